@@ -1,0 +1,1 @@
+"""Driver for the Airelectronics U-Camera gimbal (UCSP over RS-232)."""
