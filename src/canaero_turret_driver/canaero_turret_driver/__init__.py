@@ -1,0 +1,1 @@
+"""CANaerospace turret driver: protocol codec, client, simulator and ROS node."""
