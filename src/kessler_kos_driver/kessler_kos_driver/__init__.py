@@ -1,0 +1,1 @@
+"""Kessler kOS network motion-control driver (CineShooter, Second Shooter)."""
