@@ -1,0 +1,1 @@
+"""Capture Systems pan-tilt pedestal driver: protocol codec, client, simulator, ROS node."""

@@ -1,0 +1,622 @@
+"""The reconstructed Capture command table (spec chapter 4), with the evidence for each opcode.
+
+The OCR of the specification garbled most per-command opcode lines ("Dx010", "0x( A",
+"Dx04.0"). Every opcode below was established from one or more of:
+
+* **text**   an opcode printed legibly in the command's own section;
+* **rev**    the revision history (front matter), which lists added/removed commands
+  with their opcodes;
+* **table**  the error-string table of section 4.10.22 or the data-format notes of 5.1;
+* **example** a byte example in section 2 or chapter 7 whose checksum adds up;
+* **order**  the position of the command inside its group: commands of a group are
+  numbered consecutively in section order, so a command whose only free slot lies
+  between two established neighbours gets that slot.
+
+Confidence: ``high`` = printed legibly (text/rev/table/example) or the single free slot
+between two established neighbours; ``medium`` = taken from section order with both ends
+of the run established (a wrong guess would shift by one inside the run). Commands whose
+opcode could not be established are **not** in :data:`COMMANDS`; they are listed in
+:data:`UNRESOLVED` with the reason, and the encoder refuses them.
+
+Weapon-station commands (the WCU group, the dual-gimbal weapon/ballistic/CapSnap
+commands) are out of scope and deliberately absent; frames carrying their opcodes are
+treated as unknown. Units are the device's (degrees, deg/s, mA, ms); the ROS node converts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+from .datatypes import DataType, decode_value, encode_value
+from .framing import Frame, ProtocolError
+
+
+class UnknownCommand(ProtocolError):
+    """The name is not an encodable command of the table."""
+
+
+@dataclass(frozen=True)
+class AxisRule:
+    """What the axis byte means for a command and which values it accepts."""
+
+    name: str
+    low: int
+    high: int
+    meaning: str
+
+    def check(self, axis: int | None, command: str) -> int:
+        if axis is None:
+            if self.low == self.high:
+                return self.low
+            raise ProtocolError(f'{command} needs {self.meaning} ({self.low}..{self.high})')
+        if isinstance(axis, bool) or not isinstance(axis, int):
+            raise ProtocolError(f'{command}: {self.meaning} must be an integer, got {axis!r}')
+        if not self.low <= axis <= self.high:
+            raise ProtocolError(
+                f'{command}: {self.meaning} {axis} is outside {self.low}..{self.high}'
+            )
+        return axis
+
+
+MOTOR = AxisRule('motor', 1, 3, 'motor axis (1 yaw/pan, 2 pitch/tilt, 3 roll)')
+SYSTEM = AxisRule('none', 0, 0, 'axis byte (ignored, sent as 0)')
+TARGET = AxisRule('target', 1, 15, 'GPS target number in the axis byte')
+PRESET = AxisRule('preset', 1, 15, 'preset number in the axis byte')
+DIGITAL_IO = AxisRule('digital_io', 1, 6, 'digital I/O number in the axis byte')
+IMU_SENSOR = AxisRule('imu_sensor', 0, 3, 'IMU sensor (0 client, 1 base, 2 load, 3 middle)')
+IMU_AXIS = AxisRule('imu_axis', 1, 3, 'IMU axis (1 yaw, 2 pitch, 3 roll)')
+CENTRAL_AXIS = AxisRule('central_axis', 0, 2, 'sensor axis (0 x, 1 y, 2 z)')
+COMPENSATION = AxisRule('compensation', 2, 3, 'compensation (2 tilt, 3 roll)')
+
+AXIS_RULES = {
+    rule.name: rule
+    for rule in (MOTOR, SYSTEM, TARGET, PRESET, DIGITAL_IO, IMU_SENSOR, IMU_AXIS,
+                 CENTRAL_AXIS, COMPENSATION)
+}
+
+
+class Safety(Enum):
+    """Why a command needs care; the node gates the last three behind opt-in parameters."""
+
+    NONE = 'none'
+    MOTION = 'motion'  # starts axis motion (the node has dedicated, limit-checked interfaces)
+    NV_WRITE = 'nv_write'  # writes controller non-volatile memory
+    REBOOT = 'reboot'  # reboots the controller or resets an axis
+    NETWORK = 'network'  # changes IP/port/communication settings
+
+
+@dataclass(frozen=True)
+class Command:
+    """One encodable command: opcode, axis rule, argument and reply types with units."""
+
+    name: str
+    opcode: int
+    axis: AxisRule
+    arg: DataType
+    ret: DataType
+    arg_unit: str
+    ret_unit: str
+    confidence: str
+    evidence: str
+    safety: Safety = Safety.NONE
+    summary: str = ''
+
+    @property
+    def replies_with_data(self) -> bool:
+        """Getters answer with a data packet; everything else with an ACK byte (2.1)."""
+        return self.ret is not DataType.NONE
+
+    def encode(self, axis: int | None = None, value: Any = None, group: int = 0) -> bytes:
+        """Request packet bytes; raises :class:`ProtocolError` naming the bad input."""
+        axis_byte = self.axis.check(axis, self.name)
+        payload = encode_value(self.arg, value, f'{self.name} argument')
+        if not 0 <= group <= 0xFF:
+            raise ProtocolError(f'{self.name}: group id {group} is outside 0..255')
+        return Frame(group, axis_byte, self.opcode, payload).encode()
+
+    def decode_reply(self, frame: Frame) -> Any:
+        if frame.opcode != self.opcode:
+            raise ProtocolError(
+                f'{self.name}: reply opcode 0x{frame.opcode:04X} != 0x{self.opcode:04X}'
+            )
+        return decode_value(self.ret, frame.data, f'{self.name} reply')
+
+    def decode_request(self, frame: Frame) -> Any:
+        """Argument carried by a request packet (used by the simulator)."""
+        return decode_value(self.arg, frame.data, f'{self.name} argument')
+
+
+N, U8, BOOL, U16, U32, F32, F64 = (
+    DataType.NONE, DataType.U8, DataType.BOOL, DataType.U16, DataType.U32, DataType.F32,
+    DataType.F64,
+)
+ASCII, IPV4, LLA, PRESET_FMT = DataType.ASCII, DataType.IPV4, DataType.LLA, DataType.PRESET
+
+_ORDER_MOT = (
+    'order: 4.2.11-4.2.15 fill 0x013C.. after MOT_SetPositionMode 0x013B (7.1 example) '
+    'toward MOT_MotionComplete 0x0144 (4.2.19 text); 4.2.15 fragment "Dx014" agrees'
+)
+_ERR_TABLE = 'table: 4.10.22 error-message table'
+
+# (name, opcode, axis, arg, arg_unit, ret, ret_unit, confidence, evidence, safety, summary)
+_TABLE: list[tuple[Any, ...]] = [
+    # --- MOT get data (4.1) ------------------------------------------------------------
+    ('MOT_MerRegister', 0x0101, MOTOR, N, '', U16, 'bits', 'high',
+     'text: 4.10.1 "OpCode - 0x0101" (4.1.1 prints "Dx010")', Safety.NONE,
+     'Motion Error Register'),
+    ('MOT_DerRegister', 0x0102, MOTOR, N, '', U16, 'bits', 'high',
+     'text: 4.10.2 "OpCode - 0x0102"', Safety.NONE, 'Detailed Error Register'),
+    ('MOT_SrhRegister', 0x0103, MOTOR, N, '', U16, 'bits', 'high',
+     'text: 4.10.3 "OpCode - 0x0103"', Safety.NONE, 'Status Register High'),
+    ('MOT_SrlRegister', 0x0104, MOTOR, N, '', U16, 'bits', 'high',
+     'text: 4.10.4 "OpCode - 0x0104"', Safety.NONE, 'Status Register Low'),
+    ('MOT_MsrRegister', 0x0105, MOTOR, N, '', U16, 'bits', 'high',
+     'text: 4.10.5 "OpCode - 0x0105"; 4.1.5 heading lost, named from "Motion Status Register"',
+     Safety.NONE, 'Motion Status Register'),
+    ('MOT_GetMotorCurrent', 0x0106, MOTOR, N, '', F32, 'mA', 'high',
+     'order: only free slot between 0x0105 (4.10.5) and 0x0107 (2.1 example)', Safety.NONE,
+     'actual motor current'),
+    ('MOT_GetMotorVoltage', 0x0107, MOTOR, N, '', F32, 'V', 'high',
+     'example: 2.1 request 50 54 04 00 01 01 07 0D and reply (24.12 V), checksums add up',
+     Safety.NONE, 'actual motor voltage'),
+    ('MOT_GetMotorPosition', 0x0108, MOTOR, N, '', F32, 'deg', 'high',
+     'text: 4.1.8 "DpCode 0x0108"', Safety.NONE, 'motor position before the gear ratio'),
+    ('MOT_GetLoadPosition', 0x0109, MOTOR, N, '', F32, 'deg', 'high',
+     'order: only free slot between 0x0108 (4.1.8) and 0x010A (4.1.10); 4.1.9 heading '
+     'lost, name from 4.1.1x remarks and 5.1.4', Safety.NONE,
+     'load position after the gear ratio'),
+    ('MOT_GetMotorSpeed', 0x010A, MOTOR, N, '', F32, 'deg/s', 'high',
+     'text: 4.1.10 "Dx010A"', Safety.NONE, 'actual load speed'),
+    ('MOT_GetPositionErr', 0x010E, MOTOR, N, '', F32, 'deg', 'high',
+     'rev: 2.16.0 "GetPositionErr command was added - 0x010E"', Safety.NONE,
+     'position error (absolute mode)'),
+    ('MOT_GetIncPosition', 0x017C, MOTOR, N, '', F32, 'deg', 'high',
+     'rev: 2.17 "MOT_GetIncPosition - 0x017C"', Safety.NONE, 'incremental encoder position'),
+    ('MOT_GetEmgStopAxes', 0x017E, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'rev: 2.23.0 "MOT_GetEmgStopAxes - 0x017E"', Safety.NONE, 'emergency-stop flag'),
+    # --- MOT set data (4.2) ------------------------------------------------------------
+    ('MOT_SetAcceleration', 0x0130, MOTOR, F32, 'deg/s^2', N, '', 'high',
+     'example: 7.1 50 54 08 00 01 01 30 42 C8 00 00 44 (100.0), checksum adds up',
+     Safety.NONE, 'acceleration (> 0)'),
+    ('MOT_SetSpeed', 0x0131, MOTOR, F32, 'deg/s', N, '', 'high',
+     'example: 7.1 ... 01 31 41 DE 3D 71 08 (27.78), checksum adds up', Safety.NONE,
+     'speed (position mode: profile speed; speed mode: signed velocity)'),
+    ('MOT_SendPosition', 0x0132, MOTOR, F32, 'deg', N, '', 'high',
+     'text: 2.1 "MOT_SendPosition has the OpCode of 0x0132"; example: 7.1 (13.487)',
+     Safety.MOTION, 'position target, executed by MOT_Update'),
+    ('MOT_SetActualPosition', 0x0133, MOTOR, F32, 'deg', N, '', 'high',
+     'rev: 2.10.1 "MOT_SetActualPosition - 0x0133"', Safety.NONE,
+     'redefine the current position (mind the software limits)'),
+    ('MOT_Update', 0x0134, MOTOR, N, '', N, '', 'high',
+     'example: 7.1 50 54 04 00 01 01 34 3A, checksum adds up', Safety.MOTION,
+     'execute the motion set'),
+    ('MOT_Homing', 0x0135, MOTOR, N, '', N, '', 'high',
+     'order: only free slot between MOT_Update 0x0134 (7.1) and MOT_SetNegSWLS 0x0136 (rev '
+     '2.10.1); section 4.2.6 follows MOT_Update', Safety.MOTION, 'run the stored homing'),
+    ('MOT_SetPositionRelative', 0x0138, MOTOR, N, '', N, '', 'high',
+     'example: 7.1 50 54 04 00 01 01 38 3E, checksum adds up', Safety.NONE, 'relative mode'),
+    ('MOT_SetPositionAbsolute', 0x0139, MOTOR, N, '', N, '', 'high',
+     'text: 4.2.8 "OpCode Dx0139"', Safety.NONE, 'absolute mode'),
+    ('MOT_SetSpeedMode', 0x013A, MOTOR, N, '', N, '', 'high',
+     'text fragment 4.2.9 "0x( A" + only slot between 0x0139 and 0x013B', Safety.NONE,
+     'speed (velocity) mode'),
+    ('MOT_SetPositionMode', 0x013B, MOTOR, N, '', N, '', 'high',
+     'example: 7.1 50 54 04 00 01 01 3B 41, checksum adds up', Safety.NONE, 'position mode'),
+    ('MOT_AxisOn', 0x013C, MOTOR, N, '', N, '', 'medium', _ORDER_MOT, Safety.NONE,
+     'power the motor (resumes a buffered motion)'),
+    ('MOT_AxisOff', 0x013D, MOTOR, N, '', N, '', 'medium', _ORDER_MOT, Safety.NONE,
+     'power off the motor'),
+    ('MOT_AxisReset', 0x013E, MOTOR, N, '', N, '', 'medium', _ORDER_MOT, Safety.REBOOT,
+     'reset the axis (it re-homes; wait 3 s)'),
+    ('MOT_SetTum', 0x013F, MOTOR, N, '', N, '', 'medium',
+     _ORDER_MOT + '; the 7.1 example repeats 0x3B (a copy of SetPositionMode)', Safety.NONE,
+     'target update mode: rebuild the profile on each MOT_Update'),
+    ('MOT_ResetFaults', 0x0140, MOTOR, N, '', N, '', 'medium', _ORDER_MOT, Safety.NONE,
+     'reset latched faults of the axis'),
+    ('MOT_MotionComplete', 0x0144, MOTOR, N, '', N, '', 'high',
+     'text: 4.2.19 "OpCode 0x0144"', Safety.NONE, 'wait for the current move before the next'),
+    ('MOT_SaveMotorSetting', 0x0165, MOTOR, N, '', N, '', 'high',
+     'rev: 2.10.1 "MOT_SaveMotorSetting - 0x0165"', Safety.NV_WRITE,
+     'save motor settings to memory'),
+    ('MOT_SetEmgStopAxes', 0x017D, SYSTEM, BOOL, 'flag', N, '', 'high',
+     'text: 4.2.20 "OpCode 0x017D"; rev 2.23.0', Safety.NONE,
+     'set (1: stop all axes, block motion) or clear (0) the emergency stop'),
+    # --- software limit switches (4.16) ------------------------------------------------
+    ('SWLS_SetNegSWLS', 0x0136, MOTOR, F32, 'deg', N, '', 'high',
+     'text: 4.16.1 "OpCode 0x0136"; rev 2.10.1', Safety.NONE, 'negative software limit'),
+    ('SWLS_SetPosSWLS', 0x0137, MOTOR, F32, 'deg', N, '', 'high',
+     'text: 4.16.2 "OpCode 0x0137"; rev 2.10.1', Safety.NONE, 'positive software limit'),
+    ('SWLS_ActivateSWLS', 0x0146, MOTOR, BOOL, 'flag', N, '', 'high',
+     'rev: 2.10.1 "MOT_ActivateSWLS - 0x0146"; 4.16.3 fragment "Dx014.6"', Safety.NONE,
+     'enable/disable the software limits'),
+    ('SWLS_GetNegSWLS', 0x010C, MOTOR, N, '', F32, 'deg', 'high',
+     'rev: 2.10.1 "MOT_GetNegSWLS - 0x010C"', Safety.NONE, 'negative software limit'),
+    ('SWLS_GetPosSWLS', 0x010D, MOTOR, N, '', F32, 'deg', 'high',
+     'rev: 2.10.1; text 4.16.5 "0x010D"', Safety.NONE, 'positive software limit'),
+    ('SWLS_IsActiveSWLS', 0x0110, MOTOR, N, '', BOOL, 'flag', 'high',
+     'rev: 2.10.1 "MOT_IsActiveSWLS - 0x0110"', Safety.NONE, 'software limits enabled'),
+    # --- scanning (4.3); all sent to axis 0 ---------------------------------------------
+    ('SCN_SetYawMin', 0x0400, SYSTEM, F32, 'deg', N, '', 'medium',
+     'order: 4.3.1-4.3.4 are the four slots below SCN_SetStepHeight 0x0404 (4.3.5 text); '
+     'fragments "Dx04.0"', Safety.NONE, 'left edge of the scan (motor position)'),
+    ('SCN_SetYawMax', 0x0401, SYSTEM, F32, 'deg', N, '', 'medium',
+     'order: as SCN_SetYawMin', Safety.NONE, 'right edge of the scan'),
+    ('SCN_SetPitchMin', 0x0402, SYSTEM, F32, 'deg', N, '', 'medium',
+     'order: as SCN_SetYawMin', Safety.NONE, 'bottom edge of the scan'),
+    ('SCN_SetNumSteps', 0x0403, SYSTEM, U8, 'steps', N, '', 'medium',
+     'order: as SCN_SetYawMin; 4.3.4 heading lost, named after the NumSteps parameter',
+     Safety.NONE, 'rows (ZigZag/Snake) or rectangles (Square)'),
+    ('SCN_SetStepHeight', 0x0404, SYSTEM, F32, 'deg', N, '', 'high',
+     'text: 4.3.5 "Dx0404"', Safety.NONE, 'pitch step between rows'),
+    ('SCN_SetScanSpeed', 0x0405, SYSTEM, F32, 'deg/s', N, '', 'high',
+     'order: only slot between 0x0404 and 0x0406', Safety.NONE, 'yaw speed of the scan'),
+    ('SCN_SetShortPath', 0x0406, SYSTEM, BOOL, 'flag', N, '', 'high',
+     'text: 4.3.7 "0x0406"', Safety.NONE, 'short path between yaw min and max'),
+    ('SCN_IsScanOn', 0x0407, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'order: only slot between 0x0406 and 0x0408', Safety.NONE, 'scan mode active'),
+    ('SCN_StopScan', 0x0408, SYSTEM, N, '', N, '', 'high',
+     'text: 4.3.9 "Dx0408"', Safety.NONE, 'stop both motors and leave scan mode'),
+    ('SCN_StartScanZigZag', 0x040C, SYSTEM, N, '', N, '', 'high',
+     'text: 4.3.13.1 "opcode 0x040C-0x040E" = the three start commands, in section order',
+     Safety.MOTION, 'start a ZigZag scan'),
+    ('SCN_StartScanSnake', 0x040D, SYSTEM, N, '', N, '', 'high',
+     'text: 4.3.11 "Dx04.0D"; 4.3.13.1 range', Safety.MOTION, 'start a Snake scan'),
+    ('SCN_StartScanSquare', 0x040E, SYSTEM, N, '', N, '', 'high',
+     'text: 4.3.13.1 range', Safety.MOTION, 'start a Square scan'),
+    # --- GPS and targets (4.4); axis byte ignored or target number ----------------------
+    ('GPS_GetHeading', 0x0502, SYSTEM, N, '', F32, 'deg', 'high',
+     'rev: 2.24.0 "GPS_GetHeading - 0x0502"', Safety.NONE, 'system heading'),
+    ('GPS_GetLongitude', 0x0504, SYSTEM, N, '', F64, 'DDMM.mmmm', 'high',
+     'text: 4.4.1 "Dx0504"', Safety.NONE, 'GPS longitude, east positive'),
+    ('GPS_GetLatitude', 0x0505, SYSTEM, N, '', F64, 'DDMM.mmmm', 'medium',
+     'order: next after 0x0504 (4.4.2 follows 4.4.1), fragment "Dx050"', Safety.NONE,
+     'GPS latitude, north positive'),
+    ('GPS_PositionReady', 0x050A, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'text: 4.4.6 "Dx050A"', Safety.NONE, 'valid GPS position lock'),
+    ('GPS_HeadingReady', 0x050B, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'text: 4.4.7 "Dx050B" (heading lost, named from its description)', Safety.NONE,
+     'valid GPS heading'),
+    ('GPS_isConnectedGPS', 0x050C, SYSTEM, N, '', BOOL, 'flag', 'medium',
+     'order: next after 0x050B, fragment "Dx05("', Safety.NONE, 'GPS communicating'),
+    ('GPS_GetTargetLLA', 0x050F, TARGET, N, '', LLA, 'deg,deg,m', 'high',
+     'text: 5.1.3 "GetTargetLLA (0x050F)"', Safety.NONE, 'read target 1..15'),
+    ('GPS_SetTargetLLA', 0x0510, TARGET, LLA, 'deg,deg,m', N, '', 'high',
+     'text: 5.1.3 "SetTargetLLA (0x0510)"; example: 7.3 checksum 0xCC holds for 0x10 '
+     '(the printed 0x2C is a copy of SetInsertedLLA)', Safety.NONE, 'store target 1..15'),
+    ('GPS_GoToTarget', 0x0513, TARGET, N, '', N, '', 'high',
+     'example: 7.3 opcode bytes 05 13 (its checksum 0xBC is wrong, 0x1F); 0x0511/0x0512 '
+     'were the removed UTM commands (rev 2.9.0), 0x0514 follows', Safety.MOTION,
+     'point the load at target 1..15'),
+    ('GPS_ClearAllTargets', 0x0514, SYSTEM, N, '', N, '', 'high',
+     'text: 4.4.13 "0x0514"', Safety.NONE, 'clear all 15 targets'),
+    ('GPS_StartTargetLooping', 0x0516, SYSTEM, N, '', N, '', 'high',
+     'rev: 2.12.0 "GPS_StartTargetLooping - 0x0516"', Safety.MOTION, 'loop over targets'),
+    ('GPS_StopTargetLooping', 0x0517, SYSTEM, N, '', N, '', 'high',
+     'rev: 2.12.0 "GPS_StopTargetLooping - 0x0517"', Safety.NONE, 'stop target looping'),
+    ('GPS_ClearSingleTarget', 0x0528, TARGET, N, '', N, '', 'high',
+     'rev: 2.23.0 "GPS_ClearSingleTarget - 0x0528"', Safety.NONE, 'clear one target'),
+    ('GPS_SetTrackFreq', 0x0529, SYSTEM, U8, 'Hz', N, '', 'high', 'rev: 2.10.0', Safety.NONE,
+     'target tracking frequency'),
+    ('GPS_GetTrackFreq', 0x052A, SYSTEM, N, '', U8, 'Hz', 'high', 'rev: 2.10.0', Safety.NONE,
+     'target tracking frequency'),
+    ('GPS_SetInsertedLLA', 0x052C, SYSTEM, LLA, 'deg,deg,m', N, '', 'high',
+     'rev: 2.10.0; example: 7.3.1 checksum 0xE1 adds up', Safety.NONE,
+     'system position for non-tracker systems'),
+    ('GPS_GetInsertedLLA', 0x052D, SYSTEM, N, '', LLA, 'deg,deg,m', 'high', 'rev: 2.10.0',
+     Safety.NONE, 'inserted system position'),
+    ('GPS_SetInsertedHeading', 0x052E, SYSTEM, F32, 'deg', N, '', 'high',
+     'rev: 2.10.0; example: 7.3.1 (40.0) checksum 0x9D adds up', Safety.NONE,
+     'system heading for non-tracker systems'),
+    ('GPS_GetInsertedHeading', 0x052F, SYSTEM, N, '', F32, 'deg', 'high', 'rev: 2.10.0',
+     Safety.NONE, 'inserted system heading'),
+    ('GPS_SaveInsertedPos', 0x0530, SYSTEM, N, '', N, '', 'high', 'rev: 2.10.0',
+     Safety.NV_WRITE, 'save position, heading and override flag'),
+    ('GPS_SetOvdPosGPS', 0x0531, SYSTEM, BOOL, 'flag', N, '', 'high',
+     'rev: 2.10.0; examples: 7.3.1/7.3.2 checksums 0x3C/0x3B add up', Safety.NONE,
+     'override the GPS position with the inserted one'),
+    ('GPS_GetOvdPosGPS', 0x0532, SYSTEM, N, '', BOOL, 'flag', 'high', 'rev: 2.10.0',
+     Safety.NONE, 'override flag'),
+    ('GPS_SetGpsIP', 0x0535, SYSTEM, IPV4, 'ip', N, '', 'high', 'rev: 2.19.0',
+     Safety.NETWORK, 'IP address of the GPS unit (after reboot)'),
+    ('GPS_GetGpsIP', 0x0536, SYSTEM, N, '', IPV4, 'ip', 'high', 'rev: 2.19.0', Safety.NONE,
+     'IP address of the GPS unit'),
+    ('GPS_EnGpsRead', 0x0537, SYSTEM, BOOL, 'flag', N, '', 'high', 'rev: 2.19.0',
+     Safety.NONE, 'enable GPS reading over TCP'),
+    ('GPS_GetEnGpsRead', 0x0538, SYSTEM, N, '', BOOL, 'flag', 'high', 'rev: 2.19.0',
+     Safety.NONE, 'GPS reading enabled'),
+    ('GPS_SetPlatformState', 0x0CBB, SYSTEM, U8, '0 static/1 dynamic', N, '', 'high',
+     'rev: 2.24.0 lists 0x0CBB and 0x0CBC both as "SetPlatformState"; the setter comes '
+     'first (4.4.32) and the getter 4.4.33 prints "Dx0CB"', Safety.NONE,
+     'static or dynamic platform'),
+    ('GPS_GetPlatformState', 0x0CBC, SYSTEM, N, '', U8, '0 static/1 dynamic', 'high',
+     'rev: 2.24.0 (second entry, see GPS_SetPlatformState)', Safety.NONE,
+     'static or dynamic platform'),
+    # --- IMU (4.5) ----------------------------------------------------------------------
+    ('IMU_IsReadyImu', 0x0601, SYSTEM, N, '', BOOL, 'flag', 'medium',
+     'order: the slot before IMU_GetRoll 0x0602 (4.5.1 precedes 4.5.2)', Safety.NONE,
+     'IMU connected and ready'),
+    ('IMU_GetRoll', 0x0602, SYSTEM, N, '', F32, 'deg', 'high',
+     'example: 2.2.2/7.2 50 54 04 00 00 06 02 0C and reply (30.184), checksums add up',
+     Safety.NONE, 'roll -180..180'),
+    ('IMU_GetPitch', 0x0603, SYSTEM, N, '', F32, 'deg', 'high',
+     'order: only slot between 0x0602 and 0x0604', Safety.NONE, 'pitch -180..180'),
+    ('IMU_GetYaw', 0x0604, SYSTEM, N, '', F32, 'deg', 'high', 'text: 4.5.4 "Dx0604"',
+     Safety.NONE, 'yaw 0..360'),
+    ('IMU_GetGyroX', 0x0605, SYSTEM, N, '', F32, 'deg/s', 'high', 'rev: 2.9.0', Safety.NONE,
+     'gyro X rate'),
+    ('IMU_GetGyroY', 0x0606, SYSTEM, N, '', F32, 'deg/s', 'high', 'rev: 2.9.0; text 4.5.6',
+     Safety.NONE, 'gyro Y rate'),
+    ('IMU_GetGyroZ', 0x0607, SYSTEM, N, '', F32, 'deg/s', 'high', 'rev: 2.9.0', Safety.NONE,
+     'gyro Z rate'),
+    ('IMU_GetTemperature', 0x0637, SYSTEM, N, '', F32, 'degC', 'high', 'rev: 2.9.0',
+     Safety.NONE, 'IMU temperature'),
+    ('IMU_GetPressure', 0x0638, SYSTEM, N, '', F32, 'kPa', 'high',
+     'rev: 2.9.0; text 4.5.10 "Dx0638"', Safety.NONE, 'pressure'),
+    ('IMU_Leveling', 0x016C, MOTOR, N, '', N, '', 'high',
+     'rev: 2.12.0 "IMU_HomingIMU - 0x016C", renamed Leveling in 2.14.0', Safety.MOTION,
+     'drive the axis to the IMU levelling angle'),
+    ('IMU_setLevelingValue', 0x0C6B, MOTOR, F32, 'deg', N, '', 'high',
+     'rev: 2.12.0 "IMU_setHomeValueIMU - 0x0C6B"; text 4.5.12 "Dx0C6B"', Safety.NONE,
+     'levelling angle of the axis'),
+    ('IMU_getLevelingValue', 0x0C6C, MOTOR, N, '', F32, 'deg', 'high',
+     'rev: 2.12.0 "IMU_getHomeValueIMU - 0x0C6C"', Safety.NONE, 'levelling angle'),
+    ('IMU_setIMULoadOffset', 0x0C6D, IMU_AXIS, F32, 'deg', N, '', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'offset for a load-mounted IMU'),
+    ('IMU_getIMULoadOffset', 0x0C6E, IMU_AXIS, N, '', F32, 'deg', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'offset for a load-mounted IMU'),
+    ('IMU_setIMUBodyOffset', 0x0C78, IMU_AXIS, F32, 'deg', N, '', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'offset for a body-mounted IMU'),
+    ('IMU_getIMUBodyOffset', 0x0C79, IMU_AXIS, N, '', F32, 'deg', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'offset for a body-mounted IMU'),
+    ('IMU_setIMUBaseOffset', 0x0C7A, IMU_AXIS, F32, 'deg', N, '', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'offset for a base-mounted IMU'),
+    ('IMU_getIMUBaseOffset', 0x0C7B, IMU_AXIS, N, '', F32, 'deg', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'offset for a base-mounted IMU'),
+    ('IMU_getPanPositionByGyro', 0x064A, IMU_SENSOR, N, '', F32, 'deg', 'high',
+     'rev: 2.18.0', Safety.NONE, 'pan angle integrated from the gyro'),
+    ('IMU_getTiltPositionByGyro', 0x064B, IMU_SENSOR, N, '', F32, 'deg', 'high',
+     'rev: 2.18.0; text 4.5.23 "Dx064B"', Safety.NONE, 'tilt angle from the gyro'),
+    ('IMU_getRollPositionByGyro', 0x064C, IMU_SENSOR, N, '', F32, 'deg', 'high',
+     'rev: 2.18.0', Safety.NONE, 'roll angle from the gyro'),
+    ('IMU_getPanSpeedByGyro', 0x064D, IMU_SENSOR, N, '', F32, 'deg/s', 'high',
+     'rev: 2.18.0; text 4.5.25 "0x064D"', Safety.NONE, 'pan rate from the gyro'),
+    ('IMU_getTiltSpeedByGyro', 0x064E, IMU_SENSOR, N, '', F32, 'deg/s', 'high',
+     'rev: 2.18.0', Safety.NONE, 'tilt rate from the gyro'),
+    ('IMU_getRollSpeedByGyro', 0x064F, IMU_SENSOR, N, '', F32, 'deg/s', 'high',
+     'order: only slot between 0x064E (rev 2.18.0) and 0x0650 (rev 2.21.0)', Safety.NONE,
+     'roll rate from the gyro'),
+    ('IMU_GyroDriftCompensation', 0x0650, IMU_SENSOR, N, '', N, '', 'high', 'rev: 2.21.0',
+     Safety.NONE, 'measure the current yaw gyro drift'),
+    ('IMU_ResetGyroDriftCompensation', 0x0651, IMU_SENSOR, N, '', N, '', 'high',
+     'rev: 2.21.0', Safety.NONE, 'reset the drift to zero'),
+    ('IMU_GetGyroDrift', 0x0652, IMU_SENSOR, N, '', F32, 'deg/s', 'high', 'rev: 2.21.0',
+     Safety.NONE, 'calculated drift'),
+    # --- communication (4.6) ------------------------------------------------------------
+    ('COM_Reboot', 0x0701, SYSTEM, N, '', N, '', 'medium',
+     'order: 4.6.1-4.6.3 fill 0x0701-0x0703 below COM_IsConnected 0x0704 (4.6.4 text)',
+     Safety.REBOOT, 'reboot the controller (about 20 s)'),
+    ('COM_Connect', 0x0702, SYSTEM, N, '', N, '', 'medium',
+     'order: as COM_Reboot. Over TCP the controller greets with its own COM_Connect '
+     'packet (6.1), and the client answers with the opcode the controller used',
+     Safety.NONE, 'start the conversation (activates both axes)'),
+    ('COM_Disconnect', 0x0703, SYSTEM, N, '', N, '', 'medium', 'order: as COM_Reboot',
+     Safety.NONE, 'end the conversation (motors off)'),
+    ('COM_IsConnected', 0x0704, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'text: 4.6.4 "Dx0704"; rev 2.12.0', Safety.NONE, 'controller initialised'),
+    ('COM_StartKeepAlive', 0x0705, SYSTEM, BOOL, 'flag', N, '', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'start/stop the keep-alive supervision'),
+    ('COM_IsKeepAliveOn', 0x0706, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'rev: 2.13.6; text 4.6.6 "Dx0706"', Safety.NONE, 'keep-alive active'),
+    ('COM_setKeepAliveTimeout', 0x0708, SYSTEM, U16, 'ms', N, '', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'keep-alive period'),
+    ('COM_getKeepAliveTimeout', 0x0709, SYSTEM, N, '', U16, 'ms', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'keep-alive period'),
+    ('COM_setKeepAliveCount', 0x071C, SYSTEM, U8, 'cycles', N, '', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'missed periods before the controller stops the axes'),
+    ('COM_getKeepAliveCount', 0x071D, SYSTEM, N, '', U8, 'cycles', 'high', 'rev: 2.13.6',
+     Safety.NONE, 'missed periods allowed'),
+    ('COM_SysState', 0x0713, SYSTEM, N, '', U8, 'bits', 'high', 'rev: 2.12.0', Safety.NONE,
+     'active operations (stabilisation, tracking, scanning, looping)'),
+    ('COM_setDigitalIO', 0x0723, DIGITAL_IO, BOOL, 'flag', N, '', 'high', 'rev: 2.22.0',
+     Safety.NONE, 'set/reset digital output 1..6'),
+    ('COM_getDigitalIO', 0x0724, DIGITAL_IO, N, '', BOOL, 'flag', 'high', 'rev: 2.22.0',
+     Safety.NONE, 'state of digital I/O 1..6'),
+    ('COM_GetPn', 0x0C48, SYSTEM, N, '', ASCII, '', 'medium',
+     'order: 4.6.13-4.6.16 (Pn, Sn, Fw, Hw) around COM_GetFw 0x0C4A; 4.6.16 fragment "Dx0C4"',
+     Safety.NONE, 'part number'),
+    ('COM_GetSn', 0x0C49, SYSTEM, N, '', U32, '', 'medium', 'order: as COM_GetPn',
+     Safety.NONE, 'serial number'),
+    ('COM_GetFw', 0x0C4A, SYSTEM, N, '', ASCII, '', 'high', 'text: 4.6.15 "Dx0C4 A"',
+     Safety.NONE, 'firmware revision'),
+    ('COM_GetHw', 0x0C4B, SYSTEM, N, '', F32, '', 'medium', 'order: as COM_GetPn',
+     Safety.NONE, 'hardware revision'),
+    # --- IP settings (4.7), TCP only ----------------------------------------------------
+    ('IP_SetControllerIP', 0x070A, SYSTEM, IPV4, 'ip', N, '', 'high',
+     'text: 4.7.1 "OpCode 0x070A"', Safety.NETWORK, 'new controller IP (after save+reboot)'),
+    ('IP_SetControllerPort', 0x070B, SYSTEM, U16, 'port', N, '', 'high',
+     'text: 4.7.3 "Dx070B"', Safety.NETWORK, 'new controller port'),
+    ('IP_GetControllerIP', 0x070D, SYSTEM, N, '', IPV4, 'ip', 'high',
+     'text: 4.7.2 "OpCode 0x070D"', Safety.NONE, 'controller IP'),
+    ('IP_SaveIP', 0x0710, SYSTEM, N, '', N, '', 'high', 'text: 4.7.7 "OpCode 0x0710"',
+     Safety.NETWORK, 'save IP settings to memory'),
+    ('IP_GetControllerSubnetMask', 0x071B, SYSTEM, N, '', IPV4, 'ip', 'high',
+     'text: 4.7.6 "OpCode 0x071B"', Safety.NONE, 'controller subnet mask'),
+    # --- stabilisation (4.8) ------------------------------------------------------------
+    ('STB_StabilizationOn', 0x0800, SYSTEM, N, '', N, '', 'medium',
+     'order: 4.8.1/4.8.2 take 0x0800/0x0801, the only slots below the removed '
+     'STB_StabMoveRel 0x0802 (rev 2.9.0)', Safety.NONE, 'stabilise at the current position'),
+    ('STB_StabilizationOff', 0x0801, SYSTEM, N, '', N, '', 'medium',
+     'order: as STB_StabilizationOn', Safety.NONE, 'stop stabilisation'),
+    ('STB_IsStabActive', 0x0807, SYSTEM, N, '', BOOL, 'flag', 'high', 'rev: 2.21.0',
+     Safety.NONE, 'stabilisation active'),
+    ('STB_GetStabMinAccel', 0x083A, MOTOR, N, '', F32, 'deg/s^2', 'high',
+     'text: 4.8.6 "Dx083A"', Safety.NONE, 'minimum stabilisation acceleration'),
+    ('STB_GetDistanceToTarget', 0x082A, SYSTEM, N, '', F32, 'm', 'high',
+     'text: 4.8.20 "Dx082A"', Safety.NONE, 'distance to target (roll compensation)'),
+    ('STB_GetCentralAxes', 0x0826, CENTRAL_AXIS, N, '', F32, 'm', 'high',
+     'text: 4.8.22 "Dx0826"', Safety.NONE, 'sensor-to-centre distance'),
+    ('STB_SetRebalanceOn', 0x084F, MOTOR, BOOL, 'flag', N, '', 'high', 'rev: 2.17.1',
+     Safety.NONE, 'enable the rebalance function'),
+    ('STB_GetRebalanceOn', 0x0850, MOTOR, N, '', BOOL, 'flag', 'high', 'rev: 2.17.1',
+     Safety.NONE, 'rebalance enabled'),
+    ('STB_GetRebalanceStatus', 0x0851, MOTOR, N, '', BOOL, 'flag', 'high', 'rev: 2.17.1',
+     Safety.NONE, '1 decelerating, 0 normal'),
+    ('STB_SetFeedforwardGain', 0x0852, MOTOR, F32, '%', N, '', 'high', 'rev: 2.18.0',
+     Safety.NONE, 'feed-forward percentage'),
+    ('STB_GetFeedforwardGain', 0x0853, MOTOR, N, '', F32, '%', 'high', 'rev: 2.18.0',
+     Safety.NONE, 'feed-forward percentage'),
+    ('STB_SetAxisRadiusCompensation', 0x0854, COMPENSATION, BOOL, 'flag', N, '', 'high',
+     'text: 4.8.23 "Dx0854"', Safety.NONE, 'tilt/roll compensation on/off'),
+    ('STB_SetAxisStabEnable', 0x0857, MOTOR, BOOL, 'flag', N, '', 'high', 'rev: 2.19.0',
+     Safety.NONE, 'stabilise this axis'),
+    ('STB_GetAxisStabEnable', 0x0858, MOTOR, N, '', BOOL, 'flag', 'high', 'rev: 2.19.0',
+     Safety.NONE, 'axis stabilisation enabled'),
+    # --- presets (4.9); preset number in the axis byte ----------------------------------
+    ('PRST_GetPreset', 0x0D00, PRESET, N, '', PRESET_FMT, 'name+deg', 'high',
+     'text: 5.1.4 "GetPreset (0x0D00)"', Safety.NONE, 'read preset 1..15'),
+    ('PRST_SetPreset', 0x0D01, PRESET, PRESET_FMT, 'name+deg', N, '', 'high',
+     'text: 5.1.4 "SetPreset (0x0D01)"', Safety.NONE, 'store preset 1..15'),
+    ('PRST_GoToPreset', 0x0D02, PRESET, N, '', N, '', 'medium',
+     'order: 4.9.3/4.9.4 take 0x0D02/0x0D03 after SetPreset 0x0D01', Safety.MOTION,
+     'drive to preset 1..15'),
+    ('PRST_ClearAll', 0x0D03, SYSTEM, N, '', N, '', 'medium', 'order: as PRST_GoToPreset',
+     Safety.NONE, 'clear all presets'),
+    ('PRST_StartPresetLooping', 0x0D11, SYSTEM, N, '', N, '', 'high', 'rev: 2.12.0',
+     Safety.MOTION, 'loop over the stored presets'),
+    ('PRST_StopPresetLooping', 0x0D12, SYSTEM, N, '', N, '', 'high', 'rev: 2.12.0',
+     Safety.NONE, 'stop preset looping'),
+    ('PRST_GetPresetFlag', 0x0D13, SYSTEM, N, '', U16, 'bits', 'high',
+     'order: only slot between 0x0D12 (rev) and 0x0D14 (4.9.8 text)', Safety.NONE,
+     'bit n set: preset n+1 stored'),
+    ('PRST_ClearSinglePreset', 0x0D14, PRESET, N, '', N, '', 'high',
+     'text: 4.9.8 "Dx0D14"', Safety.NONE, 'clear one preset'),
+    ('PRST_SetLoopingDelay', 0x0D1C, SYSTEM, F32, 'ms', N, '', 'high', 'rev: 2.12.0',
+     Safety.NONE, 'dwell between looped points (multiples of 80 ms)'),
+    ('PRST_GetLoopingDelay', 0x0D1D, SYSTEM, N, '', F32, 'ms', 'high',
+     'rev: 2.12.0; text 4.9.10 "D0x0D1D"', Safety.NONE, 'dwell between looped points'),
+    ('CFG_SetGeneralSpd', 0x0D1E, MOTOR, F32, 'deg/s', N, '', 'high',
+     'rev: 2.12.0 "PRST_SetPresetSpd - 0x0D1E", renamed GeneralSpd in 2.14.0', Safety.NONE,
+     'speed of preset/target moves'),
+    ('CFG_GetGeneralSpd', 0x0D1F, MOTOR, N, '', F32, 'deg/s', 'high',
+     'rev: 2.12.0 "PRST_GetPresetSpd - 0x0D1F"', Safety.NONE, 'speed of preset/target moves'),
+    # --- configuration (4.12) -----------------------------------------------------------
+    ('CFG_setStartupReg', 0x0C51, MOTOR, U8, 'bits', N, '', 'high', 'rev: 2.12.0',
+     Safety.NV_WRITE, 'operations activated at start-up'),
+    ('CFG_getStartupReg', 0x0C52, MOTOR, N, '', U8, 'bits', 'high', 'rev: 2.12.0',
+     Safety.NONE, 'operations activated at start-up'),
+    ('CFG_setPosRange', 0x0C70, MOTOR, U8, 'range code', N, '', 'high',
+     'rev: 2.12.0 (3.3)', Safety.NV_WRITE, 'position range 0..3'),
+    ('CFG_getPosRange', 0x0C71, MOTOR, N, '', U8, 'range code', 'high',
+     'rev: 2.12.0 (3.4 prints "setPosRange" twice; the second is the getter)', Safety.NONE,
+     'position range'),
+    # --- errors (4.10) ------------------------------------------------------------------
+    ('ERR_CaptureSystemRegister', 0x0E01, SYSTEM, N, '', U16, 'bits', 'high', _ERR_TABLE,
+     Safety.NONE, 'Capture System Register (CSR)'),
+    ('ERR_ClearErrors', 0x0E02, SYSTEM, N, '', N, '', 'high', _ERR_TABLE, Safety.NONE,
+     'clear the CSR'),
+    ('ERR_GetDriverErrorString', 0x0E03, SYSTEM, N, '', ASCII, '', 'high', _ERR_TABLE,
+     Safety.NONE, 'driver communication error'),
+    ('ERR_GetSystemErrorString', 0x0E04, SYSTEM, N, '', ASCII, '', 'high',
+     _ERR_TABLE + '; text 4.10.10 "DxX0E04"', Safety.NONE, 'system error'),
+    ('ERR_GetLoadImuErrorString', 0x0E05, SYSTEM, N, '', ASCII, '', 'high', _ERR_TABLE,
+     Safety.NONE, 'load IMU error'),
+    ('ERR_GetBaseImuErrorString', 0x0E06, SYSTEM, N, '', ASCII, '', 'high', _ERR_TABLE,
+     Safety.NONE, 'base IMU error'),
+    ('ERR_GetGpsComErrorString', 0x0E07, SYSTEM, N, '', ASCII, '', 'high', _ERR_TABLE,
+     Safety.NONE, 'GPS communication error'),
+    ('ERR_GetGpsPosString', 0x0E08, SYSTEM, N, '', ASCII, '', 'high', _ERR_TABLE,
+     Safety.NONE, 'GPS position error'),
+    ('ERR_GetGpsHeadErrorString', 0x0E09, SYSTEM, N, '', ASCII, '', 'high', _ERR_TABLE,
+     Safety.NONE, 'GPS heading error'),
+    ('ERR_GetProtocolErrorString', 0x0E0A, SYSTEM, N, '', ASCII, '', 'high', _ERR_TABLE,
+     Safety.NONE, 'protocol error (read after an 0xA6 NACK)'),
+    ('ERR_CaptureMotorErrorRegister', 0x0E0B, MOTOR, N, '', U16, 'bits', 'high',
+     'text: 4.10.6 "OpCode - 0xOEOB"', Safety.NONE, 'Capture Motor Error Register (CMER)'),
+    ('ERR_GetAbsEncComErrorString', 0x0E0D, SYSTEM, N, '', ASCII, '', 'high',
+     _ERR_TABLE + '; rev 2.13.6', Safety.NONE, 'absolute encoder communication error'),
+    ('ERR_GetAbsEncCRCErrorString', 0x0E0E, SYSTEM, N, '', ASCII, '', 'high',
+     _ERR_TABLE + '; rev 2.13.6', Safety.NONE, 'absolute encoder CRC error'),
+    ('ERR_GetBodyImuErrorString', 0x0E0F, SYSTEM, N, '', ASCII, '', 'high',
+     _ERR_TABLE + '; rev 2.13.6', Safety.NONE, 'body IMU error'),
+    ('ERR_GetHomingErrorString', 0x0E10, SYSTEM, N, '', ASCII, '', 'high',
+     _ERR_TABLE + '; rev 2.13.6', Safety.NONE, 'homing not completed'),
+    ('ERR_OperationRegister', 0x0E12, MOTOR, N, '', U16, 'bits', 'high',
+     'rev: 2.16.0 "New Error register was added operations error - 0x0E12"', Safety.NONE,
+     'Operation Register'),
+    # --- servo control (4.19) -----------------------------------------------------------
+    ('SRV_IsEnable', 0x0F71, SYSTEM, N, '', BOOL, 'flag', 'high', 'rev: 2.21.0',
+     Safety.NONE, 'servo control enabled'),
+    ('SRV_MoveTo', 0x0F78, SYSTEM, U8, 'position 1..3', N, '', 'high', 'rev: 2.21.0',
+     Safety.MOTION, 'move the servo to a predefined position'),
+    ('SRV_GetPosition', 0x0F79, SYSTEM, N, '', U8, 'position (4 unknown)', 'high',
+     'rev: 2.21.0', Safety.NONE, 'servo position number'),
+]
+
+COMMANDS: dict[str, Command] = {}
+BY_OPCODE: dict[int, Command] = {}
+for _row in _TABLE:
+    _cmd = Command(*_row[:3], arg=_row[3], arg_unit=_row[4], ret=_row[5], ret_unit=_row[6],
+                   confidence=_row[7], evidence=_row[8], safety=_row[9], summary=_row[10])
+    if _cmd.name in COMMANDS or _cmd.opcode in BY_OPCODE:
+        raise RuntimeError(f'duplicate command table entry {_cmd.name} 0x{_cmd.opcode:04X}')
+    COMMANDS[_cmd.name] = _cmd
+    BY_OPCODE[_cmd.opcode] = _cmd
+del _row, _cmd
+
+# Commands of the in-scope groups whose opcode could not be established; never encoded.
+UNRESOLVED: dict[str, str] = {
+    'MOT_GetShortPath': '4.1.11 prints "Dx014" (0x014?), outside the get-data run; '
+                        'the 0x0141-0x0143 slots are shared with SetShortPath/SetMaxCurrent',
+    'MOT_SetShortPath': '4.2.16 prints "Dx014"; 0x0141..0x0143 all fit',
+    'MOT_GetMaxCurrent': '4.1.12 prints "Dx0"; no anchor',
+    'MOT_SetMaxCurrent': '4.2.18 has no opcode line; 0x0141..0x0143 all fit',
+    'GPS_GetAltitude': '4.4.4 has no opcode line; 0x0506..0x0509 all fit',
+    'GPS_GetSatellites': '4.4.5 has no opcode line; 0x0506..0x0509 all fit',
+    'GPS_StartTargetTracking': '4.4.16 no opcode; 0x0515 or 0x0518.. (tracker systems only)',
+    'GPS_StopTargetTracking': '4.4.17 no opcode (tracker systems only)',
+    'GPS_GetStartupStatus': '4.4.18 no opcode',
+    'IMU_Reset': '4.5.8 heading lost, "Dx060" only; 0x0608..0x0636 all fit',
+    'IMU_setGyroFilterGain': 'rev 2.18.0 says get=0x0640/set=0x0641 but 4.5.20 prints '
+                             '"0x064(0" for the setter: contradictory',
+    'IMU_getGyroFilterGain': 'see IMU_setGyroFilterGain',
+    'COM_SetComType': '4.6.11 heading and opcode lost; also a communication change',
+    'IP_GetControllerPort': '4.7.4 no opcode; 0x070C or 0x070E',
+    'IP_SetControllerSubnetMask': '4.7.5 no opcode',
+    'STB_GetStabPosError': '4.8.4 heading and opcode lost',
+    'STB_SetStabMinAccel': '4.8.5 no opcode (0x0839 likely, not printed)',
+    'STB_Set/Get Spd/Pos Kp/Ki/Kd': '4.8.7-4.8.18 print 0x0D04/0x0D09/0x0D0A/0x0D16/0x0D18/'
+                                    '0x0D1A, inside the preset group and not in a '
+                                    'consistent order: contradictory',
+    'STB_SetDistanceToTarget': '4.8.19 no opcode; 0x0829 was a removed command',
+    'STB_SetCentralAxes': '4.8.21 "Dx08" only',
+    'STB_GetAxisRadiusCompensation': '4.8.24 no opcode',
+    'STB_SaveStabilizationCfg': '4.8.30 no opcode',
+    'SWLS_SetHandler/GetHandler/SetOffsetValue/GetOffsetValue/SetSlowdownValue/'
+    'GetSlowdownValue': '4.16.7-4.16.12 print only fragments ("Dx( 6", "Dx0 B")',
+    'VDT_* (video tracker)': 'camera index travels in the group byte; not used by this '
+                             'pan-tilt driver (opcodes 0x0A01/0x0A02/0x0A04/0x0A13 are known)',
+    'LRF_* (rangefinder)': 'opcodes 0x0300-0x030E known from rev 2.17/2.20, argument types '
+                           'not reconstructed',
+    'PELCOD_*, RLY_*, DG_* (non-weapon)': 'Pelco-D settings, relay module and dual-gimbal '
+                                          'synchronisation: not reconstructed',
+}
+
+
+def command(name: str) -> Command:
+    """Look up a command by name (case-insensitive); :class:`UnknownCommand` says why not."""
+    found = COMMANDS.get(name)
+    if found is None:
+        lowered = {key.lower(): cmd for key, cmd in COMMANDS.items()}
+        found = lowered.get(name.lower())
+    if found is not None:
+        return found
+    if name in UNRESOLVED:
+        raise UnknownCommand(f'{name} is not encoded: opcode not established ({UNRESOLVED[name]})')
+    raise UnknownCommand(f'unknown command {name!r}; see capture_driver.protocol.COMMANDS')
+
+
+def encode(name: str, axis: int | None = None, value: Any = None, group: int = 0) -> bytes:
+    """Request bytes for the named command."""
+    return command(name).encode(axis, value, group)
