@@ -1,0 +1,137 @@
+"""Simulator device model on a manual clock (no pty, deterministic)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from conftest import fast_config
+from ucamera_driver.protocol import (
+    FrameParser,
+    GimbalMode,
+    GimbalType,
+    IrPaletteReport,
+    SaveConfiguration,
+    SetAngles,
+    SetMode,
+    SetRates,
+    TelemetryRateRequest,
+    VersionRequest,
+)
+from ucamera_driver.sim import Faults, UCameraModel, UCameraSim, build_arg_parser
+
+
+class ManualClock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def run(model: UCameraModel, clock: ManualClock, seconds: float, dt: float = 0.005) -> None:
+    for _ in range(round(seconds / dt)):
+        clock.now += dt
+        model.step()
+
+
+@pytest.fixture
+def clock() -> ManualClock:
+    return ManualClock()
+
+
+@pytest.fixture
+def model(clock: ManualClock) -> UCameraModel:
+    device = UCameraModel(fast_config(max_rate=math.radians(60.0),
+                                      acceleration=math.radians(240.0)), clock=clock)
+    run(device, clock, 0.3)
+    assert device.mode == GimbalMode.ANGLES  # INIT ends by itself (4.1)
+    return device
+
+
+def test_init_ignores_mode_commands(clock: ManualClock) -> None:
+    device = UCameraModel(fast_config(init_time=1.0), clock=clock)
+    device.handle(SetMode(GimbalMode.RATES))
+    assert device.mode == GimbalMode.INIT
+
+
+def test_slew_respects_speed_and_acceleration(model, clock) -> None:
+    model.handle(SetAngles(math.radians(90), 0.0))
+    top_speed = 0.0
+    previous = 0.0
+    for _ in range(600):
+        clock.now += 0.005
+        model.step()
+        top_speed = max(top_speed, abs(model.pan.velocity))
+        # one step of slack for the final snap onto the target
+        assert abs(model.pan.velocity - previous) <= 2 * math.radians(240.0) * 0.005
+        previous = model.pan.velocity
+    assert top_speed == pytest.approx(math.radians(60.0))
+    assert model.pan.position == pytest.approx(math.radians(90))
+
+
+def test_commands_of_another_mode_have_no_effect(model, clock) -> None:
+    model.handle(SetRates(0.5, 0.0))  # ANGLES mode: ignored (5.5.3.3)
+    run(model, clock, 0.5)
+    assert model.pan.position == 0.0
+    model.handle(SetMode(GimbalMode.RATES))
+    model.handle(SetAngles(1.0, 0.0))  # RATES mode: ignored (5.5.3.5)
+    run(model, clock, 0.5)
+    assert model.pan.position == 0.0
+
+
+def test_rates_stop_at_the_mechanical_limit(model, clock) -> None:
+    model.handle(SetMode(GimbalMode.RATES))
+    model.handle(SetRates(0.0, math.radians(60)))
+    run(model, clock, 3.0)
+    assert model.tilt.position == pytest.approx(math.pi / 2)
+    assert model.tilt.velocity == 0.0
+
+
+def test_save_configuration_pause(model, clock) -> None:
+    model.handle(SaveConfiguration())
+    assert model.silent()
+    assert model.handle(VersionRequest()) == []  # deaf while writing
+    assert model.ignored["VersionRequest"] == 1
+    clock.now += 0.7
+    assert not model.silent()
+    assert model.handle(TelemetryRateRequest())
+
+
+def test_periodic_set_depends_on_gimbal_type(clock) -> None:
+    ir = UCameraModel(fast_config(), clock=clock).periodic_reports()
+    day = UCameraModel(fast_config(gimbal_type=GimbalType.DAYLIGHT), clock=clock)
+    assert any(isinstance(p, IrPaletteReport) for p in ir)
+    assert not any(isinstance(p, IrPaletteReport) for p in day.periodic_reports())
+
+
+def test_unknown_mode_number_is_ignored(model) -> None:
+    model.handle(SetMode.from_payload(b"\x09\x00"))
+    assert model.mode == GimbalMode.ANGLES
+    assert model.ignored["SetMode"] == 1
+
+
+def test_corruption_fault_breaks_the_checksum() -> None:
+    faults = Faults()
+    faults.corrupt_next = 1
+    parser = FrameParser()
+    assert parser.feed(faults.apply(SetAngles(0.1, 0.1).encode())) == []
+    assert parser.stats.checksum_errors + parser.stats.length_errors == 1
+    assert len(parser.feed(faults.apply(SetAngles(0.1, 0.1).encode()))) == 1
+
+
+def test_text_commands() -> None:
+    sim = UCameraSim(fast_config())
+    assert sim.command("corrupt 3") == "ok"
+    assert sim.faults.corrupt_next == 3
+    assert sim.command("drop_rate 0.5") == "ok"
+    assert sim.faults.drop_probability == 0.5
+    assert "unknown command" in sim.command("fire")
+    assert "bad arguments" in sim.command("noise_rate lots")
+    assert "mode=init" in sim.command("status")
+
+
+def test_cli_defaults() -> None:
+    args = build_arg_parser().parse_args([])
+    assert args.telemetry_rate == 50
+    assert args.gimbal_type == "ir"

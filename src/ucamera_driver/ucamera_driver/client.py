@@ -1,0 +1,563 @@
+"""U-Camera device session over a serial port (no ROS).
+
+One I/O thread owns the link: it opens the port (with back-off), parses the
+telemetry stream (resynchronising after noise), answers request waiters,
+re-sends the current mode and angles/rates command at ``refresh_rate`` (the
+manual recommends at least 10 Hz, 5.1), and reopens the port when it
+disappears or when the telemetry stops for ``silence_timeout`` seconds.
+
+Values are SI in the *device* frame (radians, rad/s, metres); sign
+conventions for ROS are applied by the node.
+
+Modes that end by themselves (INIT, autoalign, FFC calibration) are sent once
+and not refreshed: re-sending ANGLES during them would abort them. When the
+device reports it has left such a mode, the refresh resumes in ANGLES, which
+is where the gimbal returns (4.6, 4.7).
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+from gimbal_driver_common.transport import Backoff, ByteStream, SerialStream, TransportError
+
+from .protocol import (
+    AnglesReport,
+    AntennaPositionReport,
+    AntennaPositionRequest,
+    ConfigureGpsFeed,
+    FrameParser,
+    GimbalMode,
+    GimbalTypeReport,
+    GpsFeed,
+    GpsPositionVelocities,
+    GpsVelocities,
+    IrPaletteReport,
+    ModeReport,
+    Packet,
+    PayloadError,
+    ProtocolError,
+    RatesReport,
+    SaveConfiguration,
+    SaveFfc,
+    SetAngles,
+    SetAntennaPosition,
+    SetIrPalette,
+    SetMode,
+    SetRates,
+    SetTelemetryRate,
+    SetZoom,
+    SystemPositionReport,
+    TelemetryRateReport,
+    TelemetryRateRequest,
+    UnknownPacketError,
+    VehicleAngles,
+    VehicleAngularVelocities,
+    VersionReport,
+    VersionRequest,
+    ZoomReport,
+    decode_packet,
+    expected_payload_length,
+    mode_name,
+)
+
+LOG = logging.getLogger(__name__)
+
+PERSISTENT_MODES = frozenset({GimbalMode.ANGLES, GimbalMode.RATES, GimbalMode.STOW,
+                              GimbalMode.PILOT})
+ONE_SHOT_MODES = frozenset({GimbalMode.INIT, GimbalMode.GYRO_AUTOALIGN,
+                            GimbalMode.FULL_AUTOALIGN, GimbalMode.FFC_CALIBRATION})
+
+
+class UCameraError(Exception):
+    """Base class of client errors; the message says what to check."""
+
+
+class NotConnectedError(UCameraError):
+    """The serial link is down (or the port is being reopened)."""
+
+
+class RequestTimeoutError(UCameraError):
+    """The gimbal did not answer a request."""
+
+
+@dataclass(frozen=True)
+class GimbalState:
+    """Latest reported values (None until first reported)."""
+
+    mode: int | None = None
+    pan: float | None = None
+    tilt: float | None = None
+    pan_rate: float | None = None
+    tilt_rate: float | None = None
+    zoom: float | None = None
+    gimbal_type: int | None = None
+    ir_palette: int | None = None
+    latitude: float | None = None
+    longitude: float | None = None
+    altitude: float | None = None
+    angles_time: float = 0.0  # time.time() when the last angles report arrived
+    position_time: float = 0.0
+
+
+@dataclass
+class ClientStats:
+    """Counters for diagnostics."""
+
+    frames: int = 0
+    checksum_errors: int = 0
+    length_errors: int = 0
+    discarded_bytes: int = 0
+    unknown_packets: int = 0
+    bad_payloads: int = 0
+    reconnects: int = 0
+    silences: int = 0
+    link_errors: int = 0
+    commands_sent: int = 0
+
+
+class _Waiter:
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.answer: Packet | None = None
+
+
+class UCameraClient:
+    """Session with one U-Camera; thread-safe."""
+
+    def __init__(
+        self,
+        port: str | None = None,
+        baudrate: int = 115200,
+        *,
+        stream_factory: Callable[[], ByteStream] | None = None,
+        refresh_rate: float = 10.0,
+        silence_timeout: float = 1.5,
+        request_timeout: float = 0.5,
+        save_pause_grace: float = 3.0,
+        one_shot_timeout: float = 2.0,
+        reconnect_initial: float = 0.2,
+        reconnect_max: float = 2.0,
+        on_report: Callable[[Packet, float], None] | None = None,
+        on_link_change: Callable[[bool, str], None] | None = None,
+    ) -> None:
+        if stream_factory is None:
+            if not port:
+                raise ValueError("a serial port (or a stream factory) is needed")
+            stream_factory = lambda: SerialStream(port, baudrate)  # noqa: E731
+        if refresh_rate <= 0:
+            raise ValueError("refresh_rate must be > 0 Hz")
+        self._stream_factory = stream_factory
+        self._stream: ByteStream | None = None
+        self.description = stream_factory().description
+        self.refresh_period = 1.0 / refresh_rate
+        self.silence_timeout = silence_timeout
+        self.request_timeout = request_timeout
+        self.save_pause_grace = save_pause_grace
+        self.one_shot_timeout = one_shot_timeout
+        self._backoff = Backoff(reconnect_initial, reconnect_max)
+        self._on_report = on_report
+        self._on_link_change = on_link_change
+
+        self._lock = threading.RLock()
+        self._write_lock = threading.Lock()
+        self._parser = FrameParser(expected_payload_length)
+        self._waiters: dict[type[Packet], list[_Waiter]] = collections.defaultdict(list)
+        self._state = GimbalState()
+        self._angle_times: collections.deque[float] = collections.deque(maxlen=512)
+        self.stats = ClientStats()
+        self.version: VersionReport | None = None
+        self.last_error = ""
+
+        self._desired_mode: GimbalMode | None = None
+        self._desired_angles: tuple[float, float] | None = None
+        self._desired_rates: tuple[float, float] | None = None
+        self._one_shot: GimbalMode | None = None
+        self._one_shot_seen = False
+        self._one_shot_sent = 0.0
+
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._link_broken = False
+        self._last_rx = 0.0
+        self._quiet_until = 0.0
+        self._alive = False
+        self._next_refresh = 0.0
+        self._reopen_at = 0.0
+
+    # --- lifecycle -------------------------------------------------------
+    def start(self, timeout: float = 3.0) -> VersionReport:
+        """Open the port, start the I/O thread and read the device identity.
+
+        Raises UCameraError (and leaves nothing running) when the gimbal does not
+        answer within ``timeout``.
+        """
+        if self._thread is not None:
+            raise UCameraError("client already started")
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._io_loop, name="ucamera-io", daemon=True)
+        self._thread.start()
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                return self.request_version(min(self.request_timeout,
+                                                max(0.05, deadline - time.monotonic())))
+            except UCameraError as exc:
+                self.last_error = self.last_error or str(exc)
+                time.sleep(0.05)
+        reason = self.last_error or "no answer"
+        self.stop()
+        raise UCameraError(
+            f"U-Camera on {self.description} did not answer Request Gimbal Version within "
+            f"{timeout:g} s ({reason}); check cable, power, port name and baud rate (115200 8N1)"
+        )
+
+    def stop(self) -> None:
+        """Stop the I/O thread and close the port (commands already sent stay in effect)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        self._thread = None
+        self._close("client stopped")
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None
+
+    @property
+    def connected(self) -> bool:
+        """True while the port is open and telemetry is arriving."""
+        return self._alive
+
+    def state(self) -> GimbalState:
+        with self._lock:
+            return self._state
+
+    @property
+    def desired_mode(self) -> GimbalMode | None:
+        return self._desired_mode
+
+    @property
+    def pending_automatic_mode(self) -> GimbalMode | None:
+        """The self-ending mode the client is waiting on (autoalign, FFC, init)."""
+        return self._one_shot
+
+    def telemetry_rate_achieved(self, window: float = 2.0) -> float:
+        """Angles reports per second over the last ``window`` seconds."""
+        now = time.monotonic()
+        with self._lock:
+            recent = [t for t in self._angle_times if now - t <= window]
+        if len(recent) < 2:
+            return 0.0
+        span = max(now - recent[0], recent[-1] - recent[0])
+        return (len(recent) - 1) / span if span > 0 else 0.0
+
+    # --- requests --------------------------------------------------------
+    def request(self, packet: Packet, answer: type[Packet], timeout: float | None = None,
+                attempts: int = 2) -> Packet:
+        """Send ``packet`` and wait for the ``answer`` packet type."""
+        timeout = self.request_timeout if timeout is None else timeout
+        for _ in range(max(1, attempts)):
+            waiter = _Waiter()
+            with self._lock:
+                self._waiters[answer].append(waiter)
+            try:
+                self.send(packet)
+                if waiter.event.wait(timeout):
+                    assert waiter.answer is not None
+                    return waiter.answer
+            finally:
+                with self._lock:
+                    if waiter in self._waiters[answer]:
+                        self._waiters[answer].remove(waiter)
+        raise RequestTimeoutError(
+            f"no {answer.TITLE} from the U-Camera within {timeout:g} s "
+            f"({attempts} attempt(s)) on {self.description}"
+        )
+
+    def request_version(self, timeout: float | None = None) -> VersionReport:
+        version = self.request(VersionRequest(), VersionReport, timeout)
+        assert isinstance(version, VersionReport)
+        self.version = version
+        return version
+
+    def request_telemetry_rate(self, timeout: float | None = None) -> int:
+        report = self.request(TelemetryRateRequest(), TelemetryRateReport, timeout)
+        assert isinstance(report, TelemetryRateReport)
+        return report.rate_hz
+
+    def request_antenna_position(self, timeout: float | None = None) -> tuple[float, ...]:
+        report = self.request(AntennaPositionRequest(), AntennaPositionReport, timeout)
+        assert isinstance(report, AntennaPositionReport)
+        return (report.x, report.y, report.z)
+
+    # --- commands --------------------------------------------------------
+    def send(self, packet: Packet) -> None:
+        """Encode (range-checked first) and write one packet."""
+        data = packet.encode()  # raises RangeError before anything is written
+        with self._write_lock:
+            stream = self._stream
+            if stream is None or not stream.is_open or self._link_broken:
+                raise NotConnectedError(
+                    f"U-Camera link {self.description} is down"
+                    + (f" ({self.last_error})" if self.last_error else "")
+                )
+            try:
+                stream.write(data)
+            except TransportError as exc:
+                self._link_broken = True
+                self.last_error = str(exc)
+                raise NotConnectedError(f"write to U-Camera failed: {exc}") from exc
+        self.stats.commands_sent += 1
+
+    def set_mode(self, mode: int) -> None:
+        """Select a mode; persistent ones are refreshed, self-ending ones sent once."""
+        try:
+            mode = GimbalMode(mode)
+        except ValueError:
+            SetMode(mode).encode()  # raises RangeError naming the valid modes
+            raise
+        packet = SetMode(mode)
+        packet.encode()
+        with self._lock:
+            if mode in ONE_SHOT_MODES:
+                self._one_shot, self._one_shot_seen = mode, False
+                self._one_shot_sent = time.monotonic()
+            else:
+                self._one_shot = None
+                self._desired_mode = mode
+        self.send(packet)
+
+    def set_angles(self, pan: float, tilt: float) -> None:
+        """Point to (pan, tilt) rad in ANGLES mode (switching mode if needed)."""
+        packet = SetAngles(pan, tilt)
+        packet.encode()
+        with self._lock:
+            self._desired_angles = (pan, tilt)
+            switch = self._desired_mode != GimbalMode.ANGLES or self._one_shot is not None
+        if switch:
+            self.set_mode(GimbalMode.ANGLES)
+        self.send(packet)
+
+    def set_rates(self, pan_rate: float, tilt_rate: float) -> None:
+        """Turn at (pan, tilt) rad/s in RATES mode (switching mode if needed)."""
+        packet = SetRates(pan_rate, tilt_rate)
+        packet.encode()
+        with self._lock:
+            self._desired_rates = (pan_rate, tilt_rate)
+            switch = self._desired_mode != GimbalMode.RATES or self._one_shot is not None
+        if switch:
+            self.set_mode(GimbalMode.RATES)
+        self.send(packet)
+
+    def hold(self) -> None:
+        """Stop moving: zero rates in RATES mode, else hold the reported angles."""
+        state = self.state()
+        if self._desired_mode == GimbalMode.RATES and self._one_shot is None:
+            self.set_rates(0.0, 0.0)
+        elif state.pan is not None and state.tilt is not None:
+            self.set_angles(state.pan, state.tilt)
+        else:
+            raise NotConnectedError("no angles reported yet: cannot hold position")
+
+    def set_zoom(self, level: float) -> None:
+        self.send(SetZoom(level))
+
+    def set_telemetry_rate(self, rate_hz: int, verify: bool = True) -> int:
+        """Set the periodic report rate; with ``verify`` read it back and return it."""
+        self.send(SetTelemetryRate(rate_hz))
+        return self.request_telemetry_rate() if verify else int(rate_hz)
+
+    def set_ir_palette(self, palette: int) -> None:
+        self.send(SetIrPalette(palette))
+
+    def configure_gps_feed(self, source: GpsFeed) -> None:
+        self.send(ConfigureGpsFeed(source))
+
+    def send_gps(self, latitude: float, longitude: float, altitude: float,
+                 north: float, east: float, down: float) -> None:
+        self.send(GpsPositionVelocities(latitude, longitude, altitude, north, east, down))
+
+    def send_gps_velocity(self, north: float, east: float, down: float) -> None:
+        self.send(GpsVelocities(north, east, down))
+
+    def send_vehicle_angles(self, yaw: float, pitch: float, roll: float) -> None:
+        self.send(VehicleAngles(yaw, pitch, roll))
+
+    def send_vehicle_rates(self, yaw_rate: float, pitch_rate: float, roll_rate: float) -> None:
+        self.send(VehicleAngularVelocities(yaw_rate, pitch_rate, roll_rate))
+
+    def set_antenna_position(self, x: float, y: float, z: float) -> None:
+        self.send(SetAntennaPosition(x, y, z))
+
+    def save_configuration(self) -> None:
+        """NV write: the gimbal goes quiet ~1 s, which is not treated as silence."""
+        self._quiet_until = time.monotonic() + self.save_pause_grace
+        self.send(SaveConfiguration())
+
+    def save_ffc(self) -> None:
+        self.send(SaveFfc())
+
+    # --- I/O thread ------------------------------------------------------
+    def _io_loop(self) -> None:
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if self._stream is None:
+                if now < self._reopen_at:
+                    self._stop.wait(min(0.05, self._reopen_at - now))
+                    continue
+                self._open()
+                continue
+            if self._link_broken:
+                self._drop("write failed: " + self.last_error)
+                continue
+            try:
+                data = self._stream.read(1024, 0.02)
+            except TransportError as exc:
+                self._drop(f"link lost: {exc}")
+                continue
+            if data:
+                self._receive(data)
+            now = time.monotonic()
+            quiet = self.silence_timeout + (self.save_pause_grace if now < self._quiet_until
+                                            else 0.0)
+            if now - self._last_rx > quiet:
+                self.stats.silences += 1
+                self._drop(f"no telemetry for {now - self._last_rx:.1f} s")
+                continue
+            if now >= self._next_refresh:
+                self._next_refresh = now + self.refresh_period
+                self._refresh(now)
+
+    def _open(self) -> None:
+        stream = self._stream_factory()
+        try:
+            stream.open()
+        except TransportError as exc:
+            self.last_error = str(exc)
+            self._reopen_at = time.monotonic() + self._backoff.next_delay()
+            return
+        with self._write_lock:
+            self._stream = stream
+            self._link_broken = False
+        self._parser.reset()
+        self._last_rx = time.monotonic()
+        LOG.info("opened %s", stream.description)
+
+    def _close(self, reason: str) -> None:
+        with self._write_lock:
+            stream, self._stream = self._stream, None
+        if stream is not None:
+            stream.close()
+        self._set_alive(False, reason)
+
+    def _drop(self, reason: str) -> None:
+        self.last_error = reason
+        self.stats.reconnects += 1
+        LOG.warning("U-Camera %s: %s; reopening", self.description, reason)
+        self._close(reason)
+        self._reopen_at = time.monotonic() + self._backoff.next_delay()
+
+    def _set_alive(self, alive: bool, reason: str) -> None:
+        if alive == self._alive:
+            return
+        self._alive = alive
+        if self._on_link_change is not None:
+            try:
+                self._on_link_change(alive, reason)
+            except Exception:  # a callback must not kill the I/O thread
+                LOG.exception("link change callback failed")
+
+    def _receive(self, data: bytes) -> None:
+        frames = self._parser.feed(data)
+        stats = self._parser.stats
+        self.stats.checksum_errors = stats.checksum_errors
+        self.stats.length_errors = stats.length_errors
+        self.stats.discarded_bytes = stats.discarded_bytes
+        for frame in frames:
+            try:
+                packet = decode_packet(frame)
+            except UnknownPacketError:
+                self.stats.unknown_packets += 1  # other firmware packets: ignored
+                continue
+            except (PayloadError, ProtocolError) as exc:
+                self.stats.bad_payloads += 1
+                LOG.debug("bad payload: %s", exc)
+                continue
+            self.stats.frames += 1
+            self._last_rx = time.monotonic()
+            self._backoff.reset()
+            self._set_alive(True, "telemetry arriving")
+            self._dispatch(packet)
+
+    def _dispatch(self, packet: Packet) -> None:
+        wall = time.time()
+        with self._lock:
+            state = self._state
+            if isinstance(packet, AnglesReport):
+                state = replace(state, pan=packet.pan, tilt=packet.tilt, angles_time=wall)
+                self._angle_times.append(time.monotonic())
+            elif isinstance(packet, RatesReport):
+                state = replace(state, pan_rate=packet.pan, tilt_rate=packet.tilt)
+            elif isinstance(packet, ModeReport):
+                state = replace(state, mode=packet.mode)
+                self._track_one_shot(packet.mode)
+            elif isinstance(packet, ZoomReport):
+                state = replace(state, zoom=packet.level)
+            elif isinstance(packet, GimbalTypeReport):
+                state = replace(state, gimbal_type=packet.gimbal_type)
+            elif isinstance(packet, IrPaletteReport):
+                state = replace(state, ir_palette=packet.palette)
+            elif isinstance(packet, SystemPositionReport):
+                state = replace(state, latitude=packet.latitude, longitude=packet.longitude,
+                                altitude=packet.altitude, position_time=wall)
+            self._state = state
+            waiters = self._waiters.pop(type(packet), [])
+        for waiter in waiters:
+            waiter.answer = packet
+            waiter.event.set()
+        if self._on_report is not None:
+            try:
+                self._on_report(packet, wall)
+            except Exception:
+                LOG.exception("report callback failed")
+
+    def _track_one_shot(self, reported: int) -> None:
+        """Follow a self-ending mode: wait for it to start, then to end in ANGLES."""
+        if self._one_shot is None:
+            return
+        if reported == self._one_shot:
+            self._one_shot_seen = True
+        elif self._one_shot_seen:
+            LOG.info("%s finished; device reports %s", mode_name(self._one_shot),
+                     mode_name(reported))
+            self._one_shot = None
+            if reported in PERSISTENT_MODES:
+                self._desired_mode = GimbalMode(reported)
+
+    def _refresh(self, now: float) -> None:
+        """Periodic re-send of mode and angles/rates (5.1: ~10 Hz at least)."""
+        with self._lock:
+            if self._one_shot is not None:
+                if not self._one_shot_seen and now - self._one_shot_sent > self.one_shot_timeout:
+                    self.last_error = (f"gimbal did not enter {mode_name(self._one_shot)} "
+                                       "(FFC needs an IR gimbal; INIT ignores commands)")
+                    LOG.warning(self.last_error)
+                    self._one_shot = None
+                return
+            mode, angles, rates = self._desired_mode, self._desired_angles, self._desired_rates
+        if mode is None or not self._alive:
+            return
+        try:
+            self.send(SetMode(mode))
+            if mode == GimbalMode.ANGLES and angles is not None:
+                self.send(SetAngles(*angles))
+            elif mode == GimbalMode.RATES and rates is not None:
+                self.send(SetRates(*rates))
+        except UCameraError as exc:
+            LOG.debug("refresh skipped: %s", exc)
