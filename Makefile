@@ -1,0 +1,26 @@
+# Thin wrappers around scripts/: each target sets up what it needs from nothing.
+# Every ROS process started here runs with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+
+.PHONY: setup build test lint demo bench clean
+
+setup:
+	scripts/setup_env.sh --no-build
+
+build:
+	scripts/setup_env.sh
+
+test:
+	scripts/run_tests.sh
+
+lint: setup
+	.venv/bin/ruff check .
+
+demo:
+	scripts/demo.sh
+
+bench:
+	scripts/bench.sh
+
+clean:
+	rm -rf build install log

@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Build the whole environment from nothing (or reuse what is there):
+#   1. .venv with CPython 3.11 (the ROS 2 Jazzy wheels are cp311),
+#   2. pinned wheels from requirements.txt + constraints.txt (only when they changed),
+#   3. the wheels' CMake export paths re-pointed to this interpreter (idempotent),
+#   4. colcon build of src/ into build/ and install/.
+# Usage: scripts/setup_env.sh [--no-build]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+VENV=$ROOT/.venv
+
+find_python() {
+  for candidate in "${PYTHON:-}" python3.11 python3; do
+    [ -n "$candidate" ] || continue
+    if command -v "$candidate" >/dev/null 2>&1 &&
+       "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' 2>/dev/null; then
+      command -v "$candidate"; return 0
+    fi
+  done
+  echo "setup: CPython 3.11 is required (ROS 2 Jazzy wheels are cp311); set PYTHON=" >&2
+  return 1
+}
+
+if [ ! -x "$VENV/bin/python" ]; then
+  PY=$(find_python)
+  echo "setup: creating $VENV with $PY"
+  "$PY" -m venv "$VENV"
+fi
+
+stamp=$VENV/.requirements.sha256
+want=$(cat requirements.txt constraints.txt | sha256sum | cut -d' ' -f1)
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+  echo "setup: installing pinned wheels (requirements.txt)"
+  "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check \
+    -r requirements.txt -c constraints.txt
+  echo "$want" > "$stamp"
+else
+  echo "setup: wheels up to date"
+fi
+
+"$VENV/bin/python" scripts/patch_ros_wheels.py "$VENV"
+
+[ "${1:-}" = "--no-build" ] && exit 0
+
+# shellcheck source=scripts/ros_env.sh
+source scripts/ros_env.sh --no-workspace
+echo "setup: colcon build"
+colcon build --base-paths src \
+  --cmake-args "-DPython3_EXECUTABLE=$VENV/bin/python" -DBUILD_TESTING=OFF \
+  --event-handlers console_direct- summary+ status- 2>&1 | grep -v 'AMENT_PREFIX_PATH doesn.t contain' || {
+  echo "setup: colcon build failed (see log/latest_build)" >&2; exit 1; }
+[ -f install/setup.bash ] || { echo "setup: colcon build produced no install/" >&2; exit 1; }

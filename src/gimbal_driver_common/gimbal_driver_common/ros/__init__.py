@@ -1,0 +1,1 @@
+"""rclpy side of the shared driver infrastructure (the only part that imports ROS)."""

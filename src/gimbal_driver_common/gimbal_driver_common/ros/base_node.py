@@ -1,0 +1,1004 @@
+"""Lifecycle base node shared by every gimbal driver.
+
+A driver subclasses :class:`GimbalDriverNode` and implements a handful of
+hooks (open/close the device, poll a joint sample, send moves/jogs/stops);
+this class owns everything that is the same for every device:
+
+* the common parameters of interfaces.md, declared with descriptors and
+  checked at start-up;
+* the lifecycle (configure opens the link, activate starts publishing and
+  accepting commands, deactivate stops the axes, cleanup/shutdown close) and
+  the ``autostart`` walk to *active*;
+* the device thread: polling at ``publish_rate``, ``joint_states``, and the
+  reconnect loop when the link drops while active;
+* ``joint_command`` validation, the jog dead-man watchdog, ``~/stop``,
+  ``~/move_to`` and ``~/home`` actions, presets (device or YAML file) and
+  scans (device or driver-side waypoints);
+* ``/diagnostics`` (connection, joint_states frequency, the driver's own
+  parts) and ``~/status``.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from gimbal_driver_common.diagnostics import FrequencyMonitor, Level
+from gimbal_driver_common.joint_command import (
+    CommandError,
+    JointLimits,
+    limits_from_parameters,
+    resolve_targets,
+    validate_joint_command,
+)
+from gimbal_driver_common.presets import PresetError, PresetStore
+from gimbal_driver_common.ros.diagnostics import StatusPart, to_message
+from gimbal_driver_common.ros.parameters import ParameterError, declare
+from gimbal_driver_common.scan import ScanError, ScanRequest, plan_scan
+from gimbal_driver_common.watchdog import JogWatchdog
+from gimbal_msgs.action import Home, MoveTo
+from gimbal_msgs.msg import AxisState, GimbalStatus, Preset
+from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
+
+
+class DeviceError(Exception):
+    """A device request failed in a way a person should read (NACK, refused, timeout)."""
+
+
+@dataclass
+class DeviceInfo:
+    """Identity read at configure time; feeds hardware_id and ~/status."""
+
+    model: str = ''
+    serial_number: str = ''
+    firmware_version: str = ''
+    hardware_id: str = ''
+
+    def __post_init__(self) -> None:
+        if not self.hardware_id:
+            self.hardware_id = self.serial_number or self.model or 'unknown'
+
+
+@dataclass
+class JointSample:
+    """One reading of the joints, in SI units, keyed by joint name.
+
+    ``stamp`` is the wall-clock time (``time.time()``) at which the device
+    data arrived; joint_states carry it.
+    """
+
+    positions: dict[str, float]
+    velocities: dict[str, float] = field(default_factory=dict)
+    efforts: dict[str, float] = field(default_factory=dict)
+    stamp: float = field(default_factory=time.time)
+    moving: dict[str, bool] = field(default_factory=dict)
+
+
+class GimbalDriverNode(LifecycleNode):
+    """Common behaviour of the pan-tilt drivers; subclasses implement the device hooks."""
+
+    #: joint names when the ``joint_names`` parameter is not set
+    DEFAULT_JOINT_NAMES: Sequence[str] = ('pan', 'tilt')
+    #: per-joint limits when the parameters are not set (rad, rad/s)
+    DEFAULT_POSITION_MIN: Sequence[float] = (-math.pi, -math.pi / 2)
+    DEFAULT_POSITION_MAX: Sequence[float] = (math.pi, math.pi / 2)
+    DEFAULT_VELOCITY_MAX: Sequence[float] = (1.0, 1.0)
+    #: default ``publish_rate`` (interfaces.md says 50 Hz)
+    DEFAULT_PUBLISH_RATE = 50.0
+    #: patterns the driver-side scan offers (a device with its own scans overrides start_scan)
+    SCAN_PATTERNS: Sequence[str] = ('sector', 'zigzag', 'square')
+
+    def __init__(self, node_name: str, **kwargs: object) -> None:
+        super().__init__(node_name, **kwargs)
+        self._declare_common_parameters()
+        self.declare_device_parameters()
+        self.device_info = DeviceInfo()
+        self._state_lock = threading.RLock()
+        self._connected = False
+        self._active = False
+        self._link_error = 'not configured'
+        self._reconnects = 0
+        self._latest: JointSample | None = None
+        self._targets: dict[str, float] = {}
+        self._stop_event = threading.Event()
+        self._device_thread: threading.Thread | None = None
+        self._scan_thread: threading.Thread | None = None
+        self._scan_stop = threading.Event()
+        self._move_generation = 0
+        self._watchdog = JogWatchdog(self.command_timeout, self._on_jog_expired)
+        self._joint_rate = FrequencyMonitor(self.publish_rate)
+        self._preset_store: PresetStore | None = None
+        self._callbacks = ReentrantCallbackGroup()
+        self._create_ros_interfaces()
+
+    # ------------------------------------------------------------------ hooks
+    def declare_device_parameters(self) -> None:
+        """Declare the driver's own parameters (use :meth:`declare_param`)."""
+
+    def open_device(self) -> DeviceInfo:
+        """Open the link and read the device identity; raise on failure."""
+        raise NotImplementedError
+
+    def close_device(self) -> None:
+        """Close the link (called on cleanup, shutdown and before a reconnect)."""
+
+    def poll_device(self) -> JointSample | None:
+        """Return the latest joint sample (poll the device or read the client cache).
+
+        Raise any exception when the link is lost: the base node then marks the
+        device disconnected, closes it and reconnects every ``reconnect_period``.
+        Return None when no new data is available yet.
+        """
+        raise NotImplementedError
+
+    def link_healthy(self) -> bool:
+        """For clients that reconnect by themselves: False while their link is down."""
+        return True
+
+    def send_moves(self, moves: dict[str, tuple[float, float | None]]) -> None:
+        """Absolute moves: joint -> (target rad, max speed rad/s or None for default)."""
+        raise NotImplementedError
+
+    def send_jogs(self, jogs: dict[str, float]) -> None:
+        """Velocity commands: joint -> rad/s (0 stops that joint)."""
+        raise NotImplementedError
+
+    def stop_axes(self, joints: Sequence[str] | None) -> None:
+        """Stop the named joints now (None: all). Must work in any state."""
+        raise NotImplementedError
+
+    def reset_faults(self) -> str:
+        """Clear latched faults; return a message. Raise DeviceError if impossible."""
+        raise DeviceError('this device has no fault-reset command')
+
+    def home(
+        self, joints: Sequence[str], report: Callable[[str], None], cancelled: threading.Event
+    ) -> str:
+        """Run the homing routine; return a message, raise DeviceError on failure."""
+        raise DeviceError('this device has no homing routine')
+
+    def device_status_parts(self) -> list[StatusPart]:
+        """Decoded device registers as diagnostics parts (one per axis plus device)."""
+        return []
+
+    def device_mode(self) -> str:
+        return ''
+
+    def axis_details(self, joint: str) -> dict[str, object]:
+        """Extra AxisState fields for ``joint``: state, calibrated, homed, active_errors."""
+        return {}
+
+    def device_errors(self) -> list[str]:
+        return []
+
+    # Device presets: a driver whose device stores presets sets DEVICE_PRESETS = True
+    # and implements these four; otherwise the YAML store is used.
+    DEVICE_PRESETS = False
+
+    def device_set_preset(self, index: int, name: str, positions: dict[str, float] | None) -> str:
+        raise DeviceError('no device presets')
+
+    def device_goto_preset(self, index: int, speed: float) -> str:
+        raise DeviceError('no device presets')
+
+    def device_list_presets(self) -> list[Preset]:
+        raise DeviceError('no device presets')
+
+    def device_clear_preset(self, index: int | None) -> str:
+        raise DeviceError('no device presets')
+
+    # Device scans: override to run the device's own scan; default is driver-side.
+    def start_device_scan(self, request: ScanRequest) -> str | None:
+        """Start a device scan and return a message, or None to use the driver-side scan."""
+        return None
+
+    def stop_device_scan(self) -> None:
+        """Stop a device scan (called by ~/stop_scan and ~/stop)."""
+
+    # --------------------------------------------------------------- helpers
+    def declare_param(self, name: str, default: object, description: str, **kwargs):
+        """Declare a parameter with a descriptor; see :func:`ros.parameters.declare`."""
+        return declare(self, name, default, description, **kwargs)
+
+    @property
+    def connected(self) -> bool:
+        return self._connected
+
+    @property
+    def active(self) -> bool:
+        return self._active
+
+    @property
+    def latest_sample(self) -> JointSample | None:
+        return self._latest
+
+    def current_positions(self) -> dict[str, float]:
+        sample = self._latest
+        return dict(sample.positions) if sample else {}
+
+    def _declare_common_parameters(self) -> None:
+        self.joint_names: list[str] = declare(
+            self, 'joint_names', list(self.DEFAULT_JOINT_NAMES),
+            'names used in joint_states and commands', read_only=True, element_type=str,
+        )
+        if not self.joint_names or len(set(self.joint_names)) != len(self.joint_names):
+            raise ParameterError(
+                f'parameter joint_names: need unique names, got {self.joint_names}'
+            )
+        n = len(self.joint_names)
+
+        def per_joint(values: Sequence[float]) -> list[float]:
+            values = list(values)
+            return values if len(values) == n else (values + values[-1:] * n)[:n]
+
+        self.publish_rate = declare(
+            self, 'publish_rate', float(self.DEFAULT_PUBLISH_RATE),
+            'joint_states rate in Hz', value_range=(0.1, 1000.0),
+        )
+        self.diagnostics_period = declare(
+            self, 'diagnostics_period', 1.0, 'seconds between /diagnostics messages',
+            value_range=(0.05, 60.0),
+        )
+        self.command_timeout = declare(
+            self, 'command_timeout', 0.5,
+            'jog dead-man timeout in s: a jog stops if no joint_command arrives in time '
+            '(<= 0 disables)', value_range=(-1.0, 3600.0),
+        )
+        self.reconnect_period = declare(
+            self, 'reconnect_period', 1.0, 'seconds between reconnect attempts',
+            value_range=(0.05, 600.0),
+        )
+        position_min = declare(
+            self, 'position_min', per_joint(self.DEFAULT_POSITION_MIN),
+            'lowest position per joint (rad, m for linear axes)',
+        )
+        position_max = declare(
+            self, 'position_max', per_joint(self.DEFAULT_POSITION_MAX),
+            'highest position per joint (rad, m for linear axes)',
+        )
+        velocity_max = declare(
+            self, 'velocity_max', per_joint(self.DEFAULT_VELOCITY_MAX),
+            'highest speed per joint (rad/s, m/s for linear axes)',
+        )
+        try:
+            self.limits: dict[str, JointLimits] = limits_from_parameters(
+                self.joint_names, position_min, position_max, velocity_max
+            )
+        except ValueError as exc:
+            raise ParameterError(f'joint limits: {exc}') from exc
+        self.presets_file = declare(
+            self, 'presets_file', '', 'YAML file where driver-side presets persist ("" = memory)'
+        )
+        self.goal_tolerance = declare(
+            self, 'goal_tolerance', 0.01, 'rad: a move is done when every joint is this close',
+            value_range=(1e-6, 1.0),
+        )
+        self.move_timeout = declare(
+            self, 'move_timeout', 60.0, 's: a MoveTo goal fails if not reached in time',
+            value_range=(0.1, 3600.0),
+        )
+        self.autostart = declare(
+            self, 'autostart', True,
+            'walk the lifecycle to active by itself (false for managed bring-up)',
+        )
+
+    # --------------------------------------------------------- ROS interfaces
+    def _create_ros_interfaces(self) -> None:
+        state_qos = QoSProfile(
+            depth=10, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
+        )
+        self._joint_pub = self.create_publisher(JointState, 'joint_states', state_qos)
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._status_pub = self.create_publisher(GimbalStatus, '~/status', 10)
+        self.create_subscription(
+            JointState, 'joint_command', self._on_joint_command, 1,
+            callback_group=MutuallyExclusiveCallbackGroup(),
+        )
+        group = self._callbacks
+        self.create_service(Trigger, '~/stop', self._on_stop, callback_group=group)
+        self.create_service(
+            Trigger, '~/reset_faults', self._on_reset_faults, callback_group=group
+        )
+        self.create_service(SetPreset, '~/set_preset', self._on_set_preset, callback_group=group)
+        self.create_service(
+            GotoPreset, '~/goto_preset', self._on_goto_preset, callback_group=group
+        )
+        self.create_service(
+            ListPresets, '~/list_presets', self._on_list_presets, callback_group=group
+        )
+        self.create_service(
+            ClearPreset, '~/clear_preset', self._on_clear_preset, callback_group=group
+        )
+        self.create_service(StartScan, '~/start_scan', self._on_start_scan, callback_group=group)
+        self.create_service(Trigger, '~/stop_scan', self._on_stop_scan, callback_group=group)
+        self._move_server = ActionServer(
+            self, MoveTo, '~/move_to', execute_callback=self._execute_move,
+            goal_callback=self._accept_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
+            callback_group=group,
+        )
+        self._home_server = ActionServer(
+            self, Home, '~/home', execute_callback=self._execute_home,
+            goal_callback=self._accept_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
+            callback_group=group,
+        )
+        self.create_timer(self.diagnostics_period, self._publish_diagnostics, callback_group=group)
+        watchdog_period = (
+            min(0.05, self.command_timeout / 4) if self.command_timeout > 0 else 0.5
+        )
+        self.create_timer(watchdog_period, self._watchdog.check, callback_group=group)
+
+    # -------------------------------------------------------------- lifecycle
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self._preset_store = PresetStore(self.presets_file)
+        except PresetError as exc:
+            self.get_logger().error(str(exc))
+            return TransitionCallbackReturn.FAILURE
+        try:
+            self._open()
+        except Exception as exc:  # noqa: BLE001 - any failure means "device not there"
+            self._link_error = str(exc)
+            self.get_logger().error(f'configure failed: cannot reach the device: {exc}')
+            self._safe_close()
+            return TransitionCallbackReturn.FAILURE
+        self._stop_event.clear()
+        self._device_thread = threading.Thread(
+            target=self._device_loop, name='device', daemon=True
+        )
+        self._device_thread.start()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._active = True
+        self.get_logger().info('active: publishing joint_states and accepting commands')
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._halt('deactivating')
+        self._active = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_device_thread()
+        self._safe_close()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self._active:
+            self._halt('shutting down')
+        self._active = False
+        self._stop_device_thread()
+        self._safe_close()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._halt('lifecycle error')
+        self._stop_device_thread()
+        self._safe_close()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _open(self) -> None:
+        info = self.open_device()
+        self.device_info = info if isinstance(info, DeviceInfo) else DeviceInfo()
+        with self._state_lock:
+            self._connected = True
+            self._link_error = ''
+        self.get_logger().info(
+            f'connected to {self.device_info.model or "device"} '
+            f'(serial {self.device_info.serial_number or "?"}, '
+            f'firmware {self.device_info.firmware_version or "?"})'
+        )
+
+    def _safe_close(self) -> None:
+        with self._state_lock:
+            self._connected = False
+        try:
+            self.close_device()
+        except Exception as exc:  # noqa: BLE001 - closing must never raise out
+            self.get_logger().debug(f'close_device: {exc}')
+
+    def _stop_device_thread(self) -> None:
+        self._stop_event.set()
+        self._scan_stop.set()
+        thread = self._device_thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=5.0)
+        self._device_thread = None
+
+    def _halt(self, why: str) -> None:
+        """Stop every axis and everything that would move it again."""
+        self._watchdog.cancel()
+        self._scan_stop.set()
+        self._move_generation += 1
+        if not self._connected:
+            return
+        try:
+            self.stop_device_scan()
+        except Exception as exc:  # noqa: BLE001
+            self.get_logger().warning(f'{why}: stopping the device scan failed: {exc}')
+        try:
+            self.stop_axes(None)
+            self.get_logger().info(f'{why}: axes stopped')
+        except Exception as exc:  # noqa: BLE001
+            self.get_logger().error(f'{why}: stopping the axes failed: {exc}')
+
+    # ---------------------------------------------------------- device thread
+    def _device_loop(self) -> None:
+        period = 1.0 / self.publish_rate
+        next_tick = time.monotonic()
+        while not self._stop_event.is_set():
+            if not self._connected:
+                self._try_reconnect()
+                continue
+            try:
+                if not self.link_healthy():
+                    raise DeviceError('the client reports its link is down')
+                sample = self.poll_device()
+            except Exception as exc:  # noqa: BLE001 - any failure is a lost link
+                self._on_link_lost(exc)
+                continue
+            if sample is not None:
+                self._latest = sample
+                if self._active:
+                    self._publish_joint_state(sample)
+            next_tick += period
+            delay = next_tick - time.monotonic()
+            if delay < -period:  # fell behind (slow device): do not burst to catch up
+                next_tick = time.monotonic()
+                delay = 0.0
+            self._stop_event.wait(max(delay, 0.0))
+
+    def _on_link_lost(self, exc: BaseException) -> None:
+        with self._state_lock:
+            self._connected = False
+            self._link_error = f'link lost: {exc}'
+        self._watchdog.cancel()
+        self.get_logger().error(
+            f'device link lost ({exc}); reconnecting every {self.reconnect_period:g} s'
+        )
+        self._publish_diagnostics()
+        self._safe_close()
+
+    def _try_reconnect(self) -> None:
+        if self._stop_event.wait(self.reconnect_period):
+            return
+        try:
+            self._open()
+        except Exception as exc:  # noqa: BLE001
+            self._link_error = f'reconnecting: {exc}'
+            self.get_logger().warning(
+                f'reconnect failed: {exc}', throttle_duration_sec=10.0
+            )
+            self._safe_close()
+            return
+        self._reconnects += 1
+        self.get_logger().info(f'reconnected (reconnect #{self._reconnects})')
+        self._publish_diagnostics()
+
+    def _publish_joint_state(self, sample: JointSample) -> None:
+        msg = JointState()
+        sec = math.floor(sample.stamp)
+        msg.header.stamp.sec = int(sec)
+        msg.header.stamp.nanosec = int((sample.stamp - sec) * 1e9)
+        names = [n for n in self.joint_names if n in sample.positions]
+        msg.name = names
+        msg.position = [float(sample.positions[n]) for n in names]
+        msg.velocity = [float(sample.velocities.get(n, math.nan)) for n in names]
+        if sample.efforts:
+            msg.effort = [float(sample.efforts.get(n, math.nan)) for n in names]
+        self._joint_pub.publish(msg)
+        self._joint_rate.tick()
+
+    # -------------------------------------------------------------- commands
+    def _refuse(self) -> str | None:
+        """Why commands cannot be served now, or None."""
+        if not self._active:
+            return 'node is not active (lifecycle); activate it first'
+        if not self._connected:
+            return f'device not connected ({self._link_error})'
+        return None
+
+    def _on_joint_command(self, msg: JointState) -> None:
+        refusal = self._refuse()
+        if refusal:
+            self.get_logger().warning(
+                f'joint_command ignored: {refusal}', throttle_duration_sec=2.0
+            )
+            return
+        try:
+            plan = validate_joint_command(msg.name, msg.position, msg.velocity, self.limits)
+        except CommandError as exc:
+            self.get_logger().warning(f'joint_command rejected, nothing sent: {exc}')
+            return
+        try:
+            if plan.moves:
+                self._stop_scan_silently()
+                self._watchdog.cancel(plan.moves)
+                self.send_moves(plan.moves)
+                self._targets.update({k: v[0] for k, v in plan.moves.items()})
+            if plan.jogs:
+                self._stop_scan_silently()
+                self.send_jogs(plan.jogs)
+                moving = [j for j, v in plan.jogs.items() if v != 0.0]
+                self._watchdog.feed(moving)
+                self._watchdog.cancel([j for j, v in plan.jogs.items() if v == 0.0])
+        except Exception as exc:  # noqa: BLE001
+            self.get_logger().error(f'joint_command failed on the device: {exc}')
+
+    def _on_jog_expired(self, joints: list[str]) -> None:
+        self.get_logger().warning(
+            f'jog of {joints} expired (no joint_command for {self.command_timeout:g} s): stopping'
+        )
+        if not self._connected:
+            return
+        try:
+            self.stop_axes(joints)
+        except Exception as exc:  # noqa: BLE001
+            self.get_logger().error(f'stopping expired jog failed: {exc}')
+
+    def _on_stop(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self._watchdog.cancel()
+        self._scan_stop.set()
+        self._move_generation += 1
+        if not self._connected:
+            response.success = False
+            response.message = f'device not connected ({self._link_error}); nothing to stop'
+            return response
+        try:
+            self.stop_device_scan()
+            self.stop_axes(None)
+        except Exception as exc:  # noqa: BLE001
+            response.success = False
+            response.message = f'stop failed: {exc}'
+            self.get_logger().error(response.message)
+            return response
+        response.success = True
+        response.message = 'all axes stopped; scans, moves and jogs cancelled'
+        return response
+
+    def _on_reset_faults(
+        self, request: Trigger.Request, response: Trigger.Response
+    ) -> Trigger.Response:
+        return self._run_trigger(response, self.reset_faults)
+
+    def _run_trigger(self, response: Trigger.Response, action: Callable[[], str]) -> object:
+        refusal = self._refuse()
+        if refusal:
+            response.success, response.message = False, refusal
+            return response
+        try:
+            response.message = action() or 'done'
+            response.success = True
+        except (DeviceError, CommandError, ScanError, PresetError) as exc:
+            response.success, response.message = False, str(exc)
+        except Exception as exc:  # noqa: BLE001 - services answer, never raise
+            response.success, response.message = False, f'{type(exc).__name__}: {exc}'
+            self.get_logger().error(traceback.format_exc())
+        return response
+
+    # ------------------------------------------------------------- move / home
+    def _accept_goal(self, goal: object) -> GoalResponse:
+        return GoalResponse.ACCEPT
+
+    def _execute_move(self, goal_handle):
+        goal = goal_handle.request
+        result = MoveTo.Result()
+        refusal = self._refuse()
+        names = list(goal.joint_names)
+        try:
+            if refusal:
+                raise DeviceError(refusal)
+            targets = resolve_targets(
+                names, list(goal.positions), self.current_positions(), self.limits,
+                relative=goal.relative,
+            )
+            speeds = list(goal.velocities) if goal.velocities else []
+            if speeds and len(speeds) != len(names):
+                raise CommandError(f'{len(names)} joints but {len(speeds)} velocities')
+            moves: dict[str, tuple[float, float | None]] = {}
+            for i, name in enumerate(names):
+                speed = abs(speeds[i]) if speeds and speeds[i] else None
+                if speed is not None and speed > self.limits[name].velocity_max:
+                    raise CommandError(
+                        f'joint {name!r}: speed {speed:.4f} exceeds velocity_max '
+                        f'{self.limits[name].velocity_max:.4f}'
+                    )
+                moves[name] = (targets[name], speed)
+            self._stop_scan_silently()
+            self._watchdog.cancel(names)
+            self.send_moves(moves)
+            self._targets.update(targets)
+        except Exception as exc:  # noqa: BLE001
+            goal_handle.abort()
+            result.success, result.message = False, f'move refused, nothing sent: {exc}'
+            result.positions = [self.current_positions().get(n, math.nan) for n in names]
+            return result
+        tolerance = goal.tolerance if goal.tolerance > 0 else self.goal_tolerance
+        generation = self._move_generation
+        deadline = time.monotonic() + self.move_timeout
+        feedback = MoveTo.Feedback()
+        outcome = ''
+        while True:
+            time.sleep(0.02)
+            current = self.current_positions()
+            feedback.positions = [current.get(n, math.nan) for n in names]
+            goal_handle.publish_feedback(feedback)
+            if goal_handle.is_cancel_requested:
+                self._stop_quietly(names)
+                outcome = 'cancelled'
+                break
+            if generation != self._move_generation:
+                outcome = 'stopped (~/stop or a new command)'
+                break
+            if not self._connected:
+                outcome = f'device link lost ({self._link_error})'
+                break
+            sample = self._latest
+            reached = all(
+                abs(current.get(n, math.inf) - targets[n]) <= tolerance for n in names
+            )
+            settled = not (sample and any(sample.moving.get(n, False) for n in names))
+            if reached and settled:
+                outcome = 'reached'
+                break
+            if time.monotonic() > deadline:
+                self._stop_quietly(names)
+                outcome = f'not reached within move_timeout {self.move_timeout:g} s'
+                break
+        result.positions = feedback.positions
+        result.success = outcome == 'reached'
+        result.message = outcome
+        if outcome == 'cancelled':
+            goal_handle.canceled()
+        elif result.success:
+            goal_handle.succeed()
+        else:
+            goal_handle.abort()
+        return result
+
+    def _execute_home(self, goal_handle):
+        joints = list(goal_handle.request.joint_names) or list(self.joint_names)
+        result = Home.Result()
+        unknown = [j for j in joints if j not in self.limits]
+        refusal = self._refuse() or (
+            f'unknown joint(s) {unknown}; this device has {self.joint_names}' if unknown else None
+        )
+        if refusal:
+            goal_handle.abort()
+            result.success, result.message = False, refusal
+            return result
+        cancelled = threading.Event()
+        feedback = Home.Feedback()
+
+        def report(state: str) -> None:
+            if goal_handle.is_cancel_requested:
+                cancelled.set()
+            feedback.state = state
+            goal_handle.publish_feedback(feedback)
+
+        self._stop_scan_silently()
+        self._watchdog.cancel(joints)
+        try:
+            result.message = self.home(joints, report, cancelled) or 'homed'
+            result.success = True
+        except Exception as exc:  # noqa: BLE001
+            result.success, result.message = False, str(exc)
+        if goal_handle.is_cancel_requested or cancelled.is_set():
+            self._stop_quietly(joints)
+            goal_handle.canceled()
+            result.success = False
+            result.message = 'homing cancelled'
+        elif result.success:
+            goal_handle.succeed()
+        else:
+            goal_handle.abort()
+        return result
+
+    def _stop_quietly(self, joints: Sequence[str] | None) -> None:
+        try:
+            self.stop_axes(joints)
+        except Exception as exc:  # noqa: BLE001
+            self.get_logger().error(f'stop failed: {exc}')
+
+    # ---------------------------------------------------------------- presets
+    def _on_set_preset(self, request, response):
+        def action() -> str:
+            if request.use_current_position:
+                positions = self.current_positions()
+                if not positions:
+                    raise DeviceError('no joint position received yet')
+                positions = {n: positions[n] for n in self.joint_names if n in positions}
+            else:
+                if len(request.joint_names) != len(request.positions):
+                    raise CommandError(
+                        f'{len(request.joint_names)} joint names but '
+                        f'{len(request.positions)} positions'
+                    )
+                validate_joint_command(
+                    request.joint_names, list(request.positions), [], self.limits
+                )
+                positions = dict(zip(request.joint_names, request.positions, strict=True))
+            if self.DEVICE_PRESETS:
+                return self.device_set_preset(
+                    request.index, request.name,
+                    None if request.use_current_position else positions,
+                )
+            assert self._preset_store is not None
+            self._preset_store.set(request.index, request.name, positions)
+            return f'preset {request.index} stored: ' + ', '.join(
+                f'{k}={v:.4f}' for k, v in positions.items()
+            )
+
+        return self._run_trigger(response, action)
+
+    def _on_goto_preset(self, request, response):
+        def action() -> str:
+            if request.speed < 0 or not math.isfinite(request.speed):
+                raise CommandError(f'speed {request.speed} must be >= 0 rad/s')
+            if self.DEVICE_PRESETS:
+                self._stop_scan_silently()
+                return self.device_goto_preset(request.index, request.speed)
+            assert self._preset_store is not None
+            preset = self._preset_store.get(request.index)
+            names = [n for n in preset.positions if n in self.limits]
+            speeds = [request.speed] * len(names) if request.speed > 0 else []
+            plan = validate_joint_command(
+                names, [preset.positions[n] for n in names], speeds, self.limits
+            )
+            self._stop_scan_silently()
+            self._watchdog.cancel(names)
+            self.send_moves(plan.moves)
+            self._targets.update({k: v[0] for k, v in plan.moves.items()})
+            return f'moving to preset {request.index} ({preset.name})'
+
+        return self._run_trigger(response, action)
+
+    def _on_list_presets(self, request, response):
+        try:
+            if self.DEVICE_PRESETS:
+                refusal = self._refuse()
+                if refusal:
+                    raise DeviceError(refusal)
+                response.presets = self.device_list_presets()
+            else:
+                assert self._preset_store is not None
+                response.presets = [
+                    Preset(
+                        index=p.index, name=p.name, joint_names=list(p.positions),
+                        positions=list(p.positions.values()),
+                    )
+                    for p in self._preset_store.list()
+                ]
+            response.success = True
+            response.message = f'{len(response.presets)} preset(s)'
+        except Exception as exc:  # noqa: BLE001
+            response.success, response.message = False, str(exc)
+        return response
+
+    def _on_clear_preset(self, request, response):
+        def action() -> str:
+            index = None if request.all else request.index
+            if self.DEVICE_PRESETS:
+                return self.device_clear_preset(index)
+            assert self._preset_store is not None
+            self._preset_store.clear(index)
+            return 'all presets cleared' if index is None else f'preset {index} cleared'
+
+        if not self.DEVICE_PRESETS and self._preset_store is not None:
+            # Driver-side presets can be edited without a device.
+            try:
+                response.message = action()
+                response.success = True
+            except PresetError as exc:
+                response.success, response.message = False, str(exc)
+            return response
+        return self._run_trigger(response, action)
+
+    # ------------------------------------------------------------------ scans
+    def _on_start_scan(self, request, response):
+        def action() -> str:
+            scan = ScanRequest.from_msg(request)
+            message = self.start_device_scan(scan)
+            if message is not None:
+                return message
+            waypoints = plan_scan(
+                scan, self.joint_names[:2], self.current_positions(), self.limits,
+                self.SCAN_PATTERNS,
+            )
+            self._stop_scan_silently()
+            self._scan_stop = threading.Event()
+            self._scan_thread = threading.Thread(
+                target=self._run_scan, args=(waypoints, scan, self._scan_stop),
+                name='scan', daemon=True,
+            )
+            self._scan_thread.start()
+            return f'{scan.pattern} scan started over {len(waypoints)} waypoints (driver-side)'
+
+        return self._run_trigger(response, action)
+
+    def _on_stop_scan(self, request, response):
+        def action() -> str:
+            self._scan_stop.set()
+            self.stop_device_scan()
+            self.stop_axes(None)
+            return 'scan stopped'
+
+        return self._run_trigger(response, action)
+
+    def _stop_scan_silently(self) -> None:
+        if self._scan_thread is not None and self._scan_thread.is_alive():
+            self._scan_stop.set()
+
+    def _run_scan(
+        self, waypoints: list[dict[str, float]], scan: ScanRequest, stop: threading.Event
+    ) -> None:
+        """Visit the waypoints in a loop until stopped (driver-side scan)."""
+        index = 0
+        while not stop.is_set() and self._connected:
+            target = waypoints[index % len(waypoints)]
+            speeds = {name: (scan.speed if name == self.joint_names[0] else None)
+                      for name in target}
+            try:
+                self.send_moves({n: (p, speeds[n]) for n, p in target.items()})
+            except Exception as exc:  # noqa: BLE001
+                self.get_logger().error(f'scan aborted: {exc}')
+                return
+            deadline = time.monotonic() + self.move_timeout
+            while not stop.is_set() and time.monotonic() < deadline:
+                current = self.current_positions()
+                if all(abs(current.get(n, math.inf) - p) <= self.goal_tolerance * 2
+                       for n, p in target.items()):
+                    break
+                stop.wait(0.02)
+            stop.wait(scan.dwell)
+            index += 1
+
+    # ------------------------------------------------------------ diagnostics
+    def _publish_diagnostics(self) -> None:
+        now = time.monotonic()
+        self._joint_rate.sample(now)
+        parts: list[StatusPart] = []
+        connection = StatusPart('connection')
+        connection.values = [
+            ('connected', str(self._connected)),
+            ('lifecycle', 'active' if self._active else 'inactive'),
+            ('reconnects', str(self._reconnects)),
+            ('model', self.device_info.model),
+            ('serial_number', self.device_info.serial_number),
+            ('firmware', self.device_info.firmware_version),
+        ]
+        if self._connected:
+            connection.message = 'connected'
+        else:
+            connection.level = Level.ERROR
+            connection.message = f'disconnected: {self._link_error}'
+        parts.append(connection)
+        if self._active and self._connected:
+            level, message = self._joint_rate.status()
+            parts.append(
+                StatusPart(
+                    'joint_states frequency', level, message,
+                    [('expected_hz', f'{self.publish_rate:g}'),
+                     ('measured_hz', f'{self._joint_rate.rate_hz:.2f}')],
+                )
+            )
+        if self._connected:
+            try:
+                parts.extend(self.device_status_parts())
+            except Exception as exc:  # noqa: BLE001
+                parts.append(StatusPart('device', Level.WARN, f'status unavailable: {exc}'))
+        else:
+            for name in self.joint_names:
+                parts.append(StatusPart(name, Level.STALE, 'no data: device disconnected'))
+        array = DiagnosticArray()
+        array.header.stamp = self.get_clock().now().to_msg()
+        node_name = self.get_name()
+        array.status = [to_message(node_name, self.device_info.hardware_id, p) for p in parts]
+        self._diag_pub.publish(array)
+        self._publish_status()
+
+    def _publish_status(self) -> None:
+        msg = GimbalStatus()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        if self._connected:
+            msg.connection = GimbalStatus.CONNECTION_CONNECTED
+        elif self._reconnects or self._link_error.startswith(('link lost', 'reconnecting')):
+            msg.connection = GimbalStatus.CONNECTION_CONNECTING
+        else:
+            msg.connection = GimbalStatus.CONNECTION_DISCONNECTED
+        msg.link = self.link_description()
+        msg.device_model = self.device_info.model
+        msg.serial_number = self.device_info.serial_number
+        msg.firmware_version = self.device_info.firmware_version
+        msg.reconnects = self._reconnects
+        try:
+            msg.mode = self.device_mode() if self._connected else ''
+            msg.active_errors = self.device_errors() if self._connected else []
+        except Exception as exc:  # noqa: BLE001
+            msg.active_errors = [f'status unavailable: {exc}']
+        sample = self._latest
+        jogging = set(self._watchdog.jogging)
+        for name in self.joint_names:
+            axis = AxisState(name=name)
+            axis.position = sample.positions.get(name, math.nan) if sample else math.nan
+            axis.velocity = sample.velocities.get(name, math.nan) if sample else math.nan
+            axis.effort = sample.efforts.get(name, math.nan) if sample else math.nan
+            axis.target_position = self._targets.get(name, math.nan)
+            if not self._connected:
+                axis.state = AxisState.STATE_UNKNOWN
+            elif name in jogging:
+                axis.state = AxisState.STATE_JOGGING
+            elif sample and sample.moving.get(name):
+                axis.state = AxisState.STATE_MOVING
+            else:
+                axis.state = AxisState.STATE_IDLE
+            try:
+                for key, value in self.axis_details(name).items():
+                    setattr(axis, key, value)
+            except Exception as exc:  # noqa: BLE001
+                axis.active_errors = [f'status unavailable: {exc}']
+            msg.axes.append(axis)
+        self._status_pub.publish(msg)
+
+    def link_description(self) -> str:
+        """Endpoint shown in ~/status (never a password)."""
+        return ''
+
+
+def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = None) -> int:
+    """Entry point body for a driver executable: construct, autostart, spin, stop cleanly."""
+    rclpy.init(args=args)
+    node: GimbalDriverNode | None = None
+    executor = MultiThreadedExecutor(num_threads=4)
+    status = 0
+    try:
+        try:
+            node = node_class()
+        except ParameterError as exc:
+            rclpy.logging.get_logger(node_class.__name__).fatal(f'invalid parameter: {exc}')
+            return 2
+        executor.add_node(node)
+        if node.autostart:
+            threading.Thread(target=_autostart, args=(node,), daemon=True).start()
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.on_shutdown(None)
+            node.destroy_node()
+        executor.shutdown(timeout_sec=1.0)
+        if rclpy.ok():
+            rclpy.shutdown()
+    return status
+
+
+def _autostart(node: GimbalDriverNode) -> None:
+    """Configure (retrying while the device is absent) and activate."""
+    logger = node.get_logger()
+    while rclpy.ok():
+        state = node._state_machine.current_state[1]
+        if state == 'unconfigured':
+            if node.trigger_configure() == TransitionCallbackReturn.SUCCESS:
+                continue
+            logger.warning(f'autostart: retrying configure in {node.reconnect_period:g} s')
+            time.sleep(node.reconnect_period)
+        elif state == 'inactive':
+            node.trigger_activate()
+            return
+        else:
+            return

@@ -1,0 +1,156 @@
+"""An rclpy test client in its own context and domain, for node-as-a-process tests."""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import rclpy
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from rclpy.action import ActionClient
+from rclpy.context import Context
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from gimbal_driver_common.testing import wait_for
+
+
+class RosTestClient:
+    """Publishes, subscribes, calls services and actions against nodes in ``domain_id``."""
+
+    def __init__(self, domain_id: int, name: str = 'gimbal_test_client') -> None:
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = MultiThreadedExecutor(num_threads=2, context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+        self._messages: dict[str, list[Any]] = {}
+        self._lock = threading.Lock()
+        self._publishers: dict[str, Any] = {}
+
+    def _spin(self) -> None:
+        # Shutdown races end the spin thread with assorted errors; that is expected.
+        with contextlib.suppress(Exception):
+            self.executor.spin()
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+        self._thread.join(timeout=2.0)
+
+    def __enter__(self) -> RosTestClient:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # topics
+    def subscribe(self, topic: str, msg_type: type, reliable: bool = True) -> list[Any]:
+        """Start recording ``topic``; returns the live list of received messages."""
+        with self._lock:
+            if topic in self._messages:
+                return self._messages[topic]
+            received: list[Any] = []
+            self._messages[topic] = received
+        qos = QoSProfile(
+            depth=100,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        )
+
+        def record(msg: Any) -> None:
+            with self._lock:
+                received.append(msg)
+
+        self.node.create_subscription(msg_type, topic, record, qos)
+        return received
+
+    def wait_for_message(
+        self, topic: str, msg_type: type, predicate: Callable[[Any], bool] | None = None,
+        timeout: float = 15.0, fresh: bool = True,
+    ) -> Any:
+        """Wait for a message on ``topic`` matching ``predicate`` (only new ones if ``fresh``)."""
+        received = self.subscribe(topic, msg_type)
+        start = len(received) if fresh else 0
+
+        def match() -> Any:
+            with self._lock:
+                for msg in received[start:]:
+                    if predicate is None or predicate(msg):
+                        return msg
+            return None
+
+        return wait_for(match, timeout, f'a matching message on {topic}')
+
+    def publish(self, topic: str, msg: Any) -> None:
+        publisher = self._publishers.get(topic)
+        if publisher is None:
+            publisher = self.node.create_publisher(type(msg), topic, 10)
+            self._publishers[topic] = publisher
+            wait_for(lambda: publisher.get_subscription_count() > 0, 10.0,
+                     f'a subscriber on {topic}')
+        publisher.publish(msg)
+
+    # services
+    def call(self, srv_type: type, name: str, request: Any, timeout: float = 15.0) -> Any:
+        client = self.node.create_client(srv_type, name)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                raise TimeoutError(f'service {name} not available after {timeout:g} s')
+            future = client.call_async(request)
+            wait_for(future.done, timeout, f'the reply of {name}')
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    # actions
+    def run_action(
+        self, action_type: type, name: str, goal: Any, timeout: float = 30.0,
+        cancel_after: float | None = None,
+    ) -> tuple[Any, int, list[Any]]:
+        """Send a goal and wait for its result: (result, status, feedback messages)."""
+        client = ActionClient(self.node, action_type, name)
+        feedback: list[Any] = []
+        try:
+            if not client.wait_for_server(timeout_sec=timeout):
+                raise TimeoutError(f'action {name} not available after {timeout:g} s')
+            send = client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(
+                f.feedback))
+            wait_for(send.done, timeout, f'{name} to accept the goal')
+            handle = send.result()
+            if not handle.accepted:
+                raise AssertionError(f'{name} rejected the goal')
+            if cancel_after is not None:
+                time.sleep(cancel_after)
+                cancel = handle.cancel_goal_async()
+                wait_for(cancel.done, timeout, f'{name} to answer the cancel')
+            result_future = handle.get_result_async()
+            wait_for(result_future.done, timeout, f'the result of {name}')
+            response = result_future.result()
+            return response.result, response.status, feedback
+        finally:
+            client.destroy()
+
+    # lifecycle
+    def lifecycle_state(self, node_name: str, timeout: float = 15.0) -> str:
+        reply = self.call(GetState, f'/{node_name}/get_state', GetState.Request(), timeout)
+        return reply.current_state.label
+
+    def lifecycle_transition(self, node_name: str, transition: int, timeout: float = 15.0) -> bool:
+        request = ChangeState.Request(transition=Transition(id=transition))
+        return self.call(ChangeState, f'/{node_name}/change_state', request, timeout).success
+
+    def wait_for_lifecycle_state(self, node_name: str, label: str, timeout: float = 30.0) -> None:
+        def reached() -> bool:
+            try:
+                return self.lifecycle_state(node_name, timeout=2.0) == label
+            except TimeoutError:
+                return False
+
+        wait_for(reached, timeout, f'{node_name} to reach lifecycle state {label!r}', 0.2)

@@ -1,0 +1,185 @@
+"""Helpers for tests that start simulators and nodes as separate processes.
+
+Every process gets ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a
+``ROS_DOMAIN_ID`` leased from a machine-wide pool (a lock file per id), so
+concurrent test runs on one machine never see each other's nodes and DDS
+never leaves loopback.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import TypeVar
+
+T = TypeVar('T')
+
+DOMAIN_POOL = range(20, 230)
+_LOCK_DIR = Path(tempfile.gettempdir()) / 'gimbal-ros-domain-locks'
+
+
+class DomainLease:
+    """Exclusive use of one ROS_DOMAIN_ID while held (flock on a per-id file)."""
+
+    def __init__(self) -> None:
+        self.domain_id = -1
+        self._file: object | None = None
+
+    def acquire(self) -> int:
+        _LOCK_DIR.mkdir(exist_ok=True)
+        start = os.getpid() % len(DOMAIN_POOL)
+        for offset in range(len(DOMAIN_POOL)):
+            candidate = DOMAIN_POOL[(start + offset) % len(DOMAIN_POOL)]
+            handle = open(_LOCK_DIR / f'{candidate}.lock', 'w')  # noqa: SIM115 - held open
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                handle.close()
+                continue
+            self._file, self.domain_id = handle, candidate
+            return candidate
+        raise RuntimeError('no free ROS_DOMAIN_ID in the test pool')
+
+    def release(self) -> None:
+        if self._file is not None:
+            self._file.close()  # closing drops the flock
+            self._file = None
+
+    def __enter__(self) -> int:
+        return self.acquire()
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.release()
+
+
+def ros_env(domain_id: int, extra: Mapping[str, str] | None = None) -> dict[str, str]:
+    """This process' environment with DDS confined to loopback and the given domain."""
+    env = dict(os.environ)
+    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    env['ROS_DOMAIN_ID'] = str(domain_id)
+    env.pop('ROS_STATIC_PEERS', None)
+    env['PYTHONUNBUFFERED'] = '1'
+    env['RCUTILS_COLORIZED_OUTPUT'] = '0'
+    if extra:
+        env.update(extra)
+    return env
+
+
+def find_executable(package: str, executable: str) -> str:
+    """Path of ``ros2 run PACKAGE EXECUTABLE`` in the sourced workspace (lib/<pkg>/<exe>)."""
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if not prefix:
+            continue
+        candidate = Path(prefix, 'lib', package, executable)
+        if candidate.is_file() and os.access(candidate, os.X_OK):
+            return str(candidate)
+    raise FileNotFoundError(
+        f'{package}/{executable} not found in AMENT_PREFIX_PATH; build and source the '
+        'workspace (make build; source scripts/ros_env.sh)'
+    )
+
+
+class ManagedProcess:
+    """A child process with its output in a log file, stopped like Ctrl-C would."""
+
+    def __init__(
+        self, args: Sequence[str], env: Mapping[str, str] | None = None, name: str = ''
+    ) -> None:
+        self.args = list(args)
+        self.name = name or Path(self.args[0]).name
+        self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115 - lives as long as the process
+            prefix=f'{self.name}-', suffix='.log', delete=False
+        )
+        self.log_path = self._log.name
+        self.process = subprocess.Popen(
+            self.args, env=dict(env) if env is not None else None,
+            stdout=self._log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+
+    @classmethod
+    def ros(
+        cls, package: str, executable: str, domain_id: int, arguments: Sequence[str] = (),
+        extra_env: Mapping[str, str] | None = None,
+    ) -> ManagedProcess:
+        """Start ``ros2 run package executable arguments`` in ``domain_id``."""
+        path = find_executable(package, executable)
+        return cls([path, *arguments], ros_env(domain_id, extra_env), name=executable)
+
+    @classmethod
+    def python(
+        cls, module: str, arguments: Sequence[str] = (), domain_id: int | None = None
+    ) -> ManagedProcess:
+        env = ros_env(domain_id) if domain_id is not None else dict(os.environ)
+        return cls([sys.executable, '-m', module, *arguments], env, name=module)
+
+    @property
+    def running(self) -> bool:
+        return self.process.poll() is None
+
+    def output(self) -> str:
+        self._log.flush()
+        return Path(self.log_path).read_text(encoding='utf-8', errors='replace')
+
+    def wait_for_output(self, text: str, timeout: float = 10.0) -> str:
+        """Wait until ``text`` appears in the output; return the output."""
+        wait_for(lambda: text in self.output() or not self.running, timeout,
+                 f'{self.name} to print {text!r}')
+        out = self.output()
+        if text not in out:
+            raise AssertionError(f'{self.name} exited before printing {text!r}:\n{out}')
+        return out
+
+    def send_signal(self, sig: int) -> None:
+        if self.running:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.process.pid, sig)
+
+    def stop(self, timeout: float = 10.0) -> int:
+        """SIGINT (clean shutdown), then SIGTERM, then SIGKILL; returns the exit code."""
+        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0), (signal.SIGKILL, 3.0)):
+            if not self.running:
+                break
+            self.send_signal(sig)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self.process.wait(wait)
+        self._log.close()
+        return self.process.returncode if self.process.returncode is not None else -9
+
+    def __enter__(self) -> ManagedProcess:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+
+def wait_for(
+    condition: Callable[[], T], timeout: float = 10.0, what: str = 'condition',
+    interval: float = 0.02,
+) -> T:
+    """Poll ``condition`` until it returns a truthy value; raise TimeoutError naming ``what``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise TimeoutError(f'timed out after {timeout:g} s waiting for {what}')
+        time.sleep(interval)
+
+
+def free_tcp_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago (for a simulator started elsewhere)."""
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(('127.0.0.1', 0))
+        return sock.getsockname()[1]

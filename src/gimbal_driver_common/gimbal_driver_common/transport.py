@@ -1,0 +1,257 @@
+"""Byte-stream links to devices: TCP client and serial port, with one interface.
+
+A driver's client talks to a :class:`ByteStream` and never to a socket or a
+``serial.Serial`` directly, so the same protocol session runs over TCP, RS-232
+or a pseudo-terminal. Failures surface as :class:`TransportError` subclasses;
+the client decides whether to reconnect (see :class:`Backoff`).
+"""
+
+from __future__ import annotations
+
+import abc
+import contextlib
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from urllib.parse import parse_qs, urlparse
+
+import serial
+
+
+class TransportError(Exception):
+    """A link could not be opened, or failed while in use."""
+
+
+class LinkClosed(TransportError):
+    """The peer closed the link or the device disappeared."""
+
+
+class ByteStream(abc.ABC):
+    """A bidirectional byte pipe to one device.
+
+    ``read`` returns ``b''`` on timeout and raises :class:`LinkClosed` when the
+    peer is gone, so callers can tell silence from disconnection.
+    """
+
+    @property
+    @abc.abstractmethod
+    def description(self) -> str:
+        """Human-readable endpoint, e.g. ``tcp://192.168.10.120:4949``."""
+
+    @property
+    @abc.abstractmethod
+    def is_open(self) -> bool:
+        """True between a successful :meth:`open` and :meth:`close`."""
+
+    @abc.abstractmethod
+    def open(self) -> None:
+        """Connect; raises :class:`TransportError` with the reason on failure."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release the link. Safe to call more than once."""
+
+    @abc.abstractmethod
+    def write(self, data: bytes) -> None:
+        """Send all of ``data`` or raise :class:`TransportError`."""
+
+    @abc.abstractmethod
+    def read(self, max_bytes: int, timeout: float) -> bytes:
+        """Return up to ``max_bytes`` bytes, ``b''`` if none arrived within ``timeout``."""
+
+    def __enter__(self) -> ByteStream:
+        self.open()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = 'open' if self.is_open else 'closed'
+        return f'<{type(self).__name__} {self.description} {state}>'
+
+
+class TcpStream(ByteStream):
+    """TCP client link (e.g. a Capture pedestal on port 4949)."""
+
+    def __init__(self, host: str, port: int, connect_timeout: float = 2.0) -> None:
+        self.host = host
+        self.port = int(port)
+        self.connect_timeout = connect_timeout
+        self._sock: socket.socket | None = None
+        self._write_lock = threading.Lock()
+
+    @property
+    def description(self) -> str:
+        return f'tcp://{self.host}:{self.port}'
+
+    @property
+    def is_open(self) -> bool:
+        return self._sock is not None
+
+    def open(self) -> None:
+        self.close()
+        try:
+            sock = socket.create_connection((self.host, self.port), self.connect_timeout)
+        except OSError as exc:
+            raise TransportError(f'cannot connect to {self.description}: {exc}') from exc
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+        self._sock = sock
+
+    def close(self) -> None:
+        sock, self._sock = self._sock, None
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.shutdown(socket.SHUT_RDWR)
+            sock.close()
+
+    def _require(self) -> socket.socket:
+        sock = self._sock
+        if sock is None:
+            raise LinkClosed(f'{self.description} is not open')
+        return sock
+
+    def write(self, data: bytes) -> None:
+        sock = self._require()
+        with self._write_lock:
+            try:
+                sock.sendall(data)
+            except OSError as exc:
+                raise LinkClosed(f'{self.description}: send failed: {exc}') from exc
+
+    def read(self, max_bytes: int, timeout: float) -> bytes:
+        sock = self._require()
+        sock.settimeout(max(timeout, 0.0))
+        try:
+            data = sock.recv(max_bytes)
+        except (TimeoutError, BlockingIOError):
+            return b''
+        except OSError as exc:
+            if self._sock is None:
+                raise LinkClosed(f'{self.description} was closed') from exc
+            raise LinkClosed(f'{self.description}: receive failed: {exc}') from exc
+        if not data:
+            raise LinkClosed(f'{self.description}: peer closed the connection')
+        return data
+
+
+class SerialStream(ByteStream):
+    """Serial-port link via pyserial (RS-232/422/485 adapters or a pseudo-terminal)."""
+
+    def __init__(
+        self,
+        port: str,
+        baudrate: int = 115200,
+        bytesize: int = serial.EIGHTBITS,
+        parity: str = serial.PARITY_NONE,
+        stopbits: float = serial.STOPBITS_ONE,
+    ) -> None:
+        self.port = port
+        self.baudrate = int(baudrate)
+        self._settings = {'bytesize': bytesize, 'parity': parity, 'stopbits': stopbits}
+        self._serial: serial.Serial | None = None
+        self._write_lock = threading.Lock()
+
+    @property
+    def description(self) -> str:
+        return f'serial://{self.port}?baudrate={self.baudrate}'
+
+    @property
+    def is_open(self) -> bool:
+        return self._serial is not None
+
+    def open(self) -> None:
+        self.close()
+        try:
+            self._serial = serial.Serial(
+                self.port, self.baudrate, timeout=0.1, write_timeout=2.0, **self._settings
+            )
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise TransportError(f'cannot open {self.description}: {exc}') from exc
+
+    def close(self) -> None:
+        port, self._serial = self._serial, None
+        if port is not None:
+            with contextlib.suppress(serial.SerialException, OSError):
+                port.close()
+
+    def _require(self) -> serial.Serial:
+        port = self._serial
+        if port is None:
+            raise LinkClosed(f'{self.description} is not open')
+        return port
+
+    def write(self, data: bytes) -> None:
+        port = self._require()
+        with self._write_lock:
+            try:
+                port.write(data)
+            except (serial.SerialException, OSError) as exc:
+                raise LinkClosed(f'{self.description}: write failed: {exc}') from exc
+
+    def read(self, max_bytes: int, timeout: float) -> bytes:
+        port = self._require()
+        try:
+            port.timeout = max(timeout, 0.0)
+            # Block for the first byte, then take whatever else is already buffered.
+            data = port.read(1)
+            if data:
+                waiting = port.in_waiting
+                if waiting:
+                    data += port.read(min(waiting, max_bytes - 1))
+            return data
+        except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+            # pyserial raises SerialException("device reports readiness to read but
+            # returned no data") when a USB adapter or pty disappears.
+            raise LinkClosed(f'{self.description}: read failed: {exc}') from exc
+
+
+def stream_from_url(url: str, connect_timeout: float = 2.0) -> ByteStream:
+    """Build a stream from ``tcp://host:port`` or ``serial:///dev/ttyUSB0?baudrate=115200``."""
+    parsed = urlparse(url)
+    if parsed.scheme == 'tcp':
+        if not parsed.hostname or parsed.port is None:
+            raise ValueError(f'TCP URL needs host and port: {url!r}')
+        return TcpStream(parsed.hostname, parsed.port, connect_timeout)
+    if parsed.scheme == 'serial':
+        query = parse_qs(parsed.query)
+        baud = int(query.get('baudrate', ['115200'])[0])
+        return SerialStream(parsed.path, baud)
+    raise ValueError(f'unsupported link URL {url!r}: use tcp://host:port or serial:///dev/X')
+
+
+@dataclass
+class Backoff:
+    """Exponential reconnect delay: ``initial`` doubling up to ``maximum``, reset on success."""
+
+    initial: float = 0.5
+    maximum: float = 10.0
+    _next: float = field(default=0.0, init=False)
+
+    def __post_init__(self) -> None:
+        if self.initial <= 0 or self.maximum < self.initial:
+            raise ValueError('backoff needs 0 < initial <= maximum')
+        self._next = self.initial
+
+    def next_delay(self) -> float:
+        """The delay to wait before the next attempt; doubles each call."""
+        delay = self._next
+        self._next = min(self._next * 2.0, self.maximum)
+        return delay
+
+    def reset(self) -> None:
+        self._next = self.initial
+
+
+def read_exactly(stream: ByteStream, count: int, timeout: float) -> bytes:
+    """Read ``count`` bytes or raise :class:`TimeoutError` when ``timeout`` expires first."""
+    deadline = time.monotonic() + timeout
+    buffer = bytearray()
+    while len(buffer) < count:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            raise TimeoutError(f'{stream.description}: got {len(buffer)} of {count} bytes')
+        buffer += stream.read(count - len(buffer), remaining)
+    return bytes(buffer)
