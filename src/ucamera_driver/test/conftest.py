@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable, Iterator
 
 import pytest
@@ -21,15 +20,10 @@ def fast_config(**overrides) -> SimConfig:
     return SimConfig(**values)
 
 
-def wait_for(condition: Callable[[], object], timeout: float = 5.0, what: str = "") -> object:
-    """Poll ``condition`` until truthy; fail naming ``what`` after ``timeout`` s."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = condition()
-        if value:
-            return value
-        time.sleep(0.01)
-    pytest.fail(f"timed out after {timeout} s waiting for {what or condition}")
+@pytest.fixture
+def make_config() -> Callable[..., SimConfig]:
+    """Factory of fast simulator configurations (tests import nothing from conftest)."""
+    return fast_config
 
 
 @pytest.fixture

@@ -6,7 +6,7 @@ import math
 from collections.abc import Iterator
 
 import pytest
-from conftest import fast_config, wait_for
+from gimbal_driver_common.testing import wait_for
 from ucamera_driver.client import UCameraClient, UCameraError
 from ucamera_driver.protocol import GimbalMode, GimbalType, GpsFeed, RangeError
 from ucamera_driver.sim import UCameraSim
@@ -92,8 +92,8 @@ def test_self_ending_modes_return_to_angles(sim, client, mode) -> None:
     wait_for(lambda: close(client.state().pan, math.radians(10)), what="back to commanded angles")
 
 
-def test_ffc_on_daylight_gimbal_is_reported() -> None:
-    with UCameraSim(fast_config(gimbal_type=GimbalType.DAYLIGHT)) as sim:
+def test_ffc_on_daylight_gimbal_is_reported(make_config) -> None:
+    with UCameraSim(make_config(gimbal_type=GimbalType.DAYLIGHT)) as sim:
         client = make_client(sim, one_shot_timeout=0.3)
         client.start()
         try:

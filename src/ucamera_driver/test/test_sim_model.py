@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import pytest
-from conftest import fast_config
 from ucamera_driver.protocol import (
     FrameParser,
     GimbalMode,
@@ -41,16 +40,16 @@ def clock() -> ManualClock:
 
 
 @pytest.fixture
-def model(clock: ManualClock) -> UCameraModel:
-    device = UCameraModel(fast_config(max_rate=math.radians(60.0),
+def model(clock: ManualClock, make_config) -> UCameraModel:
+    device = UCameraModel(make_config(max_rate=math.radians(60.0),
                                       acceleration=math.radians(240.0)), clock=clock)
     run(device, clock, 0.3)
     assert device.mode == GimbalMode.ANGLES  # INIT ends by itself (4.1)
     return device
 
 
-def test_init_ignores_mode_commands(clock: ManualClock) -> None:
-    device = UCameraModel(fast_config(init_time=1.0), clock=clock)
+def test_init_ignores_mode_commands(clock: ManualClock, make_config) -> None:
+    device = UCameraModel(make_config(init_time=1.0), clock=clock)
     device.handle(SetMode(GimbalMode.RATES))
     assert device.mode == GimbalMode.INIT
 
@@ -98,9 +97,9 @@ def test_save_configuration_pause(model, clock) -> None:
     assert model.handle(TelemetryRateRequest())
 
 
-def test_periodic_set_depends_on_gimbal_type(clock) -> None:
-    ir = UCameraModel(fast_config(), clock=clock).periodic_reports()
-    day = UCameraModel(fast_config(gimbal_type=GimbalType.DAYLIGHT), clock=clock)
+def test_periodic_set_depends_on_gimbal_type(clock, make_config) -> None:
+    ir = UCameraModel(make_config(), clock=clock).periodic_reports()
+    day = UCameraModel(make_config(gimbal_type=GimbalType.DAYLIGHT), clock=clock)
     assert any(isinstance(p, IrPaletteReport) for p in ir)
     assert not any(isinstance(p, IrPaletteReport) for p in day.periodic_reports())
 
@@ -120,8 +119,8 @@ def test_corruption_fault_breaks_the_checksum() -> None:
     assert len(parser.feed(faults.apply(SetAngles(0.1, 0.1).encode()))) == 1
 
 
-def test_text_commands() -> None:
-    sim = UCameraSim(fast_config())
+def test_text_commands(make_config) -> None:
+    sim = UCameraSim(make_config())
     assert sim.command("corrupt 3") == "ok"
     assert sim.faults.corrupt_next == 3
     assert sim.command("drop_rate 0.5") == "ok"
