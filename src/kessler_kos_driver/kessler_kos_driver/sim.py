@@ -1,0 +1,982 @@
+"""Kessler kOS CineShooter simulator: the kOS network protocol on TCP 127.0.0.1.
+
+What it models (document sections in brackets):
+- motors (slider, pan, tilt by default; focus/zoom optional) with trapezoidal speed/acceleration
+  physics in rotations, the documented maxima, MotorPosition when a motor becomes idle;
+- calibration (MarkBegin/MarkEnd/ResetAxis, MotorCalibrated);
+- password lock (UserPassword/DevicePassword; a locked device ignores most messages and
+  answers a wrong password with ErrorStatus 15);
+- the 30 s keep-alive: a connection silent for `keepalive_timeout` seconds is dropped;
+- discovery: NetworkInfo datagrams every 5 s while no client is connected, sent to 127.0.0.1
+  only (never broadcast), to `discovery_port`;
+- TrajectoryData storage and validation (ErrorStatus 3), Bezier playback over time with the
+  documented PlaybackStatus sequences for Live Motion (loops, reverse, rapid reverse) and
+  Time Lapse (continuous and shoot-move-shoot, pre/post photos, photo counting);
+- UnsupportedMessage for anything the document does not define;
+- fault injection: link drop, motor offline/online, axis fault (ErrorStatus 16 + reset),
+  garbage bytes, silence; from Python or from a line-based control port on 127.0.0.1.
+
+Simulated time runs `time_scale` times faster than wall time (durations, delays, exposures and
+physics); keep-alive and discovery periods are wall-clock.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+import math
+import signal
+import socket
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+
+from gimbal_driver_common.sim_server import TcpSimServer
+
+from .protocol import (
+    ALL_MOTORS,
+    DEFAULT_TCP_PORT,
+    DISCOVERY_PERIOD_S,
+    DOCUMENTED_MAXIMA,
+    KEEPALIVE_DROP_S,
+    MOTOR_ADDRESS_MAX,
+    MOTOR_ADDRESS_MIN,
+    UNCALIBRATED_TARGET,
+    BumpPositionSpeedAcceleration,
+    DeviceGuid,
+    DeviceInfo,
+    DevicePassword,
+    DeviceType,
+    ErrorCode,
+    ErrorStatus,
+    FrameParser,
+    GetDeviceGuid,
+    GetDeviceInfo,
+    GetLedStatus,
+    GetMotorInfo,
+    GetNetworkInfo,
+    GetSoftwareId,
+    GetTrajectoryData,
+    LedStatus,
+    MarkBeginPosition,
+    MarkEndPosition,
+    Message,
+    MessageType,
+    MotorCalibrated,
+    MotorInfo,
+    MotorInfoEntry,
+    MotorPosition,
+    MotorStatus,
+    MotorStatusEntry,
+    NetworkInfo,
+    PlaybackMode,
+    PlaybackState,
+    PlaybackStatus,
+    ProtocolError,
+    RapidToFirstKeyFrame,
+    ResetAxis,
+    ResetDevice,
+    SetPositionSpeedAcceleration,
+    SetupPlayback,
+    SoftwareId,
+    StartPlayback,
+    StopPlayback,
+    TakePicture,
+    Trajectory,
+    TrajectoryData,
+    UnsupportedMessage,
+    UserPassword,
+    decode,
+    position_at,
+    validate,
+)
+from .protocol.trajectory import AxisLimits
+
+LOG = logging.getLogger('kessler_kos_sim')
+PHYSICS_STEP_S = 0.002          # simulated seconds per integration step
+MAX_CATCH_UP_S = 5.0            # simulated seconds integrated at most per advance()
+DEFAULT_RANGES = {'slider': 200.0, 'pan': 100.0, 'tilt': -40.0, 'focus': 10.0, 'zoom': 10.0}
+# Locked devices still answer these (identification, keep-alive, unlocking).
+ALLOWED_WHILE_LOCKED = (GetDeviceInfo, GetNetworkInfo, UserPassword)
+
+
+@dataclass
+class SimMotor:
+    address: int
+    role: str
+    position: float = 0.0
+    velocity: float = 0.0
+    target: float = 0.0
+    speed: float = 0.0
+    acceleration: float = 0.0
+    begin: float = 0.0
+    end: float = 0.0                  # 0 = uncalibrated
+    mark_begin_raw: float | None = None
+    online: bool = True
+    moving: bool = False
+    max_setup_speed: float = 0.0
+    max_move_speed: float = 0.0
+    max_acceleration: float = 0.0
+
+    @property
+    def is_fiz(self) -> bool:
+        return self.role in ('focus', 'zoom')
+
+    @property
+    def calibrated(self) -> bool:
+        return self.end != 0.0
+
+    def travel_limits(self) -> tuple[float, float]:
+        if self.calibrated:
+            return min(0.0, self.end), max(0.0, self.end)
+        return -UNCALIBRATED_TARGET, UNCALIBRATED_TARGET
+
+    def command(self, target: float, speed: float, acceleration: float) -> None:
+        lo, hi = self.travel_limits()
+        self.target = min(max(target, lo), hi)
+        self.speed = min(max(speed, 0.0), self.max_setup_speed)
+        accel = acceleration if acceleration > 0 else self.max_acceleration
+        self.acceleration = min(accel, self.max_acceleration)
+        if self.speed == 0.0:
+            self.halt_smoothly()
+        self.moving = True
+
+    def halt_smoothly(self) -> None:
+        """Speed 0: decelerate to a stop where the motor can."""
+        a = self.acceleration or self.max_acceleration
+        stopping = self.velocity * abs(self.velocity) / (2 * a) if a > 0 else 0.0
+        self.target = self.position + stopping
+        self.speed = abs(self.velocity)
+
+    def halt_now(self) -> None:
+        self.velocity = 0.0
+        self.target = self.position
+        self.moving = False
+
+    def step(self, dt: float) -> bool:
+        """Integrate one physics step; True when the motor just became idle."""
+        if not self.moving:
+            return False
+        error = self.target - self.position
+        a = self.acceleration or self.max_acceleration
+        if abs(error) < 1e-6 and abs(self.velocity) <= a * dt:
+            self.position, self.velocity, self.moving = self.target, 0.0, False
+            return True
+        direction = math.copysign(1.0, error)
+        desired = direction * min(self.speed, math.sqrt(2 * a * abs(error)))
+        change = min(max(desired - self.velocity, -a * dt), a * dt)
+        self.velocity += change
+        new_position = self.position + self.velocity * dt
+        if (self.target - new_position) * error <= 0:   # crossed or reached the target
+            self.position, self.velocity, self.moving = self.target, 0.0, False
+            return True
+        self.position = new_position
+        return False
+
+
+@dataclass
+class SimSettings:
+    password: str = ''
+    motors: tuple[str, ...] = ('slider', 'pan', 'tilt')
+    precalibrated: bool = False
+    time_scale: float = 1.0
+    keepalive_timeout: float = KEEPALIVE_DROP_S
+    device_type: int = DeviceType.CINESHOOTER
+    guid: bytes = bytes.fromhex('4b4f53000000000000000000c1e55100')
+    firmware: tuple[int, int, int, int] = (2, 4, 1, 7)
+
+
+@dataclass
+class _Playback:
+    """Device-side playback state machine."""
+
+    trajectory: Trajectory | None = None
+    phase: str = 'idle'      # idle, homing, ready, delay, pre_photos, play, sms, post_photos
+    setup_done: bool = False
+    direction: int = 1
+    loops_left: int = 0
+    loop_forever: bool = False
+    move_time: float = 0.0   # simulated seconds into the current pass
+    pass_length: float = 0.0
+    elapsed: float = 0.0     # normalised
+    photos: int = 0
+    phase_time: float = 0.0
+    photos_in_phase: int = 0
+    sms_frame: int = 0
+    sms_step: str = ''
+    start_after_homing: bool = False
+    homing_owed: bool = False   # SetupPlayback(DelayReturn): return after StartPlayback
+    homing_targets: dict[int, float] = field(default_factory=dict)
+    status: int = PlaybackState.NO_MOVE
+
+
+class KosDevice:
+    """The simulated device: state shared by every TCP connection (it survives link drops)."""
+
+    def __init__(self, settings: SimSettings) -> None:
+        self.settings = settings
+        self.password = settings.password
+        self.lock = threading.RLock()
+        self.motors: dict[int, SimMotor] = {}
+        for index, role in enumerate(settings.motors):
+            maxima = DOCUMENTED_MAXIMA.get(role, DOCUMENTED_MAXIMA['pan'])
+            motor = SimMotor(index + 1, role, max_setup_speed=maxima.speed,
+                             max_move_speed=maxima.speed, max_acceleration=maxima.acceleration)
+            if settings.precalibrated:
+                motor.end = DEFAULT_RANGES.get(role, 100.0)
+            self.motors[motor.address] = motor
+        self.playback = _Playback()
+        self.playback_mode = PlaybackMode.LIVE_MOTION
+        self.led = (1, 0)
+        self.software_id = 0
+        self.aux_input = 0
+        self.sessions: list[KosSession] = []
+        self.sim_time = 0.0
+        self._last_wall = time.monotonic()
+        self.frames_received = 0
+        self.photos_taken = 0
+        self.reboot_requested = False
+
+    # ----------------------------------------------------------------- notifications
+    def broadcast(self, message: Message) -> None:
+        data = message.encode()
+        for session in self.sessions:
+            if session.unlocked:
+                session.outbox.append(data)
+
+    def _playback_note(self, status: int) -> None:
+        pb = self.playback
+        pb.status = status
+        addresses = sorted(pb.trajectory.axes) if pb.trajectory else sorted(self.motors)
+        positions = {a: self.motors[a].position for a in addresses if a in self.motors}
+        self.broadcast(PlaybackStatus(status, pb.elapsed, float(pb.photos), positions))
+
+    def error(self, code: int, address: int = 0, session: KosSession | None = None) -> None:
+        note = ErrorStatus(code, address)
+        if session is not None:
+            session.outbox.append(note.encode())
+        else:
+            self.broadcast(note)
+
+    # ------------------------------------------------------------------------ time
+    def advance(self) -> None:
+        """Bring the simulation up to the current wall time (called by every session)."""
+        with self.lock:
+            now = time.monotonic()
+            sim_dt = min((now - self._last_wall) * self.settings.time_scale, MAX_CATCH_UP_S)
+            self._last_wall = now
+            while sim_dt > 1e-9:
+                dt = min(PHYSICS_STEP_S, sim_dt)
+                sim_dt -= dt
+                self._step(dt)
+
+    def _step(self, dt: float) -> None:
+        self.sim_time += dt
+        pb = self.playback
+        if pb.phase in ('play',):
+            self._step_playback(dt)
+        for motor in self.motors.values():
+            if motor.step(dt) and pb.phase not in ('play',):
+                self.broadcast(MotorPosition(motor.address, motor.position))
+        if pb.phase == 'homing' and not any(
+                self.motors[a].moving for a in pb.homing_targets if a in self.motors):
+            self._homing_done()
+        elif pb.phase in ('delay', 'pre_photos', 'post_photos', 'sms'):
+            self._step_timed_phase(dt)
+
+    # --------------------------------------------------------------------- playback
+    def _first_positions(self) -> dict[int, float]:
+        traj = self.playback.trajectory
+        assert traj is not None
+        return {a: self._to_rotations(a, segs[0].p0_position) for a, segs in traj.axes.items()}
+
+    def _to_rotations(self, address: int, normalised: float) -> float:
+        motor = self.motors[address]
+        return motor.begin + normalised * (motor.end - motor.begin)
+
+    def _curve_positions(self, t: float) -> dict[int, float]:
+        traj = self.playback.trajectory
+        assert traj is not None
+        return {
+            a: self._to_rotations(a, position_at([(s.times, s.positions) for s in segs], t))
+            for a, segs in traj.axes.items()
+        }
+
+    def _start_homing(self, then_start: bool) -> None:
+        pb = self.playback
+        traj = pb.trajectory
+        assert traj is not None
+        percent = traj.playback.return_to_home_percent / 100.0
+        pb.homing_targets = self._first_positions()
+        for address, target in pb.homing_targets.items():
+            motor = self.motors[address]
+            motor.target = target
+            motor.speed = max(motor.max_move_speed * percent, 1e-3)
+            motor.acceleration = motor.max_acceleration
+            motor.moving = True
+        pb.phase = 'homing'
+        pb.start_after_homing = then_start
+
+    def _homing_done(self) -> None:
+        pb = self.playback
+        pb.elapsed = 0.0
+        self._playback_note(PlaybackState.MOTORS_HOME)
+        if pb.start_after_homing:
+            self._begin_after_setup()
+        else:
+            if pb.setup_done:
+                self._playback_note(PlaybackState.SETUP_COMPLETED)
+            pb.phase = 'ready'
+
+    def _begin_after_setup(self) -> None:
+        pb = self.playback
+        traj = pb.trajectory
+        assert traj is not None
+        delay = traj.playback.delay_interval if traj.playback.delay_mode == 1 else 0.0
+        if traj.playback.delay_mode == 2:
+            delay = max(0.0, traj.playback.delay_interval - time.time())
+        pb.phase_time = 0.0
+        if delay > 0:
+            pb.phase = 'delay'
+            pb.pass_length = delay
+            self._playback_note(PlaybackState.DELAY_TIMER_STARTED)
+        else:
+            self._after_delay()
+
+    def _after_delay(self) -> None:
+        pb = self.playback
+        traj = pb.trajectory
+        assert traj is not None
+        if traj.playback.playback_mode == PlaybackMode.LIVE_MOTION:
+            self._start_pass(forward=True)
+            return
+        pb.phase = 'pre_photos'
+        pb.phase_time = 0.0
+        pb.photos_in_phase = 0
+        self._playback_note(PlaybackState.PRE_MOVE_PHOTOS_STARTED)
+
+    def _frame_time(self) -> float:
+        tl = self.playback.trajectory.timelapse  # type: ignore[union-attr]
+        return max(tl.delay + tl.exposure, 1e-3)
+
+    def _start_pass(self, forward: bool, rapid: bool = False) -> None:
+        pb = self.playback
+        traj = pb.trajectory
+        assert traj is not None
+        pb.direction = 1 if forward else -1
+        pb.move_time = 0.0
+        if traj.playback.playback_mode == PlaybackMode.TIMELAPSE_SMS:
+            pb.phase = 'sms'
+            pb.sms_frame = 0
+            pb.sms_step = 'frame'
+            pb.phase_time = 0.0
+            self._playback_note(PlaybackState.START_FORWARD)
+            return
+        pb.pass_length = (traj.playback.rapid_reverse_duration if rapid
+                          else traj.effective_duration())
+        pb.phase = 'play'
+        for motor in (self.motors[a] for a in traj.axes):
+            motor.moving = False
+        self._playback_note(PlaybackState.START_FORWARD if forward
+                            else PlaybackState.START_REVERSE)
+
+    def _step_playback(self, dt: float) -> None:
+        pb = self.playback
+        traj = pb.trajectory
+        assert traj is not None
+        pb.move_time += dt
+        fraction = min(pb.move_time / pb.pass_length, 1.0) if pb.pass_length > 0 else 1.0
+        pb.elapsed = fraction if pb.direction > 0 else 1.0 - fraction
+        previous = {a: self.motors[a].position for a in traj.axes}
+        for address, position in self._curve_positions(pb.elapsed).items():
+            motor = self.motors[address]
+            motor.position = position
+            motor.velocity = (position - previous[address]) / dt
+        if traj.playback.playback_mode == PlaybackMode.TIMELAPSE_CONTINUOUS:
+            due = int(pb.move_time / self._frame_time())
+            while pb.photos < traj.timelapse.pre_move_photos + min(
+                    due, traj.timelapse.move_photos):
+                self._take_photo()
+        if fraction < 1.0:
+            return
+        for motor in (self.motors[a] for a in traj.axes):
+            motor.velocity = 0.0
+            motor.target = motor.position
+        if traj.playback.playback_mode == PlaybackMode.TIMELAPSE_CONTINUOUS:
+            while pb.photos < traj.timelapse.pre_move_photos + traj.timelapse.move_photos:
+                self._take_photo()
+        self._playback_note(PlaybackState.END_OF_MOVE)
+        pl = traj.playback
+        if traj.playback.playback_mode != PlaybackMode.LIVE_MOTION:
+            self._start_post_photos()
+            return
+        if pb.direction < 0:        # back at the first key frame: play forward again
+            self._start_pass(forward=True)
+            return
+        if pb.loop_forever or pb.loops_left > 0:
+            if not pb.loop_forever:
+                pb.loops_left -= 1
+            self._start_pass(forward=False, rapid=bool(pl.loop_after_rapid_reverse))
+            return
+        self._finish()
+
+    def _take_photo(self) -> None:
+        self.playback.photos += 1
+        self.photos_taken += 1
+
+    def _start_post_photos(self) -> None:
+        pb = self.playback
+        pb.phase = 'post_photos'
+        pb.phase_time = 0.0
+        pb.photos_in_phase = 0
+
+    def _step_timed_phase(self, dt: float) -> None:
+        pb = self.playback
+        traj = pb.trajectory
+        assert traj is not None
+        tl = traj.timelapse
+        pb.phase_time += dt
+        if pb.phase == 'delay':
+            if pb.phase_time >= pb.pass_length:
+                self._after_delay()
+        elif pb.phase in ('pre_photos', 'post_photos'):
+            wanted = tl.pre_move_photos if pb.phase == 'pre_photos' else tl.post_move_photos
+            while pb.photos_in_phase < wanted and pb.phase_time >= (
+                    pb.photos_in_phase + 1) * self._frame_time():
+                pb.photos_in_phase += 1
+                self._take_photo()
+            if pb.photos_in_phase >= wanted:
+                if pb.phase == 'pre_photos':
+                    self._start_pass(forward=True)
+                else:
+                    self._playback_note(PlaybackState.POST_MOVE_PHOTOS_COMPLETED)
+                    self._finish()
+        elif pb.phase == 'sms':
+            self._step_sms()
+
+    def _step_sms(self) -> None:
+        """Shoot-move-shoot: per frame StartFrame, delay, exposure (photo), move, stopped."""
+        pb = self.playback
+        traj = pb.trajectory
+        assert traj is not None
+        tl = traj.timelapse
+        if pb.sms_step == 'frame':
+            self._playback_note(PlaybackState.START_FRAME)
+            pb.sms_step, pb.phase_time = 'shoot', 0.0
+        elif pb.sms_step == 'shoot' and pb.phase_time >= tl.delay + tl.exposure:
+            self._take_photo()
+            pb.sms_frame += 1
+            pb.elapsed = pb.sms_frame / tl.move_photos
+            for address, target in self._curve_positions(pb.elapsed).items():
+                motor = self.motors[address]
+                motor.target, motor.speed = target, motor.max_move_speed
+                motor.acceleration, motor.moving = motor.max_acceleration, True
+            pb.sms_step = 'move'
+        elif pb.sms_step == 'move' and not any(self.motors[a].moving for a in traj.axes):
+            self._playback_note(PlaybackState.SMS_MOTORS_STOPPED)
+            if pb.sms_frame >= tl.move_photos:
+                self._playback_note(PlaybackState.END_OF_MOVE)
+                self._start_post_photos()
+            else:
+                pb.sms_step = 'frame'
+
+    def _finish(self) -> None:
+        """FullStop: the configured move is no longer valid (document note 3)."""
+        pb = self.playback
+        self._playback_note(PlaybackState.FULL_STOP)
+        self.playback = _Playback(status=PlaybackState.FULL_STOP, photos=pb.photos,
+                                  elapsed=pb.elapsed)
+
+    def stop_playback(self) -> None:
+        pb = self.playback
+        for motor in self.motors.values():
+            motor.halt_now()
+        self._playback_note(PlaybackState.FULL_STOP)
+        self.playback = _Playback(status=PlaybackState.FULL_STOP, photos=pb.photos,
+                                  elapsed=pb.elapsed)
+        for motor in self.motors.values():
+            if motor.online:
+                self.broadcast(MotorPosition(motor.address, motor.position))
+
+    # ------------------------------------------------------------------ handlers
+    def handle(self, message: Message, frame: bytes, session: KosSession) -> None:
+        """Apply one decoded client message; replies go to session.outbox."""
+        self.frames_received += 1
+        out = session.outbox
+        if not session.unlocked and not isinstance(message, ALLOWED_WHILE_LOCKED):
+            return   # "the Device will simply ignore most messages"
+        if isinstance(message, GetDeviceInfo):
+            out.append(self.device_info().encode())
+        elif isinstance(message, GetNetworkInfo):
+            # LimitedResponse would ask for a UDP limited broadcast; this simulator never
+            # broadcasts, so it always answers over the TCP connection.
+            out.append(self.network_info().encode())
+        elif isinstance(message, DevicePassword):
+            self.password = message.password
+        elif isinstance(message, UserPassword):
+            if message.password == self.password:
+                session.unlocked = True
+            else:
+                session.unlocked = False
+                self.error(ErrorCode.LOCKED_OUT, 0, session)
+        elif isinstance(message, GetMotorInfo):
+            online = [m for m in self.motors.values() if m.online]
+            if not online:
+                self.error(ErrorCode.NO_MOTORS, 0, session)
+            for index, motor in enumerate(online):
+                entry = MotorInfoEntry(motor.address, motor.position, motor.begin, motor.end,
+                                       motor.max_setup_speed, motor.max_move_speed,
+                                       motor.max_acceleration, motor.is_fiz)
+                out.append(MotorInfo([entry], index < len(online) - 1).encode())
+        elif isinstance(message, GetDeviceGuid):
+            out.append(DeviceGuid(self.settings.guid).encode())
+        elif isinstance(message, GetLedStatus):
+            out.append(LedStatus(*self.led, MessageType.RESPONSE).encode())
+        elif isinstance(message, LedStatus) and message.message_type == MessageType.SET:
+            self.led = (message.master_status, message.slave_status)
+        elif isinstance(message, GetSoftwareId):
+            out.append(SoftwareId(self.software_id, MessageType.RESPONSE).encode())
+        elif isinstance(message, SoftwareId) and message.message_type == MessageType.SET:
+            self.software_id = message.device_type
+        elif isinstance(message, GetTrajectoryData):
+            traj = self.playback.trajectory
+            blocks = traj.to_message().blocks if traj else []
+            out.append(TrajectoryData(blocks, MessageType.RESPONSE).encode())
+        elif isinstance(message, TrajectoryData) and message.message_type == MessageType.SET:
+            self._load(message, session)
+        elif not self._handle_action(message, session):
+            out.append(UnsupportedMessage(frame[:64]).encode())
+
+    def _load(self, message: TrajectoryData, session: KosSession) -> None:
+        try:
+            traj = Trajectory.from_message(message)
+            limits = {
+                m.address: AxisLimits(m.begin, m.end, m.max_move_speed, m.max_acceleration)
+                for m in self.motors.values() if m.online
+            }
+            validate(traj, limits)
+        except ProtocolError as exc:
+            LOG.info('rejecting TrajectoryData: %s', exc)
+            self.error(ErrorCode.TRAJECTORY_DATA, 0, session)
+            return
+        self.playback = _Playback(trajectory=traj)
+        self.playback_mode = traj.playback.playback_mode
+
+    def _motor_for(self, address: int, session: KosSession) -> SimMotor | None:
+        motor = self.motors.get(address)
+        if motor is None or not motor.online:
+            self.error(ErrorCode.INVALID_MOTOR_ADDRESS, address, session)
+            return None
+        return motor
+
+    def _handle_action(self, message: Message, session: KosSession) -> bool:
+        pb = self.playback
+        if isinstance(message, SetPositionSpeedAcceleration):
+            motor = self._motor_for(message.motor_address, session)
+            if motor is None:
+                return True
+            if pb.phase not in ('idle', 'ready'):
+                return True   # motors are under playback control
+            target = message.position
+            if isinstance(message, BumpPositionSpeedAcceleration):
+                target = (motor.target if motor.moving else motor.position) + message.position
+            motor.command(target, message.speed, message.acceleration)
+        elif isinstance(message, MarkBeginPosition):
+            motor = self._motor_for(message.motor_address, session)
+            if motor is not None:
+                motor.mark_begin_raw = motor.position
+        elif isinstance(message, MarkEndPosition):
+            motor = self._motor_for(message.motor_address, session)
+            if motor is not None:
+                self._mark_end(motor)
+        elif isinstance(message, ResetAxis):
+            targets = (list(self.motors.values()) if message.motor_address == ALL_MOTORS
+                       else [self._motor_for(message.motor_address, session)])
+            for motor in targets:
+                if motor is None:
+                    continue
+                motor.halt_now()
+                motor.position = motor.begin = motor.end = 0.0
+                motor.mark_begin_raw = None
+                if message.motor_address != ALL_MOTORS:
+                    self.broadcast(MotorCalibrated(motor.address, 0.0, 0.0))
+        elif isinstance(message, TakePicture):
+            self.photos_taken += 1
+        elif isinstance(message, SetupPlayback):
+            self._setup(message, session)
+        elif isinstance(message, StartPlayback):
+            self._start(message, session)
+        elif isinstance(message, StopPlayback):
+            self.stop_playback()
+        elif isinstance(message, RapidToFirstKeyFrame):
+            if pb.trajectory is None or pb.phase not in ('idle', 'ready'):
+                self.error(ErrorCode.RETURN_TO_FIRST_KEY_FRAME, 0, session)
+            else:
+                self._start_homing(then_start=False)
+        elif isinstance(message, ResetDevice):
+            self.reboot_requested = True
+        else:
+            return False
+        return True
+
+    def _mark_end(self, motor: SimMotor) -> None:
+        begin_raw = motor.mark_begin_raw if motor.mark_begin_raw is not None else motor.begin
+        span = motor.position - begin_raw
+        if abs(span) < 1e-3:
+            self.broadcast(ErrorStatus(ErrorCode.CALIBRATION, motor.address))
+            motor.halt_now()
+            motor.position = motor.begin = motor.end = 0.0
+            motor.mark_begin_raw = None
+            return
+        # Document: afterwards MarkBegin is 0, MarkEnd is relative to it and the current
+        # position equals MarkEnd.
+        motor.halt_now()
+        motor.begin, motor.end, motor.position = 0.0, span, span
+        motor.target = span
+        motor.mark_begin_raw = None
+        self.broadcast(MotorCalibrated(motor.address, 0.0, span))
+
+    def _setup(self, message: SetupPlayback, session: KosSession) -> None:
+        pb = self.playback
+        if pb.trajectory is None or pb.phase not in ('idle', 'ready'):
+            self.error(ErrorCode.EXECUTE_MOVE, 0, session)
+            return
+        if not self._playback_preconditions(message.direction, session):
+            return
+        pb.setup_done = True
+        if message.delay_return:
+            pb.phase = 'ready'
+            pb.homing_targets = {}
+            self._playback_note(PlaybackState.SETUP_COMPLETED)
+            pb.homing_owed = True
+        else:
+            self._start_homing(then_start=False)
+
+    def _playback_preconditions(self, direction: int, session: KosSession) -> bool:
+        traj = self.playback.trajectory
+        assert traj is not None
+        if direction != 0 and traj.playback.playback_mode != PlaybackMode.LIVE_MOTION:
+            self.error(ErrorCode.EXECUTE_MOVE, 0, session)   # no reverse in a time lapse
+            return False
+        for address in traj.axes:
+            motor = self.motors.get(address)
+            if motor is None or not motor.online or not motor.calibrated:
+                self.error(ErrorCode.EXECUTE_MOVE, address, session)
+                return False
+        return True
+
+    def _start(self, message: StartPlayback, session: KosSession) -> None:
+        pb = self.playback
+        if pb.trajectory is None or pb.phase not in ('idle', 'ready'):
+            self.error(ErrorCode.EXECUTE_MOVE, 0, session)
+            return
+        if not self._playback_preconditions(message.direction, session):
+            return
+        pl = pb.trajectory.playback
+        pb.loops_left = max(pl.loop_after_reverse, pl.loop_after_rapid_reverse)
+        pb.loop_forever = pb.loops_left == 255
+        pb.photos = 0
+        if pb.phase == 'ready' and not pb.homing_owed:
+            self._begin_after_setup()        # set up and already at the first key frame
+        else:
+            self._start_homing(then_start=True)   # no setup, or DelayReturn
+
+    # -------------------------------------------------------------------- replies
+    def device_info(self) -> DeviceInfo:
+        fw = self.settings.firmware
+        pb = self.playback
+        remaining = max(pb.pass_length - pb.phase_time, 0.0) if pb.phase == 'delay' else 0.0
+        return DeviceInfo(self.settings.device_type, 0, int(self.playback_mode), pb.status,
+                          *fw, 0, 0, self.password, self.aux_input, remaining, pb.elapsed,
+                          pb.photos)
+
+    def network_info(self) -> NetworkInfo:
+        return NetworkInfo(False, bytes.fromhex('02004b4f5301'), 0x7F000001, 0xFF000000, 0,
+                           self.settings.device_type, 0, MessageType.RESPONSE)
+
+    # ------------------------------------------------------------- fault injection
+    def set_motor_online(self, address: int, online: bool) -> None:
+        with self.lock:
+            motor = self.motors[address]
+            motor.online = online
+            if not online:
+                motor.halt_now()
+                if self.playback.trajectory and address in self.playback.trajectory.axes \
+                        and self.playback.phase not in ('idle', 'ready'):
+                    self.broadcast(ErrorStatus(ErrorCode.EXECUTE_MOVE, 0))
+                    self.stop_playback()
+            self.broadcast(MotorStatus([MotorStatusEntry(
+                address, online, 1 if motor.is_fiz else 0, motor.max_setup_speed,
+                motor.max_move_speed, motor.max_acceleration)]))
+
+    def inject_axis_fault(self, address: int, code: int = ErrorCode.AXIS_FAULT) -> None:
+        """ErrorStatus with "axis will be reset": the axis stops and loses calibration."""
+        with self.lock:
+            motor = self.motors[address]
+            if self.playback.phase not in ('idle', 'ready'):
+                self.stop_playback()
+            motor.halt_now()
+            self.broadcast(ErrorStatus(code, address))
+            motor.begin = motor.end = 0.0
+            motor.mark_begin_raw = None
+
+
+class KosSession:
+    """One TCP connection: framing, lock state, keep-alive and the reply queue."""
+
+    def __init__(self, device: KosDevice) -> None:
+        self.device = device
+        self.parser = FrameParser()
+        self.unlocked = False
+        self.outbox: list[bytes] = []
+        self.last_rx = time.monotonic()
+        self.malformed = 0
+        with device.lock:
+            device.sessions.append(self)
+
+    def on_bytes(self, data: bytes) -> bytes:
+        self.last_rx = time.monotonic()
+        device = self.device
+        device.advance()
+        with device.lock:
+            for frame in self.parser.feed(data):
+                try:
+                    message = decode(frame)
+                except ProtocolError as exc:
+                    self.malformed += 1
+                    LOG.info('malformed frame (%s); answering UnsupportedMessage', exc)
+                    if self.unlocked:
+                        self.outbox.append(UnsupportedMessage(frame[:64]).encode())
+                    continue
+                device.handle(message, frame, self)
+            return self._drain()
+
+    def poll(self) -> bytes:
+        device = self.device
+        if time.monotonic() - self.last_rx > device.settings.keepalive_timeout:
+            LOG.info('no message for %.1f s: dropping the connection (keep-alive)',
+                     device.settings.keepalive_timeout)
+            raise ConnectionAbortedError('kOS keep-alive expired')
+        if device.reboot_requested:
+            raise ConnectionAbortedError('device reboot')
+        device.advance()
+        with device.lock:
+            return self._drain()
+
+    def _drain(self) -> bytes:
+        data = b''.join(self.outbox)
+        self.outbox.clear()
+        return data
+
+    def on_disconnect(self) -> None:
+        with self.device.lock:
+            if self in self.device.sessions:
+                self.device.sessions.remove(self)
+
+
+class KosSimulator:
+    """Device + TCP server + discovery beacon + optional control port."""
+
+    def __init__(self, settings: SimSettings, port: int = 0, discovery_port: int = 0,
+                 control_port: int | None = None) -> None:
+        self.device = KosDevice(settings)
+        self.server = TcpSimServer(lambda: KosSession(self.device), port=port)
+        self.discovery_port = discovery_port
+        self.control_port_requested = control_port
+        self.control_port = 0
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._control_sock: socket.socket | None = None
+
+    @property
+    def port(self) -> int:
+        return self.server.port
+
+    def start(self) -> KosSimulator:
+        self.server.start()
+        self._spawn(self._background, 'kos-sim-background')
+        if self.control_port_requested is not None:
+            sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind(('127.0.0.1', self.control_port_requested))
+            sock.listen(2)
+            sock.settimeout(0.2)
+            self._control_sock = sock
+            self.control_port = sock.getsockname()[1]
+            self._spawn(self._control_loop, 'kos-sim-control')
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.server.stop()
+        if self._control_sock is not None:
+            self._control_sock.close()
+        for thread in self._threads:
+            thread.join(timeout=2.0)
+
+    def _spawn(self, target, name: str) -> None:
+        thread = threading.Thread(target=target, name=name, daemon=True)
+        thread.start()
+        self._threads.append(thread)
+
+    def _background(self) -> None:
+        """Keep physics running without clients, beacon NetworkInfo, handle reboots."""
+        next_beacon = time.monotonic()
+        beacon = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            while not self._stop.wait(0.02):
+                self.device.advance()
+                if self.device.reboot_requested:
+                    self.server.drop_link()
+                    with self.device.lock:
+                        self.device.reboot_requested = False
+                        self.device.playback = _Playback()
+                now = time.monotonic()
+                if self.discovery_port and now >= next_beacon:
+                    next_beacon = now + DISCOVERY_PERIOD_S / max(self.device.settings.time_scale,
+                                                                 1.0)
+                    if self.server.client_count == 0:
+                        data = self.device.network_info().encode()
+                        # Loopback only: never the limited broadcast the document describes.
+                        with contextlib.suppress(OSError):
+                            beacon.sendto(data, ('127.0.0.1', self.discovery_port))
+        finally:
+            beacon.close()
+
+    # ------------------------------------------------------------- fault injection
+    def command(self, line: str) -> str:
+        """Run one fault-injection/control command; returns 'ok ...' or 'error ...'."""
+        words = line.split()
+        if not words:
+            return 'error empty command'
+        verb, args = words[0].lower(), words[1:]
+        device = self.device
+        try:
+            if verb == 'drop':
+                self.server.drop_link(float(args[0]) if args else 0.0)
+            elif verb == 'garbage':
+                self.server.inject(bytes.fromhex(''.join(args)) if args else b'\xde\xad\xbe\xef')
+            elif verb == 'silent':
+                self.server.set_silent(bool(args) and args[0] in ('on', '1', 'true'))
+            elif verb in ('offline', 'online'):
+                device.set_motor_online(int(args[0]), verb == 'online')
+            elif verb == 'fault':
+                device.inject_axis_fault(int(args[0]), int(args[1]) if len(args) > 1 else 16)
+            elif verb == 'error':
+                with device.lock:
+                    device.broadcast(ErrorStatus(int(args[0]), int(args[1]) if len(args) > 1
+                                                 else 0))
+            elif verb == 'status':
+                with device.lock:
+                    motors = ' '.join(
+                        f'{m.address}:{m.role}:{m.position:.4f}:{m.end:.3f}:'
+                        f'{"on" if m.online else "off"}' for m in device.motors.values())
+                    return (f'ok phase={device.playback.phase} photos={device.photos_taken} '
+                            f'clients={self.server.client_count} {motors}')
+            else:
+                return (f'error unknown command {verb!r}; use drop [s], garbage [hex], '
+                        'silent on|off, offline N, online N, fault N [code], error CODE [N], '
+                        'status')
+        except (ValueError, IndexError, KeyError) as exc:
+            return f'error {verb}: {exc}'
+        return 'ok'
+
+    def _control_loop(self) -> None:
+        assert self._control_sock is not None
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._control_sock.accept()
+            except (TimeoutError, BlockingIOError):
+                continue
+            except OSError:
+                return
+            with conn, contextlib.suppress(OSError):
+                conn.settimeout(5.0)
+                buffer = b''
+                while b'\n' not in buffer:
+                    chunk = conn.recv(1024)
+                    if not chunk:
+                        break
+                    buffer += chunk
+                for line in buffer.decode(errors='replace').splitlines():
+                    conn.sendall((self.command(line) + '\n').encode())
+
+
+def control(port: int, line: str, timeout: float = 5.0) -> str:
+    """Send one control command to a running simulator (used by tests and users)."""
+    with socket.create_connection(('127.0.0.1', port), timeout) as sock:
+        sock.sendall(line.encode() + b'\n')
+        data = b''
+        while not data.endswith(b'\n'):
+            chunk = sock.recv(1024)
+            if not chunk:
+                break
+            data += chunk
+    return data.decode().strip()
+
+
+def build_arg_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='kessler_kos_sim',
+        description='Kessler kOS CineShooter simulator on TCP 127.0.0.1 (kOS network protocol).')
+    parser.add_argument('--port', type=int, default=DEFAULT_TCP_PORT,
+                        help='TCP port on 127.0.0.1 (0 = any free port; default 5520)')
+    parser.add_argument('--password', default='', help='device password (default empty)')
+    parser.add_argument('--motors', default='slider,pan,tilt',
+                        help='comma-separated motor roles in address order '
+                             '(slider, pan, tilt, focus, zoom); default slider,pan,tilt')
+    parser.add_argument('--precalibrated', action='store_true',
+                        help='start with every motor calibrated over a default range')
+    parser.add_argument('--time-scale', type=float, default=1.0,
+                        help='simulated seconds per wall-clock second (default 1)')
+    parser.add_argument('--keepalive-timeout', type=float, default=KEEPALIVE_DROP_S,
+                        help='drop a connection silent for this many wall seconds (30)')
+    parser.add_argument('--discovery-port', type=int, default=DEFAULT_TCP_PORT,
+                        help='UDP port NetworkInfo beacons go to on 127.0.0.1 (0 = off)')
+    parser.add_argument('--control-port', type=int, default=None,
+                        help='TCP port on 127.0.0.1 for fault-injection commands '
+                             '(0 = any free port; default off)')
+    parser.add_argument('--verbose', action='store_true')
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_arg_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format='%(asctime)s %(name)s: %(message)s')
+    roles = tuple(r.strip().lower() for r in args.motors.split(',') if r.strip())
+    unknown = [r for r in roles if r not in DOCUMENTED_MAXIMA]
+    if not roles or unknown or len(roles) > MOTOR_ADDRESS_MAX - MOTOR_ADDRESS_MIN + 1:
+        print(f'kessler_kos_sim: --motors must list 1..10 of {sorted(DOCUMENTED_MAXIMA)}, '
+              f'got {args.motors!r}', file=sys.stderr)
+        return 2
+    if args.time_scale <= 0 or args.keepalive_timeout <= 0:
+        print('kessler_kos_sim: --time-scale and --keepalive-timeout must be > 0',
+              file=sys.stderr)
+        return 2
+    settings = SimSettings(password=args.password, motors=roles,
+                           precalibrated=args.precalibrated, time_scale=args.time_scale,
+                           keepalive_timeout=args.keepalive_timeout)
+    sim = KosSimulator(settings, port=args.port, discovery_port=args.discovery_port,
+                       control_port=args.control_port)
+    try:
+        sim.start()
+    except OSError as exc:
+        print(f'kessler_kos_sim: cannot listen on 127.0.0.1:{args.port}: {exc}',
+              file=sys.stderr)
+        return 1
+    control_text = f' control 127.0.0.1:{sim.control_port}' if sim.control_port else ''
+    print(f'kessler_kos_sim listening on 127.0.0.1:{sim.port}{control_text} '
+          f'motors={",".join(roles)}', flush=True)
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    stop.wait()
+    sim.stop()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
