@@ -16,4 +16,11 @@ setup(
     maintainer_email='drivers@example.com',
     description='Shared infrastructure of the gimbal driver suite',
     license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            # Reference driver and simulator used to test the shared base node.
+            'virtual_gimbal_sim = gimbal_driver_common.virtual_gimbal:sim_main',
+            'virtual_gimbal_node = gimbal_driver_common.virtual_gimbal:node_main',
+        ],
+    },
 )

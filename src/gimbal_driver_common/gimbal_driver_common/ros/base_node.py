@@ -122,7 +122,7 @@ class GimbalDriverNode(LifecycleNode):
         self._watchdog = JogWatchdog(self.command_timeout, self._on_jog_expired)
         self._joint_rate = FrequencyMonitor(self.publish_rate)
         self._preset_store: PresetStore | None = None
-        self._callbacks = ReentrantCallbackGroup()
+        self._service_group = ReentrantCallbackGroup()
         self._create_ros_interfaces()
 
     # ------------------------------------------------------------------ hooks
@@ -308,7 +308,7 @@ class GimbalDriverNode(LifecycleNode):
             JointState, 'joint_command', self._on_joint_command, 1,
             callback_group=MutuallyExclusiveCallbackGroup(),
         )
-        group = self._callbacks
+        group = self._service_group
         self.create_service(Trigger, '~/stop', self._on_stop, callback_group=group)
         self.create_service(
             Trigger, '~/reset_faults', self._on_reset_faults, callback_group=group

@@ -33,6 +33,7 @@ class RosTestClient:
         self._messages: dict[str, list[Any]] = {}
         self._lock = threading.Lock()
         self._publishers: dict[str, Any] = {}
+        self._clients: dict[tuple[type, str], Any] = {}
 
     def _spin(self) -> None:
         # Shutdown races end the spin thread with assorted errors; that is expected.
@@ -99,15 +100,17 @@ class RosTestClient:
 
     # services
     def call(self, srv_type: type, name: str, request: Any, timeout: float = 15.0) -> Any:
-        client = self.node.create_client(srv_type, name)
-        try:
-            if not client.wait_for_service(timeout_sec=timeout):
-                raise TimeoutError(f'service {name} not available after {timeout:g} s')
-            future = client.call_async(request)
-            wait_for(future.done, timeout, f'the reply of {name}')
-            return future.result()
-        finally:
-            self.node.destroy_client(client)
+        # Clients are kept, not destroyed: destroying an entity while the executor
+        # thread waits on it can end the spin.
+        client = self._clients.get((srv_type, name))
+        if client is None:
+            client = self.node.create_client(srv_type, name)
+            self._clients[(srv_type, name)] = client
+        if not client.wait_for_service(timeout_sec=timeout):
+            raise TimeoutError(f'service {name} not available after {timeout:g} s')
+        future = client.call_async(request)
+        wait_for(future.done, timeout, f'the reply of {name}')
+        return future.result()
 
     # actions
     def run_action(
@@ -115,27 +118,27 @@ class RosTestClient:
         cancel_after: float | None = None,
     ) -> tuple[Any, int, list[Any]]:
         """Send a goal and wait for its result: (result, status, feedback messages)."""
-        client = ActionClient(self.node, action_type, name)
+        client = self._clients.get((action_type, name))
+        if client is None:
+            client = ActionClient(self.node, action_type, name)
+            self._clients[(action_type, name)] = client
         feedback: list[Any] = []
-        try:
-            if not client.wait_for_server(timeout_sec=timeout):
-                raise TimeoutError(f'action {name} not available after {timeout:g} s')
-            send = client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(
-                f.feedback))
-            wait_for(send.done, timeout, f'{name} to accept the goal')
-            handle = send.result()
-            if not handle.accepted:
-                raise AssertionError(f'{name} rejected the goal')
-            if cancel_after is not None:
-                time.sleep(cancel_after)
-                cancel = handle.cancel_goal_async()
-                wait_for(cancel.done, timeout, f'{name} to answer the cancel')
-            result_future = handle.get_result_async()
-            wait_for(result_future.done, timeout, f'the result of {name}')
-            response = result_future.result()
-            return response.result, response.status, feedback
-        finally:
-            client.destroy()
+        if not client.wait_for_server(timeout_sec=timeout):
+            raise TimeoutError(f'action {name} not available after {timeout:g} s')
+        send = client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(
+            f.feedback))
+        wait_for(send.done, timeout, f'{name} to accept the goal')
+        handle = send.result()
+        if not handle.accepted:
+            raise AssertionError(f'{name} rejected the goal')
+        if cancel_after is not None:
+            time.sleep(cancel_after)
+            cancel = handle.cancel_goal_async()
+            wait_for(cancel.done, timeout, f'{name} to answer the cancel')
+        result_future = handle.get_result_async()
+        wait_for(result_future.done, timeout, f'the result of {name}')
+        response = result_future.result()
+        return response.result, response.status, feedback
 
     # lifecycle
     def lifecycle_state(self, node_name: str, timeout: float = 15.0) -> str:

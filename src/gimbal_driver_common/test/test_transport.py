@@ -1,0 +1,165 @@
+"""TcpStream over loopback and SerialStream over a real pseudo-terminal."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import threading
+import tty
+
+import pytest
+from gimbal_driver_common.transport import (
+    Backoff,
+    LinkClosed,
+    SerialStream,
+    TcpStream,
+    TransportError,
+    read_exactly,
+    stream_from_url,
+)
+
+
+class EchoServer:
+    """A loopback TCP echo server that can vanish and come back on the same port."""
+
+    def __init__(self) -> None:
+        self.listener = socket.create_server(('127.0.0.1', 0))
+        self.port = self.listener.getsockname()[1]
+        self.clients: list[socket.socket] = []
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                client, _ = self.listener.accept()
+            except OSError:
+                return
+            self.clients.append(client)
+            threading.Thread(target=self._echo, args=(client,), daemon=True).start()
+
+    @staticmethod
+    def _echo(client: socket.socket) -> None:
+        try:
+            while data := client.recv(4096):
+                client.sendall(data)
+        except OSError:
+            pass
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            self.listener.shutdown(socket.SHUT_RDWR)  # wakes the accept() thread
+        self.listener.close()
+        for client in self.clients:
+            with contextlib.suppress(OSError):
+                client.shutdown(socket.SHUT_RDWR)
+            client.close()
+
+
+def test_tcp_round_trip_and_timeout() -> None:
+    server = EchoServer()
+    try:
+        with TcpStream('127.0.0.1', server.port) as stream:
+            assert stream.is_open
+            stream.write(b'hello')
+            assert read_exactly(stream, 5, 2.0) == b'hello'
+            assert stream.read(10, 0.05) == b''  # silence is not an error
+        assert not stream.is_open
+    finally:
+        server.close()
+
+
+def test_tcp_connect_refused_is_a_clear_error() -> None:
+    port = socket.create_server(('127.0.0.1', 0))
+    free = port.getsockname()[1]
+    port.close()
+    stream = TcpStream('127.0.0.1', free, connect_timeout=0.5)
+    with pytest.raises(TransportError, match=f'127.0.0.1:{free}'):
+        stream.open()
+
+
+def test_tcp_peer_disappears_and_comes_back() -> None:
+    server = EchoServer()
+    port = server.port
+    stream = TcpStream('127.0.0.1', port)
+    stream.open()
+    stream.write(b'x')
+    assert read_exactly(stream, 1, 2.0) == b'x'
+    server.close()
+    with pytest.raises(LinkClosed):
+        for _ in range(50):
+            stream.read(10, 0.1)
+    stream.close()
+    # The device comes back on the same port: a new open works.
+    listener = socket.create_server(('127.0.0.1', port))
+    try:
+        stream.open()
+        client, _ = listener.accept()
+        client.sendall(b'back')
+        assert read_exactly(stream, 4, 2.0) == b'back'
+        client.close()
+    finally:
+        stream.close()
+        listener.close()
+
+
+def test_write_on_closed_stream_raises_link_closed() -> None:
+    with pytest.raises(LinkClosed):
+        TcpStream('127.0.0.1', 1).write(b'x')
+
+
+def _raw_pty() -> tuple[int, str, int]:
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    return master, os.ttyname(slave), slave
+
+
+def test_serial_over_pty_round_trip() -> None:
+    master, name, slave = _raw_pty()
+    try:
+        with SerialStream(name, 115200) as stream:
+            stream.write(b'\x00\xffping')
+            assert os.read(master, 100) == b'\x00\xffping'
+            os.write(master, b'pong\x06')
+            assert read_exactly(stream, 5, 2.0) == b'pong\x06'
+            assert stream.read(10, 0.05) == b''
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_serial_missing_port_is_a_clear_error() -> None:
+    with pytest.raises(TransportError, match='/dev/does-not-exist'):
+        SerialStream('/dev/does-not-exist').open()
+
+
+def test_serial_port_vanishing_raises_link_closed() -> None:
+    master, name, slave = _raw_pty()
+    stream = SerialStream(name)
+    stream.open()
+    os.close(master)
+    os.close(slave)
+    with pytest.raises(LinkClosed):
+        for _ in range(20):
+            stream.read(10, 0.05)
+    stream.close()
+
+
+def test_stream_from_url() -> None:
+    tcp = stream_from_url('tcp://127.0.0.1:4949')
+    assert isinstance(tcp, TcpStream) and tcp.port == 4949
+    ser = stream_from_url('serial:///dev/ttyUSB0?baudrate=9600')
+    assert isinstance(ser, SerialStream) and ser.baudrate == 9600 and ser.port == '/dev/ttyUSB0'
+    with pytest.raises(ValueError, match='unsupported'):
+        stream_from_url('udp://127.0.0.1:1')
+
+
+def test_backoff_doubles_to_maximum_and_resets() -> None:
+    backoff = Backoff(0.5, 3.0)
+    assert [backoff.next_delay() for _ in range(5)] == [0.5, 1.0, 2.0, 3.0, 3.0]
+    backoff.reset()
+    assert backoff.next_delay() == 0.5
+    with pytest.raises(ValueError):
+        Backoff(0.0, 1.0)
