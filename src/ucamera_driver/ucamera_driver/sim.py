@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import random
 import signal
 import sys
@@ -515,7 +516,11 @@ class UCameraSim:
                 f"mode={mode_name(model.mode)} pan={math.degrees(model.pan.position):.2f}deg "
                 f"tilt={math.degrees(model.tilt.position):.2f}deg zoom={model.zoom:.3f} "
                 f"rate={model.telemetry_rate}Hz silent={self.server.silent} "
-                f"bad_packets={self.bad_packets} checksum_errors={self.checksum_errors}"
+                f"bad_packets={self.bad_packets} checksum_errors={self.checksum_errors} "
+                f"nv_saves={model.nv_saves} ffc_saves={model.ffc_saves} "
+                f"gps_feed={model.gps_feed.name.lower()} vehicle_angles_deg="
+                + ("none" if model.vehicle_angles is None else
+                   ",".join(f"{math.degrees(v):.1f}" for v in model.vehicle_angles))
             )
 
 
@@ -541,6 +546,8 @@ def build_arg_parser() -> argparse.ArgumentParser:
                         help="probability that a sent frame gets one bit flipped")
     parser.add_argument("--drop-rate", type=float, default=0.0,
                         help="probability that a sent frame is lost")
+    parser.add_argument("--control-fifo", default=None,
+                        help="also read fault commands from this named pipe (created if absent)")
     parser.add_argument("--log-level", default="INFO")
     return parser
 
@@ -561,6 +568,9 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if "--ros-args" in argv:  # started by a ROS launch file: those arguments are not ours
+        argv = argv[: argv.index("--ros-args")]
     args = build_arg_parser().parse_args(argv)
     logging.basicConfig(level=args.log_level.upper(), format="%(name)s: %(message)s")
     sim = UCameraSim(config_from_args(args), link_path=args.link)
@@ -574,13 +584,24 @@ def main(argv: list[str] | None = None) -> int:
     print(sim.port_name, flush=True)
     LOG.info("U-Camera simulator serving on %s", sim.port_name)
 
-    def read_commands() -> None:
-        for line in sys.stdin:
+    def read_commands(lines) -> None:
+        for line in lines:
             answer = sim.command(line)
             if answer:
                 print(answer, flush=True)
 
-    threading.Thread(target=read_commands, daemon=True, name="ucamera-sim-stdin").start()
+    def read_fifo(path: str) -> None:
+        while not stop.is_set():
+            with open(path, encoding="utf-8") as fifo:  # blocks until a writer opens it
+                read_commands(fifo)
+
+    threading.Thread(target=read_commands, args=(sys.stdin,), daemon=True,
+                     name="ucamera-sim-stdin").start()
+    if args.control_fifo:
+        if not os.path.exists(args.control_fifo):
+            os.mkfifo(args.control_fifo)
+        threading.Thread(target=read_fifo, args=(args.control_fifo,), daemon=True,
+                         name="ucamera-sim-fifo").start()
     try:
         while not stop.wait(0.2):
             pass

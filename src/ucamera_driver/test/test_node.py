@@ -1,0 +1,354 @@
+"""The node and the simulator as separate processes, checked through rclpy.
+
+Needs the colcon-built workspace (``make build`` then ``source scripts/ros_env.sh``).
+The simulator runs with short durations and takes fault commands through a
+named pipe (``--control-fifo``); its ``status`` answer shows the device-frame
+angles, which checks the REP-103 sign conversion (device pan is negated).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+rclpy = pytest.importorskip("rclpy")
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import TwistStamped  # noqa: E402
+from gimbal_driver_common.ros.testing import RosTestClient  # noqa: E402
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for  # noqa: E402
+from lifecycle_msgs.msg import Transition  # noqa: E402
+from sensor_msgs.msg import Imu, JointState, NavSatFix, NavSatStatus  # noqa: E402
+from std_msgs.msg import Float64  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from gimbal_msgs.action import Home, MoveTo  # noqa: E402
+from gimbal_msgs.msg import GimbalStatus  # noqa: E402
+from gimbal_msgs.srv import (  # noqa: E402
+    ClearPreset,
+    GotoPreset,
+    ListPresets,
+    SetMode,
+    SetPreset,
+    StartScan,
+)
+
+NODE = "ucamera_driver"
+SIM_ARGS = ["--init-time", "0.1", "--max-rate", "180", "--acceleration", "1800",
+            "--autoalign-time", "0.3", "--ffc-time", "0.3", "--save-pause", "0.5"]
+GOAL_SUCCEEDED = 4
+GOAL_ABORTED = 6
+
+
+class Rig:
+    """Simulator process + node process + a ROS test client in one leased domain."""
+
+    def __init__(self, node_params: dict[str, str], params_file: str | None = None) -> None:
+        self.lease = DomainLease()
+        domain = self.lease.acquire()
+        self.tmp = tempfile.TemporaryDirectory(prefix="ucamera-node-test-")
+        self.link = str(Path(self.tmp.name, "tty"))
+        self.fifo = str(Path(self.tmp.name, "control"))
+        self.sim = ManagedProcess.ros("ucamera_driver", "ucamera_sim", domain,
+                                      ["--link", self.link, "--control-fifo", self.fifo,
+                                       *SIM_ARGS])
+        self.sim.wait_for_output(self.link)
+        params = {"serial_port": self.link, "presets_file": f"{self.tmp.name}/presets.yaml",
+                  "velocity_max": "[3.0, 3.0]", "reconnect_period": "0.3",
+                  "silence_timeout": "0.5", "diagnostics_period": "0.3", **node_params}
+        args = ["--ros-args"]
+        if params_file:
+            args += ["--params-file", params_file]
+        for key, value in params.items():
+            args += ["-p", f"{key}:={value}"]
+        self.node = ManagedProcess.ros("ucamera_driver", "ucamera_driver_node", domain, args)
+        self.ros = RosTestClient(domain, name="ucamera_test_client")
+        self.ros.wait_for_message("joint_states", JointState, timeout=30.0, fresh=False)
+
+    def close(self) -> None:
+        self.ros.close()
+        self.node.stop()
+        self.sim.stop()
+        self.tmp.cleanup()
+        self.lease.release()
+
+    # simulator control
+    def sim_command(self, line: str) -> None:
+        with open(self.fifo, "w", encoding="utf-8") as fifo:
+            fifo.write(line + "\n")
+
+    def sim_status(self) -> str:
+        before = self.sim.output().count("mode=")
+        self.sim_command("status")
+        wait_for(lambda: self.sim.output().count("mode=") > before, 5.0, "sim status")
+        return [line for line in self.sim.output().splitlines() if "mode=" in line][-1]
+
+    def device_angles_deg(self) -> tuple[float, float]:
+        status = self.sim_status()
+        pan = float(re.search(r"pan=(-?[\d.]+)deg", status).group(1))
+        tilt = float(re.search(r"tilt=(-?[\d.]+)deg", status).group(1))
+        return pan, tilt
+
+    # ROS helpers
+    def joints(self, predicate, timeout: float = 15.0) -> JointState:
+        return self.ros.wait_for_message("joint_states", JointState, predicate, timeout)
+
+    def command(self, names, positions=(), velocities=()) -> None:
+        msg = JointState(name=list(names), position=list(positions),
+                         velocity=list(velocities))
+        self.ros.publish("joint_command", msg)
+
+    def at(self, pan: float, tilt: float, tol: float = 0.01):
+        return lambda m: (len(m.position) == 2 and abs(m.position[0] - pan) < tol
+                          and abs(m.position[1] - tilt) < tol)
+
+    def status(self, predicate, timeout: float = 15.0) -> GimbalStatus:
+        return self.ros.wait_for_message(f"/{NODE}/status", GimbalStatus, predicate, timeout)
+
+    def diagnostics(self, predicate, timeout: float = 15.0) -> DiagnosticArray:
+        return self.ros.wait_for_message("/diagnostics", DiagnosticArray, predicate, timeout)
+
+    def trigger(self, name: str) -> Trigger.Response:
+        return self.ros.call(Trigger, f"/{NODE}/{name}", Trigger.Request())
+
+
+def device_part(array: DiagnosticArray, part: str):
+    for status in array.status:
+        if status.name == f"{NODE}: {part}":
+            return status
+    return None
+
+
+def value(status, key: str) -> str:
+    return {kv.key: kv.value for kv in status.values}[key]
+
+
+@pytest.fixture(scope="module")
+def rig() -> Iterator[Rig]:
+    setup = Rig({"allow_nv_write": "true", "gps_feed": "external", "command_timeout": "0.5"})
+    try:
+        yield setup
+    finally:
+        setup.close()
+
+
+def test_joint_states_and_rep103_signs(rig: Rig) -> None:
+    msg = rig.joints(None)
+    assert list(msg.name) == ["pan", "tilt"]
+    rig.command(["pan", "tilt"], [0.5, 0.3])
+    rig.joints(rig.at(0.5, 0.3))
+    pan_deg, tilt_deg = rig.device_angles_deg()
+    assert pan_deg == pytest.approx(-math.degrees(0.5), abs=0.1)  # device pan positive right
+    assert tilt_deg == pytest.approx(math.degrees(0.3), abs=0.1)
+    rig.status(lambda s: s.mode == "angles" and s.connection == GimbalStatus.CONNECTION_CONNECTED)
+
+
+def test_jog_runs_in_rates_mode_and_expires(rig: Rig) -> None:
+    rig.command(["tilt"], velocities=[0.4])
+    rig.joints(lambda m: m.velocity[1] > 0.3)
+    rig.status(lambda s: s.mode == "rates")
+    # no further joint_command: the dead-man watchdog (0.5 s) zeroes the rate
+    rig.joints(lambda m: abs(m.velocity[1]) < 1e-3 and abs(m.velocity[0]) < 1e-3)
+    assert "expired" in rig.node.output()
+
+
+def test_bad_commands_are_rejected_with_a_warning(rig: Rig) -> None:
+    rig.command(["roll"], [0.1])
+    wait_for(lambda: "unknown joint" in rig.node.output(), 10.0, "unknown joint warning")
+    rig.command(["pan"], [5.0])
+    wait_for(lambda: "outside" in rig.node.output(), 10.0, "limit warning")
+
+
+def test_move_to_with_speed_and_limits(rig: Rig) -> None:
+    goal = MoveTo.Goal(joint_names=["pan", "tilt"], positions=[-0.4, 0.2],
+                       velocities=[0.8, 0.8])
+    result, status, feedback = rig.ros.run_action(MoveTo, f"/{NODE}/move_to", goal)
+    assert status == GOAL_SUCCEEDED, result.message
+    assert result.positions[0] == pytest.approx(-0.4, abs=0.02)
+    assert feedback
+    bad = MoveTo.Goal(joint_names=["pan"], positions=[4.0])
+    result, status, _ = rig.ros.run_action(MoveTo, f"/{NODE}/move_to", bad)
+    assert status == GOAL_ABORTED
+    assert "outside" in result.message
+
+
+def test_stop_service_holds_position(rig: Rig) -> None:
+    rig.command(["pan"], velocities=[0.5])
+    rig.joints(lambda m: m.velocity[0] > 0.3)
+    reply = rig.trigger("stop")
+    assert reply.success, reply.message
+    rig.joints(lambda m: abs(m.velocity[0]) < 1e-3)
+
+
+def test_home_goes_to_pilot_position(rig: Rig) -> None:
+    rig.command(["pan", "tilt"], [0.3, -0.3])
+    rig.joints(rig.at(0.3, -0.3))
+    result, status, _ = rig.ros.run_action(Home, f"/{NODE}/home", Home.Goal())
+    assert status == GOAL_SUCCEEDED, result.message
+    assert "pilot" in result.message
+    rig.joints(rig.at(0.0, 0.0))
+    rig.status(lambda s: s.mode == "pilot")
+
+
+def test_set_mode_every_kind(rig: Rig) -> None:
+    reply = rig.ros.call(SetMode, f"/{NODE}/set_mode", SetMode.Request(mode="stow"))
+    assert reply.success, reply.message
+    rig.joints(rig.at(0.0, math.pi / 2))  # 4.2: stow points tilt +90 (REP-103: up)
+    reply = rig.ros.call(SetMode, f"/{NODE}/set_mode", SetMode.Request(mode="warp"))
+    assert not reply.success
+    assert "ffc_calibration" in reply.message and "stow" in reply.message
+    for mode in ("gyro_autoalign", "ffc_calibration"):
+        reply = rig.ros.call(SetMode, f"/{NODE}/set_mode", SetMode.Request(mode=mode))
+        assert reply.success, reply.message
+        rig.status(lambda s: s.mode == "angles")  # returns by itself
+    reply = rig.ros.call(SetMode, f"/{NODE}/set_mode", SetMode.Request(mode="angles"))
+    assert reply.success, reply.message
+
+
+def test_zoom_command_and_report(rig: Rig) -> None:
+    rig.ros.publish(f"/{NODE}/zoom_command", Float64(data=0.4))
+    rig.ros.wait_for_message(f"/{NODE}/zoom", Float64, lambda m: abs(m.data - 0.4) < 1e-3)
+    rig.ros.publish(f"/{NODE}/zoom_command", Float64(data=1.5))
+    wait_for(lambda: "zoom_command rejected" in rig.node.output(), 10.0, "zoom rejection")
+
+
+def test_external_feed_reaches_the_gimbal(rig: Rig) -> None:
+    velocity = TwistStamped()
+    velocity.twist.linear.x = 1.0  # east
+    fix = NavSatFix(latitude=12.5, longitude=-45.25, altitude=321.0)
+    fix.status.status = NavSatStatus.STATUS_FIX
+    imu = Imu()
+    imu.orientation.w = 1.0  # facing east, level: NED yaw +90 deg
+    rig.ros.publish(f"/{NODE}/ext/velocity", velocity)
+    rig.ros.publish(f"/{NODE}/ext/fix", fix)
+    rig.ros.publish(f"/{NODE}/ext/imu", imu)
+    out = rig.ros.wait_for_message(f"/{NODE}/fix", NavSatFix,
+                                   lambda m: abs(m.latitude - 12.5) < 1e-6)
+    assert out.longitude == pytest.approx(-45.25)
+    assert out.altitude == pytest.approx(321.0)
+    wait_for(lambda: "vehicle_angles_deg=90.0,-0.0,0.0" in rig.sim_status()
+             or "vehicle_angles_deg=90.0,0.0,0.0" in rig.sim_status(), 10.0, "vehicle angles")
+
+
+def test_save_configuration_with_opt_in(rig: Rig) -> None:
+    reply = rig.trigger("save_configuration")
+    assert reply.success, reply.message
+    wait_for(lambda: "nv_saves=1" in rig.sim_status(), 10.0, "an NV write in the simulator")
+    reply = rig.trigger("save_ffc")
+    assert reply.success, reply.message
+    # the ~1 s pause is not a disconnection
+    rig.joints(None)
+    rig.status(lambda s: s.connection == GimbalStatus.CONNECTION_CONNECTED)
+
+
+def test_driver_side_presets_and_scan(rig: Rig) -> None:
+    call = rig.ros.call
+    reply = call(SetPreset, f"/{NODE}/set_preset", SetPreset.Request(
+        index=3, name="left", use_current_position=False, joint_names=["pan", "tilt"],
+        positions=[0.6, -0.2]))
+    assert reply.success, reply.message
+    listed = call(ListPresets, f"/{NODE}/list_presets", ListPresets.Request())
+    assert [p.index for p in listed.presets] == [3]
+    reply = call(GotoPreset, f"/{NODE}/goto_preset", GotoPreset.Request(index=3, speed=1.0))
+    assert reply.success, reply.message
+    rig.joints(rig.at(0.6, -0.2))
+    reply = call(ClearPreset, f"/{NODE}/clear_preset", ClearPreset.Request(all=True))
+    assert reply.success, reply.message
+    scan = StartScan.Request(pattern="sector", pan_min=-0.3, pan_max=0.3, tilt_min=0.0,
+                             tilt_max=0.0, speed=1.0, tilt_step=0.1, dwell=0.0)
+    reply = call(StartScan, f"/{NODE}/start_scan", scan)
+    assert reply.success, reply.message
+    rig.joints(lambda m: abs(m.position[0] - 0.3) < 0.02)
+    rig.joints(lambda m: abs(m.position[0] + 0.3) < 0.02)
+    assert rig.trigger("stop_scan").success
+
+
+def test_diagnostics_report_mode_rate_and_checksum_errors(rig: Rig) -> None:
+    for _ in range(5):
+        rig.sim_command("noise 300")
+    rig.sim_command("corrupt 5")
+
+    def has_errors(array: DiagnosticArray) -> bool:
+        part = device_part(array, "device")
+        return part is not None and int(value(part, "checksum_errors")) > 0
+
+    array = rig.diagnostics(has_errors)
+    part = device_part(array, "device")
+    assert value(part, "mode") in ("angles", "rates", "pilot")
+    assert float(value(part, "telemetry_rate_achieved_hz")) > 0
+    assert int(value(part, "discarded_bytes")) > 0
+    connection = device_part(array, "connection")
+    assert value(connection, "connected") == "True"
+    rig.command(["pan", "tilt"], [0.1, 0.1])
+    rig.joints(rig.at(0.1, 0.1))
+
+
+def test_reset_faults_is_a_clear_refusal(rig: Rig) -> None:
+    reply = rig.trigger("reset_faults")
+    assert not reply.success
+    assert "no fault-reset" in reply.message
+
+
+def test_lifecycle_deactivate_and_activate(rig: Rig) -> None:
+    assert rig.ros.lifecycle_transition(NODE, Transition.TRANSITION_DEACTIVATE)
+    assert rig.ros.lifecycle_state(NODE) == "inactive"
+    reply = rig.trigger("save_configuration")
+    assert not reply.success and "not active" in reply.message
+    assert rig.ros.lifecycle_transition(NODE, Transition.TRANSITION_ACTIVATE)
+    rig.joints(None)
+
+
+def test_silence_and_link_drop_recovery(rig: Rig) -> None:
+    rig.sim_command("silence")
+
+    def disconnected(array: DiagnosticArray) -> bool:
+        part = device_part(array, "connection")
+        return part is not None and part.level == bytes([2])
+
+    rig.diagnostics(disconnected)
+    rig.sim_command("resume")
+    rig.status(lambda s: s.connection == GimbalStatus.CONNECTION_CONNECTED, timeout=20.0)
+    rig.sim_command("drop_link 0.5")
+    rig.status(lambda s: s.connection != GimbalStatus.CONNECTION_CONNECTED)
+    connected = rig.status(lambda s: s.connection == GimbalStatus.CONNECTION_CONNECTED,
+                           timeout=20.0)
+    assert connected.reconnects >= 2
+    rig.command(["pan", "tilt"], [-0.2, 0.0])
+    rig.joints(rig.at(-0.2, 0.0))
+
+
+def packaged_config(name: str) -> str:
+    from ament_index_python.packages import get_package_share_directory
+
+    return str(Path(get_package_share_directory("ucamera_driver"), "config", name))
+
+
+def test_real_hardware_yaml_loads_and_nv_write_needs_opt_in() -> None:
+    setup = Rig({}, params_file=packaged_config("ucamera_driver.yaml"))
+    try:
+        reply = setup.trigger("save_configuration")
+        assert not reply.success
+        assert "allow_nv_write" in reply.message
+        assert not setup.trigger("save_ffc").success
+        assert "nv_saves=0" in setup.sim_status()
+    finally:
+        setup.close()
+
+
+def test_invalid_parameter_is_refused_at_start_up() -> None:
+    with DomainLease() as domain:
+        node = ManagedProcess.ros("ucamera_driver", "ucamera_driver_node", domain,
+                                  ["--ros-args", "-p", "telemetry_rate:=500"])
+        try:
+            wait_for(lambda: not node.running, 20.0, "the node to exit")
+            assert node.process.returncode != 0
+            assert "telemetry_rate" in node.output()
+        finally:
+            node.stop()
