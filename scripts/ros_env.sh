@@ -10,7 +10,11 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( $$ % 90 + 110 ))}
 export RCUTILS_COLORIZED_OUTPUT=0
 if [ "${1:-}" != "--no-workspace" ] && [ -f "$_ros_env_root/install/setup.bash" ]; then
+  # colcon's setup scripts read unset variables: relax `set -u` while sourcing them.
+  case $- in *u*) _ros_env_nounset=1; set +u ;; *) _ros_env_nounset=0 ;; esac
   # shellcheck disable=SC1091
   source "$_ros_env_root/install/setup.bash"
+  [ "$_ros_env_nounset" = 1 ] && set -u
+  unset _ros_env_nounset
 fi
 unset _ros_env_root

@@ -126,7 +126,8 @@ class ManagedProcess:
         return self.process.poll() is None
 
     def output(self) -> str:
-        self._log.flush()
+        if not self._log.closed:
+            self._log.flush()
         return Path(self.log_path).read_text(encoding='utf-8', errors='replace')
 
     def wait_for_output(self, text: str, timeout: float = 10.0) -> str:
