@@ -23,6 +23,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
 from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import (
     DomainLease,
@@ -31,9 +34,6 @@ from gimbal_driver_common.testing import (
     free_tcp_port,
     wait_for,
 )
-from sensor_msgs.msg import JointState
-from std_srvs.srv import Trigger
-
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.srv import GotoPreset, SetPreset, StartScan
 

@@ -12,13 +12,13 @@ import signal
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
-from gimbal_driver_common.virtual_gimbal import VirtualGimbalClient
 from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
+from gimbal_driver_common.virtual_gimbal import VirtualGimbalClient
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import GimbalStatus
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan

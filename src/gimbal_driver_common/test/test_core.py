@@ -6,6 +6,9 @@ import math
 
 import pytest
 import yaml
+from hypothesis import given
+from hypothesis import strategies as st
+
 from gimbal_driver_common.diagnostics import (
     FrequencyMonitor,
     Level,
@@ -25,8 +28,6 @@ from gimbal_driver_common.joint_command import (
 from gimbal_driver_common.presets import PresetError, PresetStore
 from gimbal_driver_common.scan import ScanError, ScanRequest, plan_scan
 from gimbal_driver_common.watchdog import JogWatchdog
-from hypothesis import given
-from hypothesis import strategies as st
 
 LIMITS = {
     'pan': JointLimits(-3.0, 3.0, 1.0),

@@ -9,6 +9,7 @@ import threading
 import tty
 
 import pytest
+
 from gimbal_driver_common.transport import (
     Backoff,
     LinkClosed,
