@@ -38,6 +38,7 @@ from .protocol import (
     ALL_MOTORS,
     DEFAULT_TCP_PORT,
     KEEPALIVE_PERIOD_S,
+    PLAYBACK_RUNNING_STATES,
     UNCALIBRATED_TARGET,
     BumpPositionSpeedAcceleration,
     DeviceGuid,
@@ -619,18 +620,28 @@ class KosClient:
                                   f'rot/s^2 exceeds MaxMaxAcceleration '
                                   f'{motor.max_acceleration:.3f}')
 
-    def move_to(self, address: int, position: float, speed: float,
-                acceleration: float | None = None) -> None:
-        """Absolute move in rotations (calibrated: within 0..EndPosition)."""
+    @property
+    def playback_running(self) -> bool:
+        """True while the device executes a move (it then owns the motors)."""
+        return self.playback.status in PLAYBACK_RUNNING_STATES
+
+    def check_move(self, address: int, position: float, speed: float,
+                   acceleration: float | None = None) -> SetPositionSpeedAcceleration:
+        """The message for an absolute move, or CommandRejected (nothing is sent)."""
         motor = self.motor(address)
         accel = motor.max_acceleration if acceleration is None else acceleration
         self._check_speed(motor, speed, accel)
         lo, hi = motor.travel()
-        if not math.isfinite(position) or not lo <= position <= hi:
+        if not math.isfinite(position) or not lo - 1e-9 <= position <= hi + 1e-9:
             state = 'calibrated range' if motor.calibrated else 'uncalibrated travel'
             raise CommandRejected(f'motor {address}: position {position:.4f} rot is outside '
                                   f'the {state} [{lo:.4f}, {hi:.4f}]')
-        self.send(SetPositionSpeedAcceleration(address, position, speed, accel))
+        return SetPositionSpeedAcceleration(address, min(max(position, lo), hi), speed, accel)
+
+    def move_to(self, address: int, position: float, speed: float,
+                acceleration: float | None = None) -> None:
+        """Absolute move in rotations (calibrated: within 0..EndPosition)."""
+        self.send(self.check_move(address, position, speed, acceleration))
 
     def bump(self, address: int, delta: float, speed: float,
              acceleration: float | None = None) -> None:

@@ -3,8 +3,9 @@
 import itertools
 
 import pytest
-from hypothesis import assume, given
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+
 from kessler_kos_driver.protocol import TrajectoryError, fit_keyframes, position_at
 from kessler_kos_driver.protocol.bezier import evaluate
 
@@ -28,6 +29,7 @@ def samples(segments, per=16):
             yield evaluate(times, positions, i / per)
 
 
+@settings(max_examples=200, deadline=None)
 @given(keyframes())
 def test_passes_through_keyframes_monotone_time_and_no_overshoot(kf):
     times, positions, _ = kf
@@ -51,6 +53,7 @@ def test_passes_through_keyframes_monotone_time_and_no_overshoot(kf):
         assert -1e-12 <= p <= 1 + 1e-12
 
 
+@settings(max_examples=200, deadline=None)
 @given(keyframes(velocities=True))
 def test_user_velocities_stay_within_range(kf):
     times, positions, velocities = kf

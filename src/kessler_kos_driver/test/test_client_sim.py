@@ -9,6 +9,7 @@ import socket
 import time
 
 import pytest
+
 from kessler_kos_driver.client import (
     CommandRejected,
     KosClient,

@@ -3,8 +3,9 @@
 import contextlib
 import struct
 
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from kessler_kos_driver.protocol import (
     ACTIONS,
     NOTIFICATIONS,
@@ -111,6 +112,7 @@ messages = st.one_of(
 )
 
 
+@settings(max_examples=200, deadline=None)
 @given(messages)
 def test_round_trip(message):
     frame = message.encode()
@@ -118,12 +120,14 @@ def test_round_trip(message):
     assert decode(frame) == message
 
 
+@settings(max_examples=200, deadline=None)
 @given(st.binary(max_size=80))
 def test_decode_arbitrary_bytes_raises_only_protocol_errors(data):
     with contextlib.suppress(ProtocolError):
         decode(data)
 
 
+@settings(max_examples=200, deadline=None)
 @given(st.integers(0x00, 0xFF), st.sampled_from([0, 1, 2, 0x82]), st.binary(max_size=60))
 def test_decode_any_well_framed_payload(message_id, message_type, payload):
     frame = bytes([4]) + struct.pack('>HHB', 6 + len(payload), message_id, message_type) + payload
@@ -135,6 +139,7 @@ def test_decode_any_well_framed_payload(message_id, message_type, payload):
         assert decoded.encode() == frame
 
 
+@settings(max_examples=200, deadline=None)
 @given(st.lists(messages, min_size=1, max_size=5),
        st.lists(st.binary(max_size=12).map(lambda b: b.replace(b'\x04', b'')), min_size=5,
                 max_size=5),
@@ -150,6 +155,7 @@ def test_parser_resynchronises_after_garbage(batch, garbage, chunk):
     assert parser.discarded_bytes == sum(len(g) for g in garbage[:len(frames)])
 
 
+@settings(max_examples=200, deadline=None)
 @given(st.binary(max_size=300))
 def test_parser_never_raises_and_accounts_for_every_byte(data):
     parser = FrameParser()

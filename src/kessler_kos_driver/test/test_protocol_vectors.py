@@ -25,6 +25,7 @@ rather than the OCR'd decimal text):
 """
 
 import pytest
+
 from kessler_kos_driver.protocol import (
     DecodeError,
     FrameParser,

@@ -1,6 +1,7 @@
 """TrajectoryData blocks: sizes, structure and the document's validation rules."""
 
 import pytest
+
 from kessler_kos_driver.protocol import (
     AxisLimits,
     DecodeError,

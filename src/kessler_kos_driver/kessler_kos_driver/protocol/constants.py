@@ -205,3 +205,35 @@ DOCUMENTED_MAXIMA: dict[str, AxisMaxima] = {
     'focus': AxisMaxima(200.0, 50.0),
     'zoom': AxisMaxima(200.0, 50.0),
 }
+
+
+# Document names of the PlaybackStatus values (published as PlaybackStatus.status_name).
+PLAYBACK_STATE_NAMES: dict[int, str] = {
+    PlaybackState.NO_MOVE: 'NoMove',
+    PlaybackState.MOTORS_HOME: 'MotorsHome',
+    PlaybackState.START_FORWARD: 'StartForward',
+    PlaybackState.START_REVERSE: 'StartReverse',
+    PlaybackState.END_OF_MOVE: 'EndOfMove',
+    PlaybackState.FULL_STOP: 'FullStop',
+    PlaybackState.START_FRAME: 'StartFrame',
+    PlaybackState.SETUP_COMPLETED: 'SetupCompleted',
+    PlaybackState.DELAY_TIMER_STARTED: 'DelayTimerStarted',
+    PlaybackState.PRE_CAMERA_ROLL_STARTED: 'PreCameraRollStarted',
+    PlaybackState.POST_CAMERA_ROLL_COMPLETED: 'PostCameraRollCompleted',
+    PlaybackState.PRE_MOVE_PHOTOS_STARTED: 'PreMovePhotosStarted',
+    PlaybackState.POST_MOVE_PHOTOS_COMPLETED: 'PostMovePhotosCompleted',
+    PlaybackState.SMS_MOTORS_STOPPED: 'SMSMotorsStopped',
+}
+
+# Statuses during which the device owns the motors (a move is being executed).
+PLAYBACK_RUNNING_STATES = frozenset({
+    PlaybackState.START_FORWARD, PlaybackState.START_REVERSE, PlaybackState.END_OF_MOVE,
+    PlaybackState.START_FRAME, PlaybackState.DELAY_TIMER_STARTED,
+    PlaybackState.PRE_CAMERA_ROLL_STARTED, PlaybackState.POST_CAMERA_ROLL_COMPLETED,
+    PlaybackState.PRE_MOVE_PHOTOS_STARTED, PlaybackState.POST_MOVE_PHOTOS_COMPLETED,
+    PlaybackState.SMS_MOTORS_STOPPED,
+})
+
+
+def playback_state_name(status: int) -> str:
+    return PLAYBACK_STATE_NAMES.get(status, f'Unknown({status})')

@@ -1,0 +1,687 @@
+"""ROS 2 node for Kessler kOS devices: a thin layer over KosClient on the shared base node.
+
+The base node (gimbal_driver_common.ros.base_node) provides the lifecycle, joint_states,
+joint_command, ~/stop, ~/move_to, ~/home, presets (driver-side YAML, kOS has none), scans,
+/diagnostics and ~/status. This node adds the kOS playback services, ~/calibrate,
+~/take_picture and ~/playback_status, and converts SI joint units to motor rotations with
+`joint_scales` (SI units per rotation; a negative scale flips the direction).
+
+Things the base node does not provide and that live here:
+- the `password` parameter is redacted: rclpy publishes declared parameter values on
+  /parameter_events and serves them on ~/get_parameters, so the real value is taken from the
+  parameter overrides (or `password_file`) and the declared parameter only ever holds
+  '********' (read-only);
+- per-axis diagnostics from ErrorStatus codes, motor online state, calibration and lock state.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.parameter import Parameter
+from std_srvs.srv import Trigger
+
+from gimbal_driver_common.diagnostics import Level
+from gimbal_driver_common.joint_command import CommandError
+from gimbal_driver_common.ros.base_node import (
+    DeviceError,
+    DeviceInfo,
+    GimbalDriverNode,
+    JointSample,
+    run_driver,
+)
+from gimbal_driver_common.ros.diagnostics import StatusPart
+from gimbal_driver_common.ros.parameters import ParameterError
+from gimbal_msgs.msg import AxisState
+from gimbal_msgs.msg import PlaybackStatus as PlaybackStatusMsg
+from gimbal_msgs.srv import Calibrate, LoadTrajectory
+
+from .client import ErrorEvent, KosClient, KosError
+from .moves import (
+    AxisRange,
+    JointMapping,
+    Keyframe,
+    PlaybackSettings,
+    from_keyframes,
+    from_segments,
+)
+from .protocol import (
+    DEFAULT_TCP_PORT,
+    ERROR_CODES,
+    MOTOR_ADDRESS_MAX,
+    MOTOR_ADDRESS_MIN,
+    DeviceType,
+    ErrorCode,
+    PlaybackMode,
+    PlaybackState,
+    PlaybackStatus,
+    ProtocolError,
+    playback_state_name,
+)
+
+REDACTED = '********'
+TWO_PI = 2.0 * math.pi
+DEVICE_MODELS = {
+    DeviceType.CINESHOOTER: 'Kessler CineShooter',
+    DeviceType.SECOND_SHOOTER_PRO: 'Kessler Second Shooter Pro',
+    DeviceType.SECOND_SHOOTER_PLUS: 'Kessler Second Shooter Plus',
+}
+
+
+class _RosLogHandler(logging.Handler):
+    """Forward the client's Python log records to the node's ROS logger (and /rosout)."""
+
+    def __init__(self, node: GimbalDriverNode) -> None:
+        super().__init__()
+        self._logger = node.get_logger()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        text = self.format(record)
+        if record.levelno >= logging.ERROR:
+            self._logger.error(text)
+        elif record.levelno >= logging.WARNING:
+            self._logger.warning(text)
+        else:
+            self._logger.debug(text)
+
+
+class KosDriverNode(GimbalDriverNode):
+    DEFAULT_JOINT_NAMES = ('slider', 'pan', 'tilt')
+    # Device limits are the calibrated ranges and the motors' MaxMax speeds (checked by the
+    # client); these parameter defaults only bound what the driver accepts at all.
+    DEFAULT_POSITION_MIN = (-1000.0,)
+    DEFAULT_POSITION_MAX = (1000.0,)
+    DEFAULT_VELOCITY_MAX = (60.0,)
+    SCAN_PATTERNS = ('sector',)
+
+    def __init__(self, **kwargs: object) -> None:
+        self.client: KosClient | None = None
+        self._latched_errors: list[ErrorEvent] = []
+        self._errors_lock = threading.Lock()
+        self._locked_out = False
+        super().__init__('kessler_kos_driver', **kwargs)
+        package_logger = logging.getLogger('kessler_kos_driver')
+        package_logger.addHandler(_RosLogHandler(self))
+        package_logger.setLevel(logging.INFO)
+        package_logger.propagate = False
+        group = ReentrantCallbackGroup()
+        self._playback_pub = self.create_publisher(PlaybackStatusMsg, '~/playback_status', 10)
+        self.create_service(LoadTrajectory, '~/load_trajectory', self._on_load_trajectory,
+                            callback_group=group)
+        self.create_service(Trigger, '~/setup_playback', self._on_setup_playback,
+                            callback_group=group)
+        self.create_service(Trigger, '~/start_playback', self._on_start_playback,
+                            callback_group=group)
+        self.create_service(Trigger, '~/stop_playback', self._on_stop_playback,
+                            callback_group=group)
+        self.create_service(Calibrate, '~/calibrate', self._on_calibrate, callback_group=group)
+        self.create_service(Trigger, '~/take_picture', self._on_take_picture,
+                            callback_group=group)
+
+    # ------------------------------------------------------------ parameters
+    def declare_device_parameters(self) -> None:
+        n = len(self.joint_names)
+        self.host = self.declare_param('host', '', 'device IP address or name ("" = discover '
+                                       'by listening for NetworkInfo datagrams)')
+        self.port = self.declare_param('port', DEFAULT_TCP_PORT, 'device TCP port',
+                                       value_range=(1, 65535))
+        self._password = self._declare_password()
+        self.discovery_port = self.declare_param(
+            'discovery_port', DEFAULT_TCP_PORT,
+            'UDP port on which NetworkInfo discovery datagrams are received',
+            value_range=(1, 65535))
+        self.discovery_timeout = self.declare_param(
+            'discovery_timeout', 10.0, 's to wait for a NetworkInfo datagram',
+            value_range=(0.1, 600.0))
+        self.discovery_bind = self.declare_param(
+            'discovery_bind', '0.0.0.0', 'local address the discovery listener binds to')
+        self.motor_addresses = self.declare_param(
+            'motor_addresses', list(range(1, n + 1)),
+            'kOS motor address (1..10) of each joint, same order as joint_names',
+            element_type=int, value_range=(MOTOR_ADDRESS_MIN, MOTOR_ADDRESS_MAX))
+        self.joint_scales = self.declare_param(
+            'joint_scales', [TWO_PI] * n,
+            'SI units (rad or m) per motor rotation for each joint; negative flips direction',
+            element_type=float)
+        self.acceleration_scale = self.declare_param(
+            'acceleration_scale', 0.5,
+            'fraction of each motor\'s MaxMaxAcceleration used for moves and jogs',
+            value_range=(0.01, 1.0))
+        self.poll_period = self.declare_param(
+            'poll_period', 0.05, 's between (Get)MotorInfo state polls (0 = notifications only)',
+            value_range=(0.0, 10.0))
+        self.keepalive_period = self.declare_param(
+            'keepalive_period', 10.0, 's of idle link before a (Get)NetworkInfo keep-alive '
+            '(the device drops silent links after 30 s)', value_range=(0.5, 29.0))
+        self.reply_timeout = self.declare_param(
+            'reply_timeout', 2.0, 's to wait for a device response', value_range=(0.1, 60.0))
+        self.return_to_home_percent = self.declare_param(
+            'return_to_home_percent', 100.0,
+            'speed of the return to the first key frame, % of MaxMaxMoveSpeed',
+            value_range=(1.0, 100.0))
+        self.picture_exposure = self.declare_param(
+            'picture_exposure', 0.1, 's of shutter time for ~/take_picture',
+            value_range=(0.0, 3600.0))
+        self.playback_timeout = self.declare_param(
+            'playback_timeout', 60.0, 's to wait for SetupCompleted / MotorsHome',
+            value_range=(1.0, 3600.0))
+        if len(self.motor_addresses) != n or len(set(self.motor_addresses)) != n:
+            raise ParameterError(f'parameter motor_addresses: need {n} distinct addresses '
+                                 f'(one per joint), got {self.motor_addresses}')
+        if len(self.joint_scales) != n or any(
+                not math.isfinite(s) or s == 0 for s in self.joint_scales):
+            raise ParameterError(f'parameter joint_scales: need {n} finite non-zero values, '
+                                 f'got {self.joint_scales}')
+        self.joints = {
+            name: JointMapping(name, address, scale)
+            for name, address, scale in zip(self.joint_names, self.motor_addresses,
+                                            self.joint_scales, strict=True)
+        }
+        self._joint_of = {m.address: m.name for m in self.joints.values()}
+
+    def _declare_password(self) -> str:
+        """Take the password without ever letting its value into a parameter event."""
+        overrides = getattr(self, '_parameter_overrides', {})
+        given = overrides.pop('password', None)
+        password = ''
+        if given is not None:
+            if given.type_ != Parameter.Type.STRING:
+                raise ParameterError('parameter password: must be a string')
+            password = given.value
+        password_file = self.declare_param(
+            'password_file', '', 'file whose first line is the device password (overrides '
+            'password)')
+        if password_file:
+            try:
+                password = Path(password_file).read_text(encoding='utf-8').splitlines()[0]
+            except (OSError, IndexError) as exc:
+                raise ParameterError(f'parameter password_file: cannot read a password from '
+                                     f'{password_file!r} ({type(exc).__name__})') from None
+        self.declare_param('password', REDACTED if password else '',
+                           'device password (write-only: always shown redacted)',
+                           read_only=True)
+        return password
+
+    # ------------------------------------------------------------------ hooks
+    def open_device(self) -> DeviceInfo:
+        self.close_device()
+        client = KosClient(
+            host=self.host, port=self.port, password=self._password,
+            discovery_port=self.discovery_port, discovery_timeout=self.discovery_timeout,
+            discovery_bind=self.discovery_bind, reply_timeout=self.reply_timeout,
+            keepalive_period=self.keepalive_period, poll_period=self.poll_period,
+        )
+        client.on_playback = self._publish_playback
+        client.on_error = self._on_device_error
+        try:
+            client.connect()
+        except KosError as exc:
+            client.close()
+            raise DeviceError(str(exc)) from exc
+        missing = [f'{m.name} (motor {m.address})' for m in self.joints.values()
+                   if m.address not in client.motors]
+        if missing:
+            self.get_logger().warning(f'joints without a connected motor: {missing}; '
+                                      f'device motors: {sorted(client.motors)}')
+        self.client = client
+        self._locked_out = False
+        info = client.device_info
+        model = DEVICE_MODELS.get(info.device_type, f'kOS device type {info.device_type}') \
+            if info else 'kOS device'
+        return DeviceInfo(model=model, serial_number=client.guid,
+                          firmware_version=info.firmware if info else '',
+                          hardware_id=client.guid or client.description)
+
+    def close_device(self) -> None:
+        client, self.client = self.client, None
+        if client is not None:
+            client.on_playback = client.on_error = None
+            client.close()
+
+    def link_healthy(self) -> bool:
+        return self.client is not None and self.client.connected
+
+    def link_description(self) -> str:
+        return self.client.description if self.client else f'tcp://{self.host or "?"}:{self.port}'
+
+    def _client(self) -> KosClient:
+        client = self.client
+        if client is None or not client.connected:
+            raise DeviceError('device not connected')
+        return client
+
+    def poll_device(self) -> JointSample | None:
+        client = self._client()
+        positions, velocities, moving = {}, {}, {}
+        stamp = 0.0
+        running = client.playback_running
+        for name, mapping in self.joints.items():
+            motor = client.motors.get(mapping.address)
+            if motor is None or not motor.online or not motor.stamp:
+                continue
+            positions[name] = motor.position * mapping.scale
+            velocities[name] = motor.velocity * mapping.scale
+            moving[name] = running or abs(motor.velocity) > 1e-4
+            stamp = max(stamp, motor.stamp)
+        if not positions:
+            return None
+        return JointSample(positions, velocities, stamp=stamp or time.time(), moving=moving)
+
+    def _speed_rot(self, name: str, speed_si: float | None) -> float:
+        """Motor speed in rot/s for a joint speed (None: velocity_max)."""
+        speed = speed_si if speed_si is not None else self.limits[name].velocity_max
+        return abs(speed / self.joints[name].scale)
+
+    def _refuse_during_playback(self, client: KosClient) -> None:
+        if client.playback_running:
+            raise DeviceError(
+                f'a move is playing ({playback_state_name(client.playback.status)}); '
+                'call ~/stop_playback or ~/stop first')
+
+    def send_moves(self, moves: dict[str, tuple[float, float | None]]) -> None:
+        client = self._client()
+        self._refuse_during_playback(client)
+        messages = []
+        for name, (target, speed) in moves.items():   # check everything before sending
+            mapping = self.joints[name]
+            motor = client.motor(mapping.address) if mapping.address in client.motors else None
+            if motor is None:
+                raise DeviceError(f'joint {name!r}: motor {mapping.address} is not connected')
+            speed_rot = self._speed_rot(name, speed)
+            if speed is None:
+                speed_rot = min(speed_rot, motor.max_setup_speed)
+            try:
+                messages.append(client.check_move(
+                    mapping.address, target / mapping.scale, speed_rot,
+                    motor.max_acceleration * self.acceleration_scale))
+            except KosError as exc:
+                raise CommandError(f'joint {name!r}: {exc}') from exc
+        for message in messages:
+            client.send(message)
+
+    def send_jogs(self, jogs: dict[str, float]) -> None:
+        client = self._client()
+        self._refuse_during_playback(client)
+        for name in jogs:
+            if self.joints[name].address not in client.motors:
+                raise DeviceError(f'joint {name!r}: motor {self.joints[name].address} is not '
+                                  'connected')
+        for name, velocity in jogs.items():
+            mapping = self.joints[name]
+            motor = client.motor(mapping.address)
+            rot_velocity = velocity / mapping.scale
+            if abs(rot_velocity) > motor.max_setup_speed:
+                raise CommandError(f'joint {name!r}: {abs(velocity):.4f} exceeds the motor '
+                                   f'maximum {motor.max_setup_speed * abs(mapping.scale):.4f}')
+            client.jog(mapping.address, rot_velocity,
+                       motor.max_acceleration * self.acceleration_scale)
+
+    def stop_axes(self, joints: Sequence[str] | None) -> None:
+        client = self._client()
+        if joints is None:
+            client.stop_all()
+            return
+        for name in joints:
+            address = self.joints[name].address
+            if address in client.motors and client.motors[address].online:
+                client.stop_motor(address)
+
+    def reset_faults(self) -> str:
+        """kOS has no fault-clear command: clear the driver's latched errors and re-read."""
+        client = self._client()
+        with self._errors_lock:
+            count = len(self._latched_errors)
+            self._latched_errors.clear()
+        self._locked_out = False
+        client.refresh_motors()
+        uncalibrated = [n for n, m in self.joints.items()
+                        if m.address in client.motors and not client.motors[m.address].calibrated]
+        note = (f'; not calibrated (recalibrate with ~/calibrate): {uncalibrated}'
+                if uncalibrated else '')
+        return f'cleared {count} latched device error(s){note}'
+
+    def home(self, joints: Sequence[str], report: Callable[[str], None],
+             cancelled: threading.Event) -> str:
+        """First key frame if a move is loaded, else the begin mark of calibrated joints;
+        uncalibrated joints only get their latched errors cleared."""
+        client = self._client()
+        self._refuse_during_playback(client)
+        if client.playback.loaded:
+            report('returning to the first key frame')
+            marker = len(client.playback.history)
+            try:
+                client.rapid_to_first_key_frame()
+            except KosError as exc:
+                raise DeviceError(str(exc)) from exc
+            if not client.wait_for(
+                    lambda: PlaybackState.MOTORS_HOME in client.playback.history[marker:]
+                    or cancelled.is_set(), self.playback_timeout):
+                raise DeviceError('no MotorsHome notification: the return to the first key '
+                                  'frame did not complete')
+            return 'at the first key frame of the loaded move'
+        calibrated = [n for n in joints if self.joints[n].address in client.motors
+                      and client.motors[self.joints[n].address].calibrated]
+        cleared = [n for n in joints if n not in calibrated]
+        if cleared:
+            addresses = {self.joints[n].address for n in cleared}
+            with self._errors_lock:
+                self._latched_errors = [e for e in self._latched_errors
+                                        if e.motor_address not in addresses]
+        if calibrated:
+            report('moving to the begin marks')
+            self.send_moves({n: (0.0, None) for n in calibrated})
+            deadline = time.monotonic() + self.move_timeout
+            while time.monotonic() < deadline and not cancelled.is_set():
+                current = self.current_positions()
+                if all(abs(current.get(n, math.inf)) <= self.goal_tolerance
+                       for n in calibrated):
+                    break
+                report('moving to the begin marks')
+                time.sleep(0.05)
+            else:
+                if not cancelled.is_set():
+                    raise DeviceError(f'begin marks not reached within {self.move_timeout:g} s')
+        parts = []
+        if calibrated:
+            parts.append(f'at the begin mark: {calibrated}')
+        if cleared:
+            parts.append(f'not calibrated, errors cleared (no homing without calibration): '
+                         f'{cleared}')
+        return '; '.join(parts)
+
+    # ---------------------------------------------------------- notifications
+    def _on_device_error(self, event: ErrorEvent) -> None:
+        with self._errors_lock:
+            self._latched_errors.append(event)
+            del self._latched_errors[:-20]
+        if event.code == ErrorCode.LOCKED_OUT:
+            self._locked_out = True
+        joint = self._joint_of.get(event.motor_address)
+        where = f'joint {joint!r}' if joint else f'motor {event.motor_address}'
+        self.get_logger().error(f'device error {event.code}: {event.description} ({where})')
+
+    def _publish_playback(self, note: PlaybackStatus) -> None:
+        msg = PlaybackStatusMsg()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = int(note.status)
+        msg.status_name = playback_state_name(note.status)
+        msg.elapsed = float(note.elapsed_time) if math.isfinite(note.elapsed_time) else 0.0
+        photos = note.photo_count
+        msg.photo_count = (min(round(photos), 2**32 - 1)
+                           if math.isfinite(photos) and photos >= 0 else 0)
+        for address, position in sorted(note.positions.items()):
+            name = self._joint_of.get(address)
+            if name is not None:
+                msg.joint_names.append(name)
+                msg.positions.append(float(position) * self.joints[name].scale)
+        self._playback_pub.publish(msg)
+
+    # -------------------------------------------------------------- services
+    def _on_load_trajectory(self, request, response):
+        def action() -> str:
+            client = self._client()
+            self._refuse_during_playback(client)
+            settings = PlaybackSettings(
+                mode=request.playback_mode, duration=request.duration,
+                loop_count=request.loop_count, rapid_reverse=request.rapid_reverse,
+                start_delay=request.start_delay, interval=request.interval,
+                exposure=request.exposure, move_photos=request.move_photos,
+                pre_move_photos=request.pre_move_photos,
+                post_move_photos=request.post_move_photos,
+                return_to_home_percent=self.return_to_home_percent)
+            keyframes = request.keyframes
+            has_keyframes = bool(keyframes.points)
+            if has_keyframes == bool(request.axes):
+                raise CommandError('give either keyframes (trajectory_msgs/JointTrajectory) or '
+                                   'explicit Bezier axes, not both and not neither')
+            client.refresh_motors()
+            try:
+                if has_keyframes:
+                    trajectory = from_keyframes(self._keyframes(keyframes), self.joints,
+                                                self._ranges(client), settings)
+                else:
+                    trajectory = from_segments(self._segments(request.axes), self.joints,
+                                               settings)
+                client.load_trajectory(trajectory)
+            except (ProtocolError, KosError) as exc:
+                raise DeviceError(f'trajectory not loaded: {exc}') from exc
+            axes = ', '.join(f'{self._joint_of.get(a, a)}: {len(s)} segment(s)'
+                             for a, s in trajectory.axes.items())
+            mode = PlaybackMode(request.playback_mode).name.lower()
+            return (f'{mode} move loaded ({axes}), duration '
+                    f'{trajectory.effective_duration():.3f} s; now ~/setup_playback and '
+                    '~/start_playback')
+
+        return self._run_trigger(response, action)
+
+    def _keyframes(self, trajectory) -> list[Keyframe]:
+        names = list(trajectory.joint_names)
+        if not names or len(set(names)) != len(names):
+            raise CommandError(f'keyframes.joint_names must be unique and non-empty: {names}')
+        unknown = [n for n in names if n not in self.joints]
+        if unknown:
+            raise CommandError(f'unknown joint(s) {unknown}; this device has '
+                               f'{list(self.joint_names)}')
+        frames = []
+        for index, point in enumerate(trajectory.points):
+            if len(point.positions) != len(names):
+                raise CommandError(f'keyframe {index}: {len(point.positions)} positions for '
+                                   f'{len(names)} joints')
+            if point.velocities and len(point.velocities) != len(names):
+                raise CommandError(f'keyframe {index}: velocities must be empty or one per '
+                                   'joint')
+            positions = dict(zip(names, point.positions, strict=True))
+            for name, value in positions.items():
+                limits = self.limits[name]
+                if not math.isfinite(value) or not (
+                        limits.position_min <= value <= limits.position_max):
+                    raise CommandError(f'keyframe {index}: joint {name!r} position {value} is '
+                                       f'outside [{limits.position_min}, '
+                                       f'{limits.position_max}]')
+            velocities = (dict(zip(names, point.velocities, strict=True))
+                          if point.velocities else None)
+            t = point.time_from_start.sec + point.time_from_start.nanosec * 1e-9
+            frames.append(Keyframe(t, positions, velocities))
+        return frames
+
+    def _segments(self, axes) -> dict[str, list[tuple[float, ...]]]:
+        segments: dict[str, list[tuple[float, ...]]] = {}
+        for axis in axes:
+            if axis.joint_name not in self.joints:
+                raise CommandError(f'unknown joint {axis.joint_name!r}; this device has '
+                                   f'{list(self.joint_names)}')
+            if axis.joint_name in segments:
+                raise CommandError(f'joint {axis.joint_name!r} is given twice')
+            segments[axis.joint_name] = [
+                (s.p0_time, s.p0_position, s.p1_time, s.p1_position, s.p2_time,
+                 s.p2_position, s.p3_time, s.p3_position) for s in axis.segments]
+        return segments
+
+    def _ranges(self, client: KosClient) -> dict[int, AxisRange]:
+        return {a: AxisRange(m.begin_position, m.end_position)
+                for a, m in client.motors.items() if m.online}
+
+    def _on_setup_playback(self, request, response):
+        def action() -> str:
+            client = self._client()
+            self._refuse_during_playback(client)
+            marker = len(client.playback.history)
+            try:
+                client.setup_playback()
+            except KosError as exc:
+                raise DeviceError(str(exc)) from exc
+            if not client.wait_for(
+                    lambda: PlaybackState.SETUP_COMPLETED in client.playback.history[marker:],
+                    self.playback_timeout):
+                raise DeviceError('no SetupCompleted notification within '
+                                  f'{self.playback_timeout:g} s')
+            return 'motors at the first key frame, move set up; call ~/start_playback'
+
+        return self._run_trigger(response, action)
+
+    def _on_start_playback(self, request, response):
+        def action() -> str:
+            client = self._client()
+            self._refuse_during_playback(client)
+            try:
+                client.start_playback()
+            except KosError as exc:
+                raise DeviceError(str(exc)) from exc
+            return 'playback started; follow ~/playback_status (FullStop ends the move)'
+
+        return self._run_trigger(response, action)
+
+    def _on_stop_playback(self, request, response):
+        def action() -> str:
+            self._client().stop_playback()
+            return 'StopPlayback sent: motors stop, the device reports FullStop'
+
+        return self._run_trigger(response, action)
+
+    def _on_calibrate(self, request, response):
+        def action() -> str:
+            client = self._client()
+            self._refuse_during_playback(client)
+            mapping = self.joints.get(request.joint_name)
+            if mapping is None:
+                raise CommandError(f'unknown joint {request.joint_name!r}; this device has '
+                                   f'{list(self.joint_names)}')
+            try:
+                if request.action == Calibrate.Request.MARK_BEGIN:
+                    client.mark_begin(mapping.address)
+                    return (f'{mapping.name}: begin marked here; move to the end of the '
+                            'travel and mark the end')
+                if request.action == Calibrate.Request.MARK_END:
+                    begin, end = client.mark_end(mapping.address)
+                    return (f'{mapping.name}: calibrated, range {begin * mapping.scale:.4f} .. '
+                            f'{end * mapping.scale:.4f} (position is now relative to the '
+                            'begin mark)')
+                if request.action == Calibrate.Request.RESET:
+                    client.reset_axis(mapping.address)
+                    return f'{mapping.name}: calibration cleared, position reset to 0'
+            except KosError as exc:
+                raise DeviceError(str(exc)) from exc
+            raise CommandError(f'action {request.action} is not MARK_BEGIN (0), MARK_END (1) '
+                               'or RESET (2)')
+
+        return self._run_trigger(response, action)
+
+    def _on_take_picture(self, request, response):
+        def action() -> str:
+            try:
+                self._client().take_picture(self.picture_exposure)
+            except KosError as exc:
+                raise DeviceError(str(exc)) from exc
+            return f'picture taken (exposure {self.picture_exposure:g} s)'
+
+        return self._run_trigger(response, action)
+
+    # ------------------------------------------------------------ diagnostics
+    def device_status_parts(self) -> list[StatusPart]:
+        client = self.client
+        if client is None:
+            return []
+        with self._errors_lock:
+            errors = list(self._latched_errors)
+        device_errors = [e for e in errors if e.motor_address not in self._joint_of]
+        device = StatusPart('device')
+        device.values = [
+            ('lock', 'LOCKED (password rejected)' if self._locked_out else 'unlocked'),
+            ('playback_status', playback_state_name(client.playback.status)),
+            ('move_loaded', str(client.playback.loaded)),
+            ('guid', client.guid),
+            ('malformed_frames', str(client.malformed_frames)),
+            ('unsupported_replies', str(client.unsupported_replies)),
+            *[(f'error_{e.code}', f'{e.description} (motor {e.motor_address})')
+              for e in device_errors],
+        ]
+        if self._locked_out:
+            device.level, device.message = Level.ERROR, 'device locked: password rejected'
+        elif device_errors:
+            device.level = Level.ERROR
+            device.message = f'error {device_errors[-1].code}: {device_errors[-1].description}'
+        else:
+            device.message = f'OK, playback {playback_state_name(client.playback.status)}'
+        parts = [device]
+        for name, mapping in self.joints.items():
+            part = StatusPart(name)
+            motor = client.motors.get(mapping.address)
+            axis_errors = [e for e in errors if e.motor_address == mapping.address]
+            if motor is None or not motor.online:
+                part.level, part.message = Level.ERROR, f'motor {mapping.address} offline'
+                part.values = [('motor_address', str(mapping.address)), ('online', 'False')]
+                parts.append(part)
+                continue
+            part.values = [
+                ('motor_address', str(mapping.address)), ('online', 'True'),
+                ('calibrated', str(motor.calibrated)),
+                ('begin_position', f'{motor.begin_position * mapping.scale:.6g}'),
+                ('end_position', f'{motor.end_position * mapping.scale:.6g}'),
+                ('position_rotations', f'{motor.position:.6g}'),
+                ('max_setup_speed', f'{motor.max_setup_speed * abs(mapping.scale):.6g}'),
+                ('max_move_speed', f'{motor.max_move_speed * abs(mapping.scale):.6g}'),
+                ('max_acceleration', f'{motor.max_acceleration * abs(mapping.scale):.6g}'),
+                ('fiz_motor', str(motor.is_fiz)),
+                *[(f'error_{e.code}', e.description) for e in axis_errors],
+            ]
+            if axis_errors:
+                last = axis_errors[-1]
+                part.level = Level.ERROR
+                part.message = f'error {last.code}: {last.description}'
+            elif not motor.calibrated:
+                part.level, part.message = Level.WARN, 'not calibrated (no playback, ' \
+                    'uncalibrated travel)'
+            else:
+                part.message = 'calibrated'
+            parts.append(part)
+        return parts
+
+    def device_mode(self) -> str:
+        client = self.client
+        if client is None:
+            return ''
+        mode = client.device_info.playback_mode if client.device_info else 0
+        try:
+            mode_name = PlaybackMode(mode).name.lower()
+        except ValueError:
+            mode_name = str(mode)
+        return f'{mode_name}/{playback_state_name(client.playback.status)}'
+
+    def axis_details(self, joint: str) -> dict[str, object]:
+        client = self.client
+        mapping = self.joints[joint]
+        motor = client.motors.get(mapping.address) if client else None
+        if motor is None:
+            return {'state': AxisState.STATE_DISABLED}
+        with self._errors_lock:
+            errors = [ERROR_CODES[e.code].description if e.code in ERROR_CODES else
+                      f'error {e.code}' for e in self._latched_errors
+                      if e.motor_address == mapping.address]
+        details: dict[str, object] = {'calibrated': motor.calibrated,
+                                      'homed': motor.calibrated, 'active_errors': errors}
+        if not motor.online:
+            details['state'] = AxisState.STATE_DISABLED
+        elif errors:
+            details['state'] = AxisState.STATE_FAULT
+        elif client.playback_running:
+            details['state'] = AxisState.STATE_PLAYBACK
+        return details
+
+    def device_errors(self) -> list[str]:
+        with self._errors_lock:
+            return [f'{e.code}: {e.description}' for e in self._latched_errors
+                    if e.motor_address not in self._joint_of]
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    return run_driver(KosDriverNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

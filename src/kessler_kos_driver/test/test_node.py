@@ -1,0 +1,289 @@
+"""kessler_kos_driver_node as a process against kessler_kos_sim as a process.
+
+Needs the colcon-built workspace (make build; source scripts/ros_env.sh). The tests share one
+simulator and node (module scope) and run in file order: playback first, faults last.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import pytest
+from builtin_interfaces.msg import Duration
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Log
+from rcl_interfaces.srv import GetParameters
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
+from gimbal_msgs.action import Home, MoveTo
+from gimbal_msgs.msg import AxisTrajectory, BezierSegment, GimbalStatus, PlaybackStatus
+from gimbal_msgs.srv import Calibrate, LoadTrajectory
+from kessler_kos_driver.sim import control
+
+pytestmark = pytest.mark.ros
+
+PKG = 'kessler_kos_driver'
+NODE = 'kessler_kos_driver'
+PASSWORD = 'Zq8-kos-secret'
+JOINTS = ['slider', 'pan', 'tilt']
+# rad, within the simulator's default calibrated ranges (slider 0..200 rot, pan 0..100,
+# tilt 0..-40; joint_scales 2*pi): the move takes 6 s simulated, 3 s at time scale 2.
+KEYFRAMES = [(0.0, [5.0, 10.0, -10.0]), (3.0, [60.0, 150.0, -80.0]),
+             (6.0, [30.0, 300.0, -150.0])]
+
+
+def srv(name: str) -> str:
+    return f'/{NODE}/{name}'
+
+
+@pytest.fixture(scope='module')
+def rig():
+    lease = DomainLease()
+    domain = lease.acquire()
+    port, control_port = free_tcp_port(), free_tcp_port()
+    sim = ManagedProcess.ros(PKG, 'kessler_kos_sim', domain, [
+        '--port', str(port), '--control-port', str(control_port), '--discovery-port', '0',
+        '--password', PASSWORD, '--precalibrated', '--time-scale', '2'])
+    sim.wait_for_output('listening')
+    node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain, [
+        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
+        '-p', f'password:={PASSWORD}', '-p', 'reconnect_period:=0.2',
+        '-p', 'diagnostics_period:=0.25', '-p', 'publish_rate:=20.0',
+        '-p', 'command_timeout:=0.4'])
+    ros = RosTestClient(domain)
+    logs = ros.subscribe('/rosout', Log)
+    try:
+        ros.wait_for_message('joint_states', JointState, timeout=30)
+        yield ros, control_port, node, logs
+    finally:
+        ros.close()
+        node.stop()
+        sim.stop()
+        lease.release()
+
+
+def positions(msg: JointState) -> dict[str, float]:
+    return dict(zip(msg.name, msg.position, strict=True))
+
+
+def diag_status(array: DiagnosticArray, part: str):
+    for status in array.status:
+        if status.name == f'{NODE}: {part}':
+            return status
+    return None
+
+
+def wait_diag(ros, part, predicate, timeout=10.0):
+    return ros.wait_for_message(
+        '/diagnostics', DiagnosticArray,
+        lambda a: diag_status(a, part) is not None and predicate(diag_status(a, part)),
+        timeout=timeout)
+
+
+def wait_status(statuses, start, status, timeout=30.0):
+    """The first PlaybackStatus `status` received after index `start` of the record."""
+    return wait_for(lambda: next((s for s in statuses[start:] if s.status == status), None),
+                    timeout, f'playback status {status}')
+
+
+def trigger(ros, name):
+    return ros.call(Trigger, srv(name), Trigger.Request())
+
+
+def keyframe_request(keyframes=KEYFRAMES, **fields) -> LoadTrajectory.Request:
+    trajectory = JointTrajectory(joint_names=JOINTS)
+    for t, values in keyframes:
+        trajectory.points.append(JointTrajectoryPoint(
+            positions=values, time_from_start=Duration(sec=int(t), nanosec=int(t % 1 * 1e9))))
+    return LoadTrajectory.Request(playback_mode=LoadTrajectory.Request.MODE_LIVE_MOTION,
+                                  keyframes=trajectory, **fields)
+
+
+def test_joint_states_status_and_identity(rig):
+    ros, _, _, _ = rig
+    msg = ros.wait_for_message('joint_states', JointState)
+    assert msg.name == JOINTS and len(msg.velocity) == 3
+    status = ros.wait_for_message(srv('status'), GimbalStatus)
+    assert status.connection == GimbalStatus.CONNECTION_CONNECTED
+    assert status.device_model == 'Kessler CineShooter'
+    assert [a.name for a in status.axes] == JOINTS and all(a.calibrated for a in status.axes)
+    diag = wait_diag(ros, 'device', lambda s: True)
+    assert diag_status(diag, 'pan').level[0] == 0
+    assert dict((kv.key, kv.value) for kv in diag_status(diag, 'device').values)['lock'] == \
+        'unlocked'
+
+
+def test_load_and_play_three_axis_keyframes(rig):
+    ros, _, _, _ = rig
+    reply = ros.call(LoadTrajectory, srv('load_trajectory'), keyframe_request())
+    assert reply.success, reply.message
+    statuses = ros.subscribe(srv('playback_status'), PlaybackStatus)
+    reply = trigger(ros, 'setup_playback')
+    assert reply.success, reply.message
+    home = wait_for(lambda: next((s for s in statuses if s.status_name == 'SetupCompleted'),
+                                 None), 10, 'SetupCompleted')
+    assert home.positions == pytest.approx(KEYFRAMES[0][1], abs=1e-3)
+    samples = ros.subscribe('joint_states', JointState)
+    start = len(samples)
+    reply = trigger(ros, 'start_playback')
+    assert reply.success, reply.message
+    full_stop = wait_status(statuses, 0, PlaybackStatus.FULL_STOP)
+    names = [s.status_name for s in statuses]
+    assert names[-3:] == ['StartForward', 'EndOfMove', 'FullStop']
+    assert full_stop.joint_names == JOINTS
+    assert full_stop.positions == pytest.approx(KEYFRAMES[-1][1], abs=1e-3)
+    final = ros.wait_for_message('joint_states', JointState)
+    assert list(final.position) == pytest.approx(KEYFRAMES[-1][1], abs=1e-3)
+    # joint_states followed the path: pan (monotone keyframes) rose through the move
+    pan = [positions(m)['pan'] for m in samples[start:]]
+    intermediate = [p for p in pan if 11.0 < p < 299.0]
+    assert len(intermediate) >= 3
+    assert all(b >= a - 1e-6 for a, b in itertools.pairwise(pan))
+    slider = [positions(m)['slider'] for m in samples[start:]]
+    assert max(slider) > 40.0      # went up towards 60 then came back to 30
+    # FullStop consumed the move
+    again = trigger(ros, 'start_playback')
+    assert not again.success and 'load it again' in again.message
+
+
+def test_load_refusals_send_nothing(rig):
+    ros, control_port, _, _ = rig
+    bad = keyframe_request([(0.0, [5.0, 10.0, -10.0]), (3.0, [5.0, 10.0, 10.0])])
+    reply = ros.call(LoadTrajectory, srv('load_trajectory'), bad)
+    assert not reply.success and "'tilt'" in reply.message
+    assert 'calibrated range' in reply.message
+    fast = keyframe_request([(0.0, [5.0, 10.0, -10.0]), (0.1, [900.0, 10.0, -10.0])])
+    reply = ros.call(LoadTrajectory, srv('load_trajectory'), fast)
+    assert not reply.success and 'MaxMaxMoveSpeed' in reply.message
+    looped = keyframe_request(loop_count=2, interval=1.0, move_photos=5)
+    looped.playback_mode = LoadTrajectory.Request.MODE_TIMELAPSE_SMS
+    reply = ros.call(LoadTrajectory, srv('load_trajectory'), looped)
+    assert not reply.success and 'time lapse' in reply.message
+    unknown = keyframe_request()
+    unknown.keyframes.joint_names = ['slider', 'pan', 'roll']
+    reply = ros.call(LoadTrajectory, srv('load_trajectory'), unknown)
+    assert not reply.success and 'roll' in reply.message
+    assert 'phase=idle' in control(control_port, 'status')
+
+
+def test_explicit_segments_rapid_reverse_loop_and_stop(rig):
+    ros, _, _, _ = rig
+    segment = BezierSegment(p0_time=0.0, p0_position=0.0, p1_time=1 / 3, p1_position=0.0,
+                            p2_time=2 / 3, p2_position=0.5, p3_time=1.0, p3_position=0.5)
+    request = LoadTrajectory.Request(
+        playback_mode=LoadTrajectory.Request.MODE_LIVE_MOTION, duration=4.0,
+        axes=[AxisTrajectory(joint_name='pan', segments=[segment])], loop_count=255,
+        rapid_reverse=True)
+    reply = ros.call(LoadTrajectory, srv('load_trajectory'), request)
+    assert reply.success, reply.message
+    statuses = ros.subscribe(srv('playback_status'), PlaybackStatus)
+    start = len(statuses)
+    assert trigger(ros, 'start_playback').success
+    wait_status(statuses, start, PlaybackStatus.START_REVERSE)
+    blocked = ros.run_action(MoveTo, srv('move_to'), MoveTo.Goal(joint_names=['pan'],
+                                                                  positions=[1.0]))[0]
+    assert not blocked.success and 'playing' in blocked.message
+    start = len(statuses)
+    reply = trigger(ros, 'stop_playback')
+    assert reply.success, reply.message
+    wait_status(statuses, start, PlaybackStatus.FULL_STOP, timeout=10)
+
+
+def test_move_to_and_joint_command(rig):
+    ros, _, node, _ = rig
+    goal = MoveTo.Goal(joint_names=['pan', 'tilt'], positions=[20.0, -20.0],
+                       velocities=[30.0, 30.0])
+    result, _, feedback = ros.run_action(MoveTo, srv('move_to'), goal, timeout=30)
+    assert result.success, result.message
+    assert result.positions == pytest.approx([20.0, -20.0], abs=0.011) and feedback
+    outside = MoveTo.Goal(joint_names=['tilt'], positions=[50.0])   # tilt range is 0..-251
+    result, _, _ = ros.run_action(MoveTo, srv('move_to'), outside)
+    assert not result.success and 'calibrated range' in result.message
+    ros.publish('joint_command', JointState(name=['slider'], position=[12.0]))
+    ros.wait_for_message('joint_states', JointState,
+                         lambda m: abs(positions(m)['slider'] - 12.0) < 1e-3, timeout=20)
+    ros.publish('joint_command', JointState(name=['roll'], position=[1.0]))
+    node.wait_for_output("unknown joint(s) ['roll']")
+
+
+def test_jog_expires(rig):
+    ros, _, node, _ = rig
+    ros.publish('joint_command', JointState(name=['pan'], velocity=[20.0]))
+    ros.wait_for_message('joint_states', JointState,
+                         lambda m: abs(m.velocity[1]) > 1.0, timeout=10)
+    node.wait_for_output('expired')
+    ros.wait_for_message('joint_states', JointState, lambda m: abs(m.velocity[1]) < 1e-6,
+                         timeout=10)
+
+
+def test_calibrate_take_picture_and_home(rig):
+    ros, control_port, _, _ = rig
+    reply = ros.call(Calibrate, srv('calibrate'),
+                     Calibrate.Request(joint_name='slider', action=Calibrate.Request.RESET))
+    assert reply.success, reply.message
+    wait_diag(ros, 'slider', lambda s: s.level[0] == 1 and 'not calibrated' in s.message)
+    result, _, _ = ros.run_action(Home, srv('home'), Home.Goal(joint_names=['slider']))
+    assert result.success and 'not calibrated' in result.message
+    reply = ros.call(Calibrate, srv('calibrate'), Calibrate.Request(
+        joint_name='slider', action=Calibrate.Request.MARK_BEGIN))
+    assert reply.success, reply.message
+    goal = MoveTo.Goal(joint_names=['slider'], positions=[50.0], velocities=[50.0])
+    assert ros.run_action(MoveTo, srv('move_to'), goal, timeout=30)[0].success
+    reply = ros.call(Calibrate, srv('calibrate'), Calibrate.Request(
+        joint_name='slider', action=Calibrate.Request.MARK_END))
+    assert reply.success, reply.message
+    assert 'range 0.0000 .. 50.0000' in reply.message
+    result, _, _ = ros.run_action(Home, srv('home'), Home.Goal(joint_names=['slider', 'pan']),
+                                  timeout=60)
+    assert result.success, result.message
+    msg = ros.wait_for_message('joint_states', JointState)
+    assert positions(msg)['slider'] == pytest.approx(0.0, abs=0.011)
+    bad = ros.call(Calibrate, srv('calibrate'), Calibrate.Request(joint_name='roll'))
+    assert not bad.success and 'unknown joint' in bad.message
+    assert trigger(ros, 'take_picture').success
+    assert 'photos=1' in control(control_port, 'status')
+
+
+def test_password_never_leaves_the_node(rig):
+    ros, _, _, logs = rig
+    reply = ros.call(GetParameters, srv('get_parameters'),
+                     GetParameters.Request(names=['password']))
+    assert reply.values[0].string_value == '********'
+    diag = ros.wait_for_message('/diagnostics', DiagnosticArray)
+    status = ros.wait_for_message(srv('status'), GimbalStatus)
+    assert logs, 'rosout is recorded'
+    for message in (*logs, diag, status):
+        assert PASSWORD not in str(message)
+
+
+def test_axis_fault_offline_motor_and_reset(rig):
+    ros, control_port, _, _ = rig
+    assert control(control_port, 'fault 3') == 'ok'
+    diag = wait_diag(ros, 'tilt', lambda s: s.level[0] == 2)
+    assert 'error 16' in diag_status(diag, 'tilt').message
+    reply = trigger(ros, 'reset_faults')
+    assert reply.success and 'tilt' in reply.message      # cleared, needs recalibration
+    wait_diag(ros, 'tilt', lambda s: s.level[0] == 1)
+    assert control(control_port, 'offline 2') == 'ok'
+    wait_diag(ros, 'pan', lambda s: s.level[0] == 2 and 'offline' in s.message)
+    result, _, _ = ros.run_action(MoveTo, srv('move_to'), MoveTo.Goal(joint_names=['pan'],
+                                                                       positions=[1.0]))
+    assert not result.success and 'offline' in result.message
+    assert control(control_port, 'online 2') == 'ok'
+    wait_diag(ros, 'pan', lambda s: s.level[0] == 0)
+
+
+def test_stop_and_reconnect_after_link_drop(rig):
+    ros, control_port, node, _ = rig
+    assert trigger(ros, 'stop').success
+    assert control(control_port, 'drop 0.5') == 'ok'
+    wait_diag(ros, 'connection', lambda s: s.level[0] == 2, timeout=10)
+    wait_diag(ros, 'connection', lambda s: s.level[0] == 0, timeout=20)
+    node.wait_for_output('reconnected')
+    msg = ros.wait_for_message('joint_states', JointState, timeout=10)
+    assert msg.name == JOINTS and all(math.isfinite(p) for p in msg.position)
