@@ -23,6 +23,7 @@ Wrong examples and the rule followed instead:
 from __future__ import annotations
 
 import pytest
+
 from capture_driver.protocol import (
     ChecksumError,
     DataType,

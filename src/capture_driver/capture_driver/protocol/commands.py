@@ -18,7 +18,7 @@ of the run established (a wrong guess would shift by one inside the run). Comman
 opcode could not be established are **not** in :data:`COMMANDS`; they are listed in
 :data:`UNRESOLVED` with the reason, and the encoder refuses them.
 
-Weapon-station commands (the WCU group, the dual-gimbal weapon/ballistic/CapSnap
+Weapon-station commands (the weapon-control-unit group and the weapon-related dual-gimbal
 commands) are out of scope and deliberately absent; frames carrying their opcodes are
 treated as unknown. Units are the device's (degrees, deg/s, mA, ms); the ROS node converts.
 """

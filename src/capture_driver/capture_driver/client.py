@@ -1,0 +1,523 @@
+"""Capture pedestal session: handshake, request/reply, keep-alive, resync and reconnect.
+
+One request is in flight at a time (a lock serialises callers from any thread). A request
+writes one packet and reads until its reply: a data packet with the same opcode and axis
+for getters, a single ACK byte for everything else, or a NACK byte, which raises
+:class:`DeviceNack` carrying the spec's meaning and advice. Garbage and corrupted or
+truncated packets are skipped by :class:`~.protocol.StreamDecoder`; if a started packet
+stalls for ``resync_gap`` the decoder gives it up and rescans, so a lost byte costs at
+most one request.
+
+Handshake (section 6.1): over TCP the controller sends a COM_Connect packet as soon as the
+connection opens; the client answers with a COM_Connect packet carrying the opcode the
+controller used (so a wrong reconstruction of that opcode cannot break the handshake) and
+waits for the ACK. On a serial line there is no greeting; the client sends COM_Connect.
+
+Keep-alive (4.6.5): with ``keepalive_period`` > 0 the client configures the controller's
+supervision (COM_setKeepAliveTimeout/Count, COM_StartKeepAlive) so a dead host makes the
+pedestal stop, and a background thread sends COM_IsKeepAliveOn whenever the link has been
+idle for ``keepalive_period``. With ``auto_reconnect`` the same thread reopens a lost link
+(exponential backoff) and requests made meanwhile fail fast with :class:`NotConnected`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from gimbal_driver_common.transport import Backoff, ByteStream, TransportError
+
+from .protocol import (
+    REPLY_INFO,
+    Command,
+    Frame,
+    GeoPoint,
+    PresetRecord,
+    ProtocolError,
+    ReplyByte,
+    ReplyCode,
+    StreamDecoder,
+    command,
+    ddmm_to_degrees,
+)
+from .protocol.registers import CSR_ERROR_STRINGS, REGISTERS
+
+LOG = logging.getLogger('capture_driver.client')
+
+SCAN_COMMANDS = {
+    'zigzag': 'SCN_StartScanZigZag',
+    'snake': 'SCN_StartScanSnake',
+    'square': 'SCN_StartScanSquare',
+}
+
+
+class CaptureError(Exception):
+    """Base of the client's errors; the message is meant for a person."""
+
+
+class NotConnected(CaptureError):
+    """No link to the controller (not opened yet, or lost and not yet recovered)."""
+
+
+class DeviceTimeout(CaptureError):
+    """The controller did not answer in time."""
+
+
+class DeviceNack(CaptureError):
+    """The controller answered with a NACK byte."""
+
+    def __init__(self, request: str, code: ReplyCode, detail: str = '') -> None:
+        info = REPLY_INFO[code]
+        message = f'{request}: NACK 0x{int(code):02X} {info.title} ({info.meaning})'
+        if detail:
+            message += f'; device says: {detail}'
+        if info.advice:
+            message += f'; {info.advice}'
+        super().__init__(message)
+        self.code = code
+        self.request = request
+        self.detail = detail
+
+
+@dataclass
+class Identity:
+    serial_number: str = ''
+    firmware: str = ''
+    hardware: str = ''
+    part_number: str = ''
+
+
+class CaptureClient:
+    """Thread-safe session with one Capture controller over any :class:`ByteStream`."""
+
+    def __init__(
+        self,
+        stream_factory: Callable[[], ByteStream],
+        group: int = 0,
+        timeout: float = 0.5,
+        greeting_timeout: float = 0.5,
+        expect_greeting: bool = True,
+        keepalive_period: float = 0.0,
+        keepalive_count: int = 3,
+        auto_reconnect: bool = False,
+        reconnect_backoff: Backoff | None = None,
+        resync_gap: float = 0.05,
+        max_timeouts: int = 3,
+    ) -> None:
+        self._stream_factory = stream_factory
+        self.group = group
+        self.timeout = timeout
+        self.greeting_timeout = greeting_timeout
+        self.expect_greeting = expect_greeting
+        self.keepalive_period = keepalive_period
+        self.keepalive_count = keepalive_count
+        self.auto_reconnect = auto_reconnect
+        self._backoff = reconnect_backoff or Backoff(0.2, 5.0)
+        self.resync_gap = resync_gap
+        self.max_timeouts = max_timeouts
+        self._lock = threading.RLock()
+        self._stream: ByteStream | None = None
+        self._decoder = StreamDecoder()
+        self._connected = False
+        self._connect_opcode = command('COM_Connect').opcode
+        self._last_activity = 0.0
+        self._consecutive_timeouts = 0
+        self._next_reconnect = 0.0
+        self._worker: threading.Thread | None = None
+        self._stop = threading.Event()
+        self.last_error = 'not connected'
+        self.connects = 0
+        self.stats = {'requests': 0, 'timeouts': 0, 'nacks': 0, 'stale': 0}
+        self.on_connect: Callable[[], None] | None = None
+
+    # ---------------------------------------------------------------- link
+    @property
+    def connected(self) -> bool:
+        return self._connected
+
+    @property
+    def description(self) -> str:
+        stream = self._stream
+        return stream.description if stream is not None else ''
+
+    @property
+    def garbage_bytes(self) -> int:
+        return self._decoder.garbage_bytes
+
+    def connect(self) -> None:
+        """Open the link and run the handshake; raises :class:`CaptureError` on failure."""
+        with self._lock:
+            self._close_locked()
+            stream = self._stream_factory()
+            try:
+                stream.open()
+            except TransportError as exc:
+                self.last_error = str(exc)
+                raise NotConnected(str(exc)) from exc
+            self._stream = stream
+            self._decoder.reset()
+            try:
+                self._handshake()
+                self._connected = True
+                self._consecutive_timeouts = 0
+                if self.keepalive_period > 0:
+                    self._configure_keepalive()
+            except (CaptureError, TransportError) as exc:
+                self.last_error = f'handshake with {stream.description} failed: {exc}'
+                self._close_locked()
+                raise NotConnected(self.last_error) from exc
+            self.connects += 1
+            self._backoff.reset()
+            self.last_error = ''
+        LOG.info('connected to %s', self.description)
+        callback = self.on_connect
+        if callback is not None:
+            callback()
+
+    def _handshake(self) -> None:
+        if self.expect_greeting:
+            greeting = self._wait_greeting(self.greeting_timeout)
+            if greeting is not None:
+                self._connect_opcode = greeting.opcode
+        frame = Frame(self.group, 0, self._connect_opcode)
+        self._transact('COM_Connect', frame, expect_data=False, timeout=self.timeout)
+
+    def _wait_greeting(self, timeout: float) -> Frame | None:
+        assert self._stream is not None
+        deadline = time.monotonic() + timeout
+        while (remaining := deadline - time.monotonic()) > 0:
+            for item in self._decoder.feed(self._stream.read(256, remaining)):
+                if isinstance(item, Frame) and not item.data and 0x0700 <= item.opcode <= 0x07FF:
+                    return item
+        return None
+
+    def _configure_keepalive(self) -> None:
+        timeout_ms = max(int(self.keepalive_period * 1000), 100)
+        try:
+            self._request_locked('COM_setKeepAliveTimeout', None, min(timeout_ms, 0xFFFF))
+            self._request_locked('COM_setKeepAliveCount', None, self.keepalive_count)
+            self._request_locked('COM_StartKeepAlive', None, 1)
+        except DeviceNack as exc:  # older firmware (before 2.13.6) has no keep-alive
+            LOG.warning('controller keep-alive not available: %s', exc)
+
+    def close(self, send_disconnect: bool = False) -> None:
+        """Close the link (optionally telling the controller with COM_Disconnect)."""
+        with self._lock:
+            if send_disconnect and self._connected:
+                with contextlib.suppress(CaptureError, TransportError):
+                    self._request_locked('COM_StartKeepAlive', None, 0)
+                with contextlib.suppress(CaptureError, TransportError):
+                    self._request_locked('COM_Disconnect', None, None)
+            self._close_locked()
+
+    def _close_locked(self) -> None:
+        self._connected = False
+        stream, self._stream = self._stream, None
+        if stream is not None:
+            stream.close()
+
+    def _link_lost(self, why: str) -> None:
+        self.last_error = why
+        if self._connected:
+            LOG.warning('link lost: %s', why)
+        self._close_locked()
+        self._next_reconnect = time.monotonic() + self._backoff.next_delay()
+
+    def start(self) -> None:
+        """Start the keep-alive / reconnect thread (needed only for those two features)."""
+        if self._worker is not None and self._worker.is_alive():
+            return
+        self._stop.clear()
+        self._worker = threading.Thread(target=self._run, name='capture-keepalive', daemon=True)
+        self._worker.start()
+
+    def stop(self, send_disconnect: bool = False) -> None:
+        self._stop.set()
+        if self._worker is not None and self._worker is not threading.current_thread():
+            self._worker.join(timeout=2.0)
+        self._worker = None
+        self.close(send_disconnect)
+
+    def _run(self) -> None:
+        tick = 0.05
+        while not self._stop.wait(tick):
+            if not self._connected:
+                if self.auto_reconnect and time.monotonic() >= self._next_reconnect:
+                    try:
+                        self.connect()
+                    except CaptureError as exc:
+                        self._next_reconnect = time.monotonic() + self._backoff.next_delay()
+                        LOG.debug('reconnect failed: %s', exc)
+                continue
+            if self.keepalive_period > 0 and (
+                time.monotonic() - self._last_activity >= self.keepalive_period
+            ):
+                with contextlib.suppress(CaptureError):
+                    self.request('COM_IsKeepAliveOn')
+
+    # ------------------------------------------------------------- requests
+    def request(self, name: str, axis: int | None = None, value: Any = None,
+                timeout: float | None = None) -> Any:
+        """Send one table command and return its decoded reply (None for ACK-only commands).
+
+        Raises :class:`ProtocolError` for bad arguments (nothing is sent),
+        :class:`DeviceNack`, :class:`DeviceTimeout` or :class:`NotConnected`.
+        """
+        cmd = command(name)
+        with self._lock:
+            if not self._connected and self.auto_reconnect and (
+                time.monotonic() >= self._next_reconnect
+            ):
+                try:
+                    self.connect()
+                except CaptureError:
+                    self._next_reconnect = time.monotonic() + self._backoff.next_delay()
+            return self._request_locked(cmd.name, axis, value, timeout)
+
+    def _request_locked(self, name: str, axis: int | None, value: Any,
+                        timeout: float | None = None) -> Any:
+        cmd = command(name)
+        packet = cmd.encode(axis, value, self.group)  # validates before anything is sent
+        frame = Frame(self.group, packet[4], cmd.opcode, packet[7:-1])
+        if self._stream is None:
+            raise NotConnected(f'{name}: not connected ({self.last_error})')
+        for attempt in (1, 2):
+            try:
+                reply = self._transact(name, frame, cmd.replies_with_data,
+                                       self.timeout if timeout is None else timeout)
+            except DeviceNack as exc:
+                # 0xF6: the controller did not execute the packet, so resending is safe.
+                if exc.code == ReplyCode.WRONG_CHECKSUM and attempt == 1:
+                    continue
+                raise
+            except DeviceTimeout:
+                # A getter changes nothing, so it is retried once; a setter is not.
+                if cmd.replies_with_data and attempt == 1:
+                    continue
+                raise
+            return cmd.decode_reply(reply) if cmd.replies_with_data else None
+        raise DeviceTimeout(f'{name}: no reply')  # pragma: no cover
+
+    def _transact(self, name: str, frame: Frame, expect_data: bool, timeout: float) -> Frame:
+        stream = self._stream
+        if stream is None:
+            raise NotConnected(f'{name}: not connected ({self.last_error})')
+        self.stats['requests'] += 1
+        try:
+            self._drain(stream)
+            stream.write(frame.encode())
+            self._last_activity = time.monotonic()
+            reply = self._await_reply(stream, name, frame, expect_data, timeout)
+        except TransportError as exc:
+            self._link_lost(f'{name}: {exc}')
+            raise NotConnected(f'{name}: link lost ({exc})') from exc
+        self._consecutive_timeouts = 0
+        return reply
+
+    def _drain(self, stream: ByteStream) -> None:
+        """Discard stale input (late replies of timed-out requests) before a new request."""
+        while True:
+            data = stream.read(4096, 0.0)
+            if not data:
+                break
+            for item in self._decoder.feed(data):
+                self.stats['stale'] += 1
+                if isinstance(item, Frame) and 0x0700 <= item.opcode <= 0x07FF and not item.data:
+                    LOG.info('controller re-sent its greeting (0x%04X)', item.opcode)
+
+    def _await_reply(self, stream: ByteStream, name: str, frame: Frame, expect_data: bool,
+                     timeout: float) -> Frame:
+        deadline = time.monotonic() + timeout
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            wait = min(remaining, self.resync_gap) if self._decoder.has_partial else remaining
+            data = stream.read(4096, wait)
+            items = self._decoder.feed(data) if data else self._decoder.flush_partial()
+            for item in items:
+                if isinstance(item, ReplyByte):
+                    if item.is_ack:
+                        if not expect_data:
+                            return frame
+                        self.stats['stale'] += 1
+                        continue
+                    self.stats['nacks'] += 1
+                    raise DeviceNack(self._label(name, frame), item.code)
+                if isinstance(item, Frame):
+                    if expect_data and item.opcode == frame.opcode and item.axis == frame.axis:
+                        return item
+                    self.stats['stale'] += 1
+        self.stats['timeouts'] += 1
+        self._consecutive_timeouts += 1
+        if self._consecutive_timeouts >= self.max_timeouts:
+            self._link_lost(f'device silent: {self._consecutive_timeouts} requests unanswered')
+            raise NotConnected(f'{name}: device silent, link closed for reconnect')
+        raise DeviceTimeout(f'{self._label(name, frame)}: no reply within {timeout:g} s')
+
+    @staticmethod
+    def _label(name: str, frame: Frame) -> str:
+        return f'{name} (axis {frame.axis})' if frame.axis else name
+
+    def explain_nack(self, exc: DeviceNack) -> DeviceNack:
+        """Add the controller's own reason (ERR_GetProtocolErrorString) to an 0xA6 NACK."""
+        if exc.code != ReplyCode.INVALID_COMMAND or exc.detail:
+            return exc
+        try:
+            detail = self.request('ERR_GetProtocolErrorString')
+        except (CaptureError, ProtocolError):
+            return exc
+        return DeviceNack(exc.request, exc.code, detail) if detail else exc
+
+    def run(self, name: str, axis: int | None = None, value: Any = None) -> Any:
+        """:meth:`request`, with the controller's reason attached to an 0xA6 NACK."""
+        try:
+            return self.request(name, axis, value)
+        except DeviceNack as exc:
+            raise self.explain_nack(exc) from None
+
+    # ----------------------------------------------------- device functions
+    def identity(self) -> Identity:
+        """Serial number, firmware, hardware and part number (blank where refused)."""
+        ident = Identity()
+        for attr, name in (('serial_number', 'COM_GetSn'), ('firmware', 'COM_GetFw'),
+                           ('hardware', 'COM_GetHw'), ('part_number', 'COM_GetPn')):
+            try:
+                value = self.request(name)
+            except (DeviceNack, DeviceTimeout) as exc:
+                LOG.info('identity: %s', exc)
+                continue
+            setattr(ident, attr, f'{value:g}' if isinstance(value, float) else str(value))
+        return ident
+
+    def read_axis(self, axis: int, with_current: bool = False) -> tuple[float, float, float | None]:
+        """Load position (deg), speed (deg/s) and optionally current (mA) of one axis."""
+        position = self.request('MOT_GetLoadPosition', axis)
+        speed = self.request('MOT_GetMotorSpeed', axis)
+        current = self.request('MOT_GetMotorCurrent', axis) if with_current else None
+        return position, speed, current
+
+    def move_absolute(self, axis: int, position_deg: float, speed_deg_s: float,
+                      acceleration: float) -> None:
+        """The 7.1 motion profile, absolute: mode, TUM, absolute, acc, speed, position, update."""
+        for name, value in (
+            ('MOT_SetPositionMode', None), ('MOT_SetTum', None),
+            ('MOT_SetPositionAbsolute', None), ('MOT_SetAcceleration', acceleration),
+            ('MOT_SetSpeed', abs(speed_deg_s)), ('MOT_SendPosition', position_deg),
+            ('MOT_Update', None),
+        ):
+            self.run(name, axis, value)
+
+    def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:
+        """Speed mode (4.2.9): the axis turns at ``velocity_deg_s`` until told otherwise."""
+        for name, value in (
+            ('MOT_SetSpeedMode', None), ('MOT_SetAcceleration', acceleration),
+            ('MOT_SetSpeed', velocity_deg_s), ('MOT_Update', None),
+        ):
+            self.run(name, axis, value)
+
+    def stop_axis(self, axis: int) -> None:
+        """Decelerate to rest: speed mode with speed 0 (works from position or speed mode)."""
+        for name, value in (('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
+                            ('MOT_Update', None)):
+            self.run(name, axis, value)
+
+    def stop_all(self, axes: list[int]) -> list[str]:
+        """Stop scans, loops and every axis; returns the problems (empty when all worked)."""
+        problems = []
+        for name in ('SCN_StopScan', 'PRST_StopPresetLooping', 'GPS_StopTargetLooping'):
+            try:
+                self.request(name)
+            except (DeviceNack, DeviceTimeout) as exc:
+                LOG.debug('stop: %s', exc)
+        for axis in axes:
+            try:
+                self.stop_axis(axis)
+            except (DeviceNack, DeviceTimeout) as exc:
+                problems.append(str(exc))
+        return problems
+
+    def reset_faults(self, axis: int) -> None:
+        """4.10: "send the 'Reset faults' and the 'AxisOn' commands"."""
+        self.run('MOT_ResetFaults', axis)
+        self.run('MOT_AxisOn', axis)
+
+    def registers(self, axis: int | None) -> dict[str, int]:
+        """Raw per-axis registers (``axis``) or system registers (``None``)."""
+        values = {}
+        for register in REGISTERS.values():
+            if register.per_axis == (axis is not None):
+                values[register.name] = self.request(register.command, axis)
+        return values
+
+    def error_strings(self, csr: int) -> dict[str, str]:
+        """Detailed device error text for every set CSR bit that has one."""
+        texts = {}
+        for bit, name in CSR_ERROR_STRINGS.items():
+            if csr & (1 << bit):
+                try:
+                    texts[name] = self.request(name)
+                except (DeviceNack, DeviceTimeout) as exc:
+                    texts[name] = f'unavailable ({exc})'
+        return texts
+
+    def configure_scan(self, yaw_min: float, yaw_max: float, pitch_min: float, steps: int,
+                       step_height: float, speed: float) -> None:
+        """4.3: every scan parameter is sent before each scan (defaults are 0)."""
+        for name, value in (
+            ('SCN_SetYawMin', yaw_min), ('SCN_SetYawMax', yaw_max),
+            ('SCN_SetPitchMin', pitch_min), ('SCN_SetNumSteps', steps),
+            ('SCN_SetStepHeight', step_height), ('SCN_SetScanSpeed', speed),
+        ):
+            self.run(name, None, value)
+
+    def start_scan(self, pattern: str) -> None:
+        try:
+            name = SCAN_COMMANDS[pattern]
+        except KeyError:
+            raise CaptureError(
+                f'pattern {pattern!r} not available; the device has {sorted(SCAN_COMMANDS)}'
+            ) from None
+        self.run(name)
+
+    def set_preset(self, index: int, name: str, angles: list[float]) -> None:
+        full = [*angles, *([0.0] * (6 - len(angles)))][:6]
+        self.run('PRST_SetPreset', index, PresetRecord(name, tuple(full)))
+
+    def get_preset(self, index: int) -> PresetRecord:
+        return self.run('PRST_GetPreset', index)
+
+    def preset_indices(self) -> list[int]:
+        flags = self.request('PRST_GetPresetFlag')
+        return [bit + 1 for bit in range(15) if flags & (1 << bit)]
+
+    def imu(self) -> dict[str, float]:
+        """Euler angles (deg) and gyro rates (deg/s)."""
+        names = ('IMU_GetRoll', 'IMU_GetPitch', 'IMU_GetYaw',
+                 'IMU_GetGyroX', 'IMU_GetGyroY', 'IMU_GetGyroZ')
+        keys = ('roll', 'pitch', 'yaw', 'gyro_x', 'gyro_y', 'gyro_z')
+        return {key: self.request(name) for key, name in zip(keys, names, strict=True)}
+
+    def gps_fix(self) -> tuple[bool, float, float]:
+        """(position valid, latitude deg, longitude deg); converts DDMM.mmmm (4.4.1)."""
+        ready = self.request('GPS_PositionReady')
+        latitude = ddmm_to_degrees(self.request('GPS_GetLatitude'))
+        longitude = ddmm_to_degrees(self.request('GPS_GetLongitude'))
+        return bool(ready), latitude, longitude
+
+    def goto_lla(self, target: int, point: GeoPoint) -> None:
+        self.run('GPS_SetTargetLLA', target, point)
+        self.run('GPS_GoToTarget', target)
+
+
+def describe_command(cmd: Command) -> str:
+    """One line per table entry (README and ~/command help)."""
+    arg = f'{cmd.arg.value} [{cmd.arg_unit}]' if cmd.arg_unit else cmd.arg.value
+    ret = f'{cmd.ret.value} [{cmd.ret_unit}]' if cmd.ret_unit else cmd.ret.value
+    return (f'{cmd.name} 0x{cmd.opcode:04X} axis={cmd.axis.name} arg={arg} ret={ret} '
+            f'({cmd.confidence})')

@@ -1,0 +1,1257 @@
+"""Capture pedestal simulator: the wire protocol over TCP (127.0.0.1) and a pseudo-terminal.
+
+The model (:class:`PedestalModel`) is one physical pedestal shared by every connection, as
+the real controller is: motion physics per axis (absolute/relative position mode and
+speed mode, MOT_Update semantics, speed and acceleration ramps, software and hardware
+limit switches, axis on/off, emergency stop), homing, the three device scan patterns,
+15 presets with looping, GPS targets and go-to-target, IMU angles and rates, the
+keep-alive supervision, and registers (MER, DER, SRH, SRL, MSR, CMER, CSR, operation,
+system state) whose bits follow the motion.
+
+Fault injection (methods of :class:`PedestalModel`, the ``--control-port`` text protocol,
+and the servers' ``drop_link``/``inject``): latched axis faults, NACK replies, lost
+replies, garbage bytes, a silent device and a dropped link.
+
+Assumptions where the spec is silent are marked "sim:" in comments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import signal
+import socket
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from gimbal_driver_common.sim_server import LOOPBACK, PtySimServer, TcpSimServer
+
+from .protocol import (
+    BY_OPCODE,
+    COMMANDS,
+    Frame,
+    GeoPoint,
+    PresetRecord,
+    ProtocolError,
+    ReplyByte,
+    ReplyCode,
+    StreamDecoder,
+    degrees_to_ddmm,
+)
+from .protocol import registers as reg
+from .protocol.datatypes import DataType, encode_value
+
+LOG = logging.getLogger('capture_sim')
+
+#: Bits the simulator can latch as an injected axis fault (MER bit numbers).
+FAULTS = {
+    'can_bus_error': 0, 'short_circuit': 1, 'control_error': 3, 'communication_error': 4,
+    'over_current': 8, 'i2t_error': 9, 'motor_over_temperature': 10, 'over_voltage': 12,
+    'under_voltage': 13,
+}
+# MER bit -> CMER bit for the faults above (4.10.6 groups them).
+_MER_TO_CMER = {0: 15, 1: 11, 3: 10, 8: 7, 9: 6, 12: 5, 13: 4}
+SYSTEM_FAULTS = {flag.name: flag.bit for flag in reg.CSR.flags}
+
+HOMING_SPEED = 30.0  # deg/s, sim: the stored homing profile
+GENERAL_SPEED = 30.0  # deg/s, default CFG_SetGeneralSpd
+TILT_HARD_LIMIT = 95.0  # deg, sim: mechanical limit switches of the tilt axis
+
+
+@dataclass
+class AxisModel:
+    """One motor axis in load degrees."""
+
+    number: int
+    position: float = 0.0
+    velocity: float = 0.0
+    speed_mode: bool = False
+    relative: bool = True
+    acceleration: float = 180.0
+    speed: float = 0.0  # sim: COM_Connect sets speed 0 (4.6.2)
+    pending_position: float | None = None
+    target: float | None = None
+    jog_velocity: float = 0.0
+    axis_on: bool = True
+    homing: bool = False
+    homed: bool = True
+    mer_latched: int = 0
+    der_latched: int = 0
+    swls_neg: float = -180.0
+    swls_pos: float = 180.0
+    swls_active: bool = False
+    hard_limits: tuple[float, float] | None = None
+    general_speed: float = GENERAL_SPEED
+    current_ma: float = 0.0
+    limit_flags: int = 0  # DER bits 6/7 (software) and MER bits 6/7 (hardware) while at limit
+    stored: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def faulted(self) -> bool:
+        return bool(self.mer_latched or self.der_latched & 0b0010_0100_0000_0011)
+
+    @property
+    def moving(self) -> bool:
+        return abs(self.velocity) > 1e-6 or self.target is not None or self.homing
+
+    def stop(self) -> None:
+        self.target = None
+        self.jog_velocity = 0.0
+        self.homing = False
+
+    def halt(self) -> None:
+        """Immediate stop (emergency stop, fault, keep-alive expiry)."""
+        self.stop()
+        self.velocity = 0.0
+
+    def step(self, dt: float) -> None:
+        if self.faulted or not self.axis_on:
+            self.velocity = 0.0
+            return
+        if self.homing:
+            target, vmax = 0.0, HOMING_SPEED
+        elif self.target is not None:
+            target, vmax = self.target, abs(self.speed)
+        else:
+            target, vmax = None, 0.0
+        accel = max(self.acceleration, 1e-3)
+        previous = self.velocity
+        if target is not None:
+            error = target - self.position
+            desired = math.copysign(min(vmax, math.sqrt(2.0 * accel * abs(error))), error)
+            if abs(desired) < abs(self.velocity) and desired * self.velocity >= 0:
+                self.velocity = desired  # on the braking curve: follow it exactly
+            else:
+                self.velocity += max(-accel * dt, min(accel * dt, desired - self.velocity))
+            advance = self.velocity * dt
+            if abs(error) > 1e-9 and vmax <= 0.0:
+                self.velocity = 0.0  # speed 0: the profile does not move
+            elif abs(error) <= 1e-9 or (advance * error > 0 and abs(advance) >= abs(error)):
+                self.position, self.velocity = target, 0.0  # arrives within this step
+                if self.homing:
+                    self.homing, self.homed = False, True
+                self.target = None
+            else:
+                self.position += advance
+        else:
+            desired = self.jog_velocity
+            self.velocity += max(-accel * dt, min(accel * dt, desired - self.velocity))
+            self.position += self.velocity * dt
+        change = self.velocity - previous
+        self.current_ma = 200.0 + 5.0 * abs(self.velocity) + 0.5 * abs(change) / max(dt, 1e-6)
+        self._enforce_limits()
+
+    def _enforce_limits(self) -> None:
+        self.limit_flags = 0
+        checks = []
+        if self.swls_active:
+            checks.append((self.swls_neg, self.swls_pos, 'software'))
+        if self.hard_limits is not None:
+            checks.append((*self.hard_limits, 'hardware'))
+        for low, high, kind in checks:
+            bit = None
+            if self.position <= low + 1e-6:
+                bit = 7
+                if self.position < low or self.velocity < 0 or (
+                        self.target is not None and self.target < low):
+                    self.position = low
+                    self.halt()
+            elif self.position >= high - 1e-6:
+                bit = 6
+                if self.position > high or self.velocity > 0 or (
+                        self.target is not None and self.target > high):
+                    self.position = high
+                    self.halt()
+            if bit is not None:  # the switch stays active while the axis rests on it
+                self.limit_flags |= (1 << bit) << (0 if kind == 'hardware' else 16)
+
+    # ---------------------------------------------------------------- registers
+    def mer(self) -> int:
+        value = self.mer_latched | (self.limit_flags & 0xC0)
+        return value
+
+    def der(self) -> int:
+        value = self.der_latched | ((self.limit_flags >> 16) & 0xC0)
+        return value
+
+    def srh(self) -> int:
+        value = 1  # drive initialised
+        if self.target is None and not self.homing and abs(self.velocity) < 1e-6:
+            value |= reg.SRH_TARGET_REACHED
+        if self.limit_flags & 0x40 or (self.limit_flags >> 16) & 0x40:
+            value |= 1 << 6
+        if self.limit_flags & 0x80 or (self.limit_flags >> 16) & 0x80:
+            value |= 1 << 7
+        if self.faulted:
+            value |= reg.SRH_FAULT
+        return value
+
+    def srl(self) -> int:
+        value = 0
+        if self.homing:
+            value |= reg.SRL_HOMING_ACTIVE
+        if not self.moving:
+            value |= reg.SRL_MOTION_COMPLETE
+        if self.axis_on:
+            value |= reg.SRL_AXIS_ON
+        return value
+
+    def msr(self) -> int:
+        value = 1
+        if self.mer_latched & (1 << 3):
+            value |= 1 << 3
+        if self.limit_flags & 0x40 or (self.limit_flags >> 16) & 0x40:
+            value |= 1 << 6
+        if self.limit_flags & 0x80 or (self.limit_flags >> 16) & 0x80:
+            value |= 1 << 7
+        if not self.moving:
+            value |= 1 << 9
+        if self.axis_on:
+            value |= 1 << 13
+        return value
+
+    def cmer(self) -> int:
+        value = 0
+        if self.faulted:
+            value |= 1
+        if self.axis_on:
+            value |= 1 << 1
+        if not self.moving:
+            value |= 1 << 2
+        for mer_bit, cmer_bit in _MER_TO_CMER.items():
+            if self.mer_latched & (1 << mer_bit):
+                value |= 1 << cmer_bit
+        if self.limit_flags & 0x80:
+            value |= 1 << 8
+        if self.limit_flags & 0x40:
+            value |= 1 << 9
+        if (self.limit_flags >> 16) & 0x80:
+            value |= 1 << 13
+        if (self.limit_flags >> 16) & 0x40:
+            value |= 1 << 14
+        return value
+
+    def operation(self) -> int:
+        return 0 if self.homed else reg.OPR_HOMING_NOT_COMPLETED
+
+
+class RequestRejected(Exception):
+    """Answer the request with this NACK code; ``reason`` becomes the protocol error string."""
+
+    def __init__(self, code: ReplyCode, reason: str) -> None:
+        super().__init__(reason)
+        self.code = code
+        self.reason = reason
+
+
+@dataclass
+class ScanState:
+    waypoints: list[tuple[float, float]]
+    index: int = 0
+    direction: int = 1
+
+
+class PedestalModel:
+    """A 2- or 3-axis Capture pedestal with controller; thread-safe."""
+
+    def __init__(
+        self,
+        axes: int = 2,
+        gps: bool = True,
+        imu: bool = True,
+        gear_ratio: float = 1.0,
+        time_scale: float = 1.0,
+        serial_number: int = 24017,
+        firmware: str = '2.24.0',
+    ) -> None:
+        if axes not in (2, 3):
+            raise ValueError('the simulator models 2 or 3 axes')
+        self.lock = threading.RLock()
+        self.axes = {n: AxisModel(n) for n in range(1, axes + 1)}
+        self.axes[2].hard_limits = (-TILT_HARD_LIMIT, TILT_HARD_LIMIT)
+        self.gps_present = gps
+        self.imu_present = imu
+        self.gear_ratio = gear_ratio
+        self.time_scale = time_scale
+        self.serial_number = serial_number
+        self.firmware = firmware
+        self.emergency_stop = False
+        self.stabilization = False
+        self.scan: ScanState | None = None
+        self.scan_params = {'yaw_min': 0.0, 'yaw_max': 0.0, 'pitch_min': 0.0, 'steps': 0,
+                            'step_height': 0.0, 'speed': 0.0, 'short_path': 0}
+        self.presets: dict[int, PresetRecord] = {}
+        self.preset_looping: list[int] | None = None
+        self.looping_delay_ms = 0.0
+        self._loop_wait_until = 0.0
+        self.targets: dict[int, GeoPoint] = {}
+        self.gps_position = GeoPoint(34.8915, 32.1040, 65.43)  # decimal degrees, metres
+        self.gps_heading = 0.0
+        self.inserted_position = GeoPoint(0.0, 0.0, 0.0)
+        self.inserted_heading = 0.0
+        self.override_gps = False
+        self.keepalive_on = False
+        self.keepalive_timeout_ms = 1000
+        self.keepalive_count = 3
+        self.last_command = time.monotonic()
+        self.csr_latched = 0
+        self.protocol_error = ''
+        self.stored: dict[tuple[str, int], object] = {}
+        # fault injection
+        self.nack_queue: deque[tuple[ReplyCode, int | None]] = deque()
+        self.drop_replies = 0
+        self.requests: list[Frame] = []  # every request received (tests inspect it)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.connected_sessions = 0
+
+    # -------------------------------------------------------------- physics
+    def start(self, rate_hz: float = 100.0) -> None:
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, args=(rate_hz,), daemon=True,
+                                        name='capture-sim-physics')
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+
+    def _run(self, rate_hz: float) -> None:
+        period = 1.0 / rate_hz
+        last = time.monotonic()
+        while not self._stop.wait(period):
+            now = time.monotonic()
+            self.step((now - last) * self.time_scale)
+            last = now
+
+    def step(self, dt: float) -> None:
+        with self.lock:
+            self._check_keepalive()
+            self._advance_scan()
+            self._advance_looping()
+            for axis in self.axes.values():
+                axis.step(dt)
+
+    def _check_keepalive(self) -> None:
+        if not self.keepalive_on:
+            return
+        allowed = self.keepalive_timeout_ms / 1000.0 * max(self.keepalive_count, 1)
+        if time.monotonic() - self.last_command > allowed:  # real time, not simulated
+            # 4.6.5: the controller stops any motion and turns off the axes.
+            LOG.warning('keep-alive expired: stopping and turning the axes off')
+            self.keepalive_on = False
+            self.scan = None
+            self.preset_looping = None
+            for axis in self.axes.values():
+                axis.halt()
+                axis.axis_on = False
+
+    # ---------------------------------------------------------------- scans
+    def _scan_waypoints(self, pattern: str) -> list[tuple[float, float]]:
+        p = self.scan_params
+        y0, y1, p0 = p['yaw_min'], p['yaw_max'], p['pitch_min']
+        steps, height = max(int(p['steps']), 0), p['step_height']
+        points = [(y0, p0)]
+        if pattern == 'zigzag':
+            # 4.3: diagonal runs to (YawMax, +StepHeight), back to YawMin, NumSteps times.
+            for i in range(1, steps + 1):
+                points.append((y1 if i % 2 else y0, p0 + i * height))
+            if steps == 0:
+                points.append((y1, p0))
+        elif pattern == 'snake':
+            for i in range(steps + 1):
+                row = p0 + i * height
+                if i:
+                    points.append((points[-1][0], row))
+                points.append((y1 if i % 2 == 0 else y0, row))
+        else:  # square: rectangles shrinking inward by StepHeight
+            top = p0 + max(steps, 1) * height
+            lo_y, hi_y, lo_p, hi_p = y0, y1, p0, top
+            points = []
+            while lo_y <= hi_y and lo_p <= hi_p and len(points) < 400:
+                points += [(lo_y, lo_p), (hi_y, lo_p), (hi_y, hi_p), (lo_y, hi_p)]
+                lo_y, hi_y, lo_p, hi_p = lo_y + height, hi_y - height, lo_p + height, hi_p - height
+                if height <= 0:
+                    break
+        # scan limits are motor positions (4.3.1 remark); the model keeps load degrees
+        return [(y / self.gear_ratio, q / self.gear_ratio) for y, q in points]
+
+    def _advance_scan(self) -> None:
+        scan = self.scan
+        if scan is None:
+            return
+        yaw, pitch = self.axes[1], self.axes[2]
+        if yaw.target is not None or pitch.target is not None:
+            return
+        target_yaw, target_pitch = scan.waypoints[scan.index]
+        if abs(yaw.position - target_yaw) > 1e-3 or abs(pitch.position - target_pitch) > 1e-3:
+            speed = max(abs(self.scan_params['speed']), 1e-3)
+            dy, dp = abs(target_yaw - yaw.position), abs(target_pitch - pitch.position)
+            yaw.speed = speed
+            # 4.3: pitch speed follows from the pattern so both axes arrive together
+            pitch.speed = speed * dp / dy if dy > 1e-6 else speed
+            yaw.target, pitch.target = target_yaw, target_pitch
+            return
+        if len(scan.waypoints) == 1:
+            return
+        nxt = scan.index + scan.direction
+        if not 0 <= nxt < len(scan.waypoints):  # reverse the pattern at either end
+            scan.direction = -scan.direction
+            nxt = scan.index + scan.direction
+        scan.index = nxt
+
+    def _advance_looping(self) -> None:
+        if not self.preset_looping:
+            return
+        if any(a.target is not None for a in self.axes.values()):
+            self._loop_wait_until = time.monotonic() + self.looping_delay_ms / 1000.0 / max(
+                self.time_scale, 1e-6
+            )
+            return
+        if time.monotonic() < self._loop_wait_until:
+            return
+        index = self.preset_looping.pop(0)
+        self.preset_looping.append(index)
+        self._goto_preset(index)
+
+    def _goto_preset(self, index: int) -> None:
+        record = self.presets.get(index, PresetRecord(''))
+        for number, axis in self.axes.items():
+            self._move_to(axis, record.angles[number - 1], axis.general_speed)
+
+    def _move_to(self, axis: AxisModel, target: float, speed: float) -> None:
+        axis.speed_mode = False
+        axis.jog_velocity = 0.0
+        axis.speed = speed
+        axis.target = target
+
+    # ------------------------------------------------------ fault injection
+    def inject_fault(self, axis: int, fault: str) -> None:
+        """Latch an axis fault (a name of :data:`FAULTS`); the axis stops at once."""
+        with self.lock:
+            model = self.axes[axis]
+            model.mer_latched |= 1 << FAULTS[fault]
+            model.halt()
+            self.scan = None
+
+    def inject_system_fault(self, name: str) -> None:
+        """Set a CSR bit (a flag name of registers.CSR) until ERR_ClearErrors."""
+        with self.lock:
+            self.csr_latched |= 1 << SYSTEM_FAULTS[name]
+
+    def nack_next(self, code: int = ReplyCode.EXECUTION_ERROR, opcode: int | None = None,
+                  count: int = 1) -> None:
+        """Answer the next ``count`` requests (with ``opcode`` if given) with a NACK byte."""
+        with self.lock:
+            for _ in range(count):
+                self.nack_queue.append((ReplyCode(code), opcode))
+
+    def lose_replies(self, count: int = 1) -> None:
+        """Execute the next ``count`` requests but send no reply (lost frames)."""
+        with self.lock:
+            self.drop_replies += count
+
+    def set_pose(self, axis: int, degrees: float) -> None:
+        with self.lock:
+            self.axes[axis].position = degrees
+            self.axes[axis].halt()
+
+    # ------------------------------------------------------ request handling
+    def handle(self, frame: Frame, session: CaptureSession) -> bytes:
+        """Execute one request; return the reply bytes (data packet, ACK or NACK)."""
+        with self.lock:
+            self.last_command = time.monotonic()
+            self.requests.append(frame)
+            if len(self.requests) > 5000:
+                del self.requests[:1000]
+            for i, (code, opcode) in enumerate(self.nack_queue):
+                if opcode is None or opcode == frame.opcode:
+                    del self.nack_queue[i]
+                    self.protocol_error = f'injected NACK 0x{int(code):02X}'
+                    return bytes([code])
+            try:
+                reply = self._execute(frame, session)
+            except RequestRejected as exc:
+                self.protocol_error = exc.reason
+                if exc.code == ReplyCode.INVALID_COMMAND:
+                    self.csr_latched |= 1 << 7
+                reply = bytes([exc.code])
+            if self.drop_replies:
+                self.drop_replies -= 1
+                return b''
+            return reply
+
+    def _axis(self, frame: Frame) -> AxisModel:
+        axis = self.axes.get(frame.axis)
+        if axis is None:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND,
+                                  'Axis not exist in the system' if frame.axis else
+                                  'Invalid Axis 0 in motor command')
+        return axis
+
+    def _motion_allowed(self, axis: AxisModel | None = None) -> None:
+        if self.emergency_stop:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Emergency stop flag is set')
+        if axis is not None and axis.faulted:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Axis in fault: reset faults')
+        if axis is not None and axis.homing:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Command not valid while homing')
+
+    def _execute(self, frame: Frame, session: CaptureSession) -> bytes:
+        cmd = BY_OPCODE.get(frame.opcode)
+        if cmd is None:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Opcode not Recognized')
+        if not session.connected and cmd.name != 'COM_Connect':
+            # sim: commands are processed only after COM_Connect (4.6.2)
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'COM_Connect first')
+        try:
+            arg = cmd.decode_request(frame)
+        except ProtocolError as exc:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input') from exc
+        if cmd.axis.name == 'motor':
+            self._axis(frame)
+        elif not cmd.axis.low <= frame.axis <= cmd.axis.high and cmd.axis.name != 'none':
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
+        if cmd.name.startswith(('GPS_', 'ERR_GetGps')) and not self.gps_present and not (
+            cmd.name.startswith(('GPS_SetInserted', 'GPS_GetInserted', 'GPS_SetOvd',
+                                 'GPS_GetOvd', 'GPS_SetTarget', 'GPS_GetTarget',
+                                 'GPS_GoToTarget', 'GPS_Clear'))
+        ):
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'GPS commands not available')
+        if cmd.name.startswith('IMU_') and not self.imu_present:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'IMU commands not available')
+        if (self.scan is not None and cmd.name.startswith('MOT_') and not cmd.replies_with_data
+                and cmd.name != 'MOT_SetEmgStopAxes'):
+            # 4.3: while scanning, motor commands other than reads are refused with 0xA6
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Command not valid while scanning')
+        handler = getattr(self, '_do_' + cmd.name, None)
+        if handler is not None:
+            result = handler(frame, arg, session)
+        else:
+            result = self._generic(cmd.name, frame, arg)
+        if cmd.replies_with_data:
+            data = encode_value(cmd.ret, result, cmd.name)
+            return Frame(frame.group, frame.axis, frame.opcode, data).encode()
+        return bytes([ReplyCode.ACK])
+
+    def _generic(self, name: str, frame: Frame, arg: object) -> object:
+        """Setters store, getters return what was stored (or a zero of the right type)."""
+        group, _, rest = name.partition('_')
+        key_rest = rest[3:] if rest[:3].lower() in ('set', 'get') else rest
+        key = (f'{group}_{key_rest.lower()}', frame.axis)
+        cmd = COMMANDS[name]
+        if cmd.replies_with_data:
+            if key in self.stored:
+                return self.stored[key]
+            return {DataType.BOOL: False, DataType.ASCII: '', DataType.IPV4: '0.0.0.0',
+                    DataType.LLA: GeoPoint(0.0, 0.0, 0.0),
+                    DataType.PRESET: PresetRecord('')}.get(cmd.ret, 0)
+        if arg is not None:
+            self.stored[key] = arg
+        return None
+
+    # --- COM
+    def _do_COM_Connect(self, frame, arg, session):
+        session.connected = True
+        for axis in self.axes.values():  # 4.6.2: axes on, position mode, relative, speed 0
+            axis.axis_on, axis.speed_mode, axis.relative, axis.speed = True, False, True, 0.0
+
+    def _do_COM_Disconnect(self, frame, arg, session):
+        session.connected = False
+        self.scan = None
+        for axis in self.axes.values():
+            axis.halt()
+            axis.axis_on, axis.speed_mode, axis.relative = False, False, True
+
+    def _do_COM_Reboot(self, frame, arg, session):
+        self._do_COM_Disconnect(frame, arg, session)
+
+    def _do_COM_IsConnected(self, frame, arg, session):
+        return True
+
+    def _do_COM_StartKeepAlive(self, frame, arg, session):
+        self.keepalive_on = bool(arg)
+
+    def _do_COM_IsKeepAliveOn(self, frame, arg, session):
+        return self.keepalive_on
+
+    def _do_COM_setKeepAliveTimeout(self, frame, arg, session):
+        self.keepalive_timeout_ms = arg
+
+    def _do_COM_getKeepAliveTimeout(self, frame, arg, session):
+        return self.keepalive_timeout_ms
+
+    def _do_COM_setKeepAliveCount(self, frame, arg, session):
+        self.keepalive_count = arg
+
+    def _do_COM_getKeepAliveCount(self, frame, arg, session):
+        return self.keepalive_count
+
+    def _do_COM_SysState(self, frame, arg, session):
+        value = 0
+        if self.stabilization:
+            value |= reg.SYS_STABILIZATION
+        if self.scan is not None:
+            value |= reg.SYS_SCANNING
+        if self.preset_looping:
+            value |= reg.SYS_PRESET_LOOPING
+        return value
+
+    def _do_COM_GetSn(self, frame, arg, session):
+        return self.serial_number
+
+    def _do_COM_GetFw(self, frame, arg, session):
+        return self.firmware
+
+    def _do_COM_GetHw(self, frame, arg, session):
+        return 3.1
+
+    def _do_COM_GetPn(self, frame, arg, session):
+        return f'CAP-PT{len(self.axes)}-SIM'
+
+    # --- MOT reads
+    def _do_MOT_GetLoadPosition(self, frame, arg, session):
+        return self._axis(frame).position
+
+    def _do_MOT_GetMotorPosition(self, frame, arg, session):
+        return self._axis(frame).position * self.gear_ratio
+
+    def _do_MOT_GetMotorSpeed(self, frame, arg, session):
+        return self._axis(frame).velocity
+
+    def _do_MOT_GetMotorCurrent(self, frame, arg, session):
+        axis = self._axis(frame)
+        return axis.current_ma if axis.axis_on else 0.0
+
+    def _do_MOT_GetMotorVoltage(self, frame, arg, session):
+        return 24.12
+
+    def _do_MOT_GetPositionErr(self, frame, arg, session):
+        axis = self._axis(frame)
+        return (axis.target - axis.position) if axis.target is not None else 0.0
+
+    def _do_MOT_GetIncPosition(self, frame, arg, session):
+        return self._axis(frame).position * self.gear_ratio
+
+    def _do_MOT_GetEmgStopAxes(self, frame, arg, session):
+        return self.emergency_stop
+
+    def _do_MOT_MerRegister(self, frame, arg, session):
+        return self._axis(frame).mer()
+
+    def _do_MOT_DerRegister(self, frame, arg, session):
+        return self._axis(frame).der()
+
+    def _do_MOT_SrhRegister(self, frame, arg, session):
+        return self._axis(frame).srh()
+
+    def _do_MOT_SrlRegister(self, frame, arg, session):
+        return self._axis(frame).srl()
+
+    def _do_MOT_MsrRegister(self, frame, arg, session):
+        return self._axis(frame).msr()
+
+    def _do_ERR_CaptureMotorErrorRegister(self, frame, arg, session):
+        return self._axis(frame).cmer()
+
+    def _do_ERR_OperationRegister(self, frame, arg, session):
+        return self._axis(frame).operation()
+
+    def _do_ERR_CaptureSystemRegister(self, frame, arg, session):
+        value = self.csr_latched
+        if any(a.faulted for a in self.axes.values()):
+            value |= 1 << 0
+        if any(a.homing for a in self.axes.values()):
+            value |= reg.CSR_HOMING_NOT_COMPLETED
+        return value
+
+    def _do_ERR_ClearErrors(self, frame, arg, session):
+        self.csr_latched = 0
+        self.protocol_error = ''
+
+    def _error_string(self, bit: int, text: str) -> str:
+        return text if self._do_ERR_CaptureSystemRegister(None, None, None) & (1 << bit) else ''
+
+    def _do_ERR_GetDriverErrorString(self, frame, arg, session):
+        bitmap = sum(1 << (n - 1) for n, a in self.axes.items() if a.faulted)
+        return self._error_string(0, f'No communication with axes (bitmap): 0x{bitmap:02X}')
+
+    def _do_ERR_GetSystemErrorString(self, frame, arg, session):
+        return self._error_string(1, 'General system error')
+
+    def _do_ERR_GetLoadImuErrorString(self, frame, arg, session):
+        return self._error_string(3, 'No communication with IMU')
+
+    def _do_ERR_GetBaseImuErrorString(self, frame, arg, session):
+        return self._error_string(2, 'Fail to sync with IMU')
+
+    def _do_ERR_GetGpsComErrorString(self, frame, arg, session):
+        return self._error_string(4, 'No communication with the GPS')
+
+    def _do_ERR_GetGpsPosString(self, frame, arg, session):
+        return self._error_string(5, 'The position of the GPS is not ready')
+
+    def _do_ERR_GetGpsHeadErrorString(self, frame, arg, session):
+        return self._error_string(6, 'The heading of the GPS is not ready')
+
+    def _do_ERR_GetProtocolErrorString(self, frame, arg, session):
+        return self.protocol_error
+
+    def _do_ERR_GetHomingErrorString(self, frame, arg, session):
+        return self._error_string(11, 'Pan & Tilt Homing are not completed')
+
+    # --- MOT motion
+    def _do_MOT_SetAcceleration(self, frame, arg, session):
+        if arg <= 0:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
+        self._axis(frame).acceleration = arg
+
+    def _do_MOT_SetSpeed(self, frame, arg, session):
+        self._axis(frame).speed = arg
+
+    def _do_MOT_SendPosition(self, frame, arg, session):
+        self._axis(frame).pending_position = arg
+
+    def _do_MOT_SetPositionRelative(self, frame, arg, session):
+        self._axis(frame).relative = True
+
+    def _do_MOT_SetPositionAbsolute(self, frame, arg, session):
+        self._axis(frame).relative = False
+
+    def _do_MOT_SetSpeedMode(self, frame, arg, session):
+        axis = self._axis(frame)
+        axis.speed_mode = True
+        axis.target = None
+
+    def _do_MOT_SetPositionMode(self, frame, arg, session):
+        axis = self._axis(frame)
+        axis.speed_mode = False
+        axis.jog_velocity = 0.0
+
+    def _do_MOT_Update(self, frame, arg, session):
+        axis = self._axis(frame)
+        if axis.speed_mode and axis.speed == 0.0:
+            axis.target, axis.jog_velocity = None, 0.0  # sim: a stop is always accepted
+            return
+        self._motion_allowed(axis)
+        if not axis.axis_on:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Axis is off')
+        self.preset_looping = None
+        if axis.speed_mode:
+            axis.target, axis.jog_velocity = None, axis.speed
+            return
+        if axis.pending_position is None:
+            return  # nothing to execute; the controller keeps the last profile
+        goal = axis.pending_position + (axis.position if axis.relative else 0.0)
+        axis.pending_position = None
+        axis.target = goal
+
+    def _do_MOT_Homing(self, frame, arg, session):
+        axis = self._axis(frame)
+        self._motion_allowed(axis)
+        axis.target, axis.jog_velocity, axis.homing, axis.homed = None, 0.0, True, False
+
+    def _do_MOT_AxisOn(self, frame, arg, session):
+        axis = self._axis(frame)
+        if axis.faulted:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Axis in fault: reset faults')
+        axis.axis_on = True
+
+    def _do_MOT_AxisOff(self, frame, arg, session):
+        axis = self._axis(frame)
+        axis.axis_on = False
+        axis.velocity = 0.0  # 4.2.12: stops; the buffered target resumes on AxisOn
+
+    def _do_MOT_AxisReset(self, frame, arg, session):
+        axis = self._axis(frame)
+        axis.mer_latched = axis.der_latched = 0
+        axis.halt()
+        axis.homing, axis.homed = True, False
+
+    def _do_MOT_ResetFaults(self, frame, arg, session):
+        axis = self._axis(frame)
+        if axis.mer_latched:
+            axis.axis_on = False  # sim: a cleared fault leaves the drive off until AxisOn
+        axis.mer_latched = axis.der_latched = 0
+
+    def _do_MOT_SetActualPosition(self, frame, arg, session):
+        axis = self._axis(frame)
+        axis.halt()
+        axis.position = arg / self.gear_ratio
+
+    def _do_MOT_SetEmgStopAxes(self, frame, arg, session):
+        self.emergency_stop = bool(arg)
+        if self.emergency_stop:
+            self.scan = None
+            self.preset_looping = None
+            for axis in self.axes.values():
+                axis.halt()
+        else:  # 4.2.20: profiles reset to relative position mode
+            for axis in self.axes.values():
+                axis.speed_mode, axis.relative = False, True
+
+    # --- software limits
+    def _do_SWLS_SetNegSWLS(self, frame, arg, session):
+        axis = self._axis(frame)
+        if arg >= axis.swls_pos:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
+        axis.swls_neg = arg
+
+    def _do_SWLS_SetPosSWLS(self, frame, arg, session):
+        axis = self._axis(frame)
+        if arg <= axis.swls_neg:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
+        axis.swls_pos = arg
+
+    def _do_SWLS_ActivateSWLS(self, frame, arg, session):
+        axis = self._axis(frame)
+        if arg and not axis.swls_neg <= axis.position <= axis.swls_pos:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Position outside the SWLS range')
+        axis.swls_active = bool(arg)
+
+    def _do_SWLS_GetNegSWLS(self, frame, arg, session):
+        return self._axis(frame).swls_neg
+
+    def _do_SWLS_GetPosSWLS(self, frame, arg, session):
+        return self._axis(frame).swls_pos
+
+    def _do_SWLS_IsActiveSWLS(self, frame, arg, session):
+        return self._axis(frame).swls_active
+
+    # --- scans
+    def _set_scan(self, key: str, value: object) -> None:
+        self.scan_params[key] = value
+
+    def _do_SCN_SetYawMin(self, frame, arg, session):
+        self._set_scan('yaw_min', arg)
+
+    def _do_SCN_SetYawMax(self, frame, arg, session):
+        self._set_scan('yaw_max', arg)
+
+    def _do_SCN_SetPitchMin(self, frame, arg, session):
+        self._set_scan('pitch_min', arg)
+
+    def _do_SCN_SetNumSteps(self, frame, arg, session):
+        self._set_scan('steps', arg)
+
+    def _do_SCN_SetStepHeight(self, frame, arg, session):
+        self._set_scan('step_height', arg)
+
+    def _do_SCN_SetScanSpeed(self, frame, arg, session):
+        self._set_scan('speed', arg)
+
+    def _do_SCN_SetShortPath(self, frame, arg, session):
+        self._set_scan('short_path', int(arg))
+
+    def _do_SCN_IsScanOn(self, frame, arg, session):
+        return self.scan is not None
+
+    def _do_SCN_StopScan(self, frame, arg, session):
+        if self.scan is not None:
+            self.scan = None
+            for axis in self.axes.values():
+                axis.halt()
+
+    def _start_scan(self, pattern: str) -> None:
+        self._motion_allowed()
+        if self.scan_params['speed'] <= 0:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Scan speed is 0')
+        for axis in list(self.axes.values())[:2]:
+            self._motion_allowed(axis)
+            axis.stop()
+            axis.speed_mode = False
+        self.preset_looping = None
+        self.scan = ScanState(self._scan_waypoints(pattern))
+
+    def _do_SCN_StartScanZigZag(self, frame, arg, session):
+        self._start_scan('zigzag')
+
+    def _do_SCN_StartScanSnake(self, frame, arg, session):
+        self._start_scan('snake')
+
+    def _do_SCN_StartScanSquare(self, frame, arg, session):
+        self._start_scan('square')
+
+    # --- presets
+    def _do_PRST_GetPreset(self, frame, arg, session):
+        return self.presets.get(frame.axis, PresetRecord(''))
+
+    def _do_PRST_SetPreset(self, frame, arg, session):
+        self.presets[frame.axis] = arg
+
+    def _do_PRST_GoToPreset(self, frame, arg, session):
+        self._motion_allowed()
+        if frame.axis not in self.presets:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Preset not exist')
+        for axis in self.axes.values():
+            self._motion_allowed(axis)
+        self.scan = None
+        self.preset_looping = None
+        self._goto_preset(frame.axis)
+
+    def _do_PRST_ClearAll(self, frame, arg, session):
+        self.presets.clear()
+
+    def _do_PRST_ClearSinglePreset(self, frame, arg, session):
+        self.presets.pop(frame.axis, None)
+
+    def _do_PRST_GetPresetFlag(self, frame, arg, session):
+        return sum(1 << (i - 1) for i in self.presets)
+
+    def _do_PRST_StartPresetLooping(self, frame, arg, session):
+        self._motion_allowed()
+        if not self.presets:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'No presets stored')
+        self.scan = None
+        self.preset_looping = sorted(self.presets)
+        self._loop_wait_until = 0.0
+
+    def _do_PRST_StopPresetLooping(self, frame, arg, session):
+        self.preset_looping = None
+
+    def _do_PRST_SetLoopingDelay(self, frame, arg, session):
+        self.looping_delay_ms = max(float(arg), 0.0)
+
+    def _do_PRST_GetLoopingDelay(self, frame, arg, session):
+        return self.looping_delay_ms
+
+    def _do_CFG_SetGeneralSpd(self, frame, arg, session):
+        if arg < 0:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
+        self._axis(frame).general_speed = arg
+
+    def _do_CFG_GetGeneralSpd(self, frame, arg, session):
+        return self._axis(frame).general_speed
+
+    # --- stabilisation
+    def _do_STB_StabilizationOn(self, frame, arg, session):
+        if not self.imu_present:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid command for Manual system')
+        self.stabilization = True
+
+    def _do_STB_StabilizationOff(self, frame, arg, session):
+        self.stabilization = False
+        for axis in self.axes.values():  # 4.8.2: speed/acc/position 0, relative position mode
+            axis.stop()
+            axis.speed_mode, axis.relative, axis.speed = False, True, 0.0
+
+    def _do_STB_IsStabActive(self, frame, arg, session):
+        return self.stabilization
+
+    # --- IMU: the sensor sits on the load (sim)
+    def _do_IMU_IsReadyImu(self, frame, arg, session):
+        return True
+
+    def _do_IMU_GetRoll(self, frame, arg, session):
+        return self.axes[3].position if 3 in self.axes else 0.0
+
+    def _do_IMU_GetPitch(self, frame, arg, session):
+        return self.axes[2].position
+
+    def _do_IMU_GetYaw(self, frame, arg, session):
+        return (self.gps_heading + self.axes[1].position) % 360.0
+
+    def _do_IMU_GetGyroX(self, frame, arg, session):
+        return self.axes[3].velocity if 3 in self.axes else 0.0
+
+    def _do_IMU_GetGyroY(self, frame, arg, session):
+        return self.axes[2].velocity
+
+    def _do_IMU_GetGyroZ(self, frame, arg, session):
+        return self.axes[1].velocity
+
+    def _do_IMU_GetTemperature(self, frame, arg, session):
+        return 36.5
+
+    def _do_IMU_GetPressure(self, frame, arg, session):
+        return 101.3
+
+    # --- GPS and targets
+    def _system_position(self) -> tuple[GeoPoint, float]:
+        if self.override_gps:
+            return self.inserted_position, self.inserted_heading
+        return self.gps_position, self.gps_heading
+
+    def _do_GPS_GetLongitude(self, frame, arg, session):
+        return degrees_to_ddmm(self.gps_position.longitude)
+
+    def _do_GPS_GetLatitude(self, frame, arg, session):
+        return degrees_to_ddmm(self.gps_position.latitude)
+
+    def _do_GPS_GetHeading(self, frame, arg, session):
+        return self._system_position()[1]
+
+    def _do_GPS_PositionReady(self, frame, arg, session):
+        return self.gps_present
+
+    def _do_GPS_HeadingReady(self, frame, arg, session):
+        return self.gps_present
+
+    def _do_GPS_isConnectedGPS(self, frame, arg, session):
+        return self.gps_present
+
+    def _do_GPS_SetTargetLLA(self, frame, arg, session):
+        self.targets[frame.axis] = arg
+
+    def _do_GPS_GetTargetLLA(self, frame, arg, session):
+        return self.targets.get(frame.axis, GeoPoint(0.0, 0.0, 0.0))
+
+    def _do_GPS_ClearSingleTarget(self, frame, arg, session):
+        self.targets.pop(frame.axis, None)
+
+    def _do_GPS_ClearAllTargets(self, frame, arg, session):
+        self.targets.clear()
+
+    def _do_GPS_SetInsertedLLA(self, frame, arg, session):
+        self.inserted_position = arg
+
+    def _do_GPS_GetInsertedLLA(self, frame, arg, session):
+        return self.inserted_position
+
+    def _do_GPS_SetInsertedHeading(self, frame, arg, session):
+        self.inserted_heading = arg
+
+    def _do_GPS_GetInsertedHeading(self, frame, arg, session):
+        return self.inserted_heading
+
+    def _do_GPS_SetOvdPosGPS(self, frame, arg, session):
+        self.override_gps = bool(arg)
+
+    def _do_GPS_GetOvdPosGPS(self, frame, arg, session):
+        return self.override_gps
+
+    def _do_GPS_GoToTarget(self, frame, arg, session):
+        self._motion_allowed()
+        target = self.targets.get(frame.axis)
+        if target is None:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Target not exist')
+        if not self.gps_present and not self.override_gps:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'GPS commands not available')
+        azimuth, elevation = aim_at(*self._system_position(), target)
+        self.scan = None
+        self._move_to(self.axes[1], azimuth, self.axes[1].general_speed)
+        self._move_to(self.axes[2], elevation, self.axes[2].general_speed)
+
+
+def aim_at(origin: GeoPoint, heading: float, target: GeoPoint) -> tuple[float, float]:
+    """Pan (deg, device sign: clockwise from the heading) and tilt to look at ``target``.
+
+    Local flat-earth approximation (equirectangular), fine for the ranges a pedestal aims at.
+    """
+    earth = 6371000.0
+    lat0 = math.radians(origin.latitude)
+    north = math.radians(target.latitude - origin.latitude) * earth
+    east = math.radians(target.longitude - origin.longitude) * earth * math.cos(lat0)
+    up = target.altitude - origin.altitude
+    bearing = math.degrees(math.atan2(east, north))
+    pan = (bearing - heading + 180.0) % 360.0 - 180.0
+    tilt = math.degrees(math.atan2(up, math.hypot(north, east)))
+    return pan, tilt
+
+
+class CaptureSession:
+    """One connection: byte parsing, the TCP greeting and reply generation."""
+
+    def __init__(self, model: PedestalModel, greet: bool) -> None:
+        self.model = model
+        self.decoder = StreamDecoder()
+        self.connected = False
+        self._greeting = COMMANDS['COM_Connect'].encode() if greet else b''
+
+    def poll(self) -> bytes:
+        greeting, self._greeting = self._greeting, b''
+        return greeting
+
+    def on_bytes(self, data: bytes) -> bytes:
+        out = bytearray()
+        for item in self.decoder.feed(data):
+            if isinstance(item, Frame):
+                out += self.model.handle(item, self)
+            elif isinstance(item, ReplyByte):
+                continue  # the host never sends reply bytes; ignore
+            elif item.reason == 'checksum mismatch':
+                out.append(ReplyCode.WRONG_CHECKSUM)  # 2.1: a bad checksum gets 0xF6
+        return bytes(out)
+
+    def on_disconnect(self) -> None:
+        self.connected = False
+
+
+class CaptureSimulator:
+    """The model plus its TCP and/or pty servers."""
+
+    def __init__(self, model: PedestalModel | None = None, tcp_port: int | None = 0,
+                 pty: bool = False, pty_link: str | None = None) -> None:
+        self.model = model or PedestalModel()
+        self.tcp = (TcpSimServer(lambda: CaptureSession(self.model, greet=True), port=tcp_port)
+                    if tcp_port is not None else None)
+        self.pty = (PtySimServer(lambda: CaptureSession(self.model, greet=False), pty_link)
+                    if pty else None)
+
+    def start(self) -> CaptureSimulator:
+        self.model.start()
+        for server in (self.tcp, self.pty):
+            if server is not None:
+                server.start()
+        return self
+
+    def stop(self) -> None:
+        for server in (self.tcp, self.pty):
+            if server is not None:
+                server.stop()
+        self.model.stop()
+
+    def __enter__(self) -> CaptureSimulator:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def drop_link(self, offline_for: float = 0.0) -> None:
+        for server in (self.tcp, self.pty):
+            if server is not None:
+                server.drop_link(offline_for)
+
+    def inject_garbage(self, data: bytes) -> None:
+        for server in (self.tcp, self.pty):
+            if server is not None:
+                server.inject(data)
+
+    def set_silent(self, silent: bool) -> None:
+        for server in (self.tcp, self.pty):
+            if server is not None:
+                server.set_silent(silent)
+
+    def control(self, line: str) -> str:
+        """Run one fault-injection command (see :data:`CONTROL_HELP`); return the answer."""
+        words = line.split()
+        if not words:
+            return 'error: empty command'
+        verb, args = words[0].lower(), words[1:]
+        model = self.model
+        try:
+            if verb == 'fault':
+                model.inject_fault(int(args[0]), args[1])
+            elif verb == 'system_fault':
+                model.inject_system_fault(args[0])
+            elif verb == 'nack':
+                code = int(args[0], 16)
+                opcode = COMMANDS[args[1]].opcode if len(args) > 1 and args[1] != '*' else None
+                count = int(args[2]) if len(args) > 2 else 1
+                model.nack_next(code, opcode, count)
+            elif verb == 'lose':
+                model.lose_replies(int(args[0]) if args else 1)
+            elif verb == 'garbage':
+                self.inject_garbage(bytes.fromhex(''.join(args)) if args else b'\x13\x37\x50')
+            elif verb == 'drop':
+                self.drop_link(float(args[0]) if args else 0.0)
+            elif verb == 'silent':
+                self.set_silent(args[0].lower() in ('1', 'on', 'true'))
+            elif verb == 'pose':
+                model.set_pose(int(args[0]), float(args[1]))
+            elif verb == 'state':
+                with model.lock:
+                    return 'ok ' + json.dumps({
+                        'axes': {n: {'position': a.position, 'velocity': a.velocity,
+                                     'axis_on': a.axis_on, 'homing': a.homing,
+                                     'faulted': a.faulted} for n, a in model.axes.items()},
+                        'scanning': model.scan is not None,
+                        'preset_looping': bool(model.preset_looping),
+                        'emergency_stop': model.emergency_stop,
+                        'presets': sorted(model.presets),
+                        'keepalive': model.keepalive_on,
+                        'requests': len(model.requests),
+                        'connections': self.tcp.connections if self.tcp else 0,
+                    })
+            elif verb == 'help':
+                return 'ok ' + CONTROL_HELP
+            else:
+                return f'error: unknown command {verb!r}; try help'
+        except (IndexError, KeyError, ValueError) as exc:
+            return f'error: {exc!r}; try help'
+        return 'ok'
+
+
+CONTROL_HELP = (
+    'fault AXIS NAME (NAME in ' + ','.join(FAULTS) + ') | system_fault CSR_FLAG | '
+    'nack HEXCODE [COMMAND|*] [COUNT] | lose [COUNT] | garbage [HEX] | drop [OFFLINE_S] | '
+    'silent on|off | pose AXIS DEG | state | help'
+)
+
+
+def serve_control(sim: CaptureSimulator, port: int, ready: Callable[[int], None]) -> None:
+    """Line-based fault-injection console on 127.0.0.1 (one command per line)."""
+    listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    listener.bind((LOOPBACK, port))
+    listener.listen(4)
+    ready(listener.getsockname()[1])
+
+    def serve(conn: socket.socket) -> None:
+        with conn, conn.makefile('rw', encoding='utf-8', newline='\n') as stream:
+            for line in stream:
+                stream.write(sim.control(line) + '\n')
+                stream.flush()
+
+    while True:
+        try:
+            conn, _ = listener.accept()
+        except OSError:
+            return
+        threading.Thread(target=serve, args=(conn,), daemon=True).start()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog='capture_sim',
+        description='Capture pedestal simulator on 127.0.0.1 (TCP) and/or a pseudo-terminal.',
+    )
+    parser.add_argument('--port', type=int, default=4949,
+                        help='TCP port on 127.0.0.1 (0 = any free port, -1 = no TCP)')
+    parser.add_argument('--pty', action='store_true', help='also serve a pseudo-terminal')
+    parser.add_argument('--pty-link', default=None, help='stable symlink path for the pty')
+    parser.add_argument('--axes', type=int, default=2, choices=(2, 3))
+    parser.add_argument('--no-gps', action='store_true', help='simulate a system without GPS')
+    parser.add_argument('--no-imu', action='store_true', help='simulate a manual system')
+    parser.add_argument('--gear-ratio', type=float, default=1.0)
+    parser.add_argument('--time-scale', type=float, default=1.0,
+                        help='simulated seconds per real second (faster tests)')
+    parser.add_argument('--control-port', type=int, default=-1,
+                        help='fault-injection console on 127.0.0.1 (0 = any free port)')
+    parser.add_argument('--log-level', default='INFO')
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=args.log_level.upper(), format='%(name)s: %(message)s')
+    model = PedestalModel(axes=args.axes, gps=not args.no_gps, imu=not args.no_imu,
+                          gear_ratio=args.gear_ratio, time_scale=args.time_scale)
+    sim = CaptureSimulator(model, tcp_port=None if args.port < 0 else args.port,
+                           pty=args.pty, pty_link=args.pty_link)
+    sim.start()
+    info: dict[str, object] = {'tcp_port': sim.tcp.port if sim.tcp else None,
+                               'pty': sim.pty.port_name if sim.pty else None}
+    if args.control_port >= 0:
+        ready = threading.Event()
+
+        def on_ready(port: int) -> None:
+            info['control_port'] = port
+            ready.set()
+
+        threading.Thread(target=serve_control, args=(sim, args.control_port, on_ready),
+                         daemon=True).start()
+        ready.wait(5.0)
+    print('capture_sim ready ' + json.dumps(info), flush=True)
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop.wait()
+    sim.stop()
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,345 @@
+"""The client against the simulator over the real transports (TCP loopback and a pty).
+
+No timing assertions: tests wait *up to* a timeout for a condition.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import pytest
+
+from capture_driver.client import CaptureClient, DeviceNack, DeviceTimeout, NotConnected
+from capture_driver.protocol import COMMANDS, GeoPoint, ProtocolError, ReplyCode
+from capture_driver.protocol.registers import CMER, SRL
+from capture_driver.sim import CaptureSimulator, PedestalModel, aim_at
+from gimbal_driver_common.testing import wait_for
+from gimbal_driver_common.transport import SerialStream, TcpStream
+
+
+@pytest.fixture
+def sim():
+    simulator = CaptureSimulator(PedestalModel(time_scale=8.0), tcp_port=0, pty=True).start()
+    yield simulator
+    simulator.stop()
+
+
+def tcp_client(sim, **kwargs) -> CaptureClient:
+    kwargs.setdefault('timeout', 0.5)
+    return CaptureClient(lambda: TcpStream('127.0.0.1', sim.tcp.port), **kwargs)
+
+
+def pty_client(sim, **kwargs) -> CaptureClient:
+    return CaptureClient(lambda: SerialStream(sim.pty.port_name), expect_greeting=False,
+                         **kwargs)
+
+
+@pytest.fixture(params=['tcp', 'pty'])
+def client(request, sim):
+    make = tcp_client if request.param == 'tcp' else pty_client
+    c = make(sim)
+    c.connect()
+    yield c
+    c.stop()
+
+
+def settle(client, axis, target, tolerance=1e-3, timeout=10.0):
+    def reached():
+        position, speed, _ = client.read_axis(axis)
+        return abs(position - target) <= tolerance and speed == 0.0
+
+    wait_for(reached, timeout, f'axis {axis} at {target}')
+
+
+def test_handshake_uses_the_greeting_opcode(sim):
+    c = tcp_client(sim)
+    c.connect()
+    first = sim.model.requests[0]
+    assert first.opcode == COMMANDS['COM_Connect'].opcode
+    assert c.identity().serial_number == '24017'
+    c.close()
+
+
+def test_commands_before_handshake_are_refused(sim):
+    stream = TcpStream('127.0.0.1', sim.tcp.port)
+    stream.open()
+    try:
+        stream.write(COMMANDS['MOT_GetLoadPosition'].encode(1))
+        received = bytearray()
+        wait_for(lambda: received.extend(stream.read(64, 0.1)) or b'\xa6' in received, 5.0,
+                 'NACK 0xA6')
+    finally:
+        stream.close()
+
+
+def test_absolute_move_and_registers_follow_motion(client):
+    client.move_absolute(1, 20.0, 60.0, 200.0)
+    saw_moving = False
+    for _ in range(200):
+        srl = client.request('MOT_SrlRegister', 1)
+        if not srl & (1 << 10):
+            saw_moving = True
+            break
+    settle(client, 1, 20.0)
+    assert saw_moving
+    regs = client.registers(1)
+    flags = {a.flag.name for a in SRL.decode(regs['SRL'])}
+    assert {'motion_complete', 'axis_on'} <= flags
+    assert client.request('MOT_GetPositionErr', 1) == 0.0
+
+
+def test_relative_move_in_position_mode(client):
+    client.move_absolute(2, 10.0, 60.0, 200.0)
+    settle(client, 2, 10.0)
+    for name, value in (('MOT_SetPositionMode', None), ('MOT_SetPositionRelative', None),
+                        ('MOT_SetSpeed', 50.0), ('MOT_SendPosition', -4.0), ('MOT_Update', None)):
+        client.request(name, 2, value)
+    settle(client, 2, 6.0)
+
+
+def test_jog_then_stop(client):
+    client.jog(1, -30.0, 300.0)
+    wait_for(lambda: client.read_axis(1)[1] < -1.0, 5.0, 'jog speed')
+    client.stop_axis(1)
+    wait_for(lambda: client.read_axis(1)[1] == 0.0, 5.0, 'stopped')
+
+
+def test_software_limit_stops_the_axis(client):
+    client.request('SWLS_SetNegSWLS', 1, -10.0)
+    client.request('SWLS_SetPosSWLS', 1, 10.0)
+    client.request('SWLS_ActivateSWLS', 1, 1)
+    client.move_absolute(1, 40.0, 60.0, 300.0)
+    wait_for(lambda: client.read_axis(1)[0] == pytest.approx(10.0), 10.0, 'at the limit')
+    active = {a.flag.name for a in CMER.decode(client.request('ERR_CaptureMotorErrorRegister', 1))}
+    assert 'software_positive_limit' in active
+
+
+def test_emergency_stop_blocks_motion(client):
+    client.request('MOT_SetEmgStopAxes', None, 1)
+    assert client.request('MOT_GetEmgStopAxes') is True
+    with pytest.raises(DeviceNack) as info:
+        client.move_absolute(1, 5.0, 10.0, 100.0)
+    assert info.value.code == ReplyCode.INVALID_COMMAND
+    assert 'Emergency stop' in str(info.value)  # the controller's reason is attached
+    client.request('MOT_SetEmgStopAxes', None, 0)
+    client.move_absolute(1, 5.0, 30.0, 100.0)
+    settle(client, 1, 5.0)
+
+
+def test_homing_sets_and_clears_the_homing_bit(client, sim):
+    sim.model.set_pose(1, 25.0)
+    client.request('MOT_Homing', 1)
+    assert client.request('MOT_SrlRegister', 1) & (1 << 8)
+    wait_for(lambda: not client.request('MOT_SrlRegister', 1) & (1 << 8), 10.0, 'homing done')
+    assert client.read_axis(1)[0] == 0.0
+    assert client.request('ERR_OperationRegister', 1) == 0
+
+
+def test_injected_fault_and_reset(client, sim):
+    client.jog(1, 20.0, 300.0)
+    sim.model.inject_fault(1, 'over_current')
+    active = {a.flag.name for a in CMER.decode(client.request('ERR_CaptureMotorErrorRegister', 1))}
+    assert {'fault', 'over_current'} <= active
+    csr = client.request('ERR_CaptureSystemRegister')
+    assert 'ERR_GetDriverErrorString' in client.error_strings(csr)
+    with pytest.raises(DeviceNack):
+        client.move_absolute(1, 0.0, 10.0, 100.0)
+    client.reset_faults(1)
+    active = {a.flag.name for a in CMER.decode(client.request('ERR_CaptureMotorErrorRegister', 1))}
+    assert 'fault' not in active
+    client.move_absolute(1, 0.0, 30.0, 100.0)
+    settle(client, 1, 0.0)
+
+
+def test_injected_nack_surfaces_with_advice(client, sim):
+    sim.model.nack_next(0x16, COMMANDS['MOT_GetLoadPosition'].opcode)
+    with pytest.raises(DeviceNack, match=r'Pedestal unavailable.*power cycle'):
+        client.read_axis(1)
+    assert client.read_axis(1)[0] == 0.0  # the next request works
+
+
+def test_wrong_checksum_nack_is_retried(client, sim):
+    sim.model.nack_next(0xF6, COMMANDS['MOT_GetLoadPosition'].opcode)
+    assert client.request('MOT_GetLoadPosition', 1) == 0.0
+
+
+def test_garbage_before_a_reply_is_skipped(client, sim):
+    sim.inject_garbage(b'\x00\x50\x13\x50\x54\x08\x00garbage')
+    for _ in range(5):
+        assert client.request('MOT_GetLoadPosition', 1) == 0.0
+    assert client.garbage_bytes > 0
+
+
+def test_lost_reply_times_out_then_recovers(client, sim):
+    sim.model.lose_replies(1)
+    with pytest.raises(DeviceTimeout):
+        client.request('MOT_Update', 1)  # setters are not retried
+    sim.model.lose_replies(1)
+    assert client.request('MOT_GetLoadPosition', 1) == 0.0  # getters retry once
+    assert client.connected
+
+
+def test_bad_arguments_are_refused_before_sending(client, sim):
+    before = len(sim.model.requests)
+    with pytest.raises(ProtocolError):
+        client.request('MOT_SendPosition', 1, math.nan)
+    with pytest.raises(ProtocolError):
+        client.request('MOT_GetLoadPosition', 7)
+    assert len(sim.model.requests) == before
+
+
+def test_scan_runs_on_the_device_and_stops(client, sim):
+    client.configure_scan(-10.0, 10.0, 0.0, 2, 5.0, 40.0)
+    client.start_scan('snake')
+    assert client.request('SCN_IsScanOn') is True
+    assert client.request('COM_SysState') & (1 << 2)
+    seen = set()
+    wait_for(lambda: seen.add(round(client.read_axis(2)[0])) or {0, 5, 10} <= seen, 15.0,
+             'scan rows')
+    with pytest.raises(DeviceNack):  # motor writes are refused while scanning (4.3)
+        client.request('MOT_SetSpeed', 1, 5.0)
+    client.request('SCN_StopScan')
+    assert client.request('SCN_IsScanOn') is False
+
+
+def test_presets_and_looping(client, sim):
+    client.set_preset(1, 'left', [15.0, 5.0])
+    client.set_preset(2, 'right', [-15.0, -5.0])
+    assert client.preset_indices() == [1, 2]
+    assert client.get_preset(1).name == 'left'
+    client.request('PRST_GoToPreset', 1)
+    settle(client, 1, 15.0)
+    client.request('PRST_SetLoopingDelay', None, 80.0)
+    client.request('PRST_StartPresetLooping')
+    wait_for(lambda: client.read_axis(1)[0] < -14.0, 15.0, 'loop reached preset 2')
+    client.request('PRST_StopPresetLooping')
+    client.request('PRST_ClearSinglePreset', 2)
+    assert client.preset_indices() == [1]
+
+
+def test_gps_imu_and_goto_target(client, sim):
+    ready, latitude, longitude = client.gps_fix()
+    assert ready and latitude == pytest.approx(32.1040) and longitude == pytest.approx(34.8915)
+    target = GeoPoint(34.8921, 32.1050, 64.97)
+    client.goto_lla(3, target)
+    pan, _tilt = aim_at(sim.model.gps_position, 0.0, target)
+    settle(client, 1, pan, tolerance=1e-3, timeout=15.0)
+    imu = client.imu()
+    assert imu['pitch'] == pytest.approx(client.read_axis(2)[0], abs=1e-3)
+
+
+def test_threads_share_one_client(client):
+    errors = []
+
+    def worker(axis):
+        try:
+            for _ in range(30):
+                client.read_axis(axis)
+        except Exception as exc:  # noqa: BLE001
+            errors.append(exc)
+
+    threads = [threading.Thread(target=worker, args=(a,)) for a in (1, 2, 1, 2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors
+
+
+def test_tcp_link_drop_and_auto_reconnect(sim):
+    c = tcp_client(sim, auto_reconnect=True, keepalive_period=0.2)
+    c.connect()
+    c.start()
+    try:
+        sim.drop_link()
+        with pytest.raises(NotConnected):
+            for _ in range(50):
+                c.read_axis(1)
+        wait_for(lambda: c.connected, 10.0, 'reconnected')
+        assert c.read_axis(1)[0] == 0.0
+        assert c.connects >= 2
+    finally:
+        c.stop()
+
+
+def test_pty_link_drop_and_auto_reconnect(sim):
+    c = pty_client(sim, auto_reconnect=True)
+    c.connect()
+    c.start()
+    try:
+        sim.pty.drop_link(offline_for=0.2)
+        with pytest.raises(NotConnected):
+            for _ in range(50):
+                c.read_axis(1)
+        wait_for(lambda: c.connected, 10.0, 'reconnected')
+        assert c.read_axis(2)[0] == 0.0
+    finally:
+        c.stop()
+
+
+def test_silent_device_closes_the_link(sim):
+    c = tcp_client(sim, timeout=0.1, max_timeouts=2)
+    c.connect()
+    sim.set_silent(True)
+    with pytest.raises((DeviceTimeout, NotConnected)):
+        for _ in range(5):
+            c.request('MOT_GetLoadPosition', 1)
+    assert not c.connected
+    sim.set_silent(False)
+    c.connect()
+    assert c.read_axis(1)[0] == 0.0
+    c.close()
+
+
+def test_keepalive_keeps_the_axes_on_and_expiry_stops_them(sim):
+    c = tcp_client(sim, keepalive_period=0.2)
+    c.connect()
+    c.start()
+    assert c.request('COM_IsKeepAliveOn') is True
+    c.jog(1, 10.0, 200.0)
+    threading.Event().wait(1.0)  # idle: only the keep-alive thread talks
+    assert sim.model.axes[1].axis_on
+    c._stop.set()  # the host "dies": no more keep-alives
+    wait_for(lambda: not sim.model.axes[1].axis_on, 10.0, 'controller stopped the axes')
+    assert sim.model.axes[1].velocity == 0.0
+    c.stop()
+
+
+def test_capture_sim_process_with_control_console():
+    import json
+    import socket
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'capture_driver.sim', '--port', '0', '--pty',
+         '--control-port', '0', '--time-scale', '4'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )
+    try:
+        line = ''
+        while 'capture_sim ready' not in line:
+            line = proc.stdout.readline()
+            assert line, 'simulator exited'
+        info = json.loads(line.split('ready ', 1)[1])
+        c = CaptureClient(lambda: TcpStream('127.0.0.1', info['tcp_port']))
+        c.connect()
+        with socket.create_connection(('127.0.0.1', info['control_port'])) as control:
+            stream = control.makefile('rw')
+            stream.write('nack A6 MOT_Update\n')
+            stream.flush()
+            assert stream.readline().strip() == 'ok'
+            with pytest.raises(DeviceNack):
+                c.request('MOT_Update', 1)
+            stream.write('state\n')
+            stream.flush()
+            state = json.loads(stream.readline().split(' ', 1)[1])
+            assert state['axes']['1']['axis_on'] is True
+            stream.write('bogus\n')
+            stream.flush()
+            assert stream.readline().startswith('error')
+        c.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
