@@ -4,6 +4,9 @@ import math
 import struct
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from canaero_turret_driver.protocol import (
     CanAerospaceMessage,
     CodecError,
@@ -20,8 +23,6 @@ from canaero_turret_driver.protocol import (
 )
 from canaero_turret_driver.protocol import nodeservice as ns
 from canaero_turret_driver.protocol.identifiers import AxisStatus, decode_periphery
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 SETTINGS = settings(max_examples=200, deadline=None)
 

@@ -28,6 +28,7 @@ import math
 import struct
 
 import pytest
+
 from canaero_turret_driver.protocol import (
     BY_ID,
     BY_KEY,

@@ -1,0 +1,631 @@
+"""Turret session on a python-can bus: receive thread, value cache, commands, node services.
+
+No ROS here. The client owns one `can.BusABC` (any python-can interface: socketcan on a
+robot, slcan or virtual here). A receive thread decodes every frame, keeps the latest
+value of each data identifier with its arrival time, tracks message-code sequences per
+identifier, collects EED events and answers pending node-service requests. Interface
+errors (bus-off error frames, a vanished adapter, a failing send) close the bus; the
+thread reopens it every `reconnect_period` seconds until it works again.
+
+Units: the public API is SI (rad, rad/s); the conversion to the ICD's degrees happens
+here, with an optional sign per axis (`yaw_sign`, `pitch_sign`) for installations where
+the device counts the other way than REP-103.
+
+Frames with an id not in the identifier table (including the out-of-scope functions)
+are counted as unknown and otherwise ignored.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import can
+
+from .protocol import nodeservice as ns
+from .protocol.datatypes import DataType, codec_for
+from .protocol.eed import EmergencyEvent, decode_eed, is_eed
+from .protocol.errors import CodecError
+from .protocol.identifiers import (
+    BASE_GNSS_NODE_ID,
+    BY_KEY,
+    COVER_NODE_ID,
+    DEFAULT_ZOOM_POSITION_ID,
+    MASTER_NODE_ID,
+    ROVER_GNSS_NODE_ID,
+    STOP_PITCH_BIT,
+    STOP_YAW_BIT,
+    TURRET_NODE_ID,
+    ZOOM_NODE_ID,
+    ActuatorMode,
+    Direction,
+    Identifier,
+    identifier_table,
+)
+from .protocol.message import CanAerospaceMessage
+from .protocol.sequencing import MessageCodeCounter, MessageCodeTracker, SequenceEvent
+
+LOG = logging.getLogger("canaero_turret_driver.client")
+
+AXES = ("yaw", "pitch")
+CAN_ERR_BUSOFF = 0x40  # SocketCAN error-frame class bit for bus-off
+ICD_POSITION_LIMIT_DEG = 180.0  # set-point range "-180 ÷ 180" (6.1.2, 6.1.1 pitch)
+
+
+class TurretError(Exception):
+    """Base of the client's errors; the message is meant for a person."""
+
+
+class LinkError(TurretError):
+    """The CAN interface is not open or failed while sending."""
+
+
+class CommandError(TurretError, ValueError):
+    """A command was refused before anything was sent."""
+
+
+class ServiceError(TurretError):
+    """A node-service request failed (no response, or a negative status)."""
+
+
+class NotAllowedError(TurretError):
+    """A persistent or identity-changing service was not enabled by configuration."""
+
+
+@dataclass
+class ClientConfig:
+    interface: str = "socketcan"
+    channel: str = "can0"
+    bitrate: int | None = None
+    bus_options: dict[str, object] = field(default_factory=dict)
+    client_node_id: int = MASTER_NODE_ID
+    turret_node_id: int = TURRET_NODE_ID
+    cover_node_id: int = COVER_NODE_ID
+    rover_gnss_node_id: int = ROVER_GNSS_NODE_ID
+    base_gnss_node_id: int = BASE_GNSS_NODE_ID
+    zoom_node_id: int = ZOOM_NODE_ID
+    zoom_position_id: int = DEFAULT_ZOOM_POSITION_ID
+    service_channel: int = 0
+    service_timeout: float = ns.SERVICE_RESPONSE_TIMEOUT_S
+    service_attempts: int = 3
+    stale_timeout: float = 1.0
+    node_timeout: float = 1.0
+    reconnect_period: float = 1.0
+    pad_frames: bool = False
+    yaw_sign: float = 1.0
+    pitch_sign: float = 1.0
+    allow_node_id_change: bool = False
+    allow_flash_programming: bool = False
+
+
+@dataclass(frozen=True)
+class Sample:
+    """The latest value of one data identifier."""
+
+    key: str
+    value: object  # as decoded (device units)
+    si: float | None  # SI value (signed per axis) for numeric values
+    stamp: float  # wall-clock time of arrival (for ROS headers)
+    received: float  # monotonic time of arrival (for staleness)
+    message_code: int
+    node_id: int
+
+
+@dataclass
+class Counters:
+    frames: int = 0
+    malformed: int = 0
+    unknown: int = 0
+    foreign_node: int = 0
+    type_mismatch: int = 0
+    eed: int = 0
+    bus_errors: int = 0
+    reconnects: int = 0
+    send_errors: int = 0
+    last_malformed: str = ""
+
+
+def _default_bus_factory(config: ClientConfig) -> can.BusABC:
+    kwargs = dict(config.bus_options)
+    if config.bitrate:
+        kwargs["bitrate"] = config.bitrate
+    return can.Bus(interface=config.interface, channel=config.channel, **kwargs)
+
+
+class TurretClient:
+    """A CANaerospace master talking to the turret and its companion nodes."""
+
+    def __init__(self, config: ClientConfig | None = None,
+                 bus_factory: Callable[[ClientConfig], can.BusABC] | None = None) -> None:
+        self.config = config or ClientConfig()
+        self._bus_factory = bus_factory or _default_bus_factory
+        self._table = identifier_table(self.config.zoom_position_id)
+        self._bus: can.BusABC | None = None
+        self._bus_lock = threading.Lock()
+        self._send_lock = threading.Lock()
+        self._service_lock = threading.Lock()
+        self._cache_lock = threading.Lock()
+        self._cache: dict[str, Sample] = {}
+        self._node_seen: dict[int, float] = {}
+        self._intervals_ms: dict[str, int] = {}
+        self._pending: tuple[CanAerospaceMessage, threading.Event, list] | None = None
+        self._codes = MessageCodeCounter()
+        self.sequences = MessageCodeTracker()
+        self.counters = Counters()
+        self.events: deque[EmergencyEvent] = deque(maxlen=50)
+        self.last_link_error = ""
+        self._garbled_in_row = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.on_sample: Callable[[Sample], None] | None = None
+        self.on_eed: Callable[[EmergencyEvent], None] | None = None
+        self.on_sequence: Callable[[str, SequenceEvent, int], None] | None = None
+        self.on_link: Callable[[bool, str], None] | None = None
+
+    # --- link ---------------------------------------------------------------------
+
+    @property
+    def connected(self) -> bool:
+        return self._bus is not None
+
+    @property
+    def description(self) -> str:
+        return f"{self.config.interface}:{self.config.channel}"
+
+    def open(self) -> None:
+        """Open the CAN interface now (raises LinkError) and start the receive thread."""
+        if self._bus is None:
+            self._open_bus()
+        self._start_thread()
+
+    def start(self) -> None:
+        """Start the receive thread, which opens the interface (and reopens it) by itself."""
+        self._start_thread()
+
+    def _start_thread(self) -> None:
+        if self._thread is None or not self._thread.is_alive():
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name="canaero-client-rx",
+                                            daemon=True)
+            self._thread.start()
+
+    def close(self) -> None:
+        """Stop the receive thread and release the interface. Safe to call twice."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        self._drop_bus("closed", notify=False)
+
+    def _open_bus(self) -> None:
+        try:
+            bus = self._bus_factory(self.config)
+        except (can.CanError, OSError, ValueError, ImportError) as exc:
+            self.last_link_error = f"cannot open CAN interface {self.description}: {exc}"
+            raise LinkError(self.last_link_error) from exc
+        with self._bus_lock:
+            self._bus = bus
+        self.sequences.reset()
+        self.last_link_error = ""
+        LOG.info("CAN interface %s open", self.description)
+        if self.on_link is not None:
+            self.on_link(True, f"CAN interface {self.description} open")
+
+    def _drop_bus(self, reason: str, notify: bool = True) -> None:
+        with self._bus_lock:
+            bus, self._bus = self._bus, None
+        if bus is None:
+            return
+        with contextlib.suppress(Exception):
+            bus.shutdown()
+        self.last_link_error = reason
+        pending = self._pending
+        if pending is not None:
+            pending[1].set()  # wake a waiting service request; it finds no response
+        if notify:
+            LOG.warning("CAN interface %s lost: %s", self.description, reason)
+            if self.on_link is not None:
+                self.on_link(False, reason)
+
+    def _run(self) -> None:
+        next_attempt = 0.0
+        while not self._stop.is_set():
+            bus = self._bus
+            if bus is None:
+                now = time.monotonic()
+                if now < next_attempt:
+                    self._stop.wait(min(0.05, next_attempt - now))
+                    continue
+                next_attempt = now + self.config.reconnect_period
+                try:
+                    self._open_bus()
+                    self.counters.reconnects += 1
+                except LinkError as exc:
+                    LOG.debug("%s", exc)
+                continue
+            try:
+                frame = bus.recv(timeout=0.05)
+            except (ValueError, IndexError) as exc:
+                # slcan/serial adapters raise these on garbled ASCII records.
+                self._garbled(bus, exc)
+                continue
+            except (can.CanError, OSError) as exc:
+                if isinstance(exc.__cause__, ValueError | IndexError):
+                    # python-can wraps an undecodable byte sequence in CanOperationError.
+                    self._garbled(bus, exc.__cause__)
+                    continue
+                self._drop_bus(f"receive failed: {exc}")
+                continue
+            except Exception as exc:  # noqa: BLE001 - a driver thread must not die
+                self._drop_bus(f"receive failed unexpectedly: {exc!r}")
+                continue
+            if frame is not None:
+                self._garbled_in_row = 0
+                try:
+                    self._dispatch(frame)
+                except Exception:
+                    LOG.exception("error while handling a CAN frame")
+
+    # --- receive ------------------------------------------------------------------
+
+    def _garbled(self, bus: can.BusABC, exc: BaseException) -> None:
+        """Resynchronise after bytes the adapter could not parse.
+
+        python-can's slcan keeps an undecodable partial record in its buffer (every later
+        record then fails too), so the adapter's receive buffer is flushed; if records
+        keep failing the interface is reopened.
+        """
+        self._malformed(f"garbled record from the adapter: {exc}")
+        self._garbled_in_row += 1
+        flush = getattr(bus, "flush", None)
+        if callable(flush):
+            with contextlib.suppress(Exception):
+                flush()
+        if self._garbled_in_row >= 20:
+            self._garbled_in_row = 0
+            self._drop_bus("the adapter keeps sending unreadable records")
+
+    def _malformed(self, text: str) -> None:
+        self.counters.malformed += 1
+        self.counters.last_malformed = text
+        LOG.debug("malformed: %s", text)
+
+    def _expected_node(self, ident: Identifier) -> int:
+        mapping = {
+            TURRET_NODE_ID: self.config.turret_node_id,
+            COVER_NODE_ID: self.config.cover_node_id,
+            ROVER_GNSS_NODE_ID: self.config.rover_gnss_node_id,
+            BASE_GNSS_NODE_ID: self.config.base_gnss_node_id,
+            ZOOM_NODE_ID: self.config.zoom_node_id,
+        }
+        assert ident.node_id is not None
+        return mapping[ident.node_id]
+
+    def _dispatch(self, frame: can.Message) -> None:
+        self.counters.frames += 1
+        if frame.is_error_frame:
+            self.counters.bus_errors += 1
+            if frame.arbitration_id & CAN_ERR_BUSOFF:
+                self._drop_bus("bus-off reported by the CAN controller")
+            return
+        if frame.is_extended_id or frame.is_remote_frame:
+            self.counters.unknown += 1
+            return
+        try:
+            message = CanAerospaceMessage.from_frame(frame.arbitration_id, frame.data)
+        except CodecError as exc:
+            self._malformed(str(exc))
+            return
+        now = time.monotonic()
+        if is_eed(message.can_id):
+            self._node_seen[message.node_id] = now
+            try:
+                event = decode_eed(message)
+            except CodecError as exc:
+                self._malformed(str(exc))
+                return
+            self.counters.eed += 1
+            self.events.append(event)
+            LOG.warning("%s", event.describe())
+            if self.on_eed is not None:
+                self.on_eed(event)
+            return
+        service = ns.service_channel_of(message.can_id)
+        if service is not None:
+            self._service_frame(message, now)
+            return
+        ident = self._table.get(message.can_id)
+        if ident is None or ident.direction is not Direction.DATA:
+            self.counters.unknown += 1
+            return
+        if message.node_id != self._expected_node(ident):
+            self.counters.foreign_node += 1
+            return
+        self._node_seen[message.node_id] = now
+        if not self._type_acceptable(ident, message.data_type):
+            self.counters.type_mismatch += 1
+            self._malformed(f"id {message.can_id} ({ident.key}) carries {message.type_name}, "
+                            f"the ICD says {ident.data_type.name}")
+            return
+        event, missed = self.sequences.update((message.node_id, message.can_id),
+                                              message.message_code)
+        if event in (SequenceEvent.LATE, SequenceEvent.REPEATED):
+            if self.on_sequence is not None:
+                self.on_sequence(ident.key, event, missed)
+            return  # an old or duplicate value must not replace the newer one
+        if event is SequenceEvent.LOST and self.on_sequence is not None:
+            self.on_sequence(ident.key, event, missed)
+        value = message.value
+        sample = Sample(ident.key, value, self._to_si(ident, value), time.time(), now,
+                        message.message_code, message.node_id)
+        with self._cache_lock:
+            self._cache[ident.key] = sample
+        if self.on_sample is not None:
+            self.on_sample(sample)
+
+    def _type_acceptable(self, ident: Identifier, data_type: int) -> bool:
+        if data_type == ident.data_type:
+            return True
+        if ident.key == "zoom_position":  # type not given by the ICD: any numeric scalar
+            codec = codec_for(data_type)
+            return codec is not None and codec.kind in ("int", "float")
+        return False
+
+    def _sign(self, key: str) -> float:
+        if key in ("yaw_position", "yaw_velocity"):
+            return self.config.yaw_sign
+        if key in ("pitch_position", "pitch_velocity"):
+            return self.config.pitch_sign
+        return 1.0
+
+    def _to_si(self, ident: Identifier, value: object) -> float | None:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            return None
+        return ident.to_si(value) * self._sign(ident.key)
+
+    def _service_frame(self, message: CanAerospaceMessage, now: float) -> None:
+        pending = self._pending
+        if pending is None:
+            return
+        request, event, slot = pending
+        if ns.is_response_to(request, message):
+            self._node_seen[message.node_id] = now
+            slot.append(message)
+            event.set()
+
+    # --- cache --------------------------------------------------------------------
+
+    def latest(self, key: str) -> Sample | None:
+        with self._cache_lock:
+            return self._cache.get(key)
+
+    def snapshot(self) -> dict[str, Sample]:
+        with self._cache_lock:
+            return dict(self._cache)
+
+    def stale_timeout_for(self, key: str) -> float:
+        interval = self._intervals_ms.get(key)
+        base = self.config.stale_timeout
+        return max(base, 3.0 * interval / 1000.0) if interval else base
+
+    def age(self, key: str, now: float | None = None) -> float | None:
+        sample = self.latest(key)
+        if sample is None:
+            return None
+        return (time.monotonic() if now is None else now) - sample.received
+
+    def is_stale(self, key: str, now: float | None = None) -> bool:
+        """No value yet, or older than the staleness timeout (an interval of 0 = disabled)."""
+        if self._intervals_ms.get(key) == 0:
+            return False
+        age = self.age(key, now)
+        return age is None or age > self.stale_timeout_for(key)
+
+    def node_silent(self, node_id: int | None = None, now: float | None = None) -> bool:
+        node = self.config.turret_node_id if node_id is None else node_id
+        seen = self._node_seen.get(node)
+        now = time.monotonic() if now is None else now
+        return seen is None or now - seen > self.config.node_timeout
+
+    def node_last_seen(self, node_id: int) -> float | None:
+        return self._node_seen.get(node_id)
+
+    # --- sending ------------------------------------------------------------------
+
+    def send(self, message: CanAerospaceMessage) -> None:
+        """Send one message; LinkError when the interface is closed or the send fails."""
+        bus = self._bus
+        if bus is None:
+            raise LinkError(f"CAN interface {self.description} is not open"
+                            + (f" ({self.last_link_error})" if self.last_link_error else ""))
+        frame = can.Message(arbitration_id=message.can_id, is_extended_id=False,
+                            data=message.to_bytes(pad=self.config.pad_frames))
+        try:
+            with self._send_lock:
+                bus.send(frame, timeout=0.2)
+        except (can.CanError, OSError, ValueError) as exc:
+            self.counters.send_errors += 1
+            self._drop_bus(f"send failed: {exc}")
+            raise LinkError(f"sending on {self.description} failed: {exc}") from exc
+
+    def command(self, key: str, value: object) -> None:
+        """Send a command identifier (by key) with the master node-id and a rolling code."""
+        ident = BY_KEY.get(key)
+        if ident is None or ident.direction is not Direction.COMMAND:
+            raise CommandError(f"{key!r} is not a command identifier of this driver")
+        try:
+            message = CanAerospaceMessage.build(
+                ident.can_id, self.config.client_node_id, ident.data_type, value, 0,
+                self._codes.next(ident.can_id))
+        except CodecError as exc:
+            raise CommandError(f"{ident.name}: {exc}") from exc
+        self.send(message)
+
+    @staticmethod
+    def _axis(axis: str) -> str:
+        if axis not in AXES:
+            raise CommandError(f"unknown axis {axis!r}; the turret has {', '.join(AXES)}")
+        return axis
+
+    def _axis_sign(self, axis: str) -> float:
+        return self.config.yaw_sign if axis == "yaw" else self.config.pitch_sign
+
+    @staticmethod
+    def _finite(what: str, value: float) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float) \
+                or not math.isfinite(value):
+            raise CommandError(f"{what} must be a finite number, got {value!r}")
+        return float(value)
+
+    def move_to(self, axis: str, position_rad: float) -> None:
+        """Absolute position set-point (rad); the ICD range is -180..180 deg."""
+        axis = self._axis(axis)
+        degrees = math.degrees(self._finite(f"{axis} position", position_rad))
+        degrees *= self._axis_sign(axis)
+        if abs(degrees) > ICD_POSITION_LIMIT_DEG + 1e-9:
+            raise CommandError(f"{axis} position {position_rad:.4f} rad is outside the "
+                               f"device range -pi..pi")
+        self.command(f"{axis}_position_setpoint", max(-180.0, min(180.0, degrees)))
+
+    def jog(self, axis: str, velocity_rad_s: float) -> None:
+        axis = self._axis(axis)
+        degrees = math.degrees(self._finite(f"{axis} velocity", velocity_rad_s))
+        self.command(f"{axis}_velocity_setpoint", degrees * self._axis_sign(axis))
+
+    def move_by(self, axis: str, offset_rad: float) -> None:
+        axis = self._axis(axis)
+        degrees = math.degrees(self._finite(f"{axis} offset", offset_rad))
+        self.command(f"{axis}_relative_setpoint", degrees * self._axis_sign(axis))
+
+    def stop(self, axes: tuple[str, ...] | list[str] = AXES) -> None:
+        bits = 0
+        for axis in axes:
+            bits |= STOP_YAW_BIT if self._axis(axis) == "yaw" else STOP_PITCH_BIT
+        if bits:
+            self.command("stop_actuators", bits)
+
+    def set_actuator_mode(self, axis: str, mode: int | ActuatorMode) -> None:
+        axis = self._axis(axis)
+        try:
+            mode = ActuatorMode(mode)
+        except ValueError as exc:
+            names = ", ".join(f"{m.value}={m.name.lower()}" for m in ActuatorMode)
+            raise CommandError(f"actuator mode {mode!r} does not exist ({names})") from exc
+        self.command(f"{axis}_actuator_mode", int(mode))
+
+    def remember_position(self) -> None:
+        self.command("remember_position", 1)
+
+    def restore_position(self) -> None:
+        self.command("restore_position", 1)
+
+    def set_cover(self, open_cover: bool) -> None:
+        self.command("cover_control", 1 if open_cover else 0)
+
+    def set_fan(self, on: bool) -> None:
+        self.command("fan_control", 1 if on else 0)
+
+    def set_oes_heater(self, on: bool) -> None:
+        self.command("oes_heater_control", 1 if on else 0)
+
+    def set_drives_heater(self, on: bool) -> None:
+        self.command("drives_heater_control", 1 if on else 0)
+
+    def set_charging(self, on: bool) -> None:
+        self.command("charging_control", 1 if on else 0)
+
+    # --- node services --------------------------------------------------------------
+
+    def request(self, message: CanAerospaceMessage) -> CanAerospaceMessage:
+        """Send a node-service request and wait for its response (ICD: within 100 ms)."""
+        service = ns.ServiceCode(message.service_code).name
+        attempts = max(1, self.config.service_attempts)
+        with self._service_lock:
+            for _ in range(attempts):
+                event = threading.Event()
+                slot: list[CanAerospaceMessage] = []
+                self._pending = (message, event, slot)
+                try:
+                    self.send(message)
+                    event.wait(self.config.service_timeout)
+                finally:
+                    self._pending = None
+                if slot:
+                    return slot[0]
+                if self._bus is None:
+                    break
+        raise ServiceError(
+            f"no {service} response from node {message.node_id} within "
+            f"{self.config.service_timeout * 1000:.0f} ms ({attempts} attempts) on "
+            f"{self.description}")
+
+    def identify(self, node_id: int | None = None) -> ns.IdentificationInfo:
+        node = self.config.turret_node_id if node_id is None else node_id
+        response = self.request(ns.ids_request(node, self.config.service_channel))
+        try:
+            return ns.parse_ids_response(response)
+        except CodecError as exc:
+            raise ServiceError(f"IDS response from node {node} is malformed: {exc}") from exc
+
+    def set_transmission_interval(self, key: str, interval_ms: int) -> None:
+        """TIS for one data identifier (0 stops it; the node decides the valid range)."""
+        ident = self._data_ident(key)
+        node = self._expected_node(ident)
+        try:
+            request = ns.tis_request(node, ident.can_id, int(interval_ms),
+                                     self.config.service_channel)
+        except CodecError as exc:
+            raise CommandError(f"TIS for {key}: {exc}") from exc
+        status = ns.response_status(self.request(request))
+        if status != ns.ServiceStatus.OK:
+            raise ServiceError(f"node {node} refused TIS {key} (id {ident.can_id}) = "
+                               f"{interval_ms} ms: {ns.status_text(ns.ServiceCode.TIS, status)}")
+        self._intervals_ms[key] = int(interval_ms)
+
+    def _data_ident(self, key: str) -> Identifier:
+        for ident in self._table.values():
+            if ident.key == key and ident.direction is Direction.DATA:
+                return ident
+        raise CommandError(f"{key!r} is not a data identifier of this driver")
+
+    def set_node_id(self, new_node_id: int, node_id: int | None = None) -> None:
+        """NIS: only when `allow_node_id_change` is set (changes the device's identity)."""
+        if not self.config.allow_node_id_change:
+            raise NotAllowedError("node-id changes (NIS) are disabled; enable "
+                                  "allow_node_id_change to use them")
+        node = self.config.turret_node_id if node_id is None else node_id
+        try:
+            request = ns.nis_request(node, new_node_id, self.config.service_channel)
+        except CodecError as exc:
+            raise CommandError(str(exc)) from exc
+        status = ns.response_status(self.request(request))
+        if status != ns.ServiceStatus.OK:
+            raise ServiceError(f"node {node} refused node-id {new_node_id}: "
+                               f"{ns.status_text(ns.ServiceCode.NIS, status)}")
+        for name in ("turret_node_id", "cover_node_id", "rover_gnss_node_id",
+                     "base_gnss_node_id", "zoom_node_id"):
+            if getattr(self.config, name) == node:
+                setattr(self.config, name, new_node_id)
+
+    def store_configuration(self, security_code: int, node_id: int | None = None) -> None:
+        """FPS: write the node's configuration to flash; only with allow_flash_programming."""
+        if not self.config.allow_flash_programming:
+            raise NotAllowedError("flash programming (FPS) is disabled; enable "
+                                  "allow_flash_programming to use it")
+        node = self.config.turret_node_id if node_id is None else node_id
+        if not 0 <= security_code <= 255:
+            raise CommandError(f"FPS security code {security_code} is outside 0..255")
+        status = ns.response_status(self.request(
+            ns.fps_request(node, security_code, self.config.service_channel)))
+        if status != ns.ServiceStatus.OK:
+            raise ServiceError(f"node {node} refused flash programming: "
+                               f"{ns.status_text(ns.ServiceCode.FPS, status)}")
+
+    def data_type_of(self, key: str) -> DataType:
+        return self._data_ident(key).data_type

@@ -1,0 +1,1020 @@
+"""CANaerospace turret simulator: turret, cover, GNSS and zoom nodes on one CAN bus.
+
+The model (`TurretSimulator`) turns received CAN frames into replies and produces the
+periodic NOD broadcasts. It is reached in one of two ways:
+
+* `BusSimRunner`: on any python-can bus (`virtual` inside one process for tests,
+  `socketcan` on a vcan interface on a robot);
+* `SlcanSession` behind the shared `PtySimServer`: the simulator speaks the slcan ASCII
+  protocol (Lawicel) on a pseudo-terminal, so another process opens it with
+  python-can's `slcan` interface (`channel=<pty path>`). This is how the node tests and
+  `canaero_turret_sim` work on machines without SocketCAN.
+
+Fault injection (methods of `TurretSimulator`, and the same words on the control port
+`--control-port`, one command per line, see `ControlServer`): silence a node, lose or
+repeat NOD frames (message-code gaps), malformed frames, EED events, axis drive faults,
+periphery faults; `PtySimServer.drop_link` and `inject` cut the link or send garbage.
+
+Simulator-defined EED codes (the ICD defines none): see `EedCode`. Operation id = the
+offending command (`Operation`), location id = 1 yaw, 2 pitch, 0 whole node.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import logging
+import math
+import os
+import signal
+import socket
+import socketserver
+import threading
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import can
+
+from .protocol import nodeservice as ns
+from .protocol.datatypes import DataType
+from .protocol.eed import build_eed
+from .protocol.errors import CodecError
+from .protocol.identifiers import (
+    BASE_GNSS_NODE_ID,
+    COVER_NODE_ID,
+    DEFAULT_ZOOM_POSITION_ID,
+    ROVER_GNSS_NODE_ID,
+    STOP_PITCH_BIT,
+    STOP_YAW_BIT,
+    TURRET_NODE_ID,
+    ZOOM_NODE_ID,
+    ActuatorMode,
+    AxisStatus,
+    CoverState,
+    Direction,
+    TargetState,
+    identifier_table,
+)
+from .protocol.message import CanAerospaceMessage
+from .protocol.sequencing import MessageCodeCounter
+
+LOG = logging.getLogger("canaero_turret_sim")
+
+DEFAULT_FPS_SECURITY_CODE = 0x5A
+YAW, PITCH = "yaw", "pitch"
+
+
+class EedCode(IntEnum):
+    """Error codes the simulator puts in EED messages."""
+
+    COMMAND_REJECTED = 0x0001  # axis in free run or faulted
+    WRONG_DATA_TYPE = 0x0002
+    SETPOINT_OUT_OF_RANGE = 0x0003
+    DRIVE_FAULT = 0x0010  # injected drive fault
+    INJECTED = 0x00FF  # raw injected event
+
+
+class Operation(IntEnum):
+    NONE = 0
+    POSITION = 1
+    VELOCITY = 2
+    RELATIVE = 3
+    MODE = 4
+    STOP = 5
+    OTHER = 6
+
+
+LOCATION = {YAW: 1, PITCH: 2}
+
+# Default transmission intervals in ms (the ICD only fixes cover state = 100 ms; the
+# rest are simulator choices, changeable with TIS).
+DEFAULT_INTERVALS_MS: dict[str, int] = {
+    "yaw_position": 40, "yaw_velocity": 40, "pitch_position": 40, "pitch_velocity": 40,
+    "yaw_status": 100, "pitch_status": 100, "yaw_actuator_mode_state": 500,
+    "pitch_actuator_mode_state": 500, "yaw_current": 200, "pitch_current": 200,
+    "yaw_motor_temperature": 1000, "pitch_motor_temperature": 1000,
+    "yaw_power_stage_temperature": 1000, "pitch_power_stage_temperature": 1000,
+    "yaw_bus_voltage": 1000, "pitch_bus_voltage": 1000, "yaw_humidity": 1000,
+    "pitch_humidity": 1000, "yaw_revolutions": 500, "pitch_revolutions": 500,
+    "fan_state": 500, "case_temperature": 1000, "charging_current": 1000,
+    "charging_state": 500, "oes_heater_state": 500, "drives_heater_state": 1000,
+    "periphery_status": 200, "global_pitch": 200, "global_roll": 200,
+    "cover_state": 100, "rover_heading": 200, "rover_heading_accuracy": 1000,
+    "global_yaw": 200, "latitude": 500, "longitude": 500, "altitude_msl": 500,
+    "position_accuracy": 1000, "utc_time": 1000, "zoom_position": 200,
+}
+MIN_INTERVAL_MS = 10
+MAX_INTERVAL_MS = 10000
+
+
+@dataclass
+class AxisModel:
+    """One drive: trapezoidal velocity profile toward a position or velocity target.
+
+    Positions are kept unwrapped in degrees; a continuous axis (yaw) reports them
+    wrapped to -180..180 and counts revolutions, a limited axis (pitch) stops at its
+    limits.
+    """
+
+    name: str
+    max_velocity: float  # deg/s
+    acceleration: float  # deg/s^2
+    min_position: float | None = None
+    max_position: float | None = None
+    position: float = 0.0
+    velocity: float = 0.0
+    mode: str = "idle"  # idle | position | velocity
+    target_position: float = 0.0
+    target_velocity: float = 0.0
+    actuator_mode: int = ActuatorMode.AUTO_BRAKE
+    fault: bool = False
+
+    @property
+    def continuous(self) -> bool:
+        return self.min_position is None
+
+    @property
+    def enabled(self) -> bool:
+        return not self.fault and self.actuator_mode != ActuatorMode.FREE_RUN
+
+    @property
+    def reported_position(self) -> float:
+        if self.continuous:
+            return (self.position + 180.0) % 360.0 - 180.0
+        return self.position
+
+    @property
+    def revolutions(self) -> int:
+        return math.floor((self.position + 180.0) / 360.0) if self.continuous else 0
+
+    @property
+    def target_state(self) -> int:
+        if self.mode == "velocity":
+            return TargetState.JOG
+        if self.mode == "position":
+            return TargetState.NOT_REACHED
+        return TargetState.REACHED if abs(self.velocity) < 1e-6 else TargetState.NOT_REACHED
+
+    def in_range(self, position: float) -> bool:
+        if self.continuous:
+            return -180.0 <= position <= 180.0
+        assert self.min_position is not None and self.max_position is not None
+        return self.min_position <= position <= self.max_position
+
+    def move_to(self, position: float) -> None:
+        if self.continuous:
+            delta = (position - self.reported_position + 180.0) % 360.0 - 180.0
+            self.target_position = self.position + delta
+        else:
+            self.target_position = position
+        self.mode = "position"
+
+    def move_by(self, delta: float) -> None:
+        base = self.target_position if self.mode == "position" else self.position
+        target = base + delta
+        if not self.continuous:
+            assert self.min_position is not None and self.max_position is not None
+            target = min(max(target, self.min_position), self.max_position)
+        self.target_position = target
+        self.mode = "position"
+
+    def jog(self, velocity: float) -> None:
+        self.target_velocity = max(-self.max_velocity, min(self.max_velocity, velocity))
+        self.mode = "velocity"
+
+    def stop(self) -> None:
+        self.mode = "idle"
+
+    def step(self, dt: float) -> None:
+        if dt <= 0:
+            return
+        if not self.enabled:
+            self.mode = "idle"
+            desired = 0.0
+        elif self.mode == "position":
+            error = self.target_position - self.position
+            if abs(error) < 1e-4 and abs(self.velocity) <= self.acceleration * dt:
+                self.position = self.target_position
+                self.velocity = 0.0
+                self.mode = "idle"
+                return
+            braking_speed = math.sqrt(2.0 * self.acceleration * abs(error))
+            desired = math.copysign(min(self.max_velocity, braking_speed), error)
+        elif self.mode == "velocity":
+            desired = self.target_velocity
+        else:
+            desired = 0.0
+        change = desired - self.velocity
+        limit = self.acceleration * dt
+        self.velocity += max(-limit, min(limit, change))
+        new_position = self.position + self.velocity * dt
+        if self.mode == "position":
+            # Do not overshoot the target within one step.
+            before = self.target_position - self.position
+            after = self.target_position - new_position
+            if before * after < 0:
+                new_position = self.target_position
+                self.velocity = 0.0
+                self.mode = "idle"
+        if not self.continuous:
+            assert self.min_position is not None and self.max_position is not None
+            if new_position <= self.min_position or new_position >= self.max_position:
+                new_position = min(max(new_position, self.min_position), self.max_position)
+                self.velocity = 0.0
+                if self.mode == "velocity":
+                    self.mode = "idle"
+        self.position = new_position
+
+
+@dataclass
+class SimConfig:
+    turret_node_id: int = TURRET_NODE_ID
+    zoom_position_id: int = DEFAULT_ZOOM_POSITION_ID
+    fps_security_code: int = DEFAULT_FPS_SECURITY_CODE
+    yaw_max_velocity: float = 60.0
+    pitch_max_velocity: float = 40.0
+    acceleration: float = 180.0
+    pitch_min: float = -30.0
+    pitch_max: float = 60.0
+    hardware_revision: int = 2
+    software_revision: int = 7
+    latitude_deg: float = 48.1372
+    longitude_deg: float = 11.5756
+    altitude_m: float = 519.0
+    pad_frames: bool = False
+    intervals_ms: dict[str, int] = field(default_factory=lambda: dict(DEFAULT_INTERVALS_MS))
+
+
+class TurretSimulator:
+    """The device model: thread-safe; `handle` for received frames, `poll` for time."""
+
+    def __init__(self, config: SimConfig | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.config = config or SimConfig()
+        self._clock = clock
+        self._lock = threading.RLock()
+        self._table = identifier_table(self.config.zoom_position_id)
+        self._key_to_id = {ident.key: can_id for can_id, ident in self._table.items()}
+        self.axes = {
+            YAW: AxisModel(YAW, self.config.yaw_max_velocity, self.config.acceleration),
+            PITCH: AxisModel(PITCH, self.config.pitch_max_velocity, self.config.acceleration,
+                             self.config.pitch_min, self.config.pitch_max),
+        }
+        self.node_ids = {
+            "turret": self.config.turret_node_id, "cover": COVER_NODE_ID,
+            "rover_gnss": ROVER_GNSS_NODE_ID, "base_gnss": BASE_GNSS_NODE_ID,
+            "zoom": ZOOM_NODE_ID,
+        }
+        self.fan_on = False
+        self.oes_heater_on = False
+        self.drives_heater_on = False
+        self.charging_on = False
+        self.case_sensor_fault = False
+        self.free_run_button = False
+        self.cover_state = CoverState.CLOSED
+        self._cover_target: int | None = None
+        self._cover_arrival = 0.0
+        self.saved_position: tuple[float, float] | None = None
+        self.zoom_position = 1.0
+        self.stored_configuration: dict[str, object] | None = None
+        self.received_commands: list[tuple[str, object]] = []
+        self.malformed_received = 0
+        # schedule: can_id -> (interval ms, next due time)
+        self._intervals: dict[int, int] = {}
+        self._next_due: dict[int, float] = {}
+        now = self._clock()
+        for key, interval in self.config.intervals_ms.items():
+            can_id = self._key_to_id[key]
+            self._intervals[can_id] = interval
+            self._next_due[can_id] = now
+        self._codes = MessageCodeCounter()
+        self._last_step = now
+        self._start = now
+        # faults
+        self._silent_until: dict[int, float] = {}
+        self._lose: dict[int, int] = {}
+        self._repeat: dict[int, int] = {}
+        self._malformed_pending = 0
+        self._outbox: list[can.Message] = []
+
+    # --- helpers -----------------------------------------------------------------
+
+    def _frame(self, message: CanAerospaceMessage) -> can.Message:
+        return can.Message(arbitration_id=message.can_id, is_extended_id=False,
+                           data=message.to_bytes(pad=self.config.pad_frames))
+
+    def _is_silent(self, node_id: int, now: float) -> bool:
+        return self._silent_until.get(node_id, 0.0) > now
+
+    def _node_of(self, can_id: int) -> int:
+        ident = self._table[can_id]
+        assert ident.node_id is not None
+        return self.config.turret_node_id if ident.node_id == TURRET_NODE_ID else ident.node_id
+
+    def _eed(self, code: int, operation: int, location: int,
+             node_id: int | None = None) -> None:
+        node = self.config.turret_node_id if node_id is None else node_id
+        can_id = node if 0 < node <= 127 else 127
+        message = build_eed(can_id, node, code, operation, location,
+                            self._codes.next(can_id))
+        if not self._is_silent(node, self._clock()):
+            self._outbox.append(self._frame(message))
+
+    # --- values --------------------------------------------------------------------
+
+    def _value(self, key: str, now: float) -> object:
+        yaw, pitch = self.axes[YAW], self.axes[PITCH]
+        elapsed = now - self._start
+        axis = yaw if key.startswith("yaw") else pitch
+        is_axis_key = key.startswith(("yaw_", "pitch_"))
+        suffix = key.split("_", 1)[1] if is_axis_key else ""
+        if key in ("yaw_position", "pitch_position"):
+            return axis.reported_position
+        if key in ("yaw_velocity", "pitch_velocity"):
+            return axis.velocity
+        if suffix == "motor_temperature":
+            return 35.0 + 0.02 * abs(axis.velocity)
+        if suffix == "power_stage_temperature":
+            return 40.0 + 0.03 * abs(axis.velocity)
+        if suffix == "actuator_mode_state":
+            return int(axis.actuator_mode)
+        if suffix == "bus_voltage":
+            return 27.8
+        if suffix == "current":
+            return 0.3 + 0.02 * abs(axis.velocity)
+        if suffix == "humidity":
+            return 21.5
+        if suffix == "revolutions":
+            return axis.revolutions
+        if suffix == "status":
+            return AxisStatus.encode(axis.target_state, axis.actuator_mode, axis.enabled)
+        values: dict[str, object] = {
+            "fan_state": int(self.fan_on),
+            "case_temperature": 31.0,
+            "charging_current": 1.2 if self.charging_on else 0.0,
+            "charging_state": int(self.charging_on),
+            "oes_heater_state": int(self.oes_heater_on) | (int(self.oes_heater_on) << 1),
+            "drives_heater_state": int(self.drives_heater_on),
+            "periphery_status": self._periphery(),
+            "global_pitch": 1.5 + 0.01 * math.sin(elapsed),
+            "global_roll": -0.8,
+            "cover_state": int(self.cover_state),
+            "rover_heading": round(123.45678 * 1e5),
+            "rover_heading_accuracy": round(0.25 * 1e5),
+            "global_yaw": 123.45678,
+            "latitude": round(self.config.latitude_deg * 1e7),
+            "longitude": round(self.config.longitude_deg * 1e7),
+            "altitude_msl": round(self.config.altitude_m * 1000),
+            "position_accuracy": 15000,
+            "utc_time": int(time.time()),
+            "zoom_position": self.zoom_position,
+        }
+        return values[key]
+
+    def _periphery(self) -> int:
+        bits = (int(self.fan_on) | int(self.oes_heater_on) << 1 | int(self.oes_heater_on) << 2
+                | int(self.drives_heater_on) << 3 | int(self.free_run_button) << 4
+                | int(self.charging_on) << 7 | int(self.case_sensor_fault) << 8)
+        return bits
+
+    # --- time ----------------------------------------------------------------------
+
+    def poll(self, now: float | None = None) -> list[can.Message]:
+        """Advance physics and return the frames due now (broadcasts, EED, faults)."""
+        with self._lock:
+            now = self._clock() if now is None else now
+            dt = min(now - self._last_step, 0.2)
+            self._last_step = now
+            for axis in self.axes.values():
+                axis.step(dt)
+            if self._cover_target is not None and now >= self._cover_arrival:
+                self.cover_state = CoverState(self._cover_target)
+                self._cover_target = None
+            out, self._outbox = self._outbox, []
+            for can_id, interval in self._intervals.items():
+                if interval <= 0 or now < self._next_due[can_id]:
+                    continue
+                due = self._next_due[can_id] + interval / 1000.0
+                self._next_due[can_id] = due if due > now else now + interval / 1000.0
+                out.extend(self._broadcast(can_id, now))
+            out.extend(self._take_malformed())
+            return out
+
+    def _broadcast(self, can_id: int, now: float) -> list[can.Message]:
+        ident = self._table[can_id]
+        node_id = self._node_of(can_id)
+        if self._is_silent(node_id, now):
+            return []
+        code = self._codes.next(can_id)
+        if self._lose.get(can_id, 0) > 0:
+            self._lose[can_id] -= 1
+            return []
+        message = CanAerospaceMessage.build(can_id, node_id, ident.data_type,
+                                            self._value(ident.key, now), 0, code)
+        frames = [self._frame(message)]
+        if self._repeat.get(can_id, 0) > 0:
+            self._repeat[can_id] -= 1
+            frames.append(self._frame(message))
+        return frames
+
+    def _take_malformed(self) -> list[can.Message]:
+        frames = []
+        node = self.config.turret_node_id
+        patterns = [
+            bytes((node, DataType.FLOAT, 0)),  # shorter than a header
+            bytes((node, DataType.FLOAT, 0, 0, 0x41)),  # FLOAT with one data byte
+            bytes((node, 0x70, 0, 0, 1, 2, 3, 4)),  # user-defined type on a FLOAT id
+        ]
+        ids = [self._key_to_id["yaw_position"], self._key_to_id["yaw_velocity"],
+               self._key_to_id["pitch_position"]]
+        while self._malformed_pending > 0:
+            index = self._malformed_pending % len(patterns)
+            frames.append(can.Message(arbitration_id=ids[index], is_extended_id=False,
+                                      data=patterns[index]))
+            self._malformed_pending -= 1
+        return frames
+
+    # --- received frames -----------------------------------------------------------
+
+    def handle(self, frame: can.Message) -> list[can.Message]:
+        """Process one received frame; returns the immediate replies."""
+        if frame.is_error_frame or frame.is_remote_frame or frame.is_extended_id:
+            return []
+        try:
+            message = CanAerospaceMessage.from_frame(frame.arbitration_id, frame.data)
+        except CodecError as exc:
+            self.malformed_received += 1
+            LOG.debug("malformed frame ignored: %s", exc)
+            return []
+        with self._lock:
+            service = ns.service_channel_of(message.can_id)
+            if service is not None:
+                channel, is_request = service
+                if not is_request:
+                    return []
+                return [self._frame(reply) for reply in self._service(message, channel)]
+            ident = self._table.get(message.can_id)
+            if ident is None or ident.direction is not Direction.COMMAND:
+                return []
+            self._command(ident.key, message)
+            out, self._outbox = self._outbox, []
+            return out
+
+    def _command(self, key: str, message: CanAerospaceMessage) -> None:
+        ident = self._table[message.can_id]
+        if message.data_type != ident.data_type:
+            self._eed(EedCode.WRONG_DATA_TYPE, Operation.OTHER, 0)
+            return
+        value = message.value
+        self.received_commands.append((key, value))
+        if self._is_silent(self.config.turret_node_id, self._clock()) and key != "cover_control":
+            return
+        axis_name = YAW if key.startswith("yaw") else PITCH
+        axis = self.axes[axis_name]
+        if key.endswith("_position_setpoint"):
+            if not self._accepts(axis, Operation.POSITION):
+                return
+            if not (isinstance(value, float) and math.isfinite(value)
+                    and axis.in_range(value)):
+                self._eed(EedCode.SETPOINT_OUT_OF_RANGE, Operation.POSITION,
+                          LOCATION[axis_name])
+                return
+            axis.move_to(value)
+        elif key.endswith("_velocity_setpoint"):
+            if not self._accepts(axis, Operation.VELOCITY):
+                return
+            if not (isinstance(value, float) and math.isfinite(value)):
+                self._eed(EedCode.SETPOINT_OUT_OF_RANGE, Operation.VELOCITY,
+                          LOCATION[axis_name])
+                return
+            axis.jog(value)
+        elif key.endswith("_relative_setpoint"):
+            if not self._accepts(axis, Operation.RELATIVE):
+                return
+            if not (isinstance(value, float) and math.isfinite(value)):
+                self._eed(EedCode.SETPOINT_OUT_OF_RANGE, Operation.RELATIVE,
+                          LOCATION[axis_name])
+                return
+            axis.move_by(value)
+        elif key.endswith("_actuator_mode"):
+            if value not in tuple(ActuatorMode):
+                self._eed(EedCode.SETPOINT_OUT_OF_RANGE, Operation.MODE, LOCATION[axis_name])
+                return
+            axis.actuator_mode = int(value)  # type: ignore[arg-type]
+            axis.fault = False  # a mode command re-initialises the drive
+            axis.stop()
+        elif key == "stop_actuators":
+            bits = int(value)  # type: ignore[arg-type]
+            if bits & STOP_YAW_BIT:
+                self.axes[YAW].stop()
+            if bits & STOP_PITCH_BIT:
+                self.axes[PITCH].stop()
+        elif key == "remember_position" and value == 1:
+            self.saved_position = (self.axes[YAW].reported_position,
+                                   self.axes[PITCH].reported_position)
+        elif key == "restore_position" and value == 1:
+            if self.saved_position is not None:
+                for name, target in zip((YAW, PITCH), self.saved_position, strict=True):
+                    if self._accepts(self.axes[name], Operation.POSITION):
+                        self.axes[name].move_to(target)
+        elif key == "cover_control" and value in (0, 1):
+            target = CoverState.OPENED if value == 1 else CoverState.CLOSED
+            if target != self.cover_state:
+                self.cover_state = CoverState.MIDDLE
+                self._cover_target = target
+                self._cover_arrival = self._clock() + 1.0
+        elif key == "fan_control" and value in (0, 1):
+            self.fan_on = bool(value)
+        elif key == "oes_heater_control" and value in (0, 1):
+            self.oes_heater_on = bool(value)
+        elif key == "drives_heater_control" and value in (0, 1):
+            self.drives_heater_on = bool(value)
+        elif key == "charging_control" and value in (0, 1):
+            self.charging_on = bool(value)
+
+    def _accepts(self, axis: AxisModel, operation: int) -> bool:
+        if axis.enabled:
+            return True
+        self._eed(EedCode.COMMAND_REJECTED, operation, LOCATION[axis.name])
+        return False
+
+    def _nodes_addressed(self, node_id: int) -> list[int]:
+        mine = list(self.node_ids.values())
+        if node_id == ns.BROADCAST_NODE_ID:
+            return mine
+        return [node_id] if node_id in mine else []
+
+    def _ids_of_node(self, node_id: int) -> set[int]:
+        return {can_id for can_id in self._intervals if self._node_of(can_id) == node_id}
+
+    def _service(self, request: CanAerospaceMessage,
+                 channel: int) -> Iterable[CanAerospaceMessage]:
+        now = self._clock()
+        replies = []
+        for node_id in self._nodes_addressed(request.node_id):
+            if self._is_silent(node_id, now):
+                continue
+            reply = self._service_for_node(node_id, request, channel)
+            if reply is not None:
+                replies.append(reply)
+        return replies
+
+    def _service_for_node(self, node_id: int, request: CanAerospaceMessage,
+                          channel: int) -> CanAerospaceMessage | None:
+        service = request.service_code
+        if service == ns.ServiceCode.IDS:
+            info = ns.IdentificationInfo(self.config.hardware_revision,
+                                         self.config.software_revision, 0, 0)
+            return ns.ids_response(node_id, info, channel, request.message_code)
+        if service == ns.ServiceCode.TIS:
+            status = ns.ServiceStatus.OUT_OF_RANGE
+            if request.data_type == DataType.SHORT2:
+                can_id, interval = request.value  # type: ignore[misc]
+                valid_interval = interval == 0 or MIN_INTERVAL_MS <= interval <= MAX_INTERVAL_MS
+                if can_id in self._ids_of_node(node_id) and valid_interval:
+                    self._intervals[can_id] = interval
+                    self._next_due[can_id] = self._clock()
+                    status = ns.ServiceStatus.OK
+            return ns.tis_response(node_id, status, channel)
+        if service == ns.ServiceCode.FPS:
+            if request.message_code != self.config.fps_security_code:
+                return ns.fps_response(node_id, ns.ServiceStatus.INVALID_SECURITY_CODE, channel)
+            self.stored_configuration = {"node_ids": dict(self.node_ids),
+                                         "intervals": dict(self._intervals)}
+            return ns.fps_response(node_id, ns.ServiceStatus.OK, channel)
+        if service == ns.ServiceCode.NIS:
+            new_id = request.message_code
+            if not ns.NIS_MIN_NODE_ID <= new_id <= ns.NIS_MAX_NODE_ID:
+                return ns.nis_response(node_id, ns.ServiceStatus.OUT_OF_RANGE, channel)
+            reply = ns.nis_response(node_id, ns.ServiceStatus.OK, channel)
+            for name, current in self.node_ids.items():
+                if current == node_id:
+                    self.node_ids[name] = new_id
+                    if name == "turret":
+                        self.config.turret_node_id = new_id
+            return reply
+        return None  # other services are not implemented by this device
+
+    # --- fault injection -----------------------------------------------------------
+
+    def _node_id(self, node: str | int) -> int:
+        if isinstance(node, int):
+            return node
+        if node not in self.node_ids:
+            raise ValueError(f"unknown node {node!r}; nodes: {', '.join(self.node_ids)}")
+        return self.node_ids[node]
+
+    def set_silent(self, node: str | int, duration: float = math.inf) -> None:
+        """The node sends nothing and answers nothing for `duration` s (0 = resume)."""
+        with self._lock:
+            node_id = self._node_id(node)
+            self._silent_until[node_id] = self._clock() + duration if duration > 0 else 0.0
+
+    def silence_all(self, duration: float = math.inf) -> None:
+        for node in self.node_ids:
+            self.set_silent(node, duration)
+
+    def lose_frames(self, key: str, count: int = 1) -> None:
+        """Drop the next `count` broadcasts of `key` (their message codes are used up)."""
+        with self._lock:
+            self._lose[self._key_to_id[key]] = self._lose.get(self._key_to_id[key], 0) + count
+
+    def repeat_frames(self, key: str, count: int = 1) -> None:
+        """Send the next `count` broadcasts of `key` twice (same message code)."""
+        with self._lock:
+            can_id = self._key_to_id[key]
+            self._repeat[can_id] = self._repeat.get(can_id, 0) + count
+
+    def send_malformed(self, count: int = 3) -> None:
+        with self._lock:
+            self._malformed_pending += count
+
+    def emit_eed(self, error_code: int, operation: int = 0, location: int = 0,
+                 node: str | int = "turret") -> None:
+        with self._lock:
+            self._eed(error_code, operation, location, self._node_id(node))
+
+    def set_axis_fault(self, axis: str, fault: bool = True) -> None:
+        """A drive fault disables the axis (status bit 7 off) and sends an EED."""
+        with self._lock:
+            model = self.axes[axis]
+            model.fault = fault
+            if fault:
+                model.stop()
+                self._eed(EedCode.DRIVE_FAULT, Operation.NONE, LOCATION[axis])
+
+    def set_case_sensor_fault(self, fault: bool = True) -> None:
+        with self._lock:
+            self.case_sensor_fault = fault
+
+    def clear_faults(self) -> None:
+        with self._lock:
+            self._silent_until.clear()
+            self._lose.clear()
+            self._repeat.clear()
+            self._malformed_pending = 0
+            self.case_sensor_fault = False
+            for axis in self.axes.values():
+                axis.fault = False
+
+    def state(self) -> dict[str, object]:
+        """Snapshot for tests and the control port."""
+        with self._lock:
+            return {
+                "axes": {name: {"position": a.reported_position, "velocity": a.velocity,
+                                "mode": a.mode, "actuator_mode": int(a.actuator_mode),
+                                "fault": a.fault, "revolutions": a.revolutions}
+                         for name, a in self.axes.items()},
+                "cover_state": int(self.cover_state), "fan_on": self.fan_on,
+                "oes_heater_on": self.oes_heater_on, "charging_on": self.charging_on,
+                "drives_heater_on": self.drives_heater_on,
+                "saved_position": self.saved_position, "node_ids": dict(self.node_ids),
+                "intervals_ms": {self._table[i].key: v for i, v in self._intervals.items()},
+                "stored_configuration": self.stored_configuration is not None,
+                "commands_received": len(self.received_commands),
+                "malformed_received": self.malformed_received,
+            }
+
+
+# --- transports --------------------------------------------------------------------
+
+class BusSimRunner:
+    """Runs a simulator on a python-can bus (virtual, socketcan, ...) in a thread."""
+
+    def __init__(self, simulator: TurretSimulator, bus: can.BusABC,
+                 period: float = 0.005) -> None:
+        self.simulator = simulator
+        self.bus = bus
+        self.period = period
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="canaero-sim-bus",
+                                        daemon=True)
+
+    def start(self) -> BusSimRunner:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+
+    def _send(self, frames: Iterable[can.Message]) -> None:
+        for frame in frames:
+            try:
+                self.bus.send(frame, timeout=0.1)
+            except can.CanError as exc:
+                LOG.warning("simulator could not send: %s", exc)
+
+    def _run(self) -> None:
+        next_poll = time.monotonic()
+        while not self._stop.is_set():
+            timeout = max(0.0, next_poll - time.monotonic())
+            try:
+                frame = self.bus.recv(timeout=timeout)
+            except (can.CanError, OSError, ValueError) as exc:
+                LOG.warning("simulator receive error: %s", exc)
+                time.sleep(self.period)
+                frame = None
+            if frame is not None:
+                self._send(self.simulator.handle(frame))
+            now = time.monotonic()
+            if now >= next_poll:
+                next_poll = now + self.period
+                self._send(self.simulator.poll(now))
+
+
+def encode_slcan(frame: can.Message) -> bytes:
+    """A frame as an slcan (Lawicel) ASCII record."""
+    data = bytes(frame.data)
+    if frame.is_extended_id:
+        head = f"T{frame.arbitration_id:08X}{len(data)}"
+    else:
+        head = f"t{frame.arbitration_id:03X}{len(data)}"
+    return (head + data.hex().upper()).encode("ascii") + b"\r"
+
+
+class SlcanSession:
+    """The adapter side of slcan: parses host commands, forwards frames both ways.
+
+    Commands answered: O/L (open), C (close), S0-S8/sXXXX (bitrate), V/v/N (version,
+    serial), F (status flags), Z/M/m/X/Q (accepted, no effect); tIIIL..., TIIIIIIIIL...
+    (transmit). Unknown or malformed records get BEL (0x07), as a Lawicel adapter does.
+    """
+
+    MAX_LINE = 64
+
+    def __init__(self, simulator: TurretSimulator) -> None:
+        self.simulator = simulator
+        self.is_open = False
+        self._buffer = bytearray()
+        self.rejected_records = 0
+
+    def on_bytes(self, data: bytes) -> bytes:
+        self._buffer.extend(data)
+        out = bytearray()
+        while True:
+            end = self._buffer.find(b"\r")
+            if end < 0:
+                if len(self._buffer) > self.MAX_LINE:
+                    self._buffer.clear()
+                    self.rejected_records += 1
+                    out += b"\a"
+                break
+            record = bytes(self._buffer[:end])
+            del self._buffer[:end + 1]
+            out += self._record(record.strip(b"\n"))
+        return bytes(out)
+
+    def _record(self, record: bytes) -> bytes:
+        if not record:
+            return b"\r"
+        command, rest = chr(record[0]), record[1:]
+        if command in "OL":
+            self.is_open = True
+            return b"\r"
+        if command == "C":
+            self.is_open = False
+            return b"\r"
+        if command in "SsZMmXQ":
+            return b"\r"
+        if command in "Vv":
+            return b"V1013\r"
+        if command == "N":
+            return b"NSIM1\r"
+        if command == "F":
+            return b"F00\r"
+        if command in "tT":
+            frame = self._parse_frame(command, rest)
+            if frame is None:
+                self.rejected_records += 1
+                return b"\a"
+            replies = self.simulator.handle(frame) if self.is_open else []
+            return b"z\r" + b"".join(encode_slcan(f) for f in replies)
+        self.rejected_records += 1
+        return b"\a"
+
+    @staticmethod
+    def _parse_frame(command: str, rest: bytes) -> can.Message | None:
+        id_len = 3 if command == "t" else 8
+        try:
+            text = rest.decode("ascii")
+            can_id = int(text[:id_len], 16)
+            dlc = int(text[id_len])
+            payload = bytes.fromhex(text[id_len + 1:id_len + 1 + 2 * dlc])
+        except (ValueError, IndexError, UnicodeDecodeError):
+            return None
+        if dlc > 8 or len(payload) != dlc:
+            return None
+        return can.Message(arbitration_id=can_id, is_extended_id=command == "T", data=payload)
+
+    def poll(self) -> bytes:
+        frames = self.simulator.poll()
+        if not self.is_open:
+            return b""
+        return b"".join(encode_slcan(frame) for frame in frames)
+
+
+# --- control port ------------------------------------------------------------------
+
+class ControlServer:
+    """Line commands on 127.0.0.1 to drive fault injection from another process.
+
+    Commands (answer: "ok" or "error <why>", `state` answers one JSON line):
+      silence <node|all> [seconds]   node = turret|cover|rover_gnss|base_gnss|zoom
+      resume [node|all]
+      lose <key> [count]             key = identifier key, e.g. yaw_position
+      repeat <key> [count]
+      malformed [count]
+      eed <error_code> [operation] [location] [node]
+      fault <yaw|pitch> [on|off]
+      case_sensor_fault [on|off]
+      drop_link [offline_seconds]    (pty transport only)
+      garbage [text]                 (pty transport only)
+      clear
+      state
+    """
+
+    def __init__(self, simulator: TurretSimulator, port: int = 0,
+                 link: object | None = None) -> None:
+        self.simulator = simulator
+        self.link = link  # a PtySimServer (drop_link/inject) or None
+        outer = self
+
+        class Handler(socketserver.StreamRequestHandler):
+            def handle(self) -> None:
+                for raw in self.rfile:
+                    line = raw.decode("utf-8", "replace").strip()
+                    if not line:
+                        continue
+                    self.wfile.write((outer.execute(line) + "\n").encode())
+
+        class Server(socketserver.ThreadingTCPServer):
+            allow_reuse_address = True
+            daemon_threads = True
+
+        self._server = Server(("127.0.0.1", port), Handler)
+        self._thread = threading.Thread(target=self._server.serve_forever, daemon=True,
+                                        name="canaero-sim-control")
+
+    @property
+    def port(self) -> int:
+        return self._server.server_address[1]
+
+    def start(self) -> ControlServer:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        if self._thread.is_alive():
+            self._server.shutdown()
+        self._server.server_close()
+
+    def execute(self, line: str) -> str:
+        words = line.split()
+        command, args = words[0].lower(), words[1:]
+        sim = self.simulator
+        try:
+            if command == "silence":
+                node = args[0] if args else "all"
+                duration = float(args[1]) if len(args) > 1 else math.inf
+                if node == "all":
+                    sim.silence_all(duration)
+                else:
+                    sim.set_silent(node, duration)
+            elif command == "resume":
+                node = args[0] if args else "all"
+                if node == "all":
+                    sim.silence_all(0)
+                else:
+                    sim.set_silent(node, 0)
+            elif command == "lose":
+                sim.lose_frames(args[0], int(args[1]) if len(args) > 1 else 1)
+            elif command == "repeat":
+                sim.repeat_frames(args[0], int(args[1]) if len(args) > 1 else 1)
+            elif command == "malformed":
+                sim.send_malformed(int(args[0]) if args else 3)
+            elif command == "eed":
+                numbers = [int(a, 0) for a in args[:3]]
+                node = args[3] if len(args) > 3 else "turret"
+                sim.emit_eed(*numbers, node=node)
+            elif command == "fault":
+                sim.set_axis_fault(args[0], not (len(args) > 1 and args[1] == "off"))
+            elif command == "case_sensor_fault":
+                sim.set_case_sensor_fault(not (args and args[0] == "off"))
+            elif command == "drop_link":
+                if self.link is None:
+                    return "error drop_link needs the pty transport"
+                self.link.drop_link(float(args[0]) if args else 0.0)  # type: ignore[attr-defined]
+            elif command == "garbage":
+                if self.link is None:
+                    return "error garbage needs the pty transport"
+                text = " ".join(args) if args else "t1Z\rxx\r\x00\xff"
+                self.link.inject(text.encode("latin-1"))  # type: ignore[attr-defined]
+            elif command == "clear":
+                sim.clear_faults()
+            elif command == "state":
+                return json.dumps(sim.state())
+            else:
+                return f"error unknown command {command!r}"
+        except (IndexError, ValueError, KeyError) as exc:
+            return f"error {command}: {exc}"
+        return "ok"
+
+
+class ControlClient:
+    """Small client for `ControlServer` (used by tests and scripts)."""
+
+    def __init__(self, port: int, host: str = "127.0.0.1", timeout: float = 5.0) -> None:
+        self._sock = socket.create_connection((host, port), timeout=timeout)
+        self._file = self._sock.makefile("rwb")
+
+    def command(self, line: str) -> str:
+        self._file.write(line.encode() + b"\n")
+        self._file.flush()
+        return self._file.readline().decode().strip()
+
+    def state(self) -> dict[str, object]:
+        return json.loads(self.command("state"))
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            self._file.close()
+            self._sock.close()
+
+
+# --- command line ------------------------------------------------------------------
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="canaero_turret_sim",
+        description="CANaerospace turret simulator (turret, cover, GNSS and zoom nodes).")
+    parser.add_argument("--transport", choices=("slcan-pty", "bus"), default="slcan-pty",
+                        help="slcan over a pseudo-terminal (default), or a python-can bus")
+    parser.add_argument("--link", default=None,
+                        help="path of the pty symlink for slcan-pty (default: a temp path)")
+    parser.add_argument("--interface", default="virtual",
+                        help="python-can interface for --transport bus (e.g. socketcan)")
+    parser.add_argument("--channel", default="vcan0", help="python-can channel for bus")
+    parser.add_argument("--control-port", type=int, default=0,
+                        help="TCP port on 127.0.0.1 for fault-injection commands (0 = any)")
+    parser.add_argument("--turret-node-id", type=int, default=TURRET_NODE_ID)
+    parser.add_argument("--zoom-position-id", type=int, default=DEFAULT_ZOOM_POSITION_ID)
+    parser.add_argument("--fps-security-code", type=int, default=DEFAULT_FPS_SECURITY_CODE)
+    parser.add_argument("--pad-frames", action="store_true",
+                        help="send 8-byte frames (zero padded) like the ICD examples")
+    parser.add_argument("--ready-file", default=None,
+                        help="write a JSON line with link path and control port when ready")
+    parser.add_argument("-v", "--verbose", action="store_true")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    config = SimConfig(turret_node_id=args.turret_node_id,
+                       zoom_position_id=args.zoom_position_id,
+                       fps_security_code=args.fps_security_code, pad_frames=args.pad_frames)
+    simulator = TurretSimulator(config)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    link = None
+    runner = None
+    bus = None
+    if args.transport == "slcan-pty":
+        from gimbal_driver_common.sim_server import PtySimServer
+
+        link = PtySimServer(lambda: SlcanSession(simulator), link_path=args.link).start()
+        endpoint = {"interface": "slcan", "channel": link.port_name}
+    else:
+        bus = can.Bus(interface=args.interface, channel=args.channel)
+        runner = BusSimRunner(simulator, bus).start()
+        endpoint = {"interface": args.interface, "channel": args.channel}
+    control = ControlServer(simulator, args.control_port, link).start()
+    endpoint["control_port"] = control.port
+    LOG.info("simulator ready: %s", json.dumps(endpoint))
+    print(json.dumps(endpoint), flush=True)
+    if args.ready_file:
+        with open(args.ready_file + ".tmp", "w", encoding="utf-8") as handle:
+            handle.write(json.dumps(endpoint) + "\n")
+        os.replace(args.ready_file + ".tmp", args.ready_file)
+    try:
+        while not stop.wait(0.2):
+            pass
+    finally:
+        control.stop()
+        if link is not None:
+            link.stop()
+        if runner is not None:
+            runner.stop()
+        if bus is not None:
+            bus.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

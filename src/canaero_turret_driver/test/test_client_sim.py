@@ -1,0 +1,323 @@
+"""Client against the simulator on a python-can virtual bus (one process)."""
+
+import math
+import time
+
+import can
+import pytest
+
+from canaero_turret_driver.client import (
+    ClientConfig,
+    CommandError,
+    LinkError,
+    NotAllowedError,
+    ServiceError,
+    TurretClient,
+)
+from canaero_turret_driver.protocol import ActuatorMode, AxisStatus, CanAerospaceMessage
+from canaero_turret_driver.sim import EedCode
+
+
+def wait_for(condition, timeout=5.0, interval=0.01):
+    """Wait *up to* `timeout` s for `condition()` to be truthy; returns its last value."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value or time.monotonic() > deadline:
+            return value
+        time.sleep(interval)
+
+
+def _si(client, key):
+    sample = client.latest(key)
+    return None if sample is None else sample.si
+
+
+def _enabled(client, key):
+    sample = client.latest(key)
+    return None if sample is None else AxisStatus.decode(sample.value).enabled
+
+
+def _value(client, key):
+    sample = client.latest(key)
+    return None if sample is None else sample.value
+
+
+def _target(client, key):
+    sample = client.latest(key)
+    return None if sample is None else AxisStatus.decode(sample.value).target_name
+
+
+def test_identify_and_data_arrive(client):
+    info = client.identify()
+    assert (info.hardware_revision, info.software_revision) == (2, 7)
+    assert info.identifier_distribution == 0 and info.header_type == 0
+    for key in ("yaw_position", "pitch_position", "cover_state", "latitude", "global_yaw",
+                "zoom_position", "periphery_status"):
+        assert wait_for(lambda k=key: client.latest(k) is not None), key
+    assert not client.node_silent()
+    assert client.latest("latitude").si == pytest.approx(48.1372)
+    assert client.latest("altitude_msl").si == pytest.approx(519.0)
+    assert client.identify(node_id=6).hardware_revision == 2  # base GNSS node answers too
+
+
+def test_absolute_move_reaches_target(client, simulator):
+    wait_for(lambda: client.latest("yaw_position") is not None)
+    client.move_to("yaw", 0.5)
+    client.move_to("pitch", -0.2)
+    assert wait_for(lambda: abs((_si(client, "yaw_position") or 9) - 0.5) < 1e-3)
+    assert wait_for(lambda: abs((_si(client, "pitch_position") or 9) + 0.2) < 1e-3)
+    assert wait_for(lambda: _target(client, "yaw_status") == "reached")
+
+
+def test_yaw_takes_shortest_path_across_180(client, simulator):
+    client.move_to("yaw", math.radians(170))
+    assert wait_for(lambda: abs(simulator.state()["axes"]["yaw"]["position"] - 170) < 0.01)
+    client.move_to("yaw", math.radians(-170))
+    assert wait_for(lambda: abs(simulator.state()["axes"]["yaw"]["position"] + 170) < 0.01)
+    assert simulator.state()["axes"]["yaw"]["revolutions"] == 1
+    assert wait_for(lambda: _value(client, "yaw_revolutions") == 1)
+
+
+def test_jog_then_stop(client, simulator):
+    client.jog("pitch", math.radians(10))
+    assert wait_for(lambda: (_si(client, "pitch_velocity") or 0) > math.radians(9))
+    assert wait_for(lambda: _target(client, "pitch_status") == "jog")
+    client.stop(["pitch"])
+    assert wait_for(lambda: simulator.state()["axes"]["pitch"]["velocity"] == 0.0)
+    assert wait_for(lambda: _si(client, "pitch_velocity") == 0.0)
+
+
+def test_relative_move(client, simulator):
+    client.move_by("yaw", math.radians(30))
+    assert wait_for(lambda: abs(simulator.state()["axes"]["yaw"]["position"] - 30) < 1e-3)
+    client.move_by("yaw", math.radians(-10))
+    assert wait_for(lambda: abs(simulator.state()["axes"]["yaw"]["position"] - 20) < 1e-3)
+
+
+def test_free_run_rejects_moves_with_eed(client, simulator):
+    client.set_actuator_mode("yaw", ActuatorMode.FREE_RUN)
+    assert wait_for(lambda: _value(client, "yaw_actuator_mode_state") == 0)
+    client.move_to("yaw", 1.0)
+    assert wait_for(lambda: any(e.error_code == EedCode.COMMAND_REJECTED
+                                for e in client.events))
+    event = client.events[-1]
+    assert (event.node_id, event.location_id) == (1, 1)
+    assert wait_for(lambda: _enabled(client, "yaw_status") is False)
+    client.set_actuator_mode("yaw", ActuatorMode.AUTO_BRAKE)
+    client.move_to("yaw", 0.3)
+    assert wait_for(lambda: abs(simulator.state()["axes"]["yaw"]["position"]
+                                - math.degrees(0.3)) < 1e-3)
+
+
+def test_remember_and_restore_position(client, simulator):
+    client.move_to("yaw", 0.4)
+    assert wait_for(lambda: abs(simulator.state()["axes"]["yaw"]["position"]
+                                - math.degrees(0.4)) < 1e-3)
+    client.remember_position()
+    assert wait_for(lambda: simulator.state()["saved_position"] is not None)
+    client.move_to("yaw", -0.4)
+    assert wait_for(lambda: abs(simulator.state()["axes"]["yaw"]["position"]
+                                + math.degrees(0.4)) < 1e-3)
+    client.restore_position()
+    assert wait_for(lambda: abs(simulator.state()["axes"]["yaw"]["position"]
+                                - math.degrees(0.4)) < 1e-3)
+
+
+def test_periphery_commands(client):
+    client.set_fan(True)
+    client.set_oes_heater(True)
+    client.set_charging(True)
+    client.set_cover(True)
+    assert wait_for(lambda: _value(client, "fan_state") == 1)
+    assert wait_for(lambda: ((_value(client, "periphery_status") or 0) & 0x87) == 0x87)
+    assert wait_for(lambda: _value(client, "charging_state") == 1)
+    assert wait_for(lambda: _value(client, "cover_state") == 2)  # middle first
+    assert wait_for(lambda: _value(client, "cover_state") == 1)
+
+
+def test_transmission_interval_service(client, simulator):
+    client.set_transmission_interval("case_temperature", 50)
+    assert simulator.state()["intervals_ms"]["case_temperature"] == 50
+    client.set_transmission_interval("cover_state", 0)
+    assert simulator.state()["intervals_ms"]["cover_state"] == 0
+    assert not client.is_stale("cover_state")  # disabled on purpose: not stale
+    with pytest.raises(ServiceError, match="out of range"):
+        client.set_transmission_interval("yaw_position", 5)
+    with pytest.raises(CommandError):
+        client.set_transmission_interval("yaw_position_setpoint", 50)
+
+
+def test_node_id_and_flash_services_need_opt_in(client, simulator):
+    before = simulator.state()["commands_received"]
+    with pytest.raises(NotAllowedError):
+        client.set_node_id(9)
+    with pytest.raises(NotAllowedError):
+        client.store_configuration(0x5A)
+    assert simulator.state()["node_ids"]["turret"] == 1
+    assert simulator.state()["commands_received"] == before
+
+
+def test_node_id_and_flash_services_when_enabled(simulator, channel_name):
+    config = ClientConfig(interface="virtual", channel=channel_name, service_timeout=0.5,
+                          allow_node_id_change=True, allow_flash_programming=True)
+    turret = TurretClient(config)
+    turret.open()
+    try:
+        with pytest.raises(ServiceError, match="invalid security code"):
+            turret.store_configuration(0x11)
+        turret.store_configuration(0x5A)
+        assert simulator.state()["stored_configuration"]
+        with pytest.raises(CommandError):
+            turret.set_node_id(200)
+        turret.set_node_id(9)
+        assert simulator.state()["node_ids"]["turret"] == 9
+        assert turret.config.turret_node_id == 9
+        assert turret.identify().software_revision == 7
+        assert wait_for(lambda: turret.latest("yaw_position") is not None
+                        and turret.latest("yaw_position").node_id == 9)
+    finally:
+        turret.close()
+
+
+def test_invalid_commands_send_nothing(client, simulator):
+    wait_for(lambda: client.latest("yaw_position") is not None)
+    before = simulator.state()["commands_received"]
+    for bad in (lambda: client.move_to("yaw", 4.0), lambda: client.move_to("yaw", math.nan),
+                lambda: client.jog("pitch", math.inf), lambda: client.move_to("roll", 0.1),
+                lambda: client.set_actuator_mode("yaw", 7),
+                lambda: client.command("yaw_position", 1.0)):
+        with pytest.raises(CommandError):
+            bad()
+    assert simulator.state()["commands_received"] == before
+
+
+def test_silence_goes_stale_and_recovers(client, simulator):
+    client.config.node_timeout = 0.3
+    client.config.stale_timeout = 0.3
+    assert wait_for(lambda: not client.node_silent())
+    simulator.set_silent("turret")
+    assert wait_for(lambda: client.node_silent() and client.is_stale("yaw_position"))
+    assert not client.node_silent(2)  # cover keeps talking
+    with pytest.raises(ServiceError, match="no IDS response"):
+        client.identify()
+    simulator.set_silent("turret", 0)
+    assert wait_for(lambda: not client.node_silent() and not client.is_stale("yaw_position"))
+    assert client.identify().hardware_revision == 2
+
+
+def test_lost_repeated_frames_and_malformed_frames_are_counted(client, simulator):
+    assert wait_for(lambda: client.latest("yaw_position") is not None)
+    events = []
+    client.on_sequence = lambda key, event, missed: events.append((key, event.value, missed))
+    simulator.lose_frames("yaw_position", 3)
+    simulator.repeat_frames("pitch_position", 2)
+    simulator.send_malformed(3)
+    assert wait_for(lambda: client.sequences.stats((1, 1303)).lost >= 3)
+    assert wait_for(lambda: client.sequences.stats((1, 1313)).repeated >= 2)
+    assert wait_for(lambda: client.counters.malformed >= 3)
+    assert client.counters.type_mismatch >= 1
+    assert ("yaw_position", "lost", 3) in events
+    # Values still flow after the faults.
+    code = client.latest("yaw_position").message_code
+    assert wait_for(lambda: client.latest("yaw_position").message_code != code)
+
+
+def test_injected_eed_and_axis_fault(client, simulator):
+    simulator.emit_eed(0x1234, 5, 6)
+    assert wait_for(lambda: any(e.error_code == 0x1234 for e in client.events))
+    simulator.set_axis_fault("pitch")
+    assert wait_for(lambda: any(e.error_code == EedCode.DRIVE_FAULT for e in client.events))
+    assert wait_for(lambda: _enabled(client, "pitch_status") is False)
+    client.set_actuator_mode("pitch", ActuatorMode.AUTO_BRAKE)  # re-initialises the drive
+    assert wait_for(lambda: _enabled(client, "pitch_status") is True)
+
+
+def test_unknown_and_out_of_scope_ids_are_ignored(client, spy_bus):
+    assert wait_for(lambda: client.latest("yaw_position") is not None)
+    before = client.counters.unknown
+    for can_id in (1401, 1402, 1406, 1410, 1411, 1412, 1416, 1417, 1418, 1999):
+        frame = CanAerospaceMessage.build(can_id, 1, 10, 1).to_bytes()
+        spy_bus.send(can.Message(arbitration_id=can_id, is_extended_id=False, data=frame))
+    assert wait_for(lambda: client.counters.unknown >= before + 10)
+    assert all(key not in client.snapshot() for key in ("fuse", "bolt", "trigger"))
+    # A data id from the wrong node is not taken as the turret's.
+    frame = CanAerospaceMessage.build(1303, 42, 2, 99.0).to_bytes()
+    spy_bus.send(can.Message(arbitration_id=1303, is_extended_id=False, data=frame))
+    assert wait_for(lambda: client.counters.foreign_node >= 1)
+
+
+def test_commands_use_master_node_id_and_rolling_codes(client, spy_bus):
+    client.move_to("yaw", 0.1)
+    client.move_to("yaw", 0.2)
+    seen = []
+    for _ in range(200):
+        frame = spy_bus.recv(timeout=0.5)
+        if frame is None:
+            break
+        if frame.arbitration_id == 1300:
+            seen.append(bytes(frame.data))
+        if len(seen) == 2:
+            break
+    assert [f[0] for f in seen] == [100, 100]
+    assert [f[3] for f in seen] == [0, 1]
+    assert len(seen[0]) == 8  # FLOAT: 4 header + 4 data bytes
+
+
+class _FlakyBus(can.BusABC):
+    """A bus that fails once on receive, then reports bus-off, then works."""
+
+    def __init__(self, channel, script):
+        self._inner = can.Bus(interface="virtual", channel=channel)
+        self._script = script
+        super().__init__(channel=channel)
+
+    def _recv_internal(self, timeout):
+        if self._script:
+            action = self._script.pop(0)
+            if action == "raise":
+                raise can.CanOperationError("adapter unplugged")
+            if action == "busoff":
+                return can.Message(is_error_frame=True, arbitration_id=0x40), False
+        return self._inner._recv_internal(timeout)
+
+    def send(self, msg, timeout=None):
+        self._inner.send(msg, timeout)
+
+    def shutdown(self):
+        self._inner.shutdown()
+        super().shutdown()
+
+
+def test_interface_errors_are_survived_with_reconnect(simulator, channel_name):
+    script = ["raise", "busoff"]
+    links = []
+    config = ClientConfig(interface="virtual", channel=channel_name, reconnect_period=0.05,
+                          service_timeout=0.5)
+    turret = TurretClient(config, bus_factory=lambda cfg: _FlakyBus(cfg.channel, script))
+    turret.on_link = lambda up, why: links.append((up, why))
+    turret.open()
+    try:
+        assert wait_for(lambda: turret.counters.reconnects >= 2)
+        assert turret.counters.bus_errors >= 1
+        assert any("bus-off" in why for up, why in links if not up)
+        assert wait_for(lambda: turret.latest("yaw_position") is not None)
+        assert turret.identify().software_revision == 7
+    finally:
+        turret.close()
+
+
+def test_send_without_interface_is_a_clear_error():
+    turret = TurretClient(ClientConfig(interface="virtual", channel="unused"))
+    with pytest.raises(LinkError, match="not open"):
+        turret.move_to("yaw", 0.1)
+
+
+def test_open_failure_is_a_link_error():
+    def broken(config):
+        raise can.CanInitializationError("no such device can9")
+
+    turret = TurretClient(ClientConfig(channel="can9"), bus_factory=broken)
+    with pytest.raises(LinkError, match="can9"):
+        turret.open()
+    turret.close()

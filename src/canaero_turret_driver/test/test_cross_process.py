@@ -1,0 +1,125 @@
+"""Client against `canaero_turret_sim` in another process, over slcan on a pseudo-terminal.
+
+This is the real cross-process transport of this machine (no SocketCAN here): the
+simulator speaks slcan ASCII on the pty master, the client uses python-can's `slcan`
+interface on the pty slave, and faults are injected through the simulator's control
+port on 127.0.0.1.
+"""
+
+import json
+import os
+import pathlib
+import subprocess
+import sys
+import time
+
+import pytest
+
+import canaero_turret_driver
+import gimbal_driver_common
+from canaero_turret_driver.client import ClientConfig, ServiceError, TurretClient
+from canaero_turret_driver.sim import ControlClient
+
+
+def wait_for(condition, timeout=8.0, interval=0.02):
+    """Wait *up to* `timeout` s for `condition()` to be truthy; returns its last value."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = condition()
+        if value or time.monotonic() > deadline:
+            return value
+        time.sleep(interval)
+
+
+def _python_path() -> str:
+    paths = [str(pathlib.Path(module.__file__).resolve().parent.parent)
+             for module in (canaero_turret_driver, gimbal_driver_common)]
+    return os.pathsep.join([*paths, os.environ.get("PYTHONPATH", "")])
+
+
+@pytest.fixture
+def sim_process(tmp_path):
+    ready = tmp_path / "ready.json"
+    env = dict(os.environ, PYTHONPATH=_python_path())
+    process = subprocess.Popen(
+        [sys.executable, "-m", "canaero_turret_driver.sim", "--link", str(tmp_path / "tty"),
+         "--ready-file", str(ready)],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        assert wait_for(ready.exists, timeout=20.0), "simulator did not start"
+        endpoint = json.loads(ready.read_text())
+        control = ControlClient(endpoint["control_port"])
+        yield endpoint, control
+        control.close()
+    finally:
+        process.terminate()
+        try:
+            process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+@pytest.fixture
+def remote_client(sim_process):
+    endpoint, _ = sim_process
+    config = ClientConfig(interface="slcan", channel=endpoint["channel"],
+                          bus_options={"sleep_after_open": 0}, service_timeout=0.5,
+                          reconnect_period=0.2, node_timeout=0.5, stale_timeout=0.5)
+    client = TurretClient(config)
+    client.open()
+    yield client
+    client.close()
+
+
+def test_identify_move_and_data_across_processes(sim_process, remote_client):
+    _, control = sim_process
+    assert remote_client.identify().software_revision == 7
+    assert wait_for(lambda: remote_client.latest("yaw_position") is not None)
+    remote_client.move_to("yaw", 0.35)
+    assert wait_for(lambda: abs(remote_client.latest("yaw_position").si - 0.35) < 1e-3)
+    assert abs(control.state()["axes"]["yaw"]["position"] - 20.0535) < 0.01
+
+
+def test_silence_and_recovery_across_processes(sim_process, remote_client):
+    _, control = sim_process
+    assert wait_for(lambda: not remote_client.node_silent())
+    assert control.command("silence turret") == "ok"
+    assert wait_for(lambda: remote_client.node_silent())
+    with pytest.raises(ServiceError):
+        remote_client.identify()
+    assert control.command("resume") == "ok"
+    assert wait_for(lambda: not remote_client.node_silent()
+                    and not remote_client.is_stale("yaw_position"))
+
+
+def test_lost_frames_garbage_and_eed_across_processes(sim_process, remote_client):
+    _, control = sim_process
+    assert wait_for(lambda: remote_client.latest("yaw_position") is not None)
+    assert control.command("lose yaw_position 4") == "ok"
+    assert wait_for(lambda: remote_client.sequences.stats((1, 1303)).lost >= 4)
+    assert control.command("garbage") == "ok"
+    assert wait_for(lambda: remote_client.counters.malformed >= 1)
+    code = remote_client.latest("yaw_position").message_code
+    assert wait_for(lambda: remote_client.latest("yaw_position").message_code != code)
+    before = remote_client.counters.malformed
+    assert control.command("malformed 3") == "ok"
+    assert wait_for(lambda: remote_client.counters.malformed >= before + 3)
+    assert control.command("eed 0x42 1 2") == "ok"
+    assert wait_for(lambda: any(e.error_code == 0x42 for e in remote_client.events))
+    code = remote_client.latest("yaw_position").message_code
+    assert wait_for(lambda: remote_client.latest("yaw_position").message_code != code)
+    assert control.command("bogus").startswith("error")
+
+
+def test_link_drop_reconnects_by_itself(sim_process, remote_client):
+    _, control = sim_process
+    links = []
+    remote_client.on_link = lambda up, why: links.append(up)
+    assert wait_for(lambda: remote_client.latest("yaw_position") is not None)
+    assert control.command("drop_link 0.5") == "ok"
+    assert wait_for(lambda: False in links)
+    assert wait_for(lambda: remote_client.connected and True in links, timeout=15.0)
+    assert wait_for(lambda: not remote_client.is_stale("yaw_position"), timeout=10.0)
+    assert remote_client.counters.reconnects >= 1
+    assert remote_client.identify().hardware_revision == 2
