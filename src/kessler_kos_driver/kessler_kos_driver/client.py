@@ -226,6 +226,9 @@ class KosClient:
         self._motor_parts: list = []
         self._request_lock = threading.Lock()
         self._last_tx = 0.0
+        self._last_rx = 0.0
+        self._unanswered_since: float | None = None   # first send after the last receive
+        self.silence_timeout = max(2.0 * reply_timeout, 1.0)
         self._reader: threading.Thread | None = None
         self._ticker: threading.Thread | None = None
         self._supervisor: threading.Thread | None = None
@@ -270,6 +273,7 @@ class KosClient:
             self._latest.clear()
             self._motor_parts = []
             self._session_stop = threading.Event()
+            self._unanswered_since = None
         self._reader = threading.Thread(target=self._read_loop, args=(stream,
                                          self._session_stop), name='kos-reader', daemon=True)
         self._reader.start()
@@ -379,6 +383,8 @@ class KosClient:
             self._link_lost(str(exc))
             raise NotConnected(f'link to {self.description} lost: {exc}') from exc
         self._last_tx = time.monotonic()
+        if self._unanswered_since is None:
+            self._unanswered_since = self._last_tx
 
     def request(self, message: Message, timeout: float | None = None) -> Message:
         """Send a Get and wait for the next complete response with the same MessageID."""
@@ -416,6 +422,8 @@ class KosClient:
                 return
             if not data:
                 continue
+            self._last_rx = time.monotonic()
+            self._unanswered_since = None
             before = parser.discarded_bytes
             for frame in parser.feed(data):
                 try:
@@ -443,10 +451,15 @@ class KosClient:
                          daemon=True).start()
 
     def _tick_loop(self, stop: threading.Event) -> None:
-        """State polling (GetMotorInfo) and the keep-alive (GetNetworkInfo when idle)."""
+        """State polling (GetMotorInfo), the keep-alive (GetNetworkInfo when idle) and the
+        silent-device check (requests sent, nothing received for silence_timeout)."""
         next_poll = time.monotonic()
         while not stop.wait(0.02):
             now = time.monotonic()
+            waiting = self._unanswered_since
+            if waiting is not None and now - waiting > self.silence_timeout:
+                self._link_lost(f'device silent: no reply for {now - waiting:.1f} s')
+                return
             try:
                 if self.poll_period > 0 and now >= next_poll:
                     next_poll = now + self.poll_period
@@ -480,7 +493,7 @@ class KosClient:
                 callback = self.on_playback and (lambda: self.on_playback(message))
             elif isinstance(message, MotorPosition):
                 motor = self.motors.get(message.motor_address)
-                if motor is not None:
+                if motor is not None and math.isfinite(message.position):
                     motor.position, motor.velocity, motor.stamp = message.position, 0.0, now
                 self._completed(-1000 - message.motor_address, message)
                 callback = self.on_motor_update
@@ -531,6 +544,12 @@ class KosClient:
         seen = set()
         for entry in entries:
             seen.add(entry.address)
+            values = (entry.position, entry.begin_position, entry.end_position,
+                      entry.max_setup_speed, entry.max_move_speed, entry.max_acceleration)
+            if not all(math.isfinite(v) for v in values):
+                LOG.warning('ignoring MotorInfo for motor %d with non-finite values',
+                            entry.address)
+                continue
             motor = self.motors.setdefault(entry.address, MotorState(entry.address))
             if motor.stamp and now > motor.stamp:
                 motor.velocity = (entry.position - motor.position) / (now - motor.stamp)
@@ -561,7 +580,7 @@ class KosClient:
             pb.loaded = pb.set_up = False    # the move must be sent again
         for address, position in note.positions.items():
             motor = self.motors.get(address)
-            if motor is not None:
+            if motor is not None and math.isfinite(position):
                 motor.position, motor.stamp = position, now
 
     # ------------------------------------------------------------------- queries

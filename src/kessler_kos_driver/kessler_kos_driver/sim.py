@@ -577,6 +577,9 @@ class KosDevice:
             motor = self._motor_for(message.motor_address, session)
             if motor is None:
                 return True
+            values = (message.position, message.speed, message.acceleration)
+            if not all(math.isfinite(v) for v in values):
+                return True   # a real controller would reject garbage: never move on NaN
             if pb.phase not in ('idle', 'ready'):
                 return True   # motors are under playback control
             target = message.position
@@ -603,7 +606,10 @@ class KosDevice:
                 if message.motor_address != ALL_MOTORS:
                     self.broadcast(MotorCalibrated(motor.address, 0.0, 0.0))
         elif isinstance(message, TakePicture):
-            self.photos_taken += 1
+            if message.motor_address != ALL_MOTORS and message.motor_address not in self.motors:
+                self.error(ErrorCode.INVALID_MOTOR_ADDRESS, message.motor_address, session)
+            else:
+                self.photos_taken += 1
         elif isinstance(message, SetupPlayback):
             self._setup(message, session)
         elif isinstance(message, StartPlayback):

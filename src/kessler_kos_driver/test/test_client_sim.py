@@ -432,3 +432,25 @@ def test_motor_calibrated_notification_updates_state(calibrated):
     with sim.device.lock:
         sim.device.broadcast(MotorCalibrated(1, 0.0, 42.0))
     assert wait_until(lambda: client.motors[1].end_position == 42.0)
+
+
+def test_silent_device_is_detected_and_recovered(calibrated):
+    sim, client = calibrated
+    client.close()
+    client.silence_timeout = 0.5
+    client.start(reconnect_period=0.1)
+    assert wait_until(lambda: client.connected)
+    sim.server.set_silent(True)
+    assert wait_until(lambda: not client.connected, 5)
+    assert 'silent' in client.last_error_text
+    sim.server.set_silent(False)
+    assert wait_until(lambda: client.connected, 10)
+
+
+def test_rapid_to_first_key_frame(calibrated):
+    _sim, client = calibrated
+    client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
+                                          PlaybackSettings()))
+    client.rapid_to_first_key_frame()
+    assert client.wait_playback(S.MOTORS_HOME, 10)
+    assert client.motors[3].position == pytest.approx(-10.0 / TWO_PI, abs=1e-3)

@@ -10,6 +10,9 @@ import itertools
 import math
 
 import pytest
+
+pytest.importorskip('rclpy', reason='node tests need the ROS environment')
+pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
 from builtin_interfaces.msg import Duration
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Log
