@@ -258,7 +258,15 @@ def main() -> int:
             if target.node is not None:
                 (output / f'{target.node_name}.log').write_text(target.node.output())
         lease.release()
-    print(summary(targets, output, bag, time.monotonic() - started))
+    plot = None
+    if bag is not None:
+        from plot_bag import plot as plot_bag
+
+        try:
+            plot = plot_bag(bag, output / 'positions.png')
+        except (SystemExit, ValueError, OSError) as exc:
+            print(f'demo: no plot: {exc}')
+    print(summary(targets, output, bag, plot, time.monotonic() - started))
     return 0 if all(not t.failed for t in targets) and not stop.is_set() else 1
 
 
@@ -297,7 +305,9 @@ def stop_recorder(recorder: ManagedProcess | None) -> Path | None:
     return path if path.exists() else None
 
 
-def summary(targets: list[DemoTarget], output: Path, bag: Path | None, seconds: float) -> str:
+def summary(
+    targets: list[DemoTarget], output: Path, bag: Path | None, plot: Path | None, seconds: float
+) -> str:
     lines = [f'\ndemo summary ({seconds:.0f} s, {len(targets)} driver(s))']
     for target in targets:
         verdict = 'OK' if not target.failed else 'FAILED'
@@ -307,6 +317,8 @@ def summary(targets: list[DemoTarget], output: Path, bag: Path | None, seconds: 
     lines.append(f'  node logs: {output}/<node>.log')
     if bag is not None:
         lines.append(f'  bag: {bag} (open with Foxglove Studio or ros2 bag info)')
+    if plot is not None:
+        lines.append(f'  plot: {plot} (commanded vs. actual joint positions per driver)')
     return '\n'.join(lines)
 
 

@@ -336,6 +336,8 @@ class GimbalDriverNode(LifecycleNode):
             callback_group=group,
         )
         self.create_timer(self.diagnostics_period, self._publish_diagnostics, callback_group=group)
+        self.create_timer(1.0 / min(self.publish_rate, 10.0), self._publish_status,
+                          callback_group=group)
         watchdog_period = (
             min(0.05, self.command_timeout / 4) if self.command_timeout > 0 else 0.5
         )
@@ -854,6 +856,7 @@ class GimbalDriverNode(LifecycleNode):
                       for name in target}
             try:
                 self.send_moves({n: (p, speeds[n]) for n, p in target.items()})
+                self._targets.update(target)
             except Exception as exc:  # noqa: BLE001
                 self.get_logger().error(f'scan aborted: {exc}')
                 return
@@ -909,7 +912,6 @@ class GimbalDriverNode(LifecycleNode):
         node_name = self.get_name()
         array.status = [to_message(node_name, self.device_info.hardware_id, p) for p in parts]
         self._diag_pub.publish(array)
-        self._publish_status()
 
     def _publish_status(self) -> None:
         msg = GimbalStatus()
