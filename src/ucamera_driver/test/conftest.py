@@ -6,6 +6,7 @@ import math
 from collections.abc import Callable, Iterator
 
 import pytest
+
 from ucamera_driver.protocol import GimbalType
 from ucamera_driver.sim import SimConfig, UCameraSim
 

@@ -6,6 +6,7 @@ import math
 from collections.abc import Iterator
 
 import pytest
+
 from gimbal_driver_common.testing import wait_for
 from ucamera_driver.client import UCameraClient, UCameraError
 from ucamera_driver.protocol import GimbalMode, GimbalType, GpsFeed, RangeError

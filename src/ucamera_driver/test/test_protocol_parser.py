@@ -5,6 +5,7 @@ import math
 
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
 from ucamera_driver.protocol import (
     SYNC_BYTE,
     AnglesReport,

@@ -28,6 +28,7 @@ checksum follows the rule above.
 import math
 
 import pytest
+
 from ucamera_driver.protocol import (
     AnglesReport,
     AntennaPositionReport,

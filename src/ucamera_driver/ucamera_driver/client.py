@@ -357,13 +357,17 @@ class UCameraClient:
 
     def hold(self) -> None:
         """Stop moving: zero rates in RATES mode, else hold the reported angles."""
-        state = self.state()
         if self._desired_mode == GimbalMode.RATES and self._one_shot is None:
             self.set_rates(0.0, 0.0)
-        elif state.pan is not None and state.tilt is not None:
-            self.set_angles(state.pan, state.tilt)
         else:
+            self.hold_angles()
+
+    def hold_angles(self) -> None:
+        """ANGLES mode at the last reported angles (stops any motion and automatic mode)."""
+        state = self.state()
+        if state.pan is None or state.tilt is None:
             raise NotConnectedError("no angles reported yet: cannot hold position")
+        self.set_angles(state.pan, state.tilt)
 
     def set_zoom(self, level: float) -> None:
         self.send(SetZoom(level))

@@ -29,6 +29,11 @@ import time
 from collections.abc import Callable, Sequence
 
 from geometry_msgs.msg import TwistStamped
+from rclpy.callback_groups import ReentrantCallbackGroup
+from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+from std_msgs.msg import Float64, UInt16
+from std_srvs.srv import Trigger
+
 from gimbal_driver_common.diagnostics import Level
 from gimbal_driver_common.ros.base_node import (
     DeviceError,
@@ -39,11 +44,6 @@ from gimbal_driver_common.ros.base_node import (
 )
 from gimbal_driver_common.ros.diagnostics import StatusPart
 from gimbal_driver_common.ros.parameters import ParameterError
-from rclpy.callback_groups import ReentrantCallbackGroup
-from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
-from std_msgs.msg import Float64, UInt16
-from std_srvs.srv import Trigger
-
 from gimbal_msgs.srv import SetMode
 
 from .client import UCameraClient, UCameraError
@@ -100,6 +100,18 @@ class RateLimiter:
         return True
 
 
+def _with_motion_lock(method):
+    """Serialise the motion hooks (executor threads, ramp timer, watchdog)."""
+
+    def wrapper(self, *args, **kwargs):
+        with self._motion_lock:
+            return method(self, *args, **kwargs)
+
+    wrapper.__name__ = method.__name__
+    wrapper.__doc__ = method.__doc__
+    return wrapper
+
+
 class UCameraDriverNode(GimbalDriverNode):
     """U-Camera driver (UCSP over RS-232)."""
 
@@ -111,6 +123,7 @@ class UCameraDriverNode(GimbalDriverNode):
     def __init__(self, **kwargs: object) -> None:
         self.client: UCameraClient | None = None
         self._client_lock = threading.RLock()
+        self._motion_lock = threading.RLock()  # setpoint/ramp/jog state (several threads)
         self._setpoint: dict[str, float] = {}
         self._ramp: dict[str, tuple[float, float]] = {}  # joint -> (target, speed)
         self._jog_rates: dict[str, float] = {}
@@ -235,12 +248,18 @@ class UCameraDriverNode(GimbalDriverNode):
                 client.stop()
                 raise DeviceError(str(exc)) from exc
             self.client = client
-        self._setpoint.clear()
-        self._ramp.clear()
-        self._jog_rates.clear()
+        with self._motion_lock:
+            self._setpoint.clear()
+            self._ramp.clear()
+            self._jog_rates.clear()
         deadline = time.monotonic() + 1.0
         while client.state().gimbal_type is None and time.monotonic() < deadline:
             time.sleep(0.02)
+        if client.state().mode == GimbalMode.RATES:
+            # A jog may have been running when the link was lost: the gimbal keeps its
+            # last rates, so stop it before anything else (safety on (re)connect).
+            client.set_rates(0.0, 0.0)
+            self.get_logger().warning("gimbal was in rates mode at connect: rates set to zero")
         gimbal_type = client.state().gimbal_type
         kind = GimbalType(gimbal_type).name.lower() if gimbal_type in set(GimbalType) else "?"
         return DeviceInfo(
@@ -291,6 +310,7 @@ class UCameraDriverNode(GimbalDriverNode):
             moving={name: abs(v) > MOVING_RATE for name, v in velocities.items()},
         )
 
+    @_with_motion_lock
     def send_moves(self, moves: dict[str, tuple[float, float | None]]) -> None:
         client = self._require_client()
         current = self.current_positions()
@@ -308,6 +328,7 @@ class UCameraDriverNode(GimbalDriverNode):
                 self._ramp[name] = (target, speed)
         client.set_angles(*self._to_device(self._setpoint))
 
+    @_with_motion_lock
     def _step_ramp(self) -> None:
         if not self._ramp or self.client is None or not self.connected:
             return
@@ -325,6 +346,7 @@ class UCameraDriverNode(GimbalDriverNode):
         except (UCameraError, ProtocolError) as exc:
             self.get_logger().warning(f"move setpoint not sent: {exc}", throttle_duration_sec=2.0)
 
+    @_with_motion_lock
     def send_jogs(self, jogs: dict[str, float]) -> None:
         client = self._require_client()
         self._ramp.clear()  # a jog replaces any ramped move (one mode for both axes)
@@ -334,6 +356,7 @@ class UCameraDriverNode(GimbalDriverNode):
         self._setpoint.clear()
         client.set_rates(*self._to_device(self._jog_rates))
 
+    @_with_motion_lock
     def stop_axes(self, joints: Sequence[str] | None) -> None:
         client = self._require_client()
         if joints is not None and self._jog_rates and set(joints) != set(self.joint_names):
@@ -353,10 +376,11 @@ class UCameraDriverNode(GimbalDriverNode):
              cancelled: threading.Event) -> str:
         """Pilot mode: the gimbal points to pan 0 / tilt 0 (front view, 4.2)."""
         client = self._require_client()
-        self._ramp.clear()
-        self._jog_rates.clear()
-        self._setpoint.clear()
-        client.set_mode(GimbalMode.PILOT)
+        with self._motion_lock:
+            self._ramp.clear()
+            self._jog_rates.clear()
+            self._setpoint.clear()
+            client.set_mode(GimbalMode.PILOT)
         report("pilot mode requested")
         deadline = time.monotonic() + self.home_timeout
         while time.monotonic() < deadline:
@@ -476,15 +500,16 @@ class UCameraDriverNode(GimbalDriverNode):
             if (mode == GimbalMode.FFC_CALIBRATION
                     and client.state().gimbal_type == GimbalType.DAYLIGHT):
                 raise DeviceError("ffc_calibration needs an IR gimbal; this one is daylight")
-            self._ramp.clear()
-            self._jog_rates.clear()
-            self._setpoint.clear()
-            if mode == GimbalMode.ANGLES:
-                client.hold()  # angles mode holding the current position
-            elif mode == GimbalMode.RATES:
-                client.set_rates(0.0, 0.0)
-            else:
-                client.set_mode(mode)
+            with self._motion_lock:
+                self._ramp.clear()
+                self._jog_rates.clear()
+                self._setpoint.clear()
+                if mode == GimbalMode.ANGLES:
+                    client.hold_angles()  # angles mode holding the current position
+                elif mode == GimbalMode.RATES:
+                    client.set_rates(0.0, 0.0)
+                else:
+                    client.set_mode(mode)
             deadline = time.monotonic() + self.mode_timeout
             while time.monotonic() < deadline:
                 if client.state().mode == mode:
