@@ -124,6 +124,10 @@ def from_keyframes(
     times = [k.time for k in keyframes]
     if any(not math.isfinite(t) or t < 0 for t in times):
         raise TrajectoryError('keyframe times (time_from_start) must be finite and >= 0')
+    for index in range(1, len(times)):
+        if times[index] <= times[index - 1]:
+            raise TrajectoryError(f'keyframe {index}: time_from_start must be strictly '
+                                  'increasing')
     duration = settings.duration if settings.duration > 0 else times[-1]
     if duration <= 0:
         raise TrajectoryError('the move has no length: give a duration or keyframes with '

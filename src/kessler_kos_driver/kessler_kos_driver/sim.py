@@ -669,7 +669,7 @@ class KosDevice:
         for address in traj.axes:
             motor = self.motors.get(address)
             if motor is None or not motor.online or not motor.calibrated:
-                self.error(ErrorCode.EXECUTE_MOVE, address, session)
+                self.error(ErrorCode.EXECUTE_MOVE, 0, session)   # (*) code: address 0
                 return False
         return True
 

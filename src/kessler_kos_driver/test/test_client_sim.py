@@ -33,6 +33,7 @@ from kessler_kos_driver.protocol import (
     MotorCalibrated,
     PlaybackMode,
     PlaybackState,
+    ResetAxis,
     TrajectoryData,
     UserPassword,
     decode,
@@ -454,3 +455,13 @@ def test_rapid_to_first_key_frame(calibrated):
     client.rapid_to_first_key_frame()
     assert client.wait_playback(S.MOTORS_HOME, 10)
     assert client.motors[3].position == pytest.approx(-10.0 / TWO_PI, abs=1e-3)
+
+
+def test_device_refuses_to_play_on_an_axis_that_lost_calibration(calibrated):
+    _sim, client = calibrated
+    client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
+                                          PlaybackSettings()))
+    client.send(ResetAxis(1))           # behind the client's back: slider uncalibrated
+    assert wait_until(lambda: not client.motors[1].calibrated)
+    with pytest.raises(CommandRejected, match='error 2'):
+        client.start_playback()
