@@ -147,10 +147,10 @@ def test_locked_device_ignores_commands_and_reports_error_15(make_sim):
 
 
 def test_keepalive_keeps_an_idle_connection(make_sim, make_client):
-    sim = make_sim(keepalive_timeout=0.6)
-    client = make_client(sim, poll_period=0.0, keepalive_period=0.15)
+    sim = make_sim(keepalive_timeout=1.5)
+    client = make_client(sim, poll_period=0.0, keepalive_period=0.2)
     client.connect()
-    time.sleep(1.5)
+    time.sleep(3.0)     # twice the device's keep-alive window without any other traffic
     assert client.connected and sim.server.connections == 1
     client.refresh_motors()
 
