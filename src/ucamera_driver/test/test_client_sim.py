@@ -100,7 +100,7 @@ def test_ffc_on_daylight_gimbal_is_reported(make_config) -> None:
         try:
             wait_for(lambda: client.state().mode == GimbalMode.ANGLES, what="angles")
             client.set_mode(GimbalMode.FFC_CALIBRATION)
-            wait_for(lambda: "did not enter ffc_calibration" in client.last_error,
+            wait_for(lambda: "did not enter ffc_calibration" in client.mode_error,
                      what="an error naming the mode")
             assert client.state().mode == GimbalMode.ANGLES
             assert client.state().ir_palette is None  # no IR report on a daylight gimbal

@@ -173,6 +173,7 @@ class UCameraClient:
         self.stats = ClientStats()
         self.version: VersionReport | None = None
         self.last_error = ""
+        self.mode_error = ""  # a self-ending mode the gimbal did not enter (until next mode)
 
         self._desired_mode: GimbalMode | None = None
         self._desired_angles: tuple[float, float] | None = None
@@ -324,6 +325,7 @@ class UCameraClient:
             raise
         packet = SetMode(mode)
         packet.encode()
+        self.mode_error = ""
         with self._lock:
             if mode in ONE_SHOT_MODES:
                 self._one_shot, self._one_shot_seen = mode, False
@@ -549,9 +551,10 @@ class UCameraClient:
         with self._lock:
             if self._one_shot is not None:
                 if not self._one_shot_seen and now - self._one_shot_sent > self.one_shot_timeout:
-                    self.last_error = (f"gimbal did not enter {mode_name(self._one_shot)} "
+                    self.mode_error = (f"gimbal did not enter {mode_name(self._one_shot)} "
                                        "(FFC needs an IR gimbal; INIT ignores commands)")
-                    LOG.warning(self.last_error)
+                    self.last_error = self.mode_error
+                    LOG.warning(self.mode_error)
                     self._one_shot = None
                 return
             mode, angles, rates = self._desired_mode, self._desired_angles, self._desired_rates

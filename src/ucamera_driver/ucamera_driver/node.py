@@ -408,7 +408,7 @@ class UCameraDriverNode(GimbalDriverNode):
         client = self.client
         if client is None:
             return []
-        return [client.last_error] if client.last_error and not client.connected else []
+        return [client.mode_error] if client.mode_error else []
 
     def link_description(self) -> str:
         return f"serial://{self.serial_port}?baudrate={self.baudrate}"
