@@ -1,0 +1,224 @@
+"""Shared measurement code for ``make bench``: every figure next to its reference.
+
+A driver benchmark (``bench/bench_<driver>.py``) calls these helpers and
+returns a JSON-able dict. References measured in the same run:
+
+* the wire's physical limit (``wire_limit_frames_per_s``: bits on the wire);
+* a bare rclpy JointState publisher/subscriber pair on this machine
+  (:func:`rclpy_reference`), the floor for any driver's latency and CPU.
+
+Latency definitions (wall clock, one machine):
+
+* ``sim_to_subscriber``: from the time the device data reached the driver (the
+  ``header.stamp`` the driver puts on joint_states, taken as the frame is read
+  from the simulator) to the JointState arriving at a subscriber; loopback
+  transfer from the simulator adds microseconds (``loopback_rtt_us``).
+* ``command``: from a ``joint_command`` publish to the simulator's device model
+  receiving the command bytes (observed inside the simulator's session).
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+
+from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import ManagedProcess, ros_env, wait_for
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def percentiles(samples: list[float]) -> dict[str, float]:
+    """p50/p99/max in milliseconds of samples in seconds."""
+    if not samples:
+        return {'n': 0}
+    ordered = sorted(samples)
+    p99 = ordered[min(len(ordered) - 1, round(0.99 * (len(ordered) - 1)))]
+    return {
+        'n': len(ordered),
+        'p50_ms': round(statistics.median(ordered) * 1e3, 3),
+        'p99_ms': round(p99 * 1e3, 3),
+        'max_ms': round(ordered[-1] * 1e3, 3),
+    }
+
+
+def rate(operation: Callable[[], object], seconds: float = 1.0) -> float:
+    """Calls per second of ``operation`` on this thread (one core)."""
+    count = 0
+    start = time.perf_counter()
+    deadline = start + seconds
+    while True:
+        for _ in range(200):
+            operation()
+        count += 200
+        now = time.perf_counter()
+        if now >= deadline:
+            return count / (now - start)
+
+
+def wire_limit_frames_per_s(frame_bytes: int, bits_per_second: float, bits_per_byte: int = 10,
+                            overhead_bits: int = 0) -> float:
+    """Frames per second the physical link can carry (UART: 10 bits a byte with 8N1)."""
+    return bits_per_second / (frame_bytes * bits_per_byte + overhead_bits)
+
+
+def can_frame_bits(data_bytes: int) -> int:
+    """Worst-case bits of a CAN 2.0A data frame with stuffing (for the bus-limit reference)."""
+    base = 44 + 8 * data_bytes
+    return base + (34 + 8 * data_bytes - 1) // 4 + 3 + 7  # stuff bits, IFS
+
+
+def loopback_rtt_us(samples: int = 200) -> float:
+    """Median TCP round trip on 127.0.0.1, the simulator-to-driver transfer floor."""
+    server = socket.create_server(('127.0.0.1', 0))
+    port = server.getsockname()[1]
+
+    def echo() -> None:
+        conn, _ = server.accept()
+        with conn:
+            while data := conn.recv(64):
+                conn.sendall(data)
+
+    thread = threading.Thread(target=echo, daemon=True)
+    thread.start()
+    client = socket.create_connection(('127.0.0.1', port))
+    client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    times = []
+    for _ in range(samples):
+        start = time.perf_counter()
+        client.sendall(b'x')
+        client.recv(1)
+        times.append(time.perf_counter() - start)
+    client.close()
+    server.close()
+    return round(statistics.median(times) * 1e6, 1)
+
+
+def cpu_percent(pid: int, seconds: float) -> float:
+    """CPU use of a process over ``seconds``, in % of one core (from /proc)."""
+    def ticks() -> int:
+        fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+        return int(fields[11]) + int(fields[12])  # utime + stime
+
+    hz = os.sysconf('SC_CLK_TCK')
+    start_ticks, start = ticks(), time.monotonic()
+    time.sleep(seconds)
+    return round(100.0 * (ticks() - start_ticks) / hz / (time.monotonic() - start), 1)
+
+
+class JointStateProbe:
+    """Subscribes to a joint_states topic and records arrival time and stamp of each message."""
+
+    def __init__(self, ros: RosTestClient, topic: str = 'joint_states') -> None:
+        self.arrivals: list[tuple[float, float, JointState]] = []
+        self._lock = threading.Lock()
+        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        ros.node.create_subscription(JointState, topic, self._on_message, qos)
+
+    def _on_message(self, msg: JointState) -> None:
+        now = time.time()
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        with self._lock:
+            self.arrivals.append((now, stamp, msg))
+
+    def clear(self) -> None:
+        with self._lock:
+            self.arrivals.clear()
+
+    def stamp_latencies(self) -> list[float]:
+        with self._lock:
+            return [arrival - stamp for arrival, stamp, _ in self.arrivals if stamp > 0]
+
+    def achieved_rate(self, seconds: float) -> float:
+        self.clear()
+        time.sleep(seconds)
+        with self._lock:
+            if len(self.arrivals) < 2:
+                return 0.0
+            return round((len(self.arrivals) - 1) / (self.arrivals[-1][0] - self.arrivals[0][0]), 1)
+
+
+def rclpy_reference(domain: int, rate_hz: float = 100.0, seconds: float = 5.0) -> dict:
+    """A bare rclpy JointState publisher (another process) and subscriber: latency and CPU."""
+    script = ROOT / 'bench' / 'reference_publisher.py'
+    publisher = ManagedProcess([sys.executable, str(script), str(rate_hz)], ros_env(domain),
+                               name='reference_publisher')
+    try:
+        with RosTestClient(domain, 'bench_reference') as ros:
+            probe = JointStateProbe(ros, 'reference_joint_states')
+            wait_for(lambda: len(probe.arrivals) > 5, 30, 'the reference publisher')
+            cpu = cpu_percent(publisher.process.pid, seconds)
+            latencies = probe.stamp_latencies()[-int(rate_hz * seconds):]
+            achieved = probe.achieved_rate(2.0)
+    finally:
+        publisher.stop()
+    return {'rate_hz': rate_hz, 'achieved_hz': achieved, 'latency': percentiles(latencies),
+            'cpu_percent': cpu}
+
+
+def git_revision() -> str:
+    try:
+        return subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=ROOT,
+                              capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return 'unknown'
+
+
+__all__ = ['rclpy', 'wait_for']
+
+
+class CommandProbe:
+    """Times joint_command publish -> command bytes handled by the in-process simulator.
+
+    Wraps the server's sessions so that after every ``on_bytes`` the device-side
+    predicate ``arrived()`` is checked; the first time it holds after :meth:`arm`,
+    the arrival time is recorded.
+    """
+
+    def __init__(self, server: object) -> None:
+        self._armed: Callable[[], bool] | None = None
+        self._arrived_at: float | None = None
+        self._event = threading.Event()
+        factory = server._session_factory
+
+        def wrapped_factory() -> object:
+            session = factory()
+            original = session.on_bytes
+
+            def on_bytes(data: bytes) -> bytes:
+                reply = original(data)
+                check = self._armed
+                if check is not None and check():
+                    self._arrived_at = time.time()
+                    self._armed = None
+                    self._event.set()
+                return reply
+
+            session.on_bytes = on_bytes
+            return session
+
+        server._session_factory = wrapped_factory
+
+    def measure(self, send: Callable[[], None], arrived: Callable[[], bool],
+                timeout: float = 5.0) -> float | None:
+        """Run ``send`` (publishes the command) and return the latency in s, or None."""
+        self._event.clear()
+        self._arrived_at = None
+        self._armed = arrived
+        start = time.time()
+        send()
+        if not self._event.wait(timeout):
+            self._armed = None
+            return None
+        return self._arrived_at - start
