@@ -45,6 +45,7 @@ from .protocol import (
 )
 from .protocol import registers as reg
 from .protocol.datatypes import DataType, encode_value
+from .protocol.geometry import aim_at
 
 LOG = logging.getLogger('capture_sim')
 
@@ -1037,22 +1038,6 @@ class PedestalModel:
         self.scan = None
         self._move_to(self.axes[1], azimuth, self.axes[1].general_speed)
         self._move_to(self.axes[2], elevation, self.axes[2].general_speed)
-
-
-def aim_at(origin: GeoPoint, heading: float, target: GeoPoint) -> tuple[float, float]:
-    """Pan (deg, device sign: clockwise from the heading) and tilt to look at ``target``.
-
-    Local flat-earth approximation (equirectangular), fine for the ranges a pedestal aims at.
-    """
-    earth = 6371000.0
-    lat0 = math.radians(origin.latitude)
-    north = math.radians(target.latitude - origin.latitude) * earth
-    east = math.radians(target.longitude - origin.longitude) * earth * math.cos(lat0)
-    up = target.altitude - origin.altitude
-    bearing = math.degrees(math.atan2(east, north))
-    pan = (bearing - heading + 180.0) % 360.0 - 180.0
-    tilt = math.degrees(math.atan2(up, math.hypot(north, east)))
-    return pan, tilt
 
 
 class CaptureSession:

@@ -12,8 +12,9 @@ import pytest
 
 from capture_driver.client import CaptureClient, DeviceNack, DeviceTimeout, NotConnected
 from capture_driver.protocol import COMMANDS, GeoPoint, ProtocolError, ReplyCode
+from capture_driver.protocol.geometry import aim_at
 from capture_driver.protocol.registers import CMER, SRL
-from capture_driver.sim import CaptureSimulator, PedestalModel, aim_at
+from capture_driver.sim import CaptureSimulator, PedestalModel
 from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import SerialStream, TcpStream
 

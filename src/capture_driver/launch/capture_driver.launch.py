@@ -1,0 +1,35 @@
+"""Launch the Capture pedestal driver as a managed (lifecycle) node.
+
+ros2 launch capture_driver capture_driver.launch.py [params_file:=...] [autostart:=true]
+With autostart false (the default here) a lifecycle manager configures and activates it.
+Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
+"""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import LifecycleNode
+
+
+def generate_launch_description() -> LaunchDescription:
+    share = get_package_share_directory('capture_driver')
+    default_params = os.path.join(share, 'config', 'capture_driver.yaml')
+    return LaunchDescription([
+        DeclareLaunchArgument('params_file', default_value=default_params,
+                              description='parameter YAML (config/capture_driver*.yaml)'),
+        DeclareLaunchArgument('autostart', default_value='false',
+                              description='true: the node walks itself to active'),
+        DeclareLaunchArgument('namespace', default_value=''),
+        LifecycleNode(
+            package='capture_driver',
+            executable='capture_driver_node',
+            name='capture_driver',
+            namespace=LaunchConfiguration('namespace'),
+            output='screen',
+            parameters=[LaunchConfiguration('params_file'),
+                        {'autostart': LaunchConfiguration('autostart')}],
+        ),
+    ])

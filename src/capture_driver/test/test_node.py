@@ -1,0 +1,327 @@
+"""capture_driver_node as a process against capture_sim as a process, through rclpy.
+
+Needs the colcon-built workspace (make build; source scripts/ros_env.sh). One simulator
+and one node serve the whole module; tests run in file order (link drop last). Waits are
+"up to a timeout", never timing assertions.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import socket
+
+import pytest
+
+pytest.importorskip('rclpy', reason='node tests need the ROS environment')
+pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Log
+from sensor_msgs.msg import Imu, JointState, NavSatFix
+from std_srvs.srv import SetBool, Trigger
+
+from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
+from gimbal_msgs.action import Home, MoveTo
+from gimbal_msgs.msg import GimbalStatus
+from gimbal_msgs.srv import (
+    ClearPreset,
+    DeviceCommand,
+    GotoPreset,
+    ListPresets,
+    SetPreset,
+    StartScan,
+)
+
+pytestmark = pytest.mark.ros
+
+PKG = 'capture_driver'
+NODE = 'capture_driver'
+
+
+def srv(name: str) -> str:
+    return f'/{NODE}/{name}'
+
+
+def control(port: int, line: str) -> str:
+    with socket.create_connection(('127.0.0.1', port), timeout=5.0) as sock:
+        stream = sock.makefile('rw')
+        stream.write(line + '\n')
+        stream.flush()
+        return stream.readline().strip()
+
+
+def sim_state(port: int) -> dict:
+    answer = control(port, 'state')
+    assert answer.startswith('ok '), answer
+    return json.loads(answer[3:])
+
+
+@pytest.fixture(scope='module')
+def rig():
+    lease = DomainLease()
+    domain = lease.acquire()
+    port, control_port = free_tcp_port(), free_tcp_port()
+    sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
+        '--port', str(port), '--control-port', str(control_port), '--time-scale', '4'])
+    sim.wait_for_output('capture_sim ready')
+    node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
+        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
+        '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',
+        '-p', 'diagnostics_period:=0.25', '-p', 'status_period:=0.2',
+        '-p', 'command_timeout:=0.4', '-p', 'imu_rate:=5.0', '-p', 'fix_rate:=2.0',
+        '-p', 'default_speed:=1.0', '-p', 'acceleration:=6.0'])
+    ros = RosTestClient(domain)
+    logs = ros.subscribe('/rosout', Log)
+    try:
+        ros.wait_for_message('joint_states', JointState, timeout=30)
+        yield ros, control_port, node, logs
+    finally:
+        ros.close()
+        node.stop()
+        sim.stop()
+        lease.release()
+        print('--- node log (tail) ---\n' + node.output()[-4000:])
+
+
+def positions(msg: JointState) -> dict[str, float]:
+    return dict(zip(msg.name, msg.position, strict=True))
+
+
+def diag_status(array: DiagnosticArray, part: str):
+    for status in array.status:
+        if status.name == f'{NODE}: {part}':
+            return status
+    return None
+
+
+def wait_diag(ros, part, predicate, timeout=15.0):
+    array = ros.wait_for_message(
+        '/diagnostics', DiagnosticArray,
+        lambda a: diag_status(a, part) is not None and predicate(diag_status(a, part)),
+        timeout=timeout)
+    return diag_status(array, part)
+
+
+def wait_position(ros, targets: dict[str, float], tolerance=2e-3, timeout=20.0):
+    return ros.wait_for_message(
+        'joint_states', JointState,
+        lambda m: all(abs(positions(m).get(j, math.inf) - p) < tolerance
+                      for j, p in targets.items()), timeout=timeout)
+
+
+def test_joint_states_and_identity(rig):
+    ros, *_ = rig
+    msg = ros.wait_for_message('joint_states', JointState)
+    assert msg.name == ['pan', 'tilt']
+    assert len(msg.velocity) == 2
+    status = wait_diag(ros, 'connection', lambda s: s.level == b'\x00')
+    assert status.hardware_id == 'capture-24017'
+    values = {kv.key: kv.value for kv in status.values}
+    assert values['serial_number'] == '24017'
+    assert values['firmware'].startswith('2.24.0')
+    ros.wait_for_message('joint_states', JointState, lambda m: len(m.effort) == 2)
+
+
+def test_move_to_reaches_target_and_joint_states_show_it(rig):
+    ros, control_port, *_ = rig
+    goal = MoveTo.Goal(joint_names=['pan', 'tilt'], positions=[0.4, -0.2])
+    result, _, feedback = ros.run_action(MoveTo, srv('move_to'), goal, timeout=40)
+    assert result.success, result.message
+    assert feedback
+    wait_position(ros, {'pan': 0.4, 'tilt': -0.2})
+    # REP-103: positive pan is counter-clockwise; Capture yaw counts clockwise.
+    state = sim_state(control_port)
+    assert state['axes']['1']['position'] == pytest.approx(-math.degrees(0.4), abs=0.05)
+
+
+def test_joint_command_absolute_move(rig):
+    ros, *_ = rig
+    ros.publish('joint_command', JointState(name=['tilt'], position=[0.3]))
+    wait_position(ros, {'tilt': 0.3})
+
+
+def test_joint_command_unknown_joint_is_rejected(rig):
+    ros, control_port, _, logs = rig
+    before = sim_state(control_port)['requests']
+    ros.publish('joint_command', JointState(name=['elbow'], position=[0.1]))
+    wait_for(lambda: any('unknown joint' in m.msg for m in list(logs)), 10.0, 'warning')
+    after = sim_state(control_port)
+    assert after['axes']['1']['velocity'] == 0.0  # nothing moved
+    assert after['requests'] >= before  # polling continues
+
+
+def test_jog_stops_after_command_timeout(rig):
+    ros, control_port, *_ = rig
+    ros.publish('joint_command', JointState(name=['pan'], velocity=[0.3]))
+    ros.wait_for_message('joint_states', JointState,
+                         lambda m: abs(dict(zip(m.name, m.velocity, strict=True))['pan']) > 0.05,
+                         timeout=10)
+    # No further joint_command: the dead-man stops the jog.
+    ros.wait_for_message('joint_states', JointState,
+                         lambda m: dict(zip(m.name, m.velocity, strict=True))['pan'] == 0.0,
+                         timeout=10)
+    wait_for(lambda: sim_state(control_port)['axes']['1']['velocity'] == 0.0, 5.0, 'stopped')
+
+
+def test_home_action_uses_device_homing(rig):
+    ros, control_port, *_ = rig
+    control(control_port, 'pose 1 20')
+    result, _, feedback = ros.run_action(Home, srv('home'), Home.Goal(), timeout=60)
+    assert result.success, result.message
+    assert any('homing' in f.state for f in feedback)
+    wait_position(ros, {'pan': 0.0, 'tilt': 0.0})
+
+
+def test_device_presets(rig):
+    ros, control_port, *_ = rig
+    reply = ros.call(SetPreset, srv('set_preset'), SetPreset.Request(
+        index=2, name='gate', joint_names=['pan', 'tilt'], positions=[-0.3, 0.25]))
+    assert reply.success, reply.message
+    reply = ros.call(SetPreset, srv('set_preset'), SetPreset.Request(
+        index=3, name='here', use_current_position=True))
+    assert reply.success, reply.message
+    listed = ros.call(ListPresets, srv('list_presets'), ListPresets.Request())
+    assert listed.success
+    by_index = {p.index: p for p in listed.presets}
+    assert by_index[2].name == 'gate'
+    assert by_index[2].positions[0] == pytest.approx(-0.3, abs=1e-4)
+    assert sim_state(control_port)['presets'] == [2, 3]
+    reply = ros.call(GotoPreset, srv('goto_preset'), GotoPreset.Request(index=2, speed=0.8))
+    assert reply.success, reply.message
+    wait_position(ros, {'pan': -0.3, 'tilt': 0.25})
+    bad = ros.call(GotoPreset, srv('goto_preset'), GotoPreset.Request(index=9))
+    assert not bad.success and 'empty' in bad.message
+    loop = ros.call(Trigger, srv('start_preset_loop'), Trigger.Request())
+    assert loop.success, loop.message
+    wait_for(lambda: sim_state(control_port)['preset_looping'], 10.0, 'looping')
+    stop = ros.call(Trigger, srv('stop_preset_loop'), Trigger.Request())
+    assert stop.success, stop.message
+    assert not sim_state(control_port)['preset_looping']
+    cleared = ros.call(ClearPreset, srv('clear_preset'), ClearPreset.Request(index=3))
+    assert cleared.success
+    assert sim_state(control_port)['presets'] == [2]
+
+
+def test_device_scan_and_stop(rig):
+    ros, control_port, *_ = rig
+    refused = ros.call(StartScan, srv('start_scan'), StartScan.Request(
+        pattern='sector', pan_min=-0.2, pan_max=0.2, speed=0.3))
+    assert not refused.success and 'zigzag' in refused.message
+    too_wide = ros.call(StartScan, srv('start_scan'), StartScan.Request(
+        pattern='zigzag', pan_min=-5.0, pan_max=0.2, tilt_min=0.0, tilt_max=0.2, speed=0.3,
+        tilt_step=0.1))
+    assert not too_wide.success and 'joint limits' in too_wide.message
+    reply = ros.call(StartScan, srv('start_scan'), StartScan.Request(
+        pattern='snake', pan_min=-0.2, pan_max=0.2, tilt_min=0.0, tilt_max=0.2, speed=0.5,
+        tilt_step=0.1))
+    assert reply.success, reply.message
+    assert sim_state(control_port)['scanning']
+    ros.wait_for_message(
+        '~/status'.replace('~', f'/{NODE}'), GimbalStatus, lambda m: 'scanning' in m.mode,
+        timeout=10)
+    stop = ros.call(Trigger, srv('stop_scan'), Trigger.Request())
+    assert stop.success, stop.message
+    assert not sim_state(control_port)['scanning']
+    # A move after a scan works (the driver left scan mode).
+    goal = MoveTo.Goal(joint_names=['pan'], positions=[0.1])
+    result, _, _ = ros.run_action(MoveTo, srv('move_to'), goal, timeout=40)
+    assert result.success, result.message
+
+
+def test_nack_surfaces_as_clear_service_error(rig):
+    ros, control_port, *_ = rig
+    assert control(control_port, 'nack E6 STB_StabilizationOn') == 'ok'
+    reply = ros.call(SetBool, srv('set_stabilization'), SetBool.Request(data=True))
+    assert not reply.success
+    assert 'NACK 0xE6' in reply.message and 'Execution error' in reply.message
+    reply = ros.call(SetBool, srv('set_stabilization'), SetBool.Request(data=True))
+    assert reply.success, reply.message
+    reply = ros.call(SetBool, srv('set_stabilization'), SetBool.Request(data=False))
+    assert reply.success, reply.message
+    assert control(control_port, 'nack A6 MOT_Update') == 'ok'
+    goal = MoveTo.Goal(joint_names=['tilt'], positions=[0.05])
+    result, _, _ = ros.run_action(MoveTo, srv('move_to'), goal, timeout=40)
+    assert not result.success
+    assert 'NACK 0xA6' in result.message and 'Invalid command' in result.message
+
+
+def test_command_service(rig):
+    ros, *_ = rig
+
+    def run(name, axis=0, args=()):
+        return ros.call(DeviceCommand, srv('command'), DeviceCommand.Request(
+            command=name, axis=axis, arguments=list(args)))
+
+    fw = run('COM_GetFw')
+    assert fw.success and fw.results == ['2.24.0']
+    speed = run('MOT_GetMotorSpeed', 1)
+    assert speed.success and speed.results[0].endswith('deg/s')
+    assert run('PRST_SetLoopingDelay', 0, ['160']).success
+    assert run('PRST_GetLoopingDelay').results == ['160 ms']
+    refused = run('COM_Reboot')
+    assert not refused.success and 'allow_reboot' in refused.message
+    refused = run('MOT_SendPosition', 1, ['10'])
+    assert not refused.success and 'move_to' in refused.message
+    unknown = run('GPS_GetAltitude')
+    assert not unknown.success and 'not established' in unknown.message
+    bad = run('MOT_SetSpeed', 1, ['fast'])
+    assert not bad.success and 'bad argument' in bad.message
+    bad_axis = run('MOT_GetLoadPosition', 9)
+    assert not bad_axis.success and 'outside 1..3' in bad_axis.message
+
+
+def test_imu_and_fix_topics(rig):
+    ros, *_ = rig
+    imu = ros.wait_for_message(f'/{NODE}/imu', Imu, timeout=15)
+    norm = math.sqrt(imu.orientation.x ** 2 + imu.orientation.y ** 2 + imu.orientation.z ** 2
+                     + imu.orientation.w ** 2)
+    assert norm == pytest.approx(1.0)
+    fix = ros.wait_for_message(f'/{NODE}/fix', NavSatFix, timeout=15)
+    assert fix.latitude == pytest.approx(32.1040, abs=1e-6)
+    assert fix.longitude == pytest.approx(34.8915, abs=1e-6)
+
+
+def test_goto_lla_points_at_target(rig):
+    ros, *_ = rig
+    # ~100 m north-east of the simulated GPS position, same altitude.
+    target = NavSatFix(latitude=32.1040 + 0.0006, longitude=34.8915 + 0.0007, altitude=65.43)
+    ros.publish(f'/{NODE}/goto_lla', target)
+    msg = ros.wait_for_message(
+        'joint_states', JointState,
+        lambda m: positions(m)['pan'] < -0.5 and all(v == 0.0 for v in m.velocity),
+        timeout=20)
+    assert positions(msg)['tilt'] == pytest.approx(0.0, abs=1e-3)
+
+
+def test_fault_reported_then_reset(rig):
+    ros, control_port, *_ = rig
+    assert control(control_port, 'fault 1 over_current') == 'ok'
+    status = wait_diag(ros, 'pan', lambda s: s.level == b'\x02')
+    keys = {kv.key for kv in status.values}
+    assert 'CMER.over_current' in keys and 'SRH.fault' in keys
+    device = wait_diag(ros, 'device', lambda s: 'No communication with axes' in s.message)
+    assert any(kv.key == 'error.ERR_GetDriverErrorString' for kv in device.values)
+    reply = ros.call(Trigger, srv('reset_faults'), Trigger.Request())
+    assert reply.success, reply.message
+    wait_diag(ros, 'pan', lambda s: s.level == b'\x00')
+
+
+def test_stop_service(rig):
+    ros, control_port, *_ = rig
+    ros.publish('joint_command', JointState(name=['pan'], velocity=[0.5]))
+    wait_for(lambda: sim_state(control_port)['axes']['1']['velocity'] != 0.0, 10.0, 'moving')
+    reply = ros.call(Trigger, srv('stop'), Trigger.Request())
+    assert reply.success, reply.message
+    wait_for(lambda: sim_state(control_port)['axes']['1']['velocity'] == 0.0, 10.0, 'stopped')
+
+
+def test_dropped_link_reconnects_and_diagnostics_report_it(rig):
+    ros, control_port, *_ = rig
+    assert control(control_port, 'drop 2.0') == 'ok'
+    wait_diag(ros, 'connection', lambda s: s.level == b'\x02' and 'disconnected' in s.message)
+    wait_diag(ros, 'pan', lambda s: s.level == b'\x03')
+    status = wait_diag(ros, 'connection', lambda s: s.level == b'\x00', timeout=30)
+    values = {kv.key: kv.value for kv in status.values}
+    assert int(values['reconnects']) >= 1
+    ros.wait_for_message('joint_states', JointState, timeout=15)
