@@ -8,4 +8,4 @@ source scripts/ros_env.sh
 echo "test: ruff check"
 ruff check .
 echo "test: pytest"
-python -m pytest src "$@"
+python -m pytest src tests "$@"

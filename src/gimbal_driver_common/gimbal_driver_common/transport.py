@@ -123,8 +123,9 @@ class TcpStream(ByteStream):
 
     def read(self, max_bytes: int, timeout: float) -> bytes:
         sock = self._require()
-        sock.settimeout(max(timeout, 0.0))
         try:
+            # settimeout too: it raises EBADF when another thread closed the socket.
+            sock.settimeout(max(timeout, 0.0))
             data = sock.recv(max_bytes)
         except (TimeoutError, BlockingIOError):
             return b''

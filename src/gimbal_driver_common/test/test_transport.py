@@ -164,3 +164,17 @@ def test_backoff_doubles_to_maximum_and_resets() -> None:
     assert backoff.next_delay() == 0.5
     with pytest.raises(ValueError):
         Backoff(0.0, 1.0)
+
+
+def test_tcp_close_from_another_thread_raises_link_closed() -> None:
+    server = EchoServer()
+    try:
+        stream = TcpStream('127.0.0.1', server.port)
+        stream.open()
+        sock = stream._sock  # the socket a reader thread still holds
+        sock.close()
+        with pytest.raises(LinkClosed):
+            stream.read(10, 0.1)
+    finally:
+        stream.close()
+        server.close()

@@ -1,0 +1,170 @@
+"""Every driver's launch files and parameter YAML files are valid and name only
+parameters that the node declares.
+
+There is no ``launch``/``launch_ros`` on PyPI, so the launch files are executed
+against small recording stand-ins for those modules: enough to run
+``generate_launch_description()`` and collect every Node's package,
+executable, name and parameters. Each YAML file is then loaded by the real
+node (a process with ``autostart:=false``, so nothing is connected) and the
+node's declared parameters (``list_parameters``) must cover every key.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+import types
+from pathlib import Path
+
+import pytest
+import yaml
+from rcl_interfaces.srv import ListParameters
+
+from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, find_executable
+
+pytestmark = pytest.mark.ros
+
+SRC = Path(__file__).resolve().parent.parent / 'src'
+DRIVERS = {
+    'capture_driver': 'capture_driver_node',
+    'canaero_turret_driver': 'canaero_turret_driver_node',
+    'kessler_kos_driver': 'kessler_kos_driver_node',
+    'ucamera_driver': 'ucamera_driver_node',
+}
+
+
+class Recorded:
+    """Stand-in for any launch action or substitution: remembers its arguments."""
+
+    instances: list[Recorded] = []
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        self.args, self.kwargs = args, kwargs
+        Recorded.instances.append(self)
+
+    def __truediv__(self, other: object) -> Recorded:
+        return Recorded(self, other)
+
+
+LAUNCH_DEFAULTS: dict[str, str] = {}
+
+
+class DeclareLaunchArgument(Recorded):
+    def __init__(self, name: str, *args: object, **kwargs: object) -> None:
+        super().__init__(name, *args, **kwargs)
+        LAUNCH_DEFAULTS[name] = str(kwargs.get('default_value', ''))
+
+
+class LaunchConfiguration(Recorded):
+    """Evaluates to the launch argument's default, as `ros2 launch` without arguments."""
+
+    def perform(self, context: object) -> str:
+        return LAUNCH_DEFAULTS.get(str(self.args[0]), '')
+
+
+SPECIAL = {'DeclareLaunchArgument': DeclareLaunchArgument,
+           'LaunchConfiguration': LaunchConfiguration}
+
+
+def _module(name: str) -> types.ModuleType:
+    module = types.ModuleType(name)
+
+    def factory(attr: str) -> type:
+        if attr.startswith('__'):
+            raise AttributeError(attr)
+        return SPECIAL.get(attr) or type(attr, (Recorded,), {})
+
+    module.__getattr__ = factory  # type: ignore[attr-defined]
+    module.__path__ = []  # a package, so submodules import
+    return module
+
+
+@pytest.fixture
+def launch_stubs(monkeypatch):
+    for name in ('launch', 'launch.actions', 'launch.substitutions', 'launch.conditions',
+                 'launch.event_handlers', 'launch.events', 'launch_ros', 'launch_ros.actions',
+                 'launch_ros.substitutions', 'launch_ros.events', 'launch_ros.event_handlers',
+                 'launch_ros.events.lifecycle', 'launch.launch_description_sources'):
+        monkeypatch.setitem(sys.modules, name, _module(name))
+    Recorded.instances = []
+    LAUNCH_DEFAULTS.clear()
+    yield
+
+
+def run_launch_file(path: Path) -> list[Recorded]:
+    spec = importlib.util.spec_from_file_location(f'launch_under_test_{path.stem}', path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.generate_launch_description()
+    for action in list(Recorded.instances):
+        if type(action).__name__ == 'OpaqueFunction':
+            action.kwargs['function'](object(), *action.kwargs.get('args', ()))
+    return [r for r in Recorded.instances
+            if type(r).__name__ in ('Node', 'LifecycleNode') and 'executable' in r.kwargs]
+
+
+def launch_files() -> list[tuple[str, Path]]:
+    return [(pkg, path) for pkg in DRIVERS for path in sorted((SRC / pkg / 'launch').glob('*.py'))]
+
+
+def config_files() -> list[tuple[str, Path]]:
+    return [(pkg, path) for pkg in DRIVERS
+            for path in sorted((SRC / pkg / 'config').glob('*.yaml'))]
+
+
+def test_every_driver_ships_launch_and_configs() -> None:
+    for pkg in DRIVERS:
+        assert list((SRC / pkg / 'launch').glob('*.launch.py')), f'{pkg} has no launch file'
+        configs = [p.name for p in (SRC / pkg / 'config').glob('*.yaml')]
+        assert f'{pkg}.yaml' in configs, f'{pkg}: no real-hardware YAML'
+        assert any('sim' in c for c in configs), f'{pkg}: no simulator YAML'
+
+
+@pytest.mark.parametrize(('pkg', 'path'), launch_files(), ids=lambda v: getattr(v, 'name', v))
+def test_launch_file_runs_and_starts_the_driver(launch_stubs, pkg: str, path: Path) -> None:
+    nodes = run_launch_file(path)
+    assert nodes, f'{path.name} starts no node'
+    assert any(n.kwargs['executable'] == DRIVERS[pkg] for n in nodes)
+    for node in nodes:
+        assert node.kwargs.get('package') == pkg
+        find_executable(pkg, node.kwargs['executable'])  # the executable is installed
+        if node.kwargs['executable'] != DRIVERS[pkg]:
+            continue
+        for entry in node.kwargs.get('parameters', []):
+            if isinstance(entry, dict):
+                unknown = set(entry) - declared_parameters(pkg)
+                assert not unknown, f'{path.name} sets undeclared parameters {unknown}'
+
+
+@pytest.mark.parametrize(('pkg', 'path'), config_files(), ids=lambda v: getattr(v, 'name', v))
+def test_config_sets_only_declared_parameters(pkg: str, path: Path) -> None:
+    data = yaml.safe_load(path.read_text())
+    assert isinstance(data, dict) and data, f'{path.name} is empty'
+    for section, content in data.items():
+        assert section in (pkg, '/**', f'/{pkg}', '**'), f'{path.name}: section {section!r}'
+        params = content['ros__parameters']
+        unknown = set(params) - declared_parameters(pkg)
+        assert not unknown, f'{path.name} sets parameters the node does not declare: {unknown}'
+
+
+_DECLARED: dict[str, set[str]] = {}
+
+
+def declared_parameters(pkg: str) -> set[str]:
+    """Parameter names the node declares (asked from a running, unconfigured node)."""
+    if pkg in _DECLARED:
+        return _DECLARED[pkg]
+    with DomainLease() as domain:
+        node = ManagedProcess.ros(pkg, DRIVERS[pkg], domain,
+                                  ['--ros-args', '-p', 'autostart:=false'])
+        try:
+            with RosTestClient(domain, 'launch_check') as ros:
+                reply = ros.call(ListParameters, f'/{pkg}/list_parameters',
+                                 ListParameters.Request(), timeout=30)
+        finally:
+            node.stop()
+    names = set(reply.result.names)
+    assert 'publish_rate' in names, f'{pkg}: common parameters missing: {sorted(names)}'
+    _DECLARED[pkg] = names
+    return names
