@@ -344,3 +344,13 @@ def test_capture_sim_process_with_control_console():
     finally:
         proc.terminate()
         proc.wait(10)
+
+
+def test_truncated_packet_before_a_reply_is_resynchronised(client, sim):
+    # A packet that lost its tail (length says 8, only 3 bytes follow the header). Its
+    # bytes plus the start of the real reply must not sum to a valid checksum by chance
+    # (an 8-bit checksum collides 1 time in 256; 0x41 here would).
+    sim.inject_garbage(bytes.fromhex('50 54 08 00 01 01 09 42'))
+    for _ in range(3):
+        assert client.request('MOT_GetLoadPosition', 1) == 0.0
+    assert client.connected

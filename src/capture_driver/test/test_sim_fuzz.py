@@ -1,0 +1,50 @@
+"""The simulator never crashes on arbitrary input and answers valid requests sensibly."""
+
+from __future__ import annotations
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from capture_driver.protocol import BY_OPCODE, COMMANDS, Frame, ReplyCode, StreamDecoder
+from capture_driver.sim import CaptureSession, PedestalModel
+
+
+def connected_session() -> CaptureSession:
+    session = CaptureSession(PedestalModel(), greet=False)
+    assert session.on_bytes(COMMANDS['COM_Connect'].encode()) == bytes([ReplyCode.ACK])
+    return session
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.binary(max_size=200))
+def test_garbage_never_crashes_the_simulator(data):
+    session = connected_session()
+    reply = session.on_bytes(data)
+    for item in StreamDecoder().feed(reply):
+        assert not hasattr(item, 'reason') or item.reason != 'checksum mismatch'
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.sampled_from(sorted(BY_OPCODE)), st.integers(0, 16), st.binary(max_size=48))
+def test_any_table_opcode_with_any_payload_gets_one_answer(opcode, axis, data):
+    session = connected_session()
+    reply = session.on_bytes(Frame(0, axis, opcode, data).encode())
+    items = StreamDecoder().feed(reply)
+    assert len(items) == 1
+    item = items[0]
+    if isinstance(item, Frame):
+        assert item.opcode == opcode and item.axis == axis
+        assert BY_OPCODE[opcode].replies_with_data
+
+
+def test_unknown_opcodes_are_invalid_commands():
+    session = connected_session()
+    for opcode in (0x0000, 0x0B05, 0x0FB6, 0xFFFF):  # incl. out-of-scope groups
+        assert session.on_bytes(Frame(0, 1, opcode).encode()) == bytes([ReplyCode.INVALID_COMMAND])
+
+
+def test_bad_checksum_gets_f6():
+    session = connected_session()
+    packet = bytearray(COMMANDS['MOT_GetLoadPosition'].encode(1))
+    packet[-1] ^= 0x55
+    assert session.on_bytes(bytes(packet)) == bytes([ReplyCode.WRONG_CHECKSUM])
