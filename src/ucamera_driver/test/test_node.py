@@ -25,7 +25,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import TwistStamped  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
 from sensor_msgs.msg import Imu, JointState, NavSatFix, NavSatStatus  # noqa: E402
-from std_msgs.msg import Float64  # noqa: E402
+from std_msgs.msg import Float64, UInt16  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from gimbal_driver_common.ros.testing import RosTestClient  # noqa: E402
@@ -157,7 +157,8 @@ def value(status, key: str) -> str:
 
 @pytest.fixture(scope="module")
 def rig() -> Iterator[Rig]:
-    setup = Rig({"allow_nv_write": "true", "gps_feed": "external", "command_timeout": "0.5"})
+    setup = Rig({"allow_nv_write": "true", "gps_feed": "external", "command_timeout": "0.5",
+                 "ir_palette": "2", "antenna_position": "[0.1, 0.0, -0.25]"})
     try:
         yield setup
     finally:
@@ -239,6 +240,15 @@ def test_zoom_command_and_report(rig: Rig) -> None:
                       lambda: any(abs(m.data - 0.4) < 1e-3 for m in list(zooms)))
     rig.publish_until(f"/{NODE}/zoom_command", Float64(data=1.5),
                       lambda: "zoom_command rejected" in rig.node.output())
+
+
+def test_ir_palette_and_antenna_position(rig: Rig) -> None:
+    rig.ros.wait_for_message(f"/{NODE}/ir_palette", UInt16, lambda m: m.data == 2)
+    palettes = rig.ros.subscribe(f"/{NODE}/ir_palette", UInt16)
+    rig.publish_until(f"/{NODE}/ir_palette_command", UInt16(data=5),
+                      lambda: any(m.data == 5 for m in list(palettes)))
+    array = rig.diagnostics(lambda a: device_part(a, "device") is not None)
+    assert value(device_part(array, "device"), "antenna_position_m") == "0.100, 0.000, -0.250"
 
 
 def test_external_feed_reaches_the_gimbal(rig: Rig) -> None:

@@ -91,13 +91,15 @@ class RateLimiter:
     def __init__(self, rate: float) -> None:
         self.period = 1.0 / rate if rate > 0 else 0.0
         self._last: dict[str, float] = {}
+        self._lock = threading.Lock()
 
     def allow(self, key: str, now: float | None = None) -> bool:
         now = time.monotonic() if now is None else now
-        if now - self._last.get(key, -math.inf) < self.period:
-            return False
-        self._last[key] = now
-        return True
+        with self._lock:
+            if now - self._last.get(key, -math.inf) < self.period:
+                return False
+            self._last[key] = now
+            return True
 
 
 def _with_motion_lock(method):
@@ -137,7 +139,13 @@ class UCameraDriverNode(GimbalDriverNode):
                 f"parameter joint_names: the U-Camera has two joints (pan, tilt), got "
                 f"{self.joint_names}"
             )
+        if self.telemetry_rate and self.publish_rate > self.telemetry_rate:
+            self.get_logger().warning(
+                f"publish_rate {self.publish_rate:g} Hz > telemetry_rate {self.telemetry_rate} "
+                "Hz: joint_states are published when a new angles report arrives, so they "
+                "come at the telemetry rate")
         self._feed_limiter = RateLimiter(self.external_feed_rate)
+        self._report_limiter = RateLimiter(self.report_publish_rate)
         self._zoom_pub = self.create_publisher(Float64, "~/zoom", 10)
         self._fix_pub = self.create_publisher(NavSatFix, "~/fix", 10)
         self._palette_pub = self.create_publisher(UInt16, "~/ir_palette", 10)
@@ -206,6 +214,9 @@ class UCameraDriverNode(GimbalDriverNode):
         self.external_velocity_max_age = self.declare_param(
             "external_velocity_max_age", 1.0, "s: a ~/ext/fix is forwarded with the last "
             "~/ext/velocity only if that is this fresh", value_range=(0.01, 60.0))
+        self.report_publish_rate = self.declare_param(
+            "report_publish_rate", 10.0, "max Hz of ~/zoom, ~/fix and ~/ir_palette (0 = every "
+            "report, i.e. the telemetry rate)", value_range=(0.0, 200.0))
         self.frame_id = self.declare_param(
             "frame_id", "ucamera", "frame_id of ~/fix")
         self.allow_nv_write = self.declare_param(
@@ -467,8 +478,18 @@ class UCameraDriverNode(GimbalDriverNode):
     # ------------------------------------------------------ reports -> topics
     def _on_report(self, packet: Packet, stamp: float) -> None:
         """Runs on the client's I/O thread for every received packet."""
-        if not self.active:
+        if not self.active or not self.context.ok():
             return
+        if not self._report_limiter.allow(type(packet).__name__):
+            return
+        try:
+            self._publish_report(packet, stamp)
+        except Exception as exc:  # noqa: BLE001 - context shut down between check and publish
+            if self.context.ok():
+                self.get_logger().warning(f"report not published: {exc}",
+                                          throttle_duration_sec=5.0)
+
+    def _publish_report(self, packet: Packet, stamp: float) -> None:
         if isinstance(packet, ZoomReport):
             self._zoom_pub.publish(Float64(data=packet.level))
         elif isinstance(packet, IrPaletteReport):
