@@ -248,3 +248,13 @@ def test_registers_decode_named_flags():
         assert COMMANDS[register.command].ret is DataType.U16 or register.name == 'SYS'
     for name in CSR_ERROR_STRINGS.values():
         assert COMMANDS[name].ret is DataType.ASCII
+
+
+def test_generated_command_table_doc_is_current():
+    from pathlib import Path
+
+    from capture_driver.protocol.commands import markdown_table
+
+    doc = Path(__file__).resolve().parent.parent / 'doc' / 'command_table.md'
+    assert doc.read_text(encoding='utf-8').endswith(markdown_table()), (
+        'regenerate doc/command_table.md from markdown_table()')

@@ -620,3 +620,24 @@ def command(name: str) -> Command:
 def encode(name: str, axis: int | None = None, value: Any = None, group: int = 0) -> bytes:
     """Request bytes for the named command."""
     return command(name).encode(axis, value, group)
+
+
+def markdown_table() -> str:
+    """The command table as Markdown (doc/command_table.md is generated from this)."""
+    lines = [
+        '| command | opcode | axis byte | argument | reply | confidence | safety | evidence |',
+        '|---|---|---|---|---|---|---|---|',
+    ]
+    for cmd in sorted(COMMANDS.values(), key=lambda c: c.opcode):
+        arg = '-' if cmd.arg is DataType.NONE else ' '.join(
+            filter(None, (cmd.arg.value, cmd.arg_unit)))
+        ret = 'ACK' if cmd.ret is DataType.NONE else ' '.join(
+            filter(None, (cmd.ret.value, cmd.ret_unit)))
+        safety = '' if cmd.safety is Safety.NONE else cmd.safety.value
+        evidence = cmd.evidence.replace('|', '/')
+        lines.append(f'| `{cmd.name}` | 0x{cmd.opcode:04X} | {cmd.axis.name} | {arg} | {ret} '
+                     f'| {cmd.confidence} | {safety} | {evidence} |')
+    lines += ['', '## Not encoded (opcode not established)', '',
+              '| command(s) | why |', '|---|---|']
+    lines += [f'| `{name}` | {why} |' for name, why in UNRESOLVED.items()]
+    return '\n'.join(lines) + '\n'
