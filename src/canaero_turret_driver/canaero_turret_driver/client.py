@@ -154,6 +154,7 @@ class TurretClient:
         self._cache: dict[str, Sample] = {}
         self._node_seen: dict[int, float] = {}
         self._intervals_ms: dict[str, int] = {}
+        self._observed_interval: dict[str, float] = {}
         self._pending: tuple[CanAerospaceMessage, threading.Event, list] | None = None
         self._codes = MessageCodeCounter()
         self.sequences = MessageCodeTracker()
@@ -365,7 +366,10 @@ class TurretClient:
         sample = Sample(ident.key, value, self._to_si(ident, value), time.time(), now,
                         message.message_code, message.node_id)
         with self._cache_lock:
+            previous = self._cache.get(ident.key)
             self._cache[ident.key] = sample
+        if previous is not None:
+            self._learn_interval(ident.key, now - previous.received)
         if self.on_sample is not None:
             self.on_sample(sample)
 
@@ -409,10 +413,28 @@ class TurretClient:
         with self._cache_lock:
             return dict(self._cache)
 
+    def _learn_interval(self, key: str, gap: float) -> None:
+        """Track how often an identifier arrives (the ICD leaves intervals to the device).
+
+        A smoothed inter-arrival time; gaps longer than 4x the estimate (an outage, a
+        silence) do not inflate it.
+        """
+        estimate = self._observed_interval.get(key)
+        if estimate is None:
+            self._observed_interval[key] = gap
+        elif gap <= 4.0 * estimate:
+            self._observed_interval[key] = 0.8 * estimate + 0.2 * gap
+
     def stale_timeout_for(self, key: str) -> float:
-        interval = self._intervals_ms.get(key)
-        base = self.config.stale_timeout
-        return max(base, 3.0 * interval / 1000.0) if interval else base
+        """`stale_timeout`, or 3 transmission intervals for slower identifiers."""
+        timeout = self.config.stale_timeout
+        interval_ms = self._intervals_ms.get(key)
+        if interval_ms:
+            timeout = max(timeout, 3.0 * interval_ms / 1000.0)
+        observed = self._observed_interval.get(key)
+        if observed is not None:
+            timeout = max(timeout, 3.0 * observed)
+        return timeout
 
     def age(self, key: str, now: float | None = None) -> float | None:
         sample = self.latest(key)
@@ -587,6 +609,7 @@ class TurretClient:
             raise ServiceError(f"node {node} refused TIS {key} (id {ident.can_id}) = "
                                f"{interval_ms} ms: {ns.status_text(ns.ServiceCode.TIS, status)}")
         self._intervals_ms[key] = int(interval_ms)
+        self._observed_interval.pop(key, None)
 
     def _data_ident(self, key: str) -> Identifier:
         for ident in self._table.values():
@@ -626,6 +649,10 @@ class TurretClient:
         if status != ns.ServiceStatus.OK:
             raise ServiceError(f"node {node} refused flash programming: "
                                f"{ns.status_text(ns.ServiceCode.FPS, status)}")
+
+    def data_identifiers(self) -> list[Identifier]:
+        """The data identifiers this client decodes (with the configured zoom id)."""
+        return [i for i in self._table.values() if i.direction is Direction.DATA]
 
     def data_type_of(self, key: str) -> DataType:
         return self._data_ident(key).data_type

@@ -321,3 +321,15 @@ def test_open_failure_is_a_link_error():
     with pytest.raises(LinkError, match="can9"):
         turret.open()
     turret.close()
+
+
+def test_staleness_follows_each_identifiers_own_rate():
+    turret = TurretClient(ClientConfig(stale_timeout=0.5))
+    assert turret.stale_timeout_for("case_temperature") == 0.5
+    for gap in (1.0, 1.0, 1.0):
+        turret._learn_interval("case_temperature", gap)
+    assert turret.stale_timeout_for("case_temperature") == pytest.approx(3.0)
+    turret._learn_interval("case_temperature", 60.0)  # an outage does not inflate it
+    assert turret.stale_timeout_for("case_temperature") == pytest.approx(3.0)
+    turret._learn_interval("yaw_position", 0.02)
+    assert turret.stale_timeout_for("yaw_position") == 0.5

@@ -1,0 +1,277 @@
+"""The driver node as a process against `canaero_turret_sim` (slcan over a pty).
+
+Simulator and node are separate processes (loopback DDS, a leased ROS domain); the test
+talks to the node over ROS and to the simulator over its control port to inject faults
+and read the device state.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Vector3Stamped
+from sensor_msgs.msg import JointState, NavSatFix
+from std_msgs.msg import Float64
+from std_srvs.srv import SetBool, Trigger
+
+from canaero_turret_driver.sim import ControlClient
+from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_msgs.action import MoveTo
+from gimbal_msgs.msg import GimbalStatus
+from gimbal_msgs.srv import ClearPreset, DeviceCommand, GotoPreset, ListPresets, SetMode, SetPreset
+
+pytestmark = pytest.mark.ros
+
+PKG = "canaero_turret_driver"
+NODE = "canaero_turret_driver"
+
+
+def node_params(tty: str, presets: str) -> list[str]:
+    params = [
+        "can_interface:=slcan", f"can_channel:={tty}", "can_options:=['sleep_after_open=0']",
+        "service_timeout:=0.3", "reconnect_period:=0.3", "diagnostics_period:=0.25",
+        "command_timeout:=0.4", "node_timeout:=0.6", "stale_timeout:=0.6",
+        f"presets_file:={presets}", "publish_rate:=20.0",
+        "transmission_intervals:=['yaw_position=20','pitch_position=20']",
+        "actuator_mode:=auto_brake",
+    ]
+    return ["--ros-args", *[x for p in params for x in ("-p", p)]]
+
+
+@pytest.fixture(scope="module")
+def rig(tmp_path_factory):
+    lease = DomainLease()
+    domain = lease.acquire()
+    tmp = tmp_path_factory.mktemp("canaero")
+    tty, ready, presets = tmp / "tty", tmp / "ready.json", tmp / "presets.yaml"
+    sim = ManagedProcess.ros(PKG, "canaero_turret_sim", domain,
+                             ["--link", str(tty), "--ready-file", str(ready)])
+    node = None
+    ros = None
+    control = None
+    try:
+        wait_for(ready.exists, 20, "the simulator to start")
+        control = ControlClient(json.loads(ready.read_text())["control_port"])
+        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain,
+                                  node_params(str(tty), str(presets)))
+        ros = RosTestClient(domain)
+        ros.wait_for_message("joint_states", JointState, timeout=40)
+        yield ros, control, presets, node
+    finally:
+        if ros is not None:
+            ros.close()
+        if node is not None:
+            node.stop()
+        if control is not None:
+            control.close()
+        sim.stop()
+        lease.release()
+
+
+def sim_axis(control, axis: str) -> dict:
+    return control.state()["axes"][axis]
+
+
+def part(array: DiagnosticArray, name: str):
+    for status in array.status:
+        if status.name == f"{NODE}: {name}":
+            return status
+    return None
+
+
+def wait_diag(ros, name: str, level: int, timeout: float = 15.0):
+    return ros.wait_for_message(
+        "/diagnostics", DiagnosticArray,
+        lambda a: part(a, name) is not None and part(a, name).level[0] == level, timeout)
+
+
+def move(ros, names, values, relative=False):
+    goal = MoveTo.Goal(joint_names=list(names), positions=list(values), relative=relative)
+    return ros.run_action(MoveTo, f"/{NODE}/move_to", goal, timeout=40)
+
+
+def test_joint_states_status_and_diagnostics(rig):
+    ros, _, _, _ = rig
+    msg = ros.wait_for_message("joint_states", JointState, lambda m: len(m.effort) == 2)
+    assert msg.name == ["yaw", "pitch"] and len(msg.velocity) == 2
+    assert msg.effort[0] > 0.0  # motor current, A
+    assert msg.header.stamp.sec > 0
+    status = ros.wait_for_message(f"/{NODE}/status", GimbalStatus, lambda m: m.mode)
+    assert status.connection == GimbalStatus.CONNECTION_CONNECTED
+    assert status.firmware_version == "hw 2 sw 7" and "auto_brake" in status.mode
+    diag = wait_diag(ros, "connection", 0)
+    assert all(s.hardware_id.startswith("canaerospace node 1") for s in diag.status)
+    node_part = part(wait_diag(ros, "turret node", 0), "turret node")
+    assert dict((kv.key, kv.value) for kv in node_part.values)["turret_node_id"] == "1"
+
+
+def test_move_to_absolute_and_relative(rig):
+    ros, control, _, _ = rig
+    result, _, feedback = move(ros, ["yaw", "pitch"], [0.4, 0.2])
+    assert result.success, result.message
+    assert result.positions == pytest.approx([0.4, 0.2], abs=0.011)
+    assert feedback
+    assert sim_axis(control, "yaw")["position"] == pytest.approx(math.degrees(0.4), abs=0.1)
+    result, _, _ = move(ros, ["yaw"], [-0.2], relative=True)
+    assert result.success and result.positions[0] == pytest.approx(0.2, abs=0.011)
+
+
+def test_move_refused_out_of_limits_and_unknown_joint(rig):
+    ros, control, _, _ = rig
+    before = control.state()["commands_received"]
+    result, _, _ = move(ros, ["pitch"], [1.5])
+    assert not result.success and "outside" in result.message
+    result, _, _ = move(ros, ["roll"], [0.0])
+    assert not result.success and "unknown joint" in result.message
+    assert control.state()["commands_received"] == before
+
+
+def test_jog_stops_by_watchdog(rig):
+    ros, control, _, node = rig
+    ros.publish("joint_command", JointState(name=["pitch"], velocity=[0.2]))
+    wait_for(lambda: abs(sim_axis(control, "pitch")["velocity"]) > 5.0, 10, "the jog")
+    wait_for(lambda: sim_axis(control, "pitch")["velocity"] == 0.0, 10, "the watchdog stop")
+    node.wait_for_output("expired")
+
+
+def test_stop_service_halts_a_move(rig):
+    ros, control, _, _ = rig
+    ros.publish("joint_command", JointState(name=["yaw"], position=[-2.5]))
+    wait_for(lambda: abs(sim_axis(control, "yaw")["velocity"]) > 10.0, 10, "the move")
+    reply = ros.call(Trigger, f"/{NODE}/stop", Trigger.Request())
+    assert reply.success, reply.message
+    wait_for(lambda: sim_axis(control, "yaw")["velocity"] == 0.0, 10, "the axis to stop")
+    assert sim_axis(control, "yaw")["position"] > math.degrees(-2.4)
+
+
+def test_presets_device_zero_and_driver_side(rig):
+    ros, control, presets_file, _ = rig
+    assert move(ros, ["yaw", "pitch"], [0.3, 0.1])[0].success
+    ok = ros.call(SetPreset, f"/{NODE}/set_preset",
+                  SetPreset.Request(index=0, use_current_position=True))
+    assert ok.success, ok.message
+    wait_for(lambda: control.state()["saved_position"] is not None, 5, "the turret to remember")
+    bad = ros.call(SetPreset, f"/{NODE}/set_preset", SetPreset.Request(
+        index=0, joint_names=["yaw"], positions=[0.1]))
+    assert not bad.success and "preset 0" in bad.message
+    ok = ros.call(SetPreset, f"/{NODE}/set_preset", SetPreset.Request(
+        index=3, name="gate", joint_names=["yaw", "pitch"], positions=[-0.3, 0.0]))
+    assert ok.success, ok.message
+    assert "gate" in presets_file.read_text()
+    listed = ros.call(ListPresets, f"/{NODE}/list_presets", ListPresets.Request())
+    assert [p.index for p in listed.presets] == [0, 3]
+    go = ros.call(GotoPreset, f"/{NODE}/goto_preset", GotoPreset.Request(index=3))
+    assert go.success, go.message
+    wait_for(lambda: abs(sim_axis(control, "yaw")["position"] + math.degrees(0.3)) < 0.1, 10,
+             "preset 3")
+    go = ros.call(GotoPreset, f"/{NODE}/goto_preset", GotoPreset.Request(index=0))
+    assert go.success, go.message
+    wait_for(lambda: abs(sim_axis(control, "yaw")["position"] - math.degrees(0.3)) < 0.1, 10,
+             "preset 0 (restore)")
+    missing = ros.call(GotoPreset, f"/{NODE}/goto_preset", GotoPreset.Request(index=9))
+    assert not missing.success and "9" in missing.message
+    cleared = ros.call(ClearPreset, f"/{NODE}/clear_preset", ClearPreset.Request(all=True))
+    assert cleared.success, cleared.message
+
+
+def test_periphery_and_mode_services(rig):
+    ros, control, _, _ = rig
+    for name in ("set_cover", "set_fan", "set_oes_heater", "set_charging"):
+        reply = ros.call(SetBool, f"/{NODE}/{name}", SetBool.Request(data=True))
+        assert reply.success, reply.message
+    wait_for(lambda: control.state()["cover_state"] == 1, 10, "the cover to open")
+    state = control.state()
+    assert state["fan_on"] and state["oes_heater_on"] and state["charging_on"]
+    reply = ros.call(SetMode, f"/{NODE}/set_actuator_mode", SetMode.Request(mode="yaw=free_run"))
+    assert reply.success, reply.message
+    wait_for(lambda: sim_axis(control, "yaw")["actuator_mode"] == 0, 5, "free run")
+    reply = ros.call(SetMode, f"/{NODE}/set_actuator_mode", SetMode.Request(mode="warp"))
+    assert not reply.success and "auto_brake" in reply.message
+    reply = ros.call(SetMode, f"/{NODE}/set_actuator_mode", SetMode.Request(mode="auto_brake"))
+    assert reply.success
+    wait_for(lambda: sim_axis(control, "yaw")["actuator_mode"] == 2, 5, "auto brake")
+
+
+def test_device_command_identify_and_opt_in_guards(rig):
+    ros, control, _, _ = rig
+    reply = ros.call(DeviceCommand, f"/{NODE}/device_command",
+                     DeviceCommand.Request(command="identify"))
+    assert reply.success and "software_revision=7" in reply.results
+    reply = ros.call(DeviceCommand, f"/{NODE}/device_command", DeviceCommand.Request(
+        command="set_node_id", arguments=["9"]))
+    assert not reply.success and "allow_node_id_change" in reply.message
+    reply = ros.call(DeviceCommand, f"/{NODE}/device_command", DeviceCommand.Request(
+        command="store_configuration", arguments=["0x5A"]))
+    assert not reply.success and "allow_flash_programming" in reply.message
+    assert control.state()["node_ids"]["turret"] == 1
+    assert not control.state()["stored_configuration"]
+    reply = ros.call(DeviceCommand, f"/{NODE}/device_command", DeviceCommand.Request(
+        command="set_interval", arguments=["case_temperature", "5"]))
+    assert not reply.success and "out of range" in reply.message
+
+
+def test_gnss_heading_and_inclination_topics(rig):
+    ros, _, _, _ = rig
+    fix = ros.wait_for_message(f"/{NODE}/fix", NavSatFix)
+    assert fix.latitude == pytest.approx(48.1372) and fix.longitude == pytest.approx(11.5756)
+    assert fix.altitude == pytest.approx(519.0) and fix.position_covariance[0] > 0
+    heading = ros.wait_for_message(f"/{NODE}/heading", Float64)
+    assert heading.data == pytest.approx(math.radians(123.45678), abs=1e-4)
+    incl = ros.wait_for_message(f"/{NODE}/inclination", Vector3Stamped)
+    assert incl.vector.x == pytest.approx(math.radians(-0.8), abs=1e-4)
+
+
+def test_diagnostics_on_injected_faults_and_reset(rig):
+    ros, control, _, _ = rig
+    assert control.command("fault pitch") == "ok"
+    diag = wait_diag(ros, "pitch", 2)
+    assert "disabled" in part(diag, "pitch").message
+    wait_diag(ros, "emergency events", 1)
+    reply = ros.call(Trigger, f"/{NODE}/reset_faults", Trigger.Request())
+    assert reply.success, reply.message
+    wait_diag(ros, "pitch", 0)
+    assert control.command("lose yaw_position 5") == "ok"
+    wait_diag(ros, "message codes", 1)
+    assert control.command("case_sensor_fault on") == "ok"
+    wait_diag(ros, "periphery", 1)
+    assert control.command("case_sensor_fault off") == "ok"
+    assert control.command("silence zoom") == "ok"
+    diag = wait_diag(ros, "data freshness", 1)
+    values = {kv.key: kv.value for kv in part(diag, "data freshness").values}
+    assert "zoom_position" in values["stale"]
+    assert part(diag, "connection").level[0] == 0
+    assert control.command("resume zoom") == "ok"
+    wait_diag(ros, "data freshness", 0)
+
+
+def test_turret_silence_is_an_error_and_recovers(rig):
+    ros, control, _, _ = rig
+    assert control.command("silence turret") == "ok"
+    diag = wait_diag(ros, "connection", 2)
+    assert "silent" in part(diag, "connection").message
+    assert control.command("resume turret") == "ok"
+    wait_diag(ros, "connection", 0, timeout=20)
+    ros.wait_for_message("joint_states", JointState, timeout=20)
+    assert move(ros, ["yaw"], [0.1])[0].success
+
+
+def test_link_drop_recovers(rig):
+    ros, control, _, _ = rig
+    assert control.command("drop_link 0.5") == "ok"
+    wait_diag(ros, "connection", 2)
+    wait_diag(ros, "connection", 0, timeout=30)
+    ros.wait_for_message("joint_states", JointState, timeout=20)
+
+
+def test_shutdown_stops_moving_axes(rig):
+    ros, control, _, node = rig
+    ros.publish("joint_command", JointState(name=["yaw"], position=[-2.8]))
+    wait_for(lambda: abs(sim_axis(control, "yaw")["velocity"]) > 10.0, 10, "the move")
+    node.send_signal(signal.SIGINT)
+    wait_for(lambda: sim_axis(control, "yaw")["velocity"] == 0.0, 10, "the shutdown stop")
+    assert sim_axis(control, "yaw")["position"] > math.degrees(-2.7)
