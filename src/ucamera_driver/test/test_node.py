@@ -20,6 +20,8 @@ import pytest
 pytestmark = pytest.mark.ros
 
 rclpy = pytest.importorskip("rclpy")
+pytest.importorskip("gimbal_msgs", reason="needs the built workspace: make build; "
+                    "source scripts/ros_env.sh")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import TwistStamped  # noqa: E402

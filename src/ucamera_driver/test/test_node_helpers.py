@@ -6,6 +6,8 @@ import pytest
 
 pytestmark = pytest.mark.ros
 pytest.importorskip("rclpy")
+pytest.importorskip("gimbal_msgs", reason="needs the built workspace: make build; "
+                    "source scripts/ros_env.sh")
 
 from ucamera_driver.node import (  # noqa: E402
     RateLimiter,

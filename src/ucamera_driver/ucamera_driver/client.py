@@ -204,14 +204,16 @@ class UCameraClient:
         self._thread = threading.Thread(target=self._io_loop, name="ucamera-io", daemon=True)
         self._thread.start()
         deadline = time.monotonic() + timeout
+        last_failure = "no answer"
         while time.monotonic() < deadline:
             try:
                 return self.request_version(min(self.request_timeout,
                                                 max(0.05, deadline - time.monotonic())))
             except UCameraError as exc:
-                self.last_error = self.last_error or str(exc)
+                last_failure = str(exc)
                 time.sleep(0.05)
-        reason = self.last_error or "no answer"
+        # the I/O thread's reason (cannot open, no telemetry) says more than a timeout
+        reason = self.last_error or last_failure
         self.stop()
         raise UCameraError(
             f"U-Camera on {self.description} did not answer Request Gimbal Version within "

@@ -434,7 +434,8 @@ class UCameraDriverNode(GimbalDriverNode):
         state = client.state()
         stats = client.stats
         achieved = client.telemetry_rate_achieved()
-        new_errors = stats.checksum_errors - self._last_checksum_errors
+        # a reconnect starts a new client whose counters restart at zero
+        new_errors = max(0, stats.checksum_errors - self._last_checksum_errors)
         self._last_checksum_errors = stats.checksum_errors
         level, message = Level.OK, f"mode {self.device_mode() or '?'}"
         if self.telemetry_rate and achieved < 0.7 * self.telemetry_rate:
