@@ -206,13 +206,19 @@ class CaptureClient:
             LOG.warning('controller keep-alive not available: %s', exc)
 
     def close(self, send_disconnect: bool = False) -> None:
-        """Close the link (optionally telling the controller with COM_Disconnect)."""
+        """Close the link cleanly.
+
+        A configured controller keep-alive is switched off first (a clean close is not a
+        dead host: the axes keep their power and position); with ``send_disconnect`` the
+        controller also gets COM_Disconnect, which powers the motors off (4.6.3).
+        """
         with self._lock:
+            if self._connected and self.keepalive_period > 0:
+                with contextlib.suppress(CaptureError, TransportError, ProtocolError):
+                    self._request_locked('COM_StartKeepAlive', None, 0, timeout=0.2)
             if send_disconnect and self._connected:
-                with contextlib.suppress(CaptureError, TransportError):
-                    self._request_locked('COM_StartKeepAlive', None, 0)
-                with contextlib.suppress(CaptureError, TransportError):
-                    self._request_locked('COM_Disconnect', None, None)
+                with contextlib.suppress(CaptureError, TransportError, ProtocolError):
+                    self._request_locked('COM_Disconnect', None, None, timeout=0.2)
             self._close_locked()
 
     def _close_locked(self) -> None:

@@ -161,6 +161,8 @@ class CaptureDriverNode(GimbalDriverNode):
                             callback_group=group)
         self.create_service(Trigger, '~/stop_preset_loop', self._on_stop_loop,
                             callback_group=group)
+        self.create_service(SetBool, '~/set_emergency_stop', self._on_emergency_stop,
+                            callback_group=group)
         self.create_service(DeviceCommand, '~/command', self._on_command, callback_group=group)
         self.create_subscription(NavSatFix, '~/goto_lla', self._on_goto_lla, 1,
                                  callback_group=group)
@@ -673,6 +675,17 @@ class CaptureDriverNode(GimbalDriverNode):
             self._device_call(lambda c: c.run(name))
             self._next_status = 0.0
             return f'stabilisation {"on" if request.data else "off"}'
+
+        return self._run_trigger(response, action)
+
+    def _on_emergency_stop(self, request, response):
+        def action() -> str:
+            self._device_call(lambda c: c.run('MOT_SetEmgStopAxes', None, int(request.data)))
+            self._device_scanning = self._preset_looping = False
+            self._next_status = 0.0
+            if request.data:
+                return 'emergency stop set: all axes stopped, motion commands refused'
+            return 'emergency stop cleared (the controller reset the axes to relative mode)'
 
         return self._run_trigger(response, action)
 

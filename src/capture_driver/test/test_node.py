@@ -294,6 +294,21 @@ def test_goto_lla_points_at_target(rig):
     assert positions(msg)['tilt'] == pytest.approx(0.0, abs=1e-3)
 
 
+def test_emergency_stop(rig):
+    ros, control_port, *_ = rig
+    reply = ros.call(SetBool, srv('set_emergency_stop'), SetBool.Request(data=True))
+    assert reply.success, reply.message
+    assert sim_state(control_port)['emergency_stop']
+    wait_diag(ros, 'device', lambda s: 'emergency stop' in s.message)
+    goal = MoveTo.Goal(joint_names=['tilt'], positions=[0.1])
+    result, _, _ = ros.run_action(MoveTo, srv('move_to'), goal, timeout=40)
+    assert not result.success and 'Emergency stop' in result.message
+    reply = ros.call(SetBool, srv('set_emergency_stop'), SetBool.Request(data=False))
+    assert reply.success, reply.message
+    result, _, _ = ros.run_action(MoveTo, srv('move_to'), goal, timeout=40)
+    assert result.success, result.message
+
+
 def test_fault_reported_then_reset(rig):
     ros, control_port, *_ = rig
     assert control(control_port, 'fault 1 over_current') == 'ok'
