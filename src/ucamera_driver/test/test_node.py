@@ -53,7 +53,8 @@ GOAL_ABORTED = 6
 class Rig:
     """Simulator process + node process + a ROS test client in one leased domain."""
 
-    def __init__(self, node_params: dict[str, str], params_file: str | None = None) -> None:
+    def __init__(self, node_params: dict[str, str], params_file: str | None = None,
+                 wait_active: bool = True) -> None:
         self.lease = DomainLease()
         domain = self.lease.acquire()
         self.tmp = tempfile.TemporaryDirectory(prefix="ucamera-node-test-")
@@ -73,7 +74,8 @@ class Rig:
             args += ["-p", f"{key}:={value}"]
         self.node = ManagedProcess.ros("ucamera_driver", "ucamera_driver_node", domain, args)
         self.ros = RosTestClient(domain, name="ucamera_test_client")
-        self.ros.wait_for_message("joint_states", JointState, timeout=30.0, fresh=False)
+        if wait_active:
+            self.ros.wait_for_message("joint_states", JointState, timeout=30.0, fresh=False)
 
     def close(self) -> None:
         self.ros.close()
@@ -395,3 +397,27 @@ def test_invalid_parameter_is_refused_at_start_up() -> None:
             assert "telemetry_rate" in node.output()
         finally:
             node.stop()
+
+
+def test_managed_lifecycle_and_configure_failure() -> None:
+    setup = Rig({"autostart": "false"}, wait_active=False)
+    try:
+        ros = setup.ros
+        ros.wait_for_lifecycle_state(NODE, "unconfigured")
+        assert ros.lifecycle_transition(NODE, Transition.TRANSITION_CONFIGURE)
+        assert ros.lifecycle_state(NODE) == "inactive"
+        assert setup.trigger("stop").success  # ~/stop works in every state with a link
+        assert not setup.trigger("save_configuration").success  # not active: refused
+        assert ros.lifecycle_transition(NODE, Transition.TRANSITION_ACTIVATE)
+        setup.joints(None)
+        assert ros.lifecycle_transition(NODE, Transition.TRANSITION_DEACTIVATE)
+        assert ros.lifecycle_transition(NODE, Transition.TRANSITION_CLEANUP)
+        # the device disappears: configure fails with a clear log line
+        setup.sim.stop()
+        assert not ros.lifecycle_transition(NODE, Transition.TRANSITION_CONFIGURE)
+        assert ros.lifecycle_state(NODE) == "unconfigured"
+        wait_for(lambda: "configure failed: cannot reach the device" in setup.node.output(),
+                 10.0, "the configure failure log line")
+        assert "did not answer Request Gimbal Version" in setup.node.output()
+    finally:
+        setup.close()
