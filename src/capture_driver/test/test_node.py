@@ -121,6 +121,7 @@ def test_joint_states_and_identity(rig):
     assert values['serial_number'] == '24017'
     assert values['firmware'].startswith('2.24.0')
     ros.wait_for_message('joint_states', JointState, lambda m: len(m.effort) == 2)
+    wait_diag(ros, 'joint_states frequency', lambda s: s.level == b'\x00')
 
 
 def test_move_to_reaches_target_and_joint_states_show_it(rig):

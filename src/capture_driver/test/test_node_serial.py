@@ -1,0 +1,74 @@
+"""capture_driver_node over a serial line (the simulator's pseudo-terminal), as processes."""
+
+from __future__ import annotations
+
+import json
+import socket
+
+import pytest
+
+pytest.importorskip('rclpy', reason='node tests need the ROS environment')
+pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+
+from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
+from gimbal_msgs.action import MoveTo
+
+pytestmark = pytest.mark.ros
+
+PKG = 'capture_driver'
+
+
+def control(port: int, line: str) -> str:
+    with socket.create_connection(('127.0.0.1', port), timeout=5.0) as sock:
+        stream = sock.makefile('rw')
+        stream.write(line + '\n')
+        stream.flush()
+        return stream.readline().strip()
+
+
+def connection_level(array: DiagnosticArray) -> bytes | None:
+    for status in array.status:
+        if status.name == 'capture_driver: connection':
+            return status.level
+    return None
+
+
+def test_node_over_serial_moves_and_survives_unplugging():
+    lease = DomainLease()
+    domain = lease.acquire()
+    control_port = free_tcp_port()
+    sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
+        '--port', '-1', '--pty', '--control-port', str(control_port), '--time-scale', '4'])
+    node = None
+    ros = None
+    try:
+        out = sim.wait_for_output('capture_sim ready')
+        line = next(x for x in out.splitlines() if 'capture_sim ready' in x)
+        tty = json.loads(line.split('ready ', 1)[1])['pty']
+        node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
+            '--ros-args', '-p', 'transport:=serial', '-p', f'serial_port:={tty}',
+            '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',
+            '-p', 'diagnostics_period:=0.25', '-p', 'imu_rate:=0.0', '-p', 'fix_rate:=0.0'])
+        ros = RosTestClient(domain)
+        ros.wait_for_message('joint_states', JointState, timeout=30)
+        goal = MoveTo.Goal(joint_names=['pan', 'tilt'], positions=[0.2, 0.1])
+        result, _, _ = ros.run_action(MoveTo, '/capture_driver/move_to', goal, timeout=40)
+        assert result.success, result.message
+        assert control(control_port, 'drop 1.0') == 'ok'
+        ros.wait_for_message('/diagnostics', DiagnosticArray,
+                             lambda a: connection_level(a) == b'\x02', timeout=15)
+        ros.wait_for_message('/diagnostics', DiagnosticArray,
+                             lambda a: connection_level(a) == b'\x00', timeout=30)
+        msg = ros.wait_for_message('joint_states', JointState, timeout=15)
+        assert dict(zip(msg.name, msg.position, strict=True))['pan'] == pytest.approx(
+            0.2, abs=2e-3)
+    finally:
+        if ros is not None:
+            ros.close()
+        if node is not None:
+            node.stop()
+        sim.stop()
+        lease.release()
