@@ -12,6 +12,9 @@ import math
 import signal
 
 import pytest
+
+pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (make build)")
+
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
 from sensor_msgs.msg import JointState, NavSatFix
@@ -23,7 +26,14 @@ from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import GimbalStatus
-from gimbal_msgs.srv import ClearPreset, DeviceCommand, GotoPreset, ListPresets, SetMode, SetPreset
+from gimbal_msgs.srv import (
+    ClearPreset,
+    DeviceCommand,
+    GotoPreset,
+    ListPresets,
+    SetMode,
+    SetPreset,
+)
 
 pytestmark = pytest.mark.ros
 
