@@ -280,10 +280,13 @@ class CaptureDriverNode(GimbalDriverNode):
         )
         firmware = ident.firmware + (f' (hw {ident.hardware})' if ident.hardware else '')
         serial = ident.serial_number
+        # hardware_id: serial number and firmware (the link address if the serial is unknown)
+        hardware_id = f'capture-sn{serial}' if serial else f'capture@{self.link_description()}'
+        if ident.firmware:
+            hardware_id += f'-fw{ident.firmware}'
         return DeviceInfo(
             model=ident.part_number or 'Capture pedestal', serial_number=serial,
-            firmware_version=firmware,
-            hardware_id=f'capture-{serial}' if serial else f'capture@{self.link_description()}',
+            firmware_version=firmware, hardware_id=hardware_id,
         )
 
     def _probe(self, name: str) -> bool:

@@ -116,7 +116,7 @@ def test_joint_states_and_identity(rig):
     assert msg.name == ['pan', 'tilt']
     assert len(msg.velocity) == 2
     status = wait_diag(ros, 'connection', lambda s: s.level == b'\x00')
-    assert status.hardware_id == 'capture-24017'
+    assert status.hardware_id == 'capture-sn24017-fw2.24.0'
     values = {kv.key: kv.value for kv in status.values}
     assert values['serial_number'] == '24017'
     assert values['firmware'].startswith('2.24.0')
