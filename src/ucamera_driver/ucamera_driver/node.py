@@ -618,9 +618,15 @@ class UCameraDriverNode(GimbalDriverNode):
     def _on_ext_imu(self, msg: Imu) -> None:
         if not self._feed_limiter.allow("imu"):
             return
-        if msg.orientation_covariance[0] != -1.0:
-            q = msg.orientation
-            yaw, pitch, roll = enu_flu_to_ned_frd(*quaternion_to_euler(q.x, q.y, q.z, q.w))
+        q = msg.orientation
+        norm = math.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w)
+        if msg.orientation_covariance[0] != -1.0 and not 0.9 < norm < 1.1:
+            self.get_logger().warning(
+                f"ext/imu orientation not forwarded: quaternion norm {norm:.3f} is not 1",
+                throttle_duration_sec=5.0)
+        elif msg.orientation_covariance[0] != -1.0:
+            yaw, pitch, roll = enu_flu_to_ned_frd(
+                *quaternion_to_euler(q.x / norm, q.y / norm, q.z / norm, q.w / norm))
             self._send_or_warn("ext/imu orientation",
                                lambda c: c.send_vehicle_angles(yaw, pitch, roll))
         if msg.angular_velocity_covariance[0] != -1.0:
