@@ -288,8 +288,7 @@ class CaptureClient:
     def _request_locked(self, name: str, axis: int | None, value: Any,
                         timeout: float | None = None) -> Any:
         cmd = command(name)
-        packet = cmd.encode(axis, value, self.group)  # validates before anything is sent
-        frame = Frame(self.group, packet[4], cmd.opcode, packet[7:-1])
+        frame = cmd.frame(axis, value, self.group)  # validates before anything is sent
         if self._stream is None:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
         for attempt in (1, 2):

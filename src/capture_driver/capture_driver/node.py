@@ -749,7 +749,7 @@ class CaptureDriverNode(GimbalDriverNode):
             value = parse_arguments(cmd.arg, list(request.arguments))
             axis = request.axis if (cmd.axis.low != cmd.axis.high or request.axis) else None
             try:
-                cmd.encode(axis, value, self.group_id)  # argument and axis checks, nothing sent
+                cmd.frame(axis, value, self.group_id)  # argument and axis checks, nothing sent
             except ProtocolError as exc:
                 raise CommandError(str(exc)) from None
             result = self._device_call(lambda c: c.run(cmd.name, axis, value))

@@ -341,3 +341,20 @@ def test_dropped_link_reconnects_and_diagnostics_report_it(rig):
     values = {kv.key: kv.value for kv in status.values}
     assert int(values['reconnects']) >= 1
     ros.wait_for_message('joint_states', JointState, timeout=15)
+
+
+@pytest.mark.parametrize(('override', 'name'), [
+    ('axis_ids:=[1,1]', 'axis_ids'),
+    ('joint_directions:=[1.0,0.5]', 'joint_directions'),
+    ('transport:=udp', 'transport'),
+])
+def test_invalid_parameters_are_refused_naming_them(override, name):
+    with DomainLease() as domain:
+        node = ManagedProcess.ros(PKG, 'capture_driver_node', domain,
+                                  ['--ros-args', '-p', override])
+        try:
+            node.process.wait(30)
+        finally:
+            node.stop()
+        assert node.process.returncode != 0
+        assert name in node.output()

@@ -108,13 +108,17 @@ class Command:
         """Getters answer with a data packet; everything else with an ACK byte (2.1)."""
         return self.ret is not DataType.NONE
 
-    def encode(self, axis: int | None = None, value: Any = None, group: int = 0) -> bytes:
-        """Request packet bytes; raises :class:`ProtocolError` naming the bad input."""
+    def frame(self, axis: int | None = None, value: Any = None, group: int = 0) -> Frame:
+        """Request packet; raises :class:`ProtocolError` naming the bad input."""
         axis_byte = self.axis.check(axis, self.name)
         payload = encode_value(self.arg, value, f'{self.name} argument')
         if not 0 <= group <= 0xFF:
             raise ProtocolError(f'{self.name}: group id {group} is outside 0..255')
-        return Frame(group, axis_byte, self.opcode, payload).encode()
+        return Frame(group, axis_byte, self.opcode, payload)
+
+    def encode(self, axis: int | None = None, value: Any = None, group: int = 0) -> bytes:
+        """Request packet bytes; raises :class:`ProtocolError` naming the bad input."""
+        return self.frame(axis, value, group).encode()
 
     def decode_reply(self, frame: Frame) -> Any:
         if frame.opcode != self.opcode:
