@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from ucamera_driver.protocol import (
     FrameParser,
@@ -17,8 +19,10 @@ from ucamera_driver.protocol import (
     SetRates,
     TelemetryRateRequest,
     VersionRequest,
+    encode_frame,
 )
-from ucamera_driver.sim import Faults, UCameraModel, UCameraSim, build_arg_parser
+from ucamera_driver.protocol.packets import ALL_PACKETS
+from ucamera_driver.sim import Faults, UCameraModel, UCameraSession, UCameraSim, build_arg_parser
 
 
 class ManualClock:
@@ -135,3 +139,20 @@ def test_cli_defaults() -> None:
     args = build_arg_parser().parse_args([])
     assert args.telemetry_rate == 50
     assert args.gimbal_type == "ir"
+
+
+@settings(max_examples=200, derandomize=True, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.lists(st.sampled_from(ALL_PACKETS).flatmap(lambda cls: st.tuples(
+    st.just(cls),
+    st.binary(min_size=cls.payload_length(), max_size=cls.payload_length())
+    | st.binary(max_size=30))), max_size=12))
+def test_session_survives_arbitrary_payloads(make_config, data) -> None:
+    """Any frame a client might send (right ids, random payloads) never breaks the sim."""
+    sim = UCameraSim(make_config())
+    session = UCameraSession(sim)
+    wire = b"".join(encode_frame(cls.CATEGORY, cls.PACKET_ID, payload) for cls, payload in data)
+    session.on_bytes(wire)
+    session.poll()
+    assert 1 <= sim.model.telemetry_rate <= 200
+    assert sim.model.periodic_reports()

@@ -211,7 +211,10 @@ class UCameraModel:
             elif isinstance(packet, SetZoom):
                 self.zoom_target = packet.level
             elif isinstance(packet, SetTelemetryRate):
-                self.telemetry_rate = int(packet.rate_hz)
+                if 1 <= packet.rate_hz <= 200:  # 5.5.2.5: 1 to 200 Hz
+                    self.telemetry_rate = int(packet.rate_hz)
+                else:
+                    self.ignored[name] = self.ignored.get(name, 0) + 1
             elif isinstance(packet, TelemetryRateRequest):
                 answers.append(TelemetryRateReport(self.telemetry_rate))
             elif isinstance(packet, VersionRequest):
