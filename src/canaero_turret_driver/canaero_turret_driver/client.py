@@ -23,7 +23,7 @@ import math
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import can
@@ -131,6 +131,37 @@ class Counters:
     last_malformed: str = ""
 
 
+class _Exchange:
+    """Responses to one outstanding node-service request, in arrival order."""
+
+    def __init__(self, request: CanAerospaceMessage) -> None:
+        self.request = request
+        self._messages: deque[CanAerospaceMessage] = deque()
+        self._condition = threading.Condition()
+        self._aborted = False
+
+    def add(self, message: CanAerospaceMessage) -> None:
+        with self._condition:
+            self._messages.append(message)
+            self._condition.notify_all()
+
+    def abort(self) -> None:
+        with self._condition:
+            self._aborted = True
+            self._condition.notify_all()
+
+    def wait_next(self, timeout: float) -> CanAerospaceMessage | None:
+        with self._condition:
+            self._condition.wait_for(lambda: self._messages or self._aborted, timeout)
+            return self._messages.popleft() if self._messages else None
+
+    def drain(self) -> list[CanAerospaceMessage]:
+        with self._condition:
+            messages = list(self._messages)
+            self._messages.clear()
+            return messages
+
+
 def _default_bus_factory(config: ClientConfig) -> can.BusABC:
     kwargs = dict(config.bus_options)
     if config.bitrate:
@@ -155,7 +186,7 @@ class TurretClient:
         self._node_seen: dict[int, float] = {}
         self._intervals_ms: dict[str, int] = {}
         self._observed_interval: dict[str, float] = {}
-        self._pending: tuple[CanAerospaceMessage, threading.Event, list] | None = None
+        self._exchange: _Exchange | None = None
         self._codes = MessageCodeCounter()
         self.sequences = MessageCodeTracker()
         self.counters = Counters()
@@ -226,9 +257,9 @@ class TurretClient:
         with contextlib.suppress(Exception):
             bus.shutdown()
         self.last_link_error = reason
-        pending = self._pending
-        if pending is not None:
-            pending[1].set()  # wake a waiting service request; it finds no response
+        exchange = self._exchange
+        if exchange is not None:
+            exchange.abort()  # wake a waiting service request; it finds no response
         if notify:
             LOG.warning("CAN interface %s lost: %s", self.description, reason)
             if self.on_link is not None:
@@ -394,14 +425,10 @@ class TurretClient:
         return ident.to_si(value) * self._sign(ident.key)
 
     def _service_frame(self, message: CanAerospaceMessage, now: float) -> None:
-        pending = self._pending
-        if pending is None:
-            return
-        request, event, slot = pending
-        if ns.is_response_to(request, message):
+        exchange = self._exchange
+        if exchange is not None and ns.is_response_to(exchange.request, message):
             self._node_seen[message.node_id] = now
-            slot.append(message)
-            event.set()
+            exchange.add(message)
 
     # --- cache --------------------------------------------------------------------
 
@@ -570,22 +597,135 @@ class TurretClient:
         attempts = max(1, self.config.service_attempts)
         with self._service_lock:
             for _ in range(attempts):
-                event = threading.Event()
-                slot: list[CanAerospaceMessage] = []
-                self._pending = (message, event, slot)
-                try:
+                with self._exchange_for(message) as exchange:
                     self.send(message)
-                    event.wait(self.config.service_timeout)
-                finally:
-                    self._pending = None
-                if slot:
-                    return slot[0]
+                    response = exchange.wait_next(self.config.service_timeout)
+                if response is not None:
+                    return response
                 if self._bus is None:
                     break
         raise ServiceError(
             f"no {service} response from node {message.node_id} within "
             f"{self.config.service_timeout * 1000:.0f} ms ({attempts} attempts) on "
             f"{self.description}")
+
+    @contextlib.contextmanager
+    def _exchange_for(self, request: CanAerospaceMessage) -> Iterator[_Exchange]:
+        exchange = _Exchange(request)
+        self._exchange = exchange
+        try:
+            yield exchange
+        finally:
+            self._exchange = None
+
+    def download(self, memory_id: int, data: bytes, node_id: int | None = None) -> int:
+        """DDS: write a 1..1020 byte block to node memory; returns the verified checksum.
+
+        Follows the node's XON/XOFF flow control; ABORT/INVALID or a checksum that does not
+        match the bytes sent raise ServiceError.
+        """
+        node = self.config.turret_node_id if node_id is None else node_id
+        try:
+            chunks = ns.split_block(bytes(data))
+            start = ns.start_transfer_request(node, ns.ServiceCode.DDS, memory_id,
+                                              len(chunks), self.config.service_channel)
+        except CodecError as exc:
+            raise CommandError(f"DDS: {exc}") from exc
+        timeout = self.config.service_timeout
+        with self._service_lock, self._exchange_for(start) as exchange:
+            self.send(start)
+            reply = exchange.wait_next(timeout)
+            if reply is None:
+                raise ServiceError(f"no DDS response from node {node} within "
+                                   f"{timeout * 1000:.0f} ms")
+            flow = ns.response_status(reply)
+            final = None
+            for number, chunk in enumerate(chunks, start=1):
+                while flow != ns.ServiceStatus.XON:
+                    if flow in (ns.ServiceStatus.ABORT, ns.ServiceStatus.INVALID):
+                        raise ServiceError(f"node {node} ended the download: "
+                                           f"{ns.status_text(ns.ServiceCode.DDS, flow)}")
+                    reply = exchange.wait_next(timeout * 10)  # XOFF: wait for XON
+                    if reply is None:
+                        raise ServiceError(f"node {node} paused the download (XOFF) and "
+                                           "never resumed")
+                    flow = ns.response_status(reply)
+                self.send(ns.chunk_message(start.can_id, node, ns.ServiceCode.DDS, number,
+                                           chunk))
+                for pending in exchange.drain():
+                    if pending.data_type == DataType.CHKSUM:
+                        final = pending
+                    else:
+                        flow = self._download_reply(pending, node)
+            deadline = time.monotonic() + timeout * 5
+            while final is None:
+                reply = exchange.wait_next(max(0.0, deadline - time.monotonic()))
+                if reply is None:
+                    raise ServiceError(f"node {node} sent no DDS checksum")
+                if reply.data_type == DataType.CHKSUM:
+                    final = reply
+                else:
+                    self._download_reply(reply, node)
+            reply = final
+        expected = ns.block_checksum(bytes(data))
+        if reply.value != expected:
+            raise ServiceError(f"DDS checksum mismatch: node {node} reports {reply.value}, "
+                               f"sent bytes sum to {expected}")
+        return expected
+
+    @staticmethod
+    def _download_reply(reply: CanAerospaceMessage, node: int) -> int:
+        status = ns.response_status(reply)
+        if status in (ns.ServiceStatus.ABORT, ns.ServiceStatus.INVALID):
+            raise ServiceError(f"node {node} ended the download: "
+                               f"{ns.status_text(ns.ServiceCode.DDS, status)}")
+        return status
+
+    def upload(self, memory_id: int, length: int, node_id: int | None = None) -> bytes:
+        """DUS: read `length` (1..1020) bytes of node memory, checking numbers and checksum."""
+        node = self.config.turret_node_id if node_id is None else node_id
+        if not 1 <= length <= ns.MAX_BLOCK_BYTES:
+            raise CommandError(f"DUS: length {length} is outside 1..{ns.MAX_BLOCK_BYTES}")
+        count = (length + 3) // 4
+        try:
+            start = ns.start_transfer_request(node, ns.ServiceCode.DUS, memory_id, count,
+                                              self.config.service_channel)
+        except CodecError as exc:
+            raise CommandError(f"DUS: {exc}") from exc
+        timeout = self.config.service_timeout
+        received: dict[int, bytes] = {}
+        with self._service_lock, self._exchange_for(start) as exchange:
+            self.send(start)
+            reply = exchange.wait_next(timeout)
+            if reply is None:
+                raise ServiceError(f"no DUS response from node {node} within "
+                                   f"{timeout * 1000:.0f} ms")
+            status = ns.response_status(reply)
+            if status != ns.ServiceStatus.OK:
+                raise ServiceError(f"node {node} refused the upload of memory {memory_id}: "
+                                   f"{ns.status_text(ns.ServiceCode.DUS, status)}")
+            deadline = time.monotonic() + timeout + 0.01 * count + 0.5
+            while True:
+                reply = exchange.wait_next(max(0.0, deadline - time.monotonic()))
+                if reply is None:
+                    raise ServiceError(f"DUS from node {node}: {len(received)} of {count} "
+                                       "data messages, then silence")
+                if reply.data_type == DataType.CHKSUM:
+                    break
+                if reply.data_type == DataType.LONG:
+                    raise ServiceError(f"node {node} aborted the upload: "
+                                       f"{ns.status_text(ns.ServiceCode.DUS, int(reply.value))}")
+                value = reply.value
+                received[reply.message_code] = bytes(value if isinstance(value, tuple)
+                                                     else (value,))
+        missing = [n for n in range(1, count + 1) if n not in received]
+        if missing:
+            raise ServiceError(f"DUS from node {node}: data messages {missing} missing")
+        data = b"".join(received[n] for n in range(1, count + 1))
+        if reply.value != ns.block_checksum(data):
+            raise ServiceError(f"DUS checksum mismatch: node {node} reports {reply.value}, "
+                               f"received bytes sum to {ns.block_checksum(data)}")
+        return data[:length]
 
     def identify(self, node_id: int | None = None) -> ns.IdentificationInfo:
         node = self.config.turret_node_id if node_id is None else node_id

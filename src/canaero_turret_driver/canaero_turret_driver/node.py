@@ -203,6 +203,9 @@ class CanaeroTurretNode(GimbalDriverNode):
                           value_range=(0.0, 3600.0))
         self.allow_node_id_change = p("allow_node_id_change", False,
                                       "allow NIS (set_node_id) through ~/device_command")
+        self.allow_data_download = p("allow_data_download", False,
+                                     "allow DDS (download) through ~/device_command: it writes "
+                                     "device memory")
         self.allow_flash_programming = p("allow_flash_programming", False,
                                          "allow FPS (store_configuration) through "
                                          "~/device_command")
@@ -479,7 +482,8 @@ class CanaeroTurretNode(GimbalDriverNode):
         return callback
 
     def _on_device_command(self, request, response):
-        """identify [node-id] | set_interval <key> <ms> | set_node_id <new> [node-id] |
+        """identify [node-id] | set_interval <key> <ms> | upload <memid> <length> |
+        download <memid> <hex> | set_node_id <new> [node-id] |
         store_configuration <security code> [node-id]"""
         results: list[str] = []
 
@@ -509,9 +513,36 @@ class CanaeroTurretNode(GimbalDriverNode):
                 if command == "set_node_id":
                     if not args:
                         raise CommandError("set_node_id needs <new node-id> [node-id]")
-                    node = number(args[1]) if len(args) > 1 else None
-                    client.set_node_id(number(args[0]), node)
-                    return f"node-id changed to {number(args[0])}"
+                    node = number(args[1]) if len(args) > 1 else client.config.turret_node_id
+                    new_id = number(args[0])
+                    client.set_node_id(new_id, node)
+                    for name, value in self.node_ids.items():
+                        if value == node:
+                            self.node_ids[name] = new_id  # reconnects use the new id
+                    self.get_logger().warning(
+                        f"node {node} now has node-id {new_id}; put it in the parameter file, "
+                        "and store it with store_configuration (FPS) to keep it after a "
+                        "power cycle")
+                    return f"node-id {node} changed to {new_id}"
+                if command == "upload":
+                    if len(args) != 2:
+                        raise CommandError("upload needs <memory id> <length in bytes>")
+                    data = client.upload(number(args[0]), number(args[1]))
+                    results.append(data.hex())
+                    return f"{len(data)} bytes read from memory {number(args[0])} (DUS)"
+                if command == "download":
+                    if not self.allow_data_download:
+                        raise CommandError("data download (DDS) writes device memory and is "
+                                           "disabled; set allow_data_download to use it")
+                    if len(args) != 2:
+                        raise CommandError("download needs <memory id> <hex bytes>")
+                    try:
+                        data = bytes.fromhex(args[1])
+                    except ValueError as exc:
+                        raise CommandError(f"{args[1]!r} is not hex bytes") from exc
+                    checksum = client.download(number(args[0]), data)
+                    results.append(f"checksum={checksum}")
+                    return f"{len(data)} bytes written to memory {number(args[0])} (DDS)"
                 if command == "store_configuration":
                     if not args:
                         raise CommandError("store_configuration needs <security code>")
@@ -519,7 +550,8 @@ class CanaeroTurretNode(GimbalDriverNode):
                     client.store_configuration(number(args[0]), node)
                     return "configuration stored in flash"
             raise CommandError(f"unknown command {command!r}; commands: identify, "
-                               "set_interval, set_node_id, store_configuration")
+                               "set_interval, upload, download, set_node_id, "
+                               "store_configuration")
 
         response = self._run_trigger(response, action)
         response.results = results

@@ -230,6 +230,27 @@ class AxisModel:
 
 
 @dataclass
+class Memory:
+    """A block of node memory reachable with DDS/DUS."""
+
+    data: bytearray
+    writable: bool
+
+
+@dataclass
+class _Download:
+    node_id: int
+    memory_id: int
+    count: int
+    next_number: int = 1
+    data: bytearray = field(default_factory=bytearray)
+
+
+SCRATCH_MEMORY_ID = 1  # 64 bytes of writable scratch memory in the turret node
+IDENT_MEMORY_ID = 16  # read-only identification text
+
+
+@dataclass
 class SimConfig:
     turret_node_id: int = TURRET_NODE_ID
     zoom_position_id: int = DEFAULT_ZOOM_POSITION_ID
@@ -299,6 +320,12 @@ class TurretSimulator:
         self._repeat: dict[int, int] = {}
         self._malformed_pending = 0
         self._outbox: list[can.Message] = []
+        self.memories: dict[int, Memory] = {  # turret node memories by MEMID
+            SCRATCH_MEMORY_ID: Memory(bytearray(64), writable=True),
+            IDENT_MEMORY_ID: Memory(bytearray(b"CANAERO-TURRET-SIM hw2 sw7\0"),
+                                              writable=False),
+        }
+        self._download: _Download | None = None
 
     # --- helpers -----------------------------------------------------------------
 
@@ -557,10 +584,64 @@ class TurretSimulator:
         for node_id in self._nodes_addressed(request.node_id):
             if self._is_silent(node_id, now):
                 continue
+            if request.service_code in (ns.ServiceCode.DDS, ns.ServiceCode.DUS):
+                replies.extend(self._transfer(node_id, request, channel))
+                continue
             reply = self._service_for_node(node_id, request, channel)
             if reply is not None:
                 replies.append(reply)
         return replies
+
+    def _transfer(self, node_id: int, request: CanAerospaceMessage,
+                  channel: int) -> list[CanAerospaceMessage]:
+        """DDS (write) and DUS (read) of the simulated memories (see `MEMORIES`)."""
+        service = ns.ServiceCode(request.service_code)
+        if request.data_type == DataType.MEMID:
+            memory_id, count = int(request.value), request.message_code  # type: ignore[arg-type]
+            memory = (self.memories.get(memory_id)
+                      if node_id == self.config.turret_node_id else None)
+            if service == ns.ServiceCode.DDS:
+                if memory is None or not memory.writable or not 1 <= count <= 255 \
+                        or count * 4 > len(memory.data) + 3:
+                    self._download = None
+                    return [ns.long_response(node_id, service, ns.ServiceStatus.INVALID,
+                                             request.message_code, channel)]
+                self._download = _Download(node_id, memory_id, count)
+                return [ns.long_response(node_id, service, ns.ServiceStatus.XON,
+                                         request.message_code, channel)]
+            if memory is None or not 1 <= count <= 255 or count * 4 > len(memory.data) + 3:
+                return [ns.long_response(node_id, service, ns.ServiceStatus.ABORT,
+                                         request.message_code, channel)]
+            _, response_id = ns.service_channel_ids(channel)
+            data = bytes(memory.data[:count * 4])
+            replies = [ns.long_response(node_id, service, ns.ServiceStatus.OK,
+                                        request.message_code, channel)]
+            replies += [ns.chunk_message(response_id, node_id, service, number, chunk)
+                        for number, chunk in enumerate(ns.split_block(data), start=1)]
+            replies.append(ns.checksum_response(node_id, service, ns.block_checksum(data),
+                                                count, channel))
+            return replies
+        # a DDS data message
+        download = self._download
+        if service != ns.ServiceCode.DDS or download is None or download.node_id != node_id:
+            return []
+        value = request.value
+        chunk = bytes(value if isinstance(value, tuple) else (value,))  # type: ignore[arg-type]
+        if request.message_code != download.next_number or \
+                request.data_type not in (DataType.UCHAR, DataType.UCHAR2, DataType.UCHAR3,
+                                          DataType.UCHAR4):
+            self._download = None
+            return [ns.long_response(node_id, service, ns.ServiceStatus.ABORT,
+                                     request.message_code, channel)]
+        download.data += chunk
+        download.next_number += 1
+        if request.message_code < download.count:
+            return []
+        self._download = None
+        memory = self.memories[download.memory_id]
+        memory.data[:len(download.data)] = download.data
+        return [ns.checksum_response(node_id, service, ns.block_checksum(bytes(download.data)),
+                                     download.count, channel)]
 
     def _service_for_node(self, node_id: int, request: CanAerospaceMessage,
                           channel: int) -> CanAerospaceMessage | None:

@@ -333,3 +333,21 @@ def test_staleness_follows_each_identifiers_own_rate():
     assert turret.stale_timeout_for("case_temperature") == pytest.approx(3.0)
     turret._learn_interval("yaw_position", 0.02)
     assert turret.stale_timeout_for("yaw_position") == 0.5
+
+
+def test_data_download_and_upload(client, simulator):
+    text = client.upload(16, 26)
+    assert text == b"CANAERO-TURRET-SIM hw2 sw7"
+    block = bytes(range(1, 42))  # 41 bytes: 11 data messages, the last with one byte
+    assert client.download(1, block) == sum(block)
+    assert bytes(simulator.memories[1].data[:41]) == block
+    assert client.upload(1, 41) == block
+    with pytest.raises(ServiceError, match="INVALID"):
+        client.download(16, b"read-only")
+    with pytest.raises(ServiceError, match="ABORT"):
+        client.upload(99, 4)
+    with pytest.raises(CommandError):
+        client.download(1, b"")
+    with pytest.raises(CommandError):
+        client.upload(1, 2000)
+    assert client.identify().software_revision == 7  # the service channel is free again

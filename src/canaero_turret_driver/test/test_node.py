@@ -223,6 +223,16 @@ def test_device_command_identify_and_opt_in_guards(rig):
     reply = ros.call(DeviceCommand, f"/{NODE}/device_command", DeviceCommand.Request(
         command="set_interval", arguments=["case_temperature", "5"]))
     assert not reply.success and "out of range" in reply.message
+    reply = ros.call(DeviceCommand, f"/{NODE}/device_command", DeviceCommand.Request(
+        command="upload", arguments=["16", "18"]))
+    assert reply.success, reply.message
+    assert bytes.fromhex(reply.results[0]) == b"CANAERO-TURRET-SIM"
+    reply = ros.call(DeviceCommand, f"/{NODE}/device_command", DeviceCommand.Request(
+        command="download", arguments=["1", "0102"]))
+    assert not reply.success and "allow_data_download" in reply.message
+    reply = ros.call(DeviceCommand, f"/{NODE}/device_command", DeviceCommand.Request(
+        command="format_disk"))
+    assert not reply.success and "unknown command" in reply.message
 
 
 def test_gnss_heading_and_inclination_topics(rig):
