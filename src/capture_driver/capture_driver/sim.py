@@ -973,6 +973,24 @@ class PedestalModel:
     def _do_IMU_GetPressure(self, frame, arg, session):
         return 101.3
 
+    # --- laser rangefinder (sim: a target 850 m away while measuring)
+    def _do_LRF_IsConnected(self, frame, arg, session):
+        return True
+
+    def _do_LRF_StartMeasurement(self, frame, arg, session):
+        self.stored[('LRF_measuring', 0)] = True
+
+    def _do_LRF_StopMeasurement(self, frame, arg, session):
+        self.stored[('LRF_measuring', 0)] = False
+
+    def _do_LRF_GetLRFDistance(self, frame, arg, session):
+        return 850.0 + 10.0 * (frame.axis - 1) if self.stored.get(('LRF_measuring', 0)) else 0.0
+
+    def _do_LRF_GetTargetDistance(self, frame, arg, session):
+        if self.stored.get(('LRF_distancesource', 0)):
+            return self._do_LRF_GetLRFDistance(Frame(0, 1, 0x030A), None, session)
+        return self.stored.get(('LRF_manualdistance', 0), 0.0)
+
     # --- GPS and targets
     def _system_position(self) -> tuple[GeoPoint, float]:
         if self.override_gps:

@@ -354,3 +354,17 @@ def test_truncated_packet_before_a_reply_is_resynchronised(client, sim):
     for _ in range(3):
         assert client.request('MOT_GetLoadPosition', 1) == 0.0
     assert client.connected
+
+
+def test_rangefinder_commands(client):
+    assert client.request('LRF_IsConnected') is True
+    client.request('LRF_SetManualDistance', None, 120.0)
+    client.request('LRF_SetDistanceSource', None, 0)
+    assert client.request('LRF_GetTargetDistance') == 120.0
+    client.request('LRF_StartMeasurement')
+    client.request('LRF_SetDistanceSource', None, 1)
+    assert client.request('LRF_GetTargetDistance') == 850.0
+    assert client.request('LRF_GetLRFDistance', 2) == 860.0
+    with pytest.raises(ProtocolError):
+        client.request('LRF_GetLRFDistance', 6)
+    client.request('LRF_StopMeasurement')

@@ -69,11 +69,12 @@ IMU_SENSOR = AxisRule('imu_sensor', 0, 3, 'IMU sensor (0 client, 1 base, 2 load,
 IMU_AXIS = AxisRule('imu_axis', 1, 3, 'IMU axis (1 yaw, 2 pitch, 3 roll)')
 CENTRAL_AXIS = AxisRule('central_axis', 0, 2, 'sensor axis (0 x, 1 y, 2 z)')
 COMPENSATION = AxisRule('compensation', 2, 3, 'compensation (2 tilt, 3 roll)')
+MEASUREMENT = AxisRule('measurement', 1, 5, 'LRF measurement (target) number')
 
 AXIS_RULES = {
     rule.name: rule
     for rule in (MOTOR, SYSTEM, TARGET, PRESET, DIGITAL_IO, IMU_SENSOR, IMU_AXIS,
-                 CENTRAL_AXIS, COMPENSATION)
+                 CENTRAL_AXIS, COMPENSATION, MEASUREMENT)
 }
 
 
@@ -549,6 +550,41 @@ _TABLE: list[tuple[Any, ...]] = [
     ('ERR_OperationRegister', 0x0E12, MOTOR, N, '', U16, 'bits', 'high',
      'rev: 2.16.0 "New Error register was added operations error - 0x0E12"', Safety.NONE,
      'Operation Register'),
+    # --- laser rangefinder (4.17); axis byte unused except for the measurement number -----
+    ('LRF_SetManualDistance', 0x0300, SYSTEM, F32, 'm', N, '', 'medium',
+     'rev: 2.17 "LRF_SetRange - 0x0300"; 4.17.1 is that command renamed ("Set the range to '
+     'the target"), first of the group', Safety.NONE, 'manual distance to the target'),
+    ('LRF_GetManualDistance', 0x0301, SYSTEM, N, '', F32, 'm', 'medium',
+     'rev: 2.17 "LRF_GetRange - 0x0301" (renamed, as LRF_SetManualDistance)', Safety.NONE,
+     'manual distance to the target'),
+    ('LRF_SetMinMeasurement', 0x0302, SYSTEM, U16, 'm', N, '', 'high', 'rev: 2.20.0',
+     Safety.NONE, 'minimum of the measurement range'),
+    ('LRF_GetMinMeasurement', 0x0303, SYSTEM, N, '', U16, 'm', 'high', 'rev: 2.20.0',
+     Safety.NONE, 'minimum of the measurement range'),
+    ('LRF_SetMaxMeasurement', 0x0304, SYSTEM, U16, 'm', N, '', 'high',
+     'rev: 2.20.0; text 4.17.5 "Dx0304"', Safety.NONE, 'maximum of the measurement range'),
+    ('LRF_GetMaxMeasurement', 0x0305, SYSTEM, N, '', U16, 'm', 'high', 'rev: 2.20.0',
+     Safety.NONE, 'maximum of the measurement range'),
+    ('LRF_SetFrequency', 0x0306, SYSTEM, U8, 'Hz', N, '', 'high', 'rev: 2.20.0', Safety.NONE,
+     'measurement frequency'),
+    ('LRF_GetFrequency', 0x0307, SYSTEM, N, '', U8, 'Hz', 'high', 'rev: 2.20.0', Safety.NONE,
+     'measurement frequency'),
+    ('LRF_StartMeasurement', 0x0308, SYSTEM, N, '', N, '', 'high',
+     'order: rev 2.20.0 item 1.7 lost in the OCR; only slot between 0x0307 and 0x0309',
+     Safety.NONE, 'start measuring'),
+    ('LRF_StopMeasurement', 0x0309, SYSTEM, N, '', N, '', 'high', 'rev: 2.20.0', Safety.NONE,
+     'stop measuring'),
+    ('LRF_GetLRFDistance', 0x030A, MEASUREMENT, N, '', F32, 'm', 'high',
+     'rev: 2.20.0; text 4.17.11 "Dx030A"', Safety.NONE,
+     'measured distance (measurement 1 = current/last)'),
+    ('LRF_SetDistanceSource', 0x030B, SYSTEM, U8, '0 manual/1 LRF', N, '', 'high',
+     'rev: 2.20.0', Safety.NONE, 'distance source'),
+    ('LRF_GetDistanceSource', 0x030C, SYSTEM, N, '', U8, '0 manual/1 LRF', 'high',
+     'rev: 2.20.0', Safety.NONE, 'distance source'),
+    ('LRF_GetTargetDistance', 0x030D, SYSTEM, N, '', F32, 'm', 'high', 'rev: 2.20.0',
+     Safety.NONE, 'final distance (from the selected source)'),
+    ('LRF_IsConnected', 0x030E, SYSTEM, N, '', BOOL, 'flag', 'high', 'rev: 2.20.0',
+     Safety.NONE, 'rangefinder connected'),
     # --- servo control (4.19) -----------------------------------------------------------
     ('SRV_IsEnable', 0x0F71, SYSTEM, N, '', BOOL, 'flag', 'high', 'rev: 2.21.0',
      Safety.NONE, 'servo control enabled'),
@@ -601,8 +637,6 @@ UNRESOLVED: dict[str, str] = {
     'GetSlowdownValue': '4.16.7-4.16.12 print only fragments ("Dx( 6", "Dx0 B")',
     'VDT_* (video tracker)': 'camera index travels in the group byte; not used by this '
                              'pan-tilt driver (opcodes 0x0A01/0x0A02/0x0A04/0x0A13 are known)',
-    'LRF_* (rangefinder)': 'opcodes 0x0300-0x030E known from rev 2.17/2.20, argument types '
-                           'not reconstructed',
     'PELCOD_*, RLY_*, DG_* (non-weapon)': 'Pelco-D settings, relay module and dual-gimbal '
                                           'synchronisation: not reconstructed',
 }
