@@ -583,7 +583,11 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, lambda *_: stop.set())
-    sim.start()
+    try:
+        sim.start()
+    except OSError as exc:
+        raise SystemExit(f"ucamera_sim: cannot create the pseudo-terminal link "
+                         f"{args.link or ''}: {exc}") from exc
     print(sim.port_name, flush=True)
     LOG.info("U-Camera simulator serving on %s", sim.port_name)
 
