@@ -351,3 +351,20 @@ def test_data_download_and_upload(client, simulator):
     with pytest.raises(CommandError):
         client.upload(1, 2000)
     assert client.identify().software_revision == 7  # the service channel is free again
+
+
+def test_axis_sign_maps_device_direction(simulator, channel_name):
+    config = ClientConfig(interface="virtual", channel=channel_name, yaw_sign=-1.0)
+    turret = TurretClient(config)
+    turret.open()
+    try:
+        turret.move_to("yaw", 0.25)  # REP-103 +0.25 rad = device -14.3 deg
+        assert wait_for(lambda: abs(simulator.state()["axes"]["yaw"]["position"]
+                                    + math.degrees(0.25)) < 1e-3)
+        assert wait_for(lambda: abs((_si(turret, "yaw_position") or 9) - 0.25) < 1e-3)
+        turret.jog("yaw", 0.1)
+        assert wait_for(lambda: simulator.state()["axes"]["yaw"]["velocity"] < -5.0)
+        assert wait_for(lambda: (_si(turret, "yaw_velocity") or 0) > 0.09)
+        turret.stop()
+    finally:
+        turret.close()

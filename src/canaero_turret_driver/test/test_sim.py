@@ -2,6 +2,8 @@
 
 import can
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from canaero_turret_driver.protocol import CanAerospaceMessage, DataType
 from canaero_turret_driver.protocol import nodeservice as ns
@@ -113,3 +115,15 @@ def test_control_commands_report_errors():
         assert '"axes"' in control.execute("state")
     finally:
         control.stop()
+
+
+@settings(max_examples=200, deadline=None)
+@given(chunks=st.lists(st.binary(max_size=40), max_size=8))
+def test_slcan_session_survives_any_bytes(chunks):
+    session = SlcanSession(TurretSimulator())
+    session.on_bytes(b"O\r")
+    for chunk in chunks:
+        out = session.on_bytes(chunk)
+        for record in out.split(b"\r")[:-1]:
+            record = record.lstrip(b"\a")
+            assert record == b"" or record[:1] in b"tzVNF", record

@@ -1,0 +1,126 @@
+"""Managed bring-up, start-up parameter checks and the opt-in node services, as processes."""
+
+from __future__ import annotations
+
+import json
+import time
+
+import pytest
+
+pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (make build)")
+
+from lifecycle_msgs.msg import Transition
+from sensor_msgs.msg import JointState
+
+from canaero_turret_driver.sim import ControlClient
+from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_msgs.action import MoveTo
+from gimbal_msgs.srv import DeviceCommand
+
+pytestmark = pytest.mark.ros
+
+PKG = "canaero_turret_driver"
+NODE = "canaero_turret_driver"
+
+
+def ros_args(*params: str) -> list[str]:
+    return ["--ros-args", *[x for p in params for x in ("-p", p)]]
+
+
+@pytest.mark.parametrize(("param", "expected"), [
+    ("transmission_intervals:=['bogus=5']", "transmission_intervals"),
+    ("yaw_direction:=0", "yaw_direction"),
+    ("actuator_mode:=sideways", "actuator_mode"),
+    ("can_options:=['novalue']", "can_options"),
+    ("service_channel:=50", "service_channel"),
+])
+def test_invalid_parameters_are_refused_at_start(param, expected):
+    with DomainLease() as domain:
+        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain,
+                                  ros_args("can_interface:=virtual", param))
+        try:
+            wait_for(lambda: not node.running, 30, "the node to refuse the parameter")
+            assert node.process.returncode != 0
+            assert expected in node.output()
+        finally:
+            node.stop()
+
+
+@pytest.fixture(scope="module")
+def managed(tmp_path_factory):
+    lease = DomainLease()
+    domain = lease.acquire()
+    tmp = tmp_path_factory.mktemp("canaero_managed")
+    tty, ready = tmp / "tty", tmp / "ready.json"
+    sim = ManagedProcess.ros(PKG, "canaero_turret_sim", domain,
+                             ["--link", str(tty), "--ready-file", str(ready)])
+    node = ros = control = None
+    try:
+        wait_for(ready.exists, 20, "the simulator to start")
+        control = ControlClient(json.loads(ready.read_text())["control_port"])
+        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain, ros_args(
+            "can_interface:=slcan", f"can_channel:={tty}",
+            "can_options:=['sleep_after_open=0']", "autostart:=false",
+            "service_timeout:=0.3", "reconnect_period:=0.3", "command_timeout:=5.0",
+            "allow_node_id_change:=true", "allow_flash_programming:=true",
+            "allow_data_download:=true"))
+        ros = RosTestClient(domain)
+        yield ros, control, node
+    finally:
+        if ros is not None:
+            ros.close()
+        if node is not None:
+            node.stop()
+        if control is not None:
+            control.close()
+        sim.stop()
+        lease.release()
+
+
+def test_managed_lifecycle_and_deactivate_stops_axes(managed):
+    ros, control, _ = managed
+    ros.wait_for_lifecycle_state(NODE, "unconfigured")
+    assert ros.lifecycle_transition(NODE, Transition.TRANSITION_CONFIGURE)
+    assert ros.lifecycle_state(NODE) == "inactive"
+    goal = MoveTo.Goal(joint_names=["yaw"], positions=[0.2])
+    result, _, _ = ros.run_action(MoveTo, f"/{NODE}/move_to", goal)
+    assert not result.success and "not active" in result.message
+    assert ros.lifecycle_transition(NODE, Transition.TRANSITION_ACTIVATE)
+    ros.wait_for_message("joint_states", JointState, timeout=20)
+    ros.publish("joint_command", JointState(name=["pitch"], velocity=[0.3]))
+    wait_for(lambda: control.state()["axes"]["pitch"]["velocity"] > 5.0, 10, "the jog")
+    assert ros.lifecycle_transition(NODE, Transition.TRANSITION_DEACTIVATE)
+    wait_for(lambda: control.state()["axes"]["pitch"]["velocity"] == 0.0, 10,
+             "deactivate to stop the axis")
+    assert ros.lifecycle_transition(NODE, Transition.TRANSITION_ACTIVATE)
+
+
+def call(ros, command, *arguments):
+    request = DeviceCommand.Request(command=command, arguments=list(arguments))
+    return ros.call(DeviceCommand, f"/{NODE}/device_command", request)
+
+
+def test_opt_in_services_when_enabled(managed):
+    ros, control, _ = managed
+    ros.wait_for_lifecycle_state(NODE, "active")
+    reply = call(ros, "download", "1", "00112233445566")
+    assert reply.success, reply.message
+    assert call(ros, "upload", "1", "7").results == ["00112233445566"]
+    reply = call(ros, "store_configuration", "0x11")
+    assert not reply.success and "invalid security code" in reply.message
+    reply = call(ros, "store_configuration", "0x5A")
+    assert reply.success, reply.message
+    assert control.state()["stored_configuration"]
+    reply = call(ros, "set_node_id", "300")
+    assert not reply.success and "1..199" in reply.message
+    reply = call(ros, "set_node_id", "9")
+    assert reply.success, reply.message
+    assert control.state()["node_ids"]["turret"] == 9
+    # The driver follows the new id: data keeps flowing and IDS reaches node 9.
+    start = time.time()
+    ros.wait_for_message("joint_states", JointState,
+                         lambda m: m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 > start,
+                         timeout=20)
+    reply = call(ros, "identify")
+    assert reply.success and "software_revision=7" in reply.results
