@@ -11,18 +11,22 @@ Run it with ``make demo`` (which sets up the environment first).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.type_support import check_for_type_support
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
@@ -52,11 +56,13 @@ class DemoTarget:
     sim_args: Callable[[DemoTarget], list[str]]
     node_params: Callable[[DemoTarget], list[str]]
     ready_text: str = ''
+    ready: Callable[[DemoTarget], bool] | None = None
     joints: tuple[str, ...] = ('pan', 'tilt')
     move_goal: tuple[float, ...] = (0.4, 0.2)
     jog_joint: str = 'pan'
     jog_velocity: float = 0.2
     scan: StartScan.Request | None = None
+    scan_seconds: float = 4.0
     extra_steps: list[tuple[str, Callable[[DemoTarget, RosTestClient], str]]] = field(
         default_factory=list
     )
@@ -68,6 +74,18 @@ class DemoTarget:
     failed: list[str] = field(default_factory=list)
     latest: JointState | None = None
     diagnostic_level: int = 3
+    note: str = ''
+    tracebacks: list[str] = field(default_factory=list)
+    workdir: Path = Path()
+    stop: threading.Event = field(default_factory=threading.Event)
+
+    def is_ready(self) -> bool:
+        """The simulator accepts connections (its own readiness signal)."""
+        if self.ready is not None:
+            return self.ready(self)
+        if self.ready_text:
+            return self.sim is not None and self.ready_text in self.sim.output()
+        return True
 
     @property
     def namespace(self) -> str:
@@ -81,6 +99,40 @@ class DemoTarget:
     def topic(self, name: str) -> str:
         """A relative topic of the node (joint_states, joint_command)."""
         return f'{self.namespace}/{name}'
+
+
+class DemoRosClient(RosTestClient):
+    """The test client, safe for the demo's one-thread-per-driver use.
+
+    rosidl's generated ``__import_type_support__`` sets a type's ``_TYPE_SUPPORT`` before it
+    imports the nested types (an action's SendGoal request, its Goal, ...), so a second
+    thread that uses the type in that window sends with a half-loaded type ("Object of type
+    'NoneType' is not an instance of 'capsule'"). Loading each type under one lock first
+    closes the window.
+    """
+
+    _type_lock = threading.Lock()
+
+    def _load(self, kind: type) -> None:
+        with self._type_lock:
+            check_for_type_support(kind)
+
+    def subscribe(self, topic: str, msg_type: type, reliable: bool = True) -> list[Any]:
+        self._load(msg_type)
+        return super().subscribe(topic, msg_type, reliable)
+
+    def publish(self, topic: str, msg: Any) -> None:
+        self._load(type(msg))
+        super().publish(topic, msg)
+
+    def call(self, srv_type: type, name: str, request: Any, timeout: float = 15.0) -> Any:
+        self._load(srv_type)
+        return super().call(srv_type, name, request, timeout)
+
+    def run_action(self, action_type: type, name: str, goal: Any, timeout: float = 30.0,
+                   cancel_after: float | None = None) -> tuple[Any, int, list[Any]]:
+        self._load(action_type)
+        return super().run_action(action_type, name, goal, timeout, cancel_after)
 
 
 def virtual_gimbal_target() -> DemoTarget:
@@ -120,14 +172,42 @@ def run_step(target: DemoTarget, name: str, action: Callable[[], str]) -> None:
         target.done.append(f'{name}: {detail}')
     except Exception as exc:  # noqa: BLE001 - the demo reports and goes on
         target.failed.append(f'{name}: {exc}')
+        target.tracebacks.append(f'{target.node_name} {name}:\n{traceback.format_exc()}')
+
+
+def joint_position(target: DemoTarget, joint: str) -> float:
+    """The latest reported position of ``joint`` (NaN before the first joint_states)."""
+    latest = target.latest
+    if latest is None or joint not in latest.name:
+        return math.nan
+    return latest.position[list(latest.name).index(joint)]
+
+
+def settled(target: DemoTarget, joint: str, stop: threading.Event, timeout: float = 10.0,
+            window: float = 0.5, band: float = 2e-3) -> float:
+    """Wait until ``joint`` stays within ``band`` for ``window`` s; return where it stopped."""
+    deadline = time.monotonic() + timeout
+    anchor, since = joint_position(target, joint), time.monotonic()
+    while not stop.is_set():
+        now, position = time.monotonic(), joint_position(target, joint)
+        if abs(position - anchor) > band:
+            anchor, since = position, now
+        elif now - since >= window:
+            return position
+        if now > deadline:
+            raise RuntimeError(f'{joint} still moving {timeout:g} s after the jog ended '
+                               f'(at {position:.3f}): the dead-man did not stop it')
+        stop.wait(0.05)
+    return anchor
 
 
 def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None:
-    """The per-driver script: move, jog, preset, scan, then the driver's extras."""
+    """The per-driver script: move, jog, preset, scan, then the driver's extras. Each step
+    checks its effect on joint_states, so OK in the summary means the device did it."""
+    goal_joints = list(target.joints[: len(target.move_goal)])
 
     def move() -> str:
-        goal = MoveTo.Goal(joint_names=list(target.joints[: len(target.move_goal)]),
-                           positions=list(target.move_goal))
+        goal = MoveTo.Goal(joint_names=goal_joints, positions=list(target.move_goal))
         result, _, feedback = ros.run_action(MoveTo, target.ns('move_to'), goal, timeout=60)
         if not result.success:
             raise RuntimeError(result.message)
@@ -135,33 +215,66 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
         return f'reached [{ends}] rad with {len(feedback)} feedback messages'
 
     def jog() -> str:
-        end = time.monotonic() + 1.5
+        joint, velocity, seconds = target.jog_joint, target.jog_velocity, 1.5
+        before = joint_position(target, joint)
+        end = time.monotonic() + seconds
         while time.monotonic() < end and not stop.is_set():
             ros.publish(target.topic('joint_command'),
-                        JointState(name=[target.jog_joint], velocity=[target.jog_velocity]))
-            time.sleep(0.1)
-        time.sleep(1.5)  # stop publishing: the dead-man timeout stops the axis
-        return f'{target.jog_joint} at {target.jog_velocity} rad/s for 1.5 s, then watchdog stop'
+                        JointState(name=[joint], velocity=[velocity]))
+            target.note = f'jog {joint} {joint_position(target, joint) - before:+.3f}'
+            stop.wait(0.1)
+        # No more joint_command: the dead-man (command_timeout) must stop the axis.
+        stopped_at = settled(target, joint, stop)
+        target.note = ''
+        moved = stopped_at - before
+        if moved * velocity <= 0 or abs(moved) < 0.25 * abs(velocity) * seconds:
+            raise RuntimeError(f'{joint} moved {moved:+.3f} during a {velocity:+g} rad/s jog '
+                               f'of {seconds:g} s')
+        return (f'{joint} at {velocity:+g} rad/s for {seconds:g} s: moved {moved:+.3f}, '
+                f'then stopped by the dead-man at {stopped_at:.3f}')
 
     def preset() -> str:
-        stored = ros.call(SetPreset, target.ns('set_preset'),
-                          SetPreset.Request(index=1, name='demo', use_current_position=True))
+        stored = ros.call(SetPreset, target.ns('set_preset'), SetPreset.Request(
+            index=1, name='demo', joint_names=goal_joints, positions=list(target.move_goal)))
         if not stored.success:
             raise RuntimeError(stored.message)
         went = ros.call(GotoPreset, target.ns('goto_preset'), GotoPreset.Request(index=1))
         if not went.success:
             raise RuntimeError(went.message)
-        return 'stored preset 1 at the current position and moved back to it'
+        wanted = dict(zip(goal_joints, target.move_goal, strict=True))
+        wait_for(lambda: stop.is_set() or all(
+            abs(joint_position(target, j) - p) < 0.02 for j, p in wanted.items()), 30,
+            f'the joints to reach preset 1 {wanted}')
+        return (f'stored preset 1 at the move goal, went back to it from the jog end '
+                f'({went.message})')
 
     def scan() -> str:
         if target.scan is None:
             return 'no scan for this device'
+        joint = target.joints[0]
         started = ros.call(StartScan, target.ns('start_scan'), target.scan)
         if not started.success:
             raise RuntimeError(started.message)
-        stop.wait(4.0)
-        ros.call(Trigger, target.ns('stop_scan'), Trigger.Request())
-        return started.message
+        low = high = joint_position(target, joint)
+        end = time.monotonic() + target.scan_seconds
+        while time.monotonic() < end and not stop.is_set():
+            position = joint_position(target, joint)
+            low, high = min(low, position), max(high, position)
+            target.note = f'scan {joint} {low:+.2f}..{high:+.2f}'
+            stop.wait(0.05)
+        stopped = ros.call(Trigger, target.ns('stop_scan'), Trigger.Request())
+        target.note = ''
+        if not stopped.success:
+            raise RuntimeError(f'stop_scan: {stopped.message}')
+        # The sweep may start outside the scan range: count only the part inside it.
+        span = target.scan.pan_max - target.scan.pan_min
+        covered = min(high, target.scan.pan_max) - max(low, target.scan.pan_min)
+        if covered < 0.5 * span:
+            raise RuntimeError(f'{joint} only covered {low:.3f}..{high:.3f} of the scan range '
+                               f'{target.scan.pan_min:g}..{target.scan.pan_max:g} in '
+                               f'{target.scan_seconds:g} s')
+        return (f'{started.message}; {joint} covered {low:.2f}..{high:.2f} in '
+                f'{target.scan_seconds:g} s, then stop_scan')
 
     for name, action in (('move', move), ('jog', jog), ('preset', preset), ('scan', scan)):
         if stop.is_set():
@@ -174,14 +287,111 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
     target.step = 'done'
 
 
+LEVELS = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
+
+
 def status_line(target: DemoTarget) -> str:
-    levels = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
+    """One live line: connection level, current step, steps done/failed, joint positions."""
     joints = '-'
     if target.latest is not None:
         joints = ' '.join(f'{n}={p:+.3f}' for n, p in zip(target.latest.name,
                                                           target.latest.position, strict=False))
-    return (f'{target.node_name:<24} {levels.get(target.diagnostic_level, "?"):<5} '
-            f'{target.step:<10} {joints}')
+    progress = f'{len(target.done)} ok' + (f' {len(target.failed)} failed' if target.failed
+                                           else '')
+    note = f'  {target.note}' if target.note else ''
+    return (f'{target.node_name:<22} {LEVELS.get(target.diagnostic_level, "?"):<5} '
+            f'{target.step:<10} {progress:<8} {joints}{note}')
+
+
+class LiveStatus:
+    """One line per driver, redrawn in place on a terminal; on a pipe or file, a line per
+    driver whenever its step or connection level changes (a log stays readable)."""
+
+    def __init__(self, targets: list[DemoTarget], started: float) -> None:
+        self.targets = targets
+        self.started = started
+        self.live = sys.stdout.isatty()
+        self.last: dict[str, tuple[str, int, int]] = {}
+        self.drawn = False
+
+    def update(self) -> None:
+        if self.live:
+            width = shutil.get_terminal_size((120, 24)).columns - 1
+            lines = [status_line(t)[:width] for t in self.targets]
+            up = f'\x1b[{len(lines)}A' if self.drawn else ''
+            sys.stdout.write(up + ''.join(f'\r\x1b[2K{line}\n' for line in lines))
+            sys.stdout.flush()
+            self.drawn = True
+            return
+        for target in self.targets:
+            key = (target.step, target.diagnostic_level, len(target.failed))
+            if self.last.get(target.node_name) != key:
+                self.last[target.node_name] = key
+                print(f'[{time.monotonic() - self.started:5.1f} s] {status_line(target)}',
+                      flush=True)
+
+
+def start_processes(targets: list[DemoTarget], domain: int, stop: threading.Event) -> None:
+    """All simulators first (in parallel), then each node once its simulator is ready."""
+    for target in targets:
+        target.port = free_tcp_port()
+        try:
+            target.sim = ManagedProcess.ros(target.package, target.sim_executable, domain,
+                                            target.sim_args(target))
+        except OSError as exc:
+            target.failed.append(f'start: simulator {target.sim_executable}: {exc}')
+    for target in targets:
+        if target.failed:
+            continue
+        target.step = 'sim'
+        try:
+            wait_for(lambda t=target: t.is_ready() or not t.sim.running or stop.is_set(), 30,
+                     f'{target.sim_executable} to be ready')
+        except TimeoutError as exc:
+            target.failed.append(f'start: {exc}')
+            continue
+        if stop.is_set():
+            return
+        if not target.sim.running:
+            tail = target.sim.output().strip().splitlines()[-3:]
+            target.failed.append(f'start: {target.sim_executable} exited: {" / ".join(tail)}')
+            continue
+        params = [x for p in target.node_params(target) for x in ('-p', p)]
+        target.node = ManagedProcess.ros(
+            target.package, target.node_executable, domain,
+            ['--ros-args', '-r', f'__ns:={target.namespace}', *params])
+        target.step = 'connect'
+
+
+def stop_processes(targets: list[DemoTarget], recorder: ManagedProcess | None,
+                   output: Path) -> Path | None:
+    """Nodes first (they stop their axes while the simulators still listen), then the
+    recorder (the bag is finished cleanly), then the simulators; each group in parallel.
+    Every process gets SIGINT, then SIGTERM, then SIGKILL (ManagedProcess.stop)."""
+
+    def stop_all(processes: list[ManagedProcess]) -> None:
+        threads = [threading.Thread(target=p.stop) for p in processes]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+
+    stop_all([t.node for t in targets if t.node is not None])
+    bag = stop_recorder(recorder)
+    stop_all([t.sim for t in targets if t.sim is not None])
+    for target in targets:
+        for process, name in ((target.node, target.node_name),
+                              (target.sim, target.sim_executable)):
+            if process is not None:
+                (output / f'{name}.log').write_text(process.output())
+                Path(process.log_path).unlink(missing_ok=True)
+    failures = [text for target in targets for text in target.tracebacks]
+    if failures:
+        (output / 'demo_failures.log').write_text('\n'.join(failures))
+    if recorder is not None:
+        (output / 'record_bag.log').write_text(recorder.output())
+        Path(recorder.log_path).unlink(missing_ok=True)
+    return bag
 
 
 def main() -> int:
@@ -190,7 +400,9 @@ def main() -> int:
     parser.add_argument('--only', nargs='*', help='node names to run (default: all built)')
     args = parser.parse_args()
     sys.path.insert(0, str(Path(__file__).parent))
-    output = Path(args.output)
+    # demo_targets imports this module as `demo`: let it find this one, not a second copy.
+    sys.modules.setdefault('demo', sys.modules[__name__])
+    output = Path(args.output).resolve()
     if output.exists():
         shutil.rmtree(output)
     output.mkdir(parents=True)
@@ -201,63 +413,68 @@ def main() -> int:
         print('demo: no driver is built; run make build first', file=sys.stderr)
         return 1
     stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+
+    def interrupt(*_: object) -> None:
+        if not stop.is_set():
+            print('\ndemo: interrupted, stopping everything', flush=True)
+        stop.set()
+
+    signal.signal(signal.SIGINT, interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
+    workdir = tempfile.TemporaryDirectory(prefix='gimbal-demo-')
+    for target in targets:
+        target.workdir = Path(workdir.name)
+        target.stop = stop
     lease = DomainLease()
     domain = lease.acquire()
-    print(f'demo: ROS_DOMAIN_ID={domain}, DDS on loopback only; output in {output}')
+    print(f'demo: {len(targets)} driver(s): {", ".join(t.node_name for t in targets)}')
+    print(f'demo: ROS_DOMAIN_ID={domain}, DDS on loopback only; output in {output}', flush=True)
     started = time.monotonic()
     recorder = None
     ros = None
+    bag = None
+    workers: list[threading.Thread] = []
     try:
-        for target in targets:
-            target.port = free_tcp_port()
-            target.sim = ManagedProcess.ros(target.package, target.sim_executable, domain,
-                                            target.sim_args(target))
-            if target.ready_text:
-                target.sim.wait_for_output(target.ready_text, timeout=30)
-            params = [x for p in target.node_params(target) for x in ('-p', p)]
-            target.node = ManagedProcess.ros(
-                target.package, target.node_executable, domain,
-                ['--ros-args', '-r', f'__ns:={target.namespace}', *params])
-        ros = RosTestClient(domain, 'demo_client')
         recorder = start_recorder(domain, output)
+        start_processes(targets, domain, stop)
+        ros = DemoRosClient(domain, 'demo_client')
         watch_topics(ros, targets)
-        for target in targets:
-            try:
-                wait_for(lambda t=target: t.latest is not None or stop.is_set(), 60,
-                         f'{target.node_name} joint_states')
-            except TimeoutError as exc:
-                target.failed.append(f'start: {exc}')
+        status = LiveStatus(targets, started)
+        deadline = time.monotonic() + 60
+        waiting = [t for t in targets if not t.failed]
+        while waiting and not stop.is_set():
+            status.update()
+            for target in list(waiting):
+                if target.latest is not None:
+                    waiting.remove(target)
+                    target.step = 'ready'
+                elif not target.node.running:
+                    target.failed.append(f'start: {target.node_executable} exited')
+                    waiting.remove(target)
+                elif time.monotonic() > deadline:
+                    target.failed.append(f'start: no {target.topic("joint_states")} in 60 s')
+                    waiting.remove(target)
+            stop.wait(0.2)
         workers = [threading.Thread(target=drive, args=(t, ros, stop), daemon=True)
                    for t in targets if not t.failed]
         for worker in workers:
             worker.start()
-        live = sys.stdout.isatty()
         while any(w.is_alive() for w in workers) and not stop.is_set():
-            lines = [status_line(t) for t in targets]
-            if live:
-                sys.stdout.write('\x1b[2K' + '\n\x1b[2K'.join(lines) + f'\x1b[{len(lines)}A\r')
-            else:
-                print(' | '.join(lines), flush=True)
-            time.sleep(0.5 if live else 2.0)
-        if live:
-            sys.stdout.write('\n' * len(targets))
+            status.update()
+            stop.wait(0.5)
+        status.update()
     except Exception:  # noqa: BLE001 - report, then clean up below
         traceback.print_exc()
     finally:
-        if stop.is_set():
-            print('\ndemo: interrupted, stopping everything')
-        bag = stop_recorder(recorder)
+        # Stop the drivers before the client goes away, so a blocked step returns.
+        if ros is not None:
+            for worker in workers:
+                worker.join(timeout=0.1 if stop.is_set() else 5.0)
+        bag = stop_processes(targets, recorder, output)
         if ros is not None:
             ros.close()
-        for target in targets:
-            for process in (target.node, target.sim):
-                if process is not None:
-                    process.stop()
-            if target.node is not None:
-                (output / f'{target.node_name}.log').write_text(target.node.output())
         lease.release()
+        workdir.cleanup()
     plot = None
     if bag is not None:
         from plot_bag import plot as plot_bag
@@ -267,7 +484,10 @@ def main() -> int:
         except (SystemExit, ValueError, OSError) as exc:
             print(f'demo: no plot: {exc}')
     print(summary(targets, output, bag, plot, time.monotonic() - started))
-    return 0 if all(not t.failed for t in targets) and not stop.is_set() else 1
+    interrupted = stop.is_set()
+    if interrupted:
+        print('demo: interrupted; every simulator and node was stopped')
+    return 0 if all(not t.failed for t in targets) and not interrupted else 1
 
 
 def watch_topics(ros: RosTestClient, targets: list[DemoTarget]) -> None:
@@ -311,10 +531,14 @@ def summary(
     lines = [f'\ndemo summary ({seconds:.0f} s, {len(targets)} driver(s))']
     for target in targets:
         verdict = 'OK' if not target.failed else 'FAILED'
+        if not target.failed and target.step != 'done':
+            verdict = f'INTERRUPTED during {target.step}'
         lines.append(f'  {target.title} [{target.node_name}]: {verdict}')
         lines += [f'    done   {d}' for d in target.done]
         lines += [f'    failed {f}' for f in target.failed]
     lines.append(f'  node logs: {output}/<node>.log')
+    if (output / 'demo_failures.log').exists():
+        lines.append(f'  failed steps with tracebacks: {output}/demo_failures.log')
     if bag is not None:
         lines.append(f'  bag: {bag} (open with Foxglove Studio or ros2 bag info)')
     if plot is not None:

@@ -1,0 +1,95 @@
+"""`scripts/demo.py` end to end: every simulator and driver, the MCAP bag, the plot.
+
+Runs the demo as a user would (``source scripts/ros_env.sh; python scripts/demo.py``) into a
+temporary output directory, then checks that it exited 0 with every driver OK, that the bag
+holds each driver's joint_states with its joint names (decoded with mcap_ros2, as
+scripts/plot_bag.py does), that the plot is a PNG, and that no simulator or node outlived it.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.ros
+
+ROOT = Path(__file__).resolve().parent.parent
+# namespace -> (node name, joint names) of every driver the demo must run.
+DRIVERS = {
+    '/virtual_gimbal': ('virtual_gimbal', {'pan', 'tilt'}),
+    '/capture': ('capture_driver', {'pan', 'tilt'}),
+    '/canaero_turret': ('canaero_turret_driver', {'yaw', 'pitch'}),
+    '/kessler_kos': ('kessler_kos_driver', {'pan', 'tilt', 'slider'}),
+    '/ucamera': ('ucamera_driver', {'pan', 'tilt'}),
+}
+EXECUTABLES = ('_sim', '_node', 'record_bag.py')
+
+
+def processes_in_domain(domain: str) -> list[str]:
+    """Command lines of this user's demo processes (simulators, nodes, recorder) that run
+    in ROS domain ``domain``."""
+    found = []
+    for entry in Path('/proc').iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            environ = (entry / 'environ').read_bytes().split(b'\0')
+            cmdline = (entry / 'cmdline').read_bytes().replace(b'\0', b' ').decode()
+        except OSError:
+            continue
+        if f'ROS_DOMAIN_ID={domain}'.encode() in environ and any(
+                name in cmdline for name in EXECUTABLES) and str(ROOT) in cmdline:
+            found.append(f'{entry.name}: {cmdline}')
+    return found
+
+
+def test_demo_drives_every_driver_and_records_a_bag(tmp_path):
+    mcap_reader = pytest.importorskip('mcap.reader')
+    mcap_decoder = pytest.importorskip('mcap_ros2.decoder')
+    if not (ROOT / 'install' / 'setup.bash').exists():
+        pytest.skip('the workspace is not built (make build)')
+    output = tmp_path / 'demo'
+    command = f'source scripts/ros_env.sh && exec python scripts/demo.py --output {output}'
+    env = {k: v for k, v in os.environ.items() if k != 'ROS_DOMAIN_ID'}
+    demo = subprocess.Popen(['bash', '-c', command], cwd=ROOT, env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        out, _ = demo.communicate(timeout=150)
+    except subprocess.TimeoutExpired:
+        demo.send_signal(signal.SIGINT)  # the demo stops its processes on Ctrl-C
+        out, _ = demo.communicate(timeout=60)
+        pytest.fail(f'the demo did not finish within 150 s:\n{out[-6000:]}')
+    assert demo.returncode == 0, out[-6000:]
+    for node, _ in DRIVERS.values():
+        assert re.search(rf'\[{node}\]: OK$', out, re.MULTILINE), f'{node} not OK:\n{out}'
+    assert 'failed' not in out.split('demo summary', 1)[1]
+
+    domain = re.search(r'ROS_DOMAIN_ID=(\d+)', out).group(1)
+    assert processes_in_domain(domain) == [], 'processes left after the demo'
+
+    bag = output / 'demo.mcap'
+    assert bag.is_file()
+    joints: dict[str, set[str]] = defaultdict(set)
+    counts: dict[str, int] = defaultdict(int)
+    with bag.open('rb') as stream:
+        reader = mcap_reader.make_reader(stream,
+                                         decoder_factories=[mcap_decoder.DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages(
+                topics=[f'{ns}/joint_states' for ns in DRIVERS]):
+            namespace = channel.topic.rsplit('/', 1)[0]
+            joints[namespace].update(msg.name)
+            counts[namespace] += 1
+    for namespace, (_, names) in DRIVERS.items():
+        assert counts[namespace] > 20, f'{namespace}/joint_states: {counts[namespace]} messages'
+        assert joints[namespace] == names, namespace
+
+    plot = output / 'positions.png'
+    assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    for node, _ in DRIVERS.values():
+        assert (output / f'{node}.log').is_file()
