@@ -368,3 +368,16 @@ def test_rangefinder_commands(client):
     with pytest.raises(ProtocolError):
         client.request('LRF_GetLRFDistance', 6)
     client.request('LRF_StopMeasurement')
+
+
+def test_three_axis_pedestal():
+    with CaptureSimulator(PedestalModel(axes=3, time_scale=8.0), tcp_port=0) as sim3:
+        c = tcp_client(sim3)
+        c.connect()
+        c.move_absolute(3, -12.0, 60.0, 300.0)
+        settle(c, 3, -12.0)
+        assert c.request('IMU_GetRoll') == pytest.approx(-12.0)
+        assert c.registers(3)['CMER'] & (1 << 1)  # axis on
+        c.close()
+    two_axis = PedestalModel(axes=2)
+    assert 3 not in two_axis.axes
