@@ -1,0 +1,227 @@
+"""Shared steps of the per-driver benchmarks (bench_<driver>.py): codec rates and node figures.
+
+Every driver benchmark runs its simulator inside the bench process (so a
+:class:`~harness.CommandProbe` can watch the device model) and the driver node
+as a separate process, then measures, in this order and on one node process:
+
+1. ``cpu_percent`` of the node while it publishes at ``publish_rate``, the
+   ``sim_to_subscriber`` latency of the joint_states received meanwhile
+   and the ``joint_states_hz`` achieved in the same window;
+2. ``command_latency``: ``joint_command`` publish -> the simulator's device
+   model holding the commanded target.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from harness import (
+    ROOT,
+    CommandProbe,
+    JointStateProbe,
+    cpu_percent,
+    percentiles,
+    wire_limit_frames_per_s,
+)
+from sensor_msgs.msg import JointState
+
+from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import ManagedProcess, wait_for
+
+# Bytes a TCP segment adds to its payload on 100BASE-TX Ethernet: preamble+SFD 8, MAC header
+# 14, FCS 4, inter-frame gap 12, IPv4 20, TCP 20 (no options). One frame per segment (the
+# drivers set TCP_NODELAY and exchange one request/reply at a time), and a minimum Ethernet
+# frame of 64 bytes (MAC header through FCS).
+ETHERNET_WIRE_OVERHEAD = 8 + 12
+ETHERNET_MIN_FRAME = 64
+TCP_IP_HEADERS = 20 + 20
+MAC_HEADER_AND_FCS = 14 + 4
+
+#: one command sample: the JointState to publish and the device-side predicate of its arrival
+CommandSample = tuple[JointState, Callable[[], bool]]
+
+
+def tcp_wire_limit_frames_per_s(frame_bytes: int, bits_per_second: float = 100e6) -> float:
+    """Frames per second a TCP link carries, one protocol frame per Ethernet frame."""
+    ethernet = max(ETHERNET_MIN_FRAME, MAC_HEADER_AND_FCS + TCP_IP_HEADERS + frame_bytes)
+    return wire_limit_frames_per_s(ethernet + ETHERNET_WIRE_OVERHEAD, bits_per_second,
+                                   bits_per_byte=8)
+
+
+def cpu_rate(operation: Callable[[], object], cpu_seconds: float = 1.0) -> float:
+    """Calls per second of this thread's CPU time: frames/s on one core, whatever else runs.
+
+    ``harness.rate`` divides by wall time, which on a machine shared with other processes
+    counts the time this thread waited for a core; the codec figure is per CPU-second.
+    """
+    count = 0
+    start = time.thread_time()
+    while True:
+        for _ in range(200):
+            operation()
+        count += 200
+        used = time.thread_time() - start
+        if used >= cpu_seconds:
+            return count / used
+
+
+def codec_figures(frame: str, frame_bytes: int, encode: Callable[[], object],
+                  decode: Callable[[], object], wire: str, wire_limit: float,
+                  seconds: float = 1.0, **extra: object) -> dict:
+    """Encode/decode rate of one frame on one core, next to the wire's frame limit."""
+    encode_rate = cpu_rate(encode, seconds)
+    decode_rate = cpu_rate(decode, seconds)
+    return {
+        'clock': 'thread CPU time (frames per CPU-second of one core)',
+        'frame': frame,
+        'frame_bytes': frame_bytes,
+        'encode_frames_per_s': round(encode_rate),
+        'decode_frames_per_s': round(decode_rate),
+        'wire': wire,
+        'wire_limit_frames_per_s': round(wire_limit, 1),
+        **extra,
+    }
+
+
+def ros_parameters(values: dict[str, object]) -> list[str]:
+    """``-p name:=value`` arguments; floats keep their decimal point (double parameters)."""
+    args: list[str] = []
+    for name, value in values.items():
+        if isinstance(value, bool):
+            text = 'true' if value else 'false'
+        elif isinstance(value, float):
+            text = repr(value)
+        elif isinstance(value, (list, tuple)):
+            text = '[' + ', '.join(repr(v) if isinstance(v, float) else str(v)
+                                   for v in value) + ']'
+        else:
+            text = str(value)
+        args += ['-p', f'{name}:={text}']
+    return args
+
+
+def start_node(domain: int, package: str, parameters: dict[str, object],
+               params_file: bool = True) -> ManagedProcess:
+    """``<package>_node`` with its simulator YAML (if any) and ``parameters`` on top."""
+    args = ['--ros-args']
+    config = ROOT / 'src' / package / 'config' / f'{package}_sim.yaml'
+    if params_file and Path(config).is_file():
+        args += ['--params-file', str(config)]
+    return ManagedProcess.ros(package, f'{package}_node', domain,
+                              args + ros_parameters(parameters))
+
+
+def node_figures(
+    domain: int,
+    package: str,
+    parameters: dict[str, object],
+    probe: CommandProbe | None,
+    commands: Callable[[int], CommandSample] | None,
+    samples: int = 30,
+    window_seconds: float = 5.0,
+    settle_seconds: float = 2.0,
+    command_gap: float = 0.05,
+    startup_timeout: float = 40.0,
+    observe: Callable[[float, float], dict] | None = None,
+) -> dict:
+    """Start the node; in one window CPU, joint_states rate and latency; then commands.
+
+    ``observe(start, end)`` (monotonic times of the window) may add simulator-side figures.
+    """
+    results: dict = {'publish_rate': parameters.get('publish_rate')}
+    node = start_node(domain, package, parameters)
+    try:
+        with RosTestClient(domain, f'bench_{package}') as ros:
+            states = JointStateProbe(ros)
+            try:
+                wait_for(lambda: len(states.arrivals) > 10, startup_timeout,
+                         f'joint_states from {package}_node')
+            except TimeoutError as exc:
+                raise RuntimeError(f'{exc}; node output:\n{node.output()[-2000:]}') from exc
+            # let the start-up transient pass (DDS discovery of this subscriber slows the
+            # node and the simulator for a second or two on a loaded machine)
+            time.sleep(settle_seconds)
+            states.clear()
+            # one window: CPU of the node, and the joint_states received meanwhile
+            start = time.monotonic()
+            results['cpu_percent'] = cpu_percent(node.process.pid, window_seconds)
+            if observe is not None:
+                results.update(observe(start, time.monotonic()))
+            results['joint_states_hz'] = received_rate(states)
+            results['sim_to_subscriber'] = percentiles(states.stamp_latencies())
+            results.update(report_freshness(states))
+            if probe is not None and commands is not None:
+                results['command_latency'] = command_latencies(ros, probe, commands, samples,
+                                                               command_gap)
+    finally:
+        code = node.stop()
+        if code not in (0, -2, 130):
+            results.setdefault('notes', []).append(f'node exited with code {code}')
+    return results
+
+
+def received_rate(states: JointStateProbe) -> float:
+    """Messages per second over the recorded arrivals (first to last)."""
+    with states._lock:
+        times = [arrival for arrival, _, _ in states.arrivals]
+    if len(times) < 2:
+        return 0.0
+    return round((len(times) - 1) / (times[-1] - times[0]), 1)
+
+
+def report_freshness(states: JointStateProbe) -> dict:
+    """How often the device data behind joint_states changes, and the latency of its first
+    publication: a polled driver republishes a held report until the next one arrives."""
+    with states._lock:
+        arrivals = list(states.arrivals)
+    first: dict[float, float] = {}
+    for arrival, stamp, _ in arrivals:
+        if stamp > 0 and stamp not in first:
+            first[stamp] = arrival
+    if len(first) < 2:
+        return {}
+    stamps = sorted(first)
+    return {
+        'device_reports_hz': round((len(stamps) - 1) / (stamps[-1] - stamps[0]), 1),
+        'sim_to_subscriber_first_publication': percentiles(
+            [first[s] - s for s in stamps]),
+    }
+
+
+def command_latencies(ros: RosTestClient, probe: CommandProbe,
+                      commands: Callable[[int], CommandSample], samples: int,
+                      gap: float) -> dict:
+    """``samples`` joint_command publishes, each timed until its target reaches the model."""
+    warm_up, _ = commands(-1)
+    ros.publish('joint_command', warm_up)   # creates the publisher and waits for discovery
+    time.sleep(0.3)
+    latencies: list[float] = []
+    lost = 0
+    for index in range(samples):
+        message, arrived = commands(index)
+        latency = probe.measure(lambda m=message: ros.publish('joint_command', m), arrived,
+                                timeout=2.0)
+        if latency is None:
+            lost += 1
+        else:
+            latencies.append(latency)
+        time.sleep(gap)
+    figures = percentiles(latencies)
+    if lost:
+        figures['timed_out'] = lost
+    return figures
+
+
+def joint_command(names: Sequence[str], positions: Sequence[float]) -> JointState:
+    return JointState(name=list(names), position=[float(p) for p in positions])
+
+
+def close(a: float | None, b: float, tolerance: float) -> bool:
+    return a is not None and math.isfinite(a) and abs(a - b) <= tolerance
+
+
+def add_note(results: dict, note: str) -> None:
+    results.setdefault('notes', []).append(note)
