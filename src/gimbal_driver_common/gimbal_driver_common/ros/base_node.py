@@ -21,6 +21,7 @@ this class owns everything that is the same for every device:
 from __future__ import annotations
 
 import math
+import signal
 import threading
 import time
 import traceback
@@ -34,6 +35,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
@@ -455,7 +457,7 @@ class GimbalDriverNode(LifecycleNode):
                 continue
             if sample is not None:
                 self._latest = sample
-                if self._active:
+                if self._active and self.context.ok():
                     self._publish_joint_state(sample)
             next_tick += period
             delay = next_tick - time.monotonic()
@@ -963,7 +965,12 @@ class GimbalDriverNode(LifecycleNode):
 
 def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = None) -> int:
     """Entry point body for a driver executable: construct, autostart, spin, stop cleanly."""
-    rclpy.init(args=args)
+    # rclpy's own SIGINT handler would shut the context down before on_shutdown runs, so
+    # the "axes stopped" log and any last message would be lost: handle SIGINT (and SIGTERM,
+    # which launch sends after SIGINT) here, as KeyboardInterrupt in the executor thread.
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
     node: GimbalDriverNode | None = None
     executor = MultiThreadedExecutor(num_threads=4)
     status = 0
@@ -987,6 +994,10 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
         if rclpy.ok():
             rclpy.shutdown()
     return status
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
 def _autostart(node: GimbalDriverNode) -> None:

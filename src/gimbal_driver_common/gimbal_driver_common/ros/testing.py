@@ -96,6 +96,9 @@ class RosTestClient:
             self._publishers[topic] = publisher
             wait_for(lambda: publisher.get_subscription_count() > 0, 10.0,
                      f'a subscriber on {topic}')
+            # Discovery is not symmetric: the publisher can see the subscriber before the
+            # subscriber has matched the publisher, and a message sent then is lost.
+            time.sleep(0.3)
         publisher.publish(msg)
 
     # services
