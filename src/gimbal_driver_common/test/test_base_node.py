@@ -16,7 +16,7 @@ from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.ros.testing import RosTestClient, find_diagnostic, joint_positions
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_driver_common.virtual_gimbal import VirtualGimbalClient
 from gimbal_msgs.action import Home, MoveTo
@@ -50,15 +50,9 @@ def device_state(port: int) -> list[float]:
         client.close()
 
 
-def positions(msg: JointState) -> dict[str, float]:
-    return dict(zip(msg.name, msg.position, strict=True))
-
-
 def connection_status(array: DiagnosticArray) -> tuple[int, str] | None:
-    for status in array.status:
-        if status.name == f'{NODE}: connection':
-            return status.level[0], status.message
-    return None
+    status = find_diagnostic(array, NODE, 'connection')
+    return (status.level[0], status.message) if status else None
 
 
 @pytest.fixture(scope='module')
@@ -107,7 +101,7 @@ def test_move_to_reaches_target_and_joint_states_show_it(rig) -> None:
     assert result.positions == pytest.approx([0.5, -0.3], abs=0.011)
     assert feedback, 'MoveTo publishes feedback while moving'
     msg = ros.wait_for_message('joint_states', JointState)
-    assert positions(msg)['pan'] == pytest.approx(0.5, abs=0.011)
+    assert joint_positions(msg)['pan'] == pytest.approx(0.5, abs=0.011)
     assert device_state(port)[0] == pytest.approx(0.5, abs=0.011)
     result, _, _ = move(ros, ['pan'], [-0.2], relative=True)
     assert result.success and result.positions[0] == pytest.approx(0.3, abs=0.011)
@@ -213,6 +207,7 @@ def test_reconnects_after_device_loss_and_reports_it() -> None:
                     '/diagnostics', DiagnosticArray,
                     lambda a: (connection_status(a) or (0, ''))[0] == 2)
                 assert 'disconnected' in connection_status(diag)[1]
+                assert 'disconnected' in ros.wait_for_diagnostic(NODE, 'connection').message
                 stale = [s for s in diag.status if s.name == f'{NODE}: pan']
                 assert stale and stale[0].level[0] == 3
                 status = ros.wait_for_message(f'/{NODE}/status', GimbalStatus)

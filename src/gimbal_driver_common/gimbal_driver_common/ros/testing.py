@@ -9,14 +9,29 @@ from collections.abc import Callable
 from typing import Any
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.action import ActionClient
 from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.testing import wait_for
+
+
+def joint_positions(msg: JointState) -> dict[str, float]:
+    """Joint name -> position of a JointState."""
+    return dict(zip(msg.name, msg.position, strict=True))
+
+
+def find_diagnostic(array: DiagnosticArray, node: str, part: str) -> DiagnosticStatus | None:
+    """The status named ``<node>: <part>`` in a DiagnosticArray, or None."""
+    for status in array.status:
+        if status.name == f'{node}: {part}':
+            return status
+    return None
 
 
 class RosTestClient:
@@ -88,6 +103,19 @@ class RosTestClient:
             return None
 
         return wait_for(match, timeout, f'a matching message on {topic}')
+
+    def wait_for_diagnostic(
+        self, node: str, part: str,
+        predicate: Callable[[DiagnosticStatus], bool] | None = None, timeout: float = 15.0,
+    ) -> DiagnosticStatus:
+        """Wait for a new ``<node>: <part>`` status on /diagnostics matching ``predicate``."""
+
+        def match(array: DiagnosticArray) -> bool:
+            status = find_diagnostic(array, node, part)
+            return status is not None and (predicate is None or predicate(status))
+
+        array = self.wait_for_message('/diagnostics', DiagnosticArray, match, timeout)
+        return find_diagnostic(array, node, part)
 
     def publish(self, topic: str, msg: Any) -> None:
         publisher = self._publishers.get(topic)
