@@ -195,8 +195,7 @@ def settled(target: DemoTarget, joint: str, stop: threading.Event, timeout: floa
         elif now - since >= window:
             return position
         if now > deadline:
-            raise RuntimeError(f'{joint} still moving {timeout:g} s after the jog ended '
-                               f'(at {position:.3f}): the dead-man did not stop it')
+            raise RuntimeError(f'{joint} still moving after {timeout:g} s (at {position:.3f})')
         stop.wait(0.05)
     return anchor
 
@@ -224,7 +223,10 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
             target.note = f'jog {joint} {joint_position(target, joint) - before:+.3f}'
             stop.wait(0.1)
         # No more joint_command: the dead-man (command_timeout) must stop the axis.
-        stopped_at = settled(target, joint, stop)
+        try:
+            stopped_at = settled(target, joint, stop)
+        except RuntimeError as exc:
+            raise RuntimeError(f'the dead-man did not stop the jog: {exc}') from None
         target.note = ''
         moved = stopped_at - before
         if moved * velocity <= 0 or abs(moved) < 0.25 * abs(velocity) * seconds:
@@ -245,6 +247,7 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
         wait_for(lambda: stop.is_set() or all(
             abs(joint_position(target, j) - p) < 0.02 for j, p in wanted.items()), 30,
             f'the joints to reach preset 1 {wanted}')
+        settled(target, goal_joints[0], stop, window=0.3)
         return (f'stored preset 1 at the move goal, went back to it from the jog end '
                 f'({went.message})')
 
@@ -481,8 +484,8 @@ def main() -> int:
 
         try:
             plot = plot_bag(bag, output / 'positions.png')
-        except (SystemExit, ValueError, OSError) as exc:
-            print(f'demo: no plot: {exc}')
+        except (SystemExit, Exception) as exc:  # noqa: BLE001 - e.g. a bag cut short
+            print(f'demo: no plot from {bag}: {exc}')
     print(summary(targets, output, bag, plot, time.monotonic() - started))
     interrupted = stop.is_set()
     if interrupted:

@@ -135,18 +135,21 @@ def kessler_playback(target: DemoTarget, ros: RosTestClient) -> str:
         playback_mode=LoadTrajectory.Request.MODE_LIVE_MOTION, keyframes=trajectory))
     if not loaded.success:
         raise RuntimeError(f'load_trajectory: {loaded.message}')
+    start = len(statuses)
     setup = ros.call(Trigger, target.ns('setup_playback'), Trigger.Request(), timeout=60)
     if not setup.success:
         raise RuntimeError(f'setup_playback: {setup.message}')
-    start = len(statuses)
     played = ros.call(Trigger, target.ns('start_playback'), Trigger.Request())
     if not played.success:
         raise RuntimeError(f'start_playback: {played.message}')
 
     def full_stop() -> PlaybackStatus | None:
+        """The FullStop that ends this playback (one after its StartForward)."""
+        forward = False
         for status in list(statuses)[start:]:
             target.note = f'playback {status.status_name} {status.elapsed:.0%}'
-            if status.status == PlaybackStatus.FULL_STOP or target.stop.is_set():
+            forward = forward or status.status == PlaybackStatus.START_FORWARD
+            if (forward and status.status == PlaybackStatus.FULL_STOP) or target.stop.is_set():
                 return status
         return None
 
