@@ -97,6 +97,10 @@ class ClientConfig:
     stale_timeout: float = 1.0
     node_timeout: float = 1.0
     reconnect_period: float = 1.0
+    # Reopen the interface when no frame at all arrived for this long (0 = never). Some
+    # transports (a socketcand TCP link that the peer closed, a wedged USB adapter) go
+    # quiet instead of raising; a CAN bus with a broadcasting turret is never quiet.
+    reopen_after_silence: float = 0.0
     pad_frames: bool = False
     yaw_sign: float = 1.0
     pitch_sign: float = 1.0
@@ -193,6 +197,7 @@ class TurretClient:
         self.events: deque[EmergencyEvent] = deque(maxlen=50)
         self.last_link_error = ""
         self._garbled_in_row = 0
+        self._last_frame = time.monotonic()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.on_sample: Callable[[Sample], None] | None = None
@@ -243,6 +248,7 @@ class TurretClient:
             raise LinkError(self.last_link_error) from exc
         with self._bus_lock:
             self._bus = bus
+        self._last_frame = time.monotonic()
         self.sequences.reset()
         self.last_link_error = ""
         LOG.info("CAN interface %s open", self.description)
@@ -297,12 +303,17 @@ class TurretClient:
             except Exception as exc:  # noqa: BLE001 - a driver thread must not die
                 self._drop_bus(f"receive failed unexpectedly: {exc!r}")
                 continue
-            if frame is not None:
-                self._garbled_in_row = 0
-                try:
-                    self._dispatch(frame)
-                except Exception:
-                    LOG.exception("error while handling a CAN frame")
+            if frame is None:
+                quiet = time.monotonic() - self._last_frame
+                if 0 < self.config.reopen_after_silence < quiet:
+                    self._drop_bus(f"no CAN frame for {quiet:.1f} s: reopening the interface")
+                continue
+            self._last_frame = time.monotonic()
+            self._garbled_in_row = 0
+            try:
+                self._dispatch(frame)
+            except Exception:  # a bad callback must not end the receive thread
+                LOG.exception("error while handling a CAN frame")
 
     # --- receive ------------------------------------------------------------------
 

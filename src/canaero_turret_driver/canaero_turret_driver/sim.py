@@ -898,6 +898,102 @@ class SlcanSession:
         return b"".join(encode_slcan(frame) for frame in frames)
 
 
+class SocketcandSession:
+    """One TCP client of a socketcand-style bridge (the daemon's ASCII "rawmode" protocol).
+
+    All sessions and the simulator share an in-process python-can `virtual` bus (`hub`),
+    so the bridge behaves like a CAN bus: a frame a client sends reaches the simulator and
+    every other client, and every broadcast reaches every client. python-can's
+    `socketcand` interface connects with `channel=<name>, host=127.0.0.1, port=<port>`.
+
+    Handshake: "< hi >" on connect, "< open <bus> >" -> "< ok >", "< rawmode >" -> "< ok >";
+    then "< send <id> <len> <b0> ... >" from the client and "< frame <id> <sec.usec> <hex> >"
+    to it. Frames start `RAW_SETTLE_S` after rawmode because python-can reads each
+    handshake reply with a single recv() and must not get a frame glued to it.
+    """
+
+    RAW_SETTLE_S = 0.05
+    MAX_RECORD = 200
+
+    def __init__(self, hub_channel: str) -> None:
+        self._bus = can.Bus(interface="virtual", channel=hub_channel)
+        self._buffer = ""
+        self._greeted = False
+        self._opened = False
+        self._raw_since: float | None = None
+        self.rejected_records = 0
+
+    def on_bytes(self, data: bytes) -> bytes:
+        self._buffer += data.decode("ascii", "replace")
+        out = []
+        while True:
+            start = self._buffer.find("<")
+            end = self._buffer.find(">", start + 1) if start >= 0 else -1
+            if start < 0 or end < 0:
+                if start < 0 or len(self._buffer) - start > self.MAX_RECORD:
+                    self._buffer = ""
+                break
+            record = self._buffer[start + 1:end].split()
+            self._buffer = self._buffer[end + 1:]
+            out.append(self._record(record))
+        return "".join(out).encode("ascii")
+
+    def _record(self, words: list[str]) -> str:
+        if not words:
+            return ""
+        command = words[0]
+        if command == "open" and len(words) == 2:
+            self._opened = True
+            return "< ok >"
+        if command == "rawmode" and self._opened:
+            self._raw_since = time.monotonic()
+            return "< ok >"
+        if command == "send" and self._raw_since is not None:
+            frame = self._parse_send(words[1:])
+            if frame is not None:
+                with contextlib.suppress(can.CanError):
+                    self._bus.send(frame)
+                return ""
+        self.rejected_records += 1
+        return ""  # socketcand ignores what it does not understand
+
+    @staticmethod
+    def _parse_send(words: list[str]) -> can.Message | None:
+        try:
+            can_id, length = int(words[0], 16), int(words[1], 16)
+            data = bytes(int(word, 16) for word in words[2:2 + length])
+        except (ValueError, IndexError):
+            return None
+        if length > 8 or len(data) != length or can_id > 0x1FFFFFFF:
+            return None
+        return can.Message(arbitration_id=can_id, is_extended_id=len(words[0]) > 3,
+                           data=data)
+
+    def poll(self) -> bytes:
+        if not self._greeted:
+            self._greeted = True
+            return b"< hi >"
+        frames = []
+        while True:
+            frame = self._bus.recv(timeout=0)
+            if frame is None:
+                break
+            frames.append(frame)
+        if self._raw_since is None or time.monotonic() - self._raw_since < self.RAW_SETTLE_S:
+            return b""
+        return "".join(encode_socketcand(frame) for frame in frames).encode("ascii")
+
+    def on_disconnect(self) -> None:
+        self._bus.shutdown()
+
+
+def encode_socketcand(frame: can.Message) -> str:
+    can_id = f"{frame.arbitration_id:08X}" if frame.is_extended_id else \
+        f"{frame.arbitration_id:03X}"
+    stamp = frame.timestamp or time.time()
+    return f"< frame {can_id} {stamp:.6f} {bytes(frame.data).hex().upper()} >"
+
+
 # --- control port ------------------------------------------------------------------
 
 class ControlServer:
@@ -1032,8 +1128,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="canaero_turret_sim",
         description="CANaerospace turret simulator (turret, cover, GNSS and zoom nodes).")
-    parser.add_argument("--transport", choices=("slcan-pty", "bus"), default="slcan-pty",
-                        help="slcan over a pseudo-terminal (default), or a python-can bus")
+    parser.add_argument("--transport", choices=("slcan-pty", "socketcand", "bus"),
+                        default="slcan-pty",
+                        help="slcan over a pseudo-terminal (default), a socketcand-style TCP "
+                             "bridge on 127.0.0.1, or a python-can bus")
+    parser.add_argument("--port", type=int, default=0,
+                        help="TCP port of the socketcand bridge on 127.0.0.1 (0 = any)")
     parser.add_argument("--link", default=None,
                         help="path of the pty symlink for slcan-pty (default: a temp path)")
     parser.add_argument("--interface", default="virtual",
@@ -1071,12 +1171,21 @@ def main(argv: list[str] | None = None) -> int:
 
         link = PtySimServer(lambda: SlcanSession(simulator), link_path=args.link).start()
         endpoint = {"interface": "slcan", "channel": link.port_name}
+    elif args.transport == "socketcand":
+        from gimbal_driver_common.sim_server import TcpSimServer
+
+        hub = f"canaero-sim-hub-{os.getpid()}"
+        bus = can.Bus(interface="virtual", channel=hub)
+        runner = BusSimRunner(simulator, bus).start()
+        link = TcpSimServer(lambda: SocketcandSession(hub), port=args.port).start()
+        endpoint = {"interface": "socketcand", "channel": "can0", "host": link.host,
+                    "port": link.port}
     else:
         bus = can.Bus(interface=args.interface, channel=args.channel)
         runner = BusSimRunner(simulator, bus).start()
         endpoint = {"interface": args.interface, "channel": args.channel}
     control = ControlServer(simulator, args.control_port, link).start()
-    endpoint["control_port"] = control.port
+    endpoint["control_port"] = control.port  # type: ignore[assignment]
     LOG.info("simulator ready: %s", json.dumps(endpoint))
     print(json.dumps(endpoint), flush=True)
     if args.ready_file:

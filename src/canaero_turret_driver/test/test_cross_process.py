@@ -123,3 +123,61 @@ def test_link_drop_reconnects_by_itself(sim_process, remote_client):
     assert wait_for(lambda: not remote_client.is_stale("yaw_position"), timeout=10.0)
     assert remote_client.counters.reconnects >= 1
     assert remote_client.identify().hardware_revision == 2
+
+
+@pytest.fixture
+def socketcand_sim(tmp_path):
+    ready = tmp_path / "ready.json"
+    env = dict(os.environ, PYTHONPATH=_python_path())
+    process = subprocess.Popen(
+        [sys.executable, "-m", "canaero_turret_driver.sim", "--transport", "socketcand",
+         "--ready-file", str(ready)],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        assert wait_for(ready.exists, timeout=20.0), "simulator did not start"
+        endpoint = json.loads(ready.read_text())
+        control = ControlClient(endpoint["control_port"])
+        yield endpoint, control
+        control.close()
+    finally:
+        process.terminate()
+        try:
+            process.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+def _socketcand_client(endpoint) -> TurretClient:
+    config = ClientConfig(interface="socketcand", channel=endpoint["channel"],
+                          bus_options={"host": endpoint["host"], "port": endpoint["port"]},
+                          service_timeout=0.5, reconnect_period=0.2, node_timeout=0.5,
+                          stale_timeout=0.5, reopen_after_silence=1.0)
+    client = TurretClient(config)
+    client.open()
+    return client
+
+
+def test_socketcand_bridge_is_a_shared_bus(socketcand_sim):
+    endpoint, control = socketcand_sim
+    assert endpoint["host"] == "127.0.0.1"
+    first, second = _socketcand_client(endpoint), _socketcand_client(endpoint)
+    try:
+        assert first.identify().software_revision == 7
+        first.move_to("pitch", 0.3)
+        assert wait_for(lambda: second.latest("pitch_position") is not None
+                        and abs(second.latest("pitch_position").si - 0.3) < 1e-3)
+        assert control.command("silence turret") == "ok"
+        assert wait_for(lambda: second.node_silent())
+        assert control.command("resume") == "ok"
+        assert wait_for(lambda: not second.node_silent())
+        links = []
+        first.on_link = lambda up, why: links.append(up)
+        assert control.command("drop_link 0.3") == "ok"
+        assert wait_for(lambda: False in links)
+        assert wait_for(lambda: first.connected and True in links, timeout=15.0)
+        assert wait_for(lambda: not first.is_stale("yaw_position"), timeout=10.0)
+        assert first.identify().hardware_revision == 2
+    finally:
+        first.close()
+        second.close()
