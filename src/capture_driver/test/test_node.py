@@ -15,12 +15,11 @@ import pytest
 
 pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
-from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Log
 from sensor_msgs.msg import Imu, JointState, NavSatFix
 from std_srvs.srv import SetBool, Trigger
 
-from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import GimbalStatus
@@ -84,29 +83,13 @@ def rig():
         print('--- node log (tail) ---\n' + node.output()[-4000:])
 
 
-def positions(msg: JointState) -> dict[str, float]:
-    return dict(zip(msg.name, msg.position, strict=True))
 
-
-def diag_status(array: DiagnosticArray, part: str):
-    for status in array.status:
-        if status.name == f'{NODE}: {part}':
-            return status
-    return None
-
-
-def wait_diag(ros, part, predicate, timeout=15.0):
-    array = ros.wait_for_message(
-        '/diagnostics', DiagnosticArray,
-        lambda a: diag_status(a, part) is not None and predicate(diag_status(a, part)),
-        timeout=timeout)
-    return diag_status(array, part)
 
 
 def wait_position(ros, targets: dict[str, float], tolerance=2e-3, timeout=20.0):
     return ros.wait_for_message(
         'joint_states', JointState,
-        lambda m: all(abs(positions(m).get(j, math.inf) - p) < tolerance
+        lambda m: all(abs(joint_positions(m).get(j, math.inf) - p) < tolerance
                       for j, p in targets.items()), timeout=timeout)
 
 
@@ -115,13 +98,13 @@ def test_joint_states_and_identity(rig):
     msg = ros.wait_for_message('joint_states', JointState)
     assert msg.name == ['pan', 'tilt']
     assert len(msg.velocity) == 2
-    status = wait_diag(ros, 'connection', lambda s: s.level == b'\x00')
+    status = ros.wait_for_diagnostic(NODE, 'connection', lambda s: s.level == b'\x00')
     assert status.hardware_id == 'capture-sn24017-fw2.24.0'
     values = {kv.key: kv.value for kv in status.values}
     assert values['serial_number'] == '24017'
     assert values['firmware'].startswith('2.24.0')
     ros.wait_for_message('joint_states', JointState, lambda m: len(m.effort) == 2)
-    wait_diag(ros, 'joint_states frequency', lambda s: s.level == b'\x00')
+    ros.wait_for_diagnostic(NODE, 'joint_states frequency', lambda s: s.level == b'\x00')
 
 
 def test_move_to_reaches_target_and_joint_states_show_it(rig):
@@ -290,9 +273,9 @@ def test_goto_lla_points_at_target(rig):
     ros.publish(f'/{NODE}/goto_lla', target)
     msg = ros.wait_for_message(
         'joint_states', JointState,
-        lambda m: positions(m)['pan'] < -0.5 and all(v == 0.0 for v in m.velocity),
+        lambda m: joint_positions(m)['pan'] < -0.5 and all(v == 0.0 for v in m.velocity),
         timeout=20)
-    assert positions(msg)['tilt'] == pytest.approx(0.0, abs=1e-3)
+    assert joint_positions(msg)['tilt'] == pytest.approx(0.0, abs=1e-3)
 
 
 def test_emergency_stop(rig):
@@ -300,7 +283,7 @@ def test_emergency_stop(rig):
     reply = ros.call(SetBool, srv('set_emergency_stop'), SetBool.Request(data=True))
     assert reply.success, reply.message
     assert sim_state(control_port)['emergency_stop']
-    wait_diag(ros, 'device', lambda s: 'emergency stop' in s.message)
+    ros.wait_for_diagnostic(NODE, 'device', lambda s: 'emergency stop' in s.message)
     goal = MoveTo.Goal(joint_names=['tilt'], positions=[0.1])
     result, _, _ = ros.run_action(MoveTo, srv('move_to'), goal, timeout=40)
     assert not result.success and 'Emergency stop' in result.message
@@ -313,14 +296,15 @@ def test_emergency_stop(rig):
 def test_fault_reported_then_reset(rig):
     ros, control_port, *_ = rig
     assert control(control_port, 'fault 1 over_current') == 'ok'
-    status = wait_diag(ros, 'pan', lambda s: s.level == b'\x02')
+    status = ros.wait_for_diagnostic(NODE, 'pan', lambda s: s.level == b'\x02')
     keys = {kv.key for kv in status.values}
     assert 'CMER.over_current' in keys and 'SRH.fault' in keys
-    device = wait_diag(ros, 'device', lambda s: 'No communication with axes' in s.message)
+    device = ros.wait_for_diagnostic(
+        NODE, 'device', lambda s: 'No communication with axes' in s.message)
     assert any(kv.key == 'error.ERR_GetDriverErrorString' for kv in device.values)
     reply = ros.call(Trigger, srv('reset_faults'), Trigger.Request())
     assert reply.success, reply.message
-    wait_diag(ros, 'pan', lambda s: s.level == b'\x00')
+    ros.wait_for_diagnostic(NODE, 'pan', lambda s: s.level == b'\x00')
 
 
 def test_stop_service(rig):
@@ -335,9 +319,10 @@ def test_stop_service(rig):
 def test_dropped_link_reconnects_and_diagnostics_report_it(rig):
     ros, control_port, *_ = rig
     assert control(control_port, 'drop 2.0') == 'ok'
-    wait_diag(ros, 'connection', lambda s: s.level == b'\x02' and 'disconnected' in s.message)
-    wait_diag(ros, 'pan', lambda s: s.level == b'\x03')
-    status = wait_diag(ros, 'connection', lambda s: s.level == b'\x00', timeout=30)
+    ros.wait_for_diagnostic(
+        NODE, 'connection', lambda s: s.level == b'\x02' and 'disconnected' in s.message)
+    ros.wait_for_diagnostic(NODE, 'pan', lambda s: s.level == b'\x03')
+    status = ros.wait_for_diagnostic(NODE, 'connection', lambda s: s.level == b'\x00', timeout=30)
     values = {kv.key: kv.value for kv in status.values}
     assert int(values['reconnects']) >= 1
     ros.wait_for_message('joint_states', JointState, timeout=15)

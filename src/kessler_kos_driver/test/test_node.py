@@ -21,7 +21,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.ros.testing import RosTestClient, find_diagnostic, joint_positions
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import AxisTrajectory, BezierSegment, GimbalStatus, PlaybackStatus
@@ -70,21 +70,12 @@ def rig():
         lease.release()
 
 
-def positions(msg: JointState) -> dict[str, float]:
-    return dict(zip(msg.name, msg.position, strict=True))
-
-
-def diag_status(array: DiagnosticArray, part: str):
-    for status in array.status:
-        if status.name == f'{NODE}: {part}':
-            return status
-    return None
 
 
 def wait_diag(ros, part, predicate, timeout=10.0):
     return ros.wait_for_message(
         '/diagnostics', DiagnosticArray,
-        lambda a: diag_status(a, part) is not None and predicate(diag_status(a, part)),
+        lambda a: (status := find_diagnostic(a, NODE, part)) is not None and predicate(status),
         timeout=timeout)
 
 
@@ -116,9 +107,9 @@ def test_joint_states_status_and_identity(rig):
     assert status.device_model == 'Kessler CineShooter'
     assert [a.name for a in status.axes] == JOINTS and all(a.calibrated for a in status.axes)
     diag = wait_diag(ros, 'device', lambda s: True)
-    assert diag_status(diag, 'pan').level[0] == 0
-    assert dict((kv.key, kv.value) for kv in diag_status(diag, 'device').values)['lock'] == \
-        'unlocked'
+    assert find_diagnostic(diag, NODE, 'pan').level[0] == 0
+    device = find_diagnostic(diag, NODE, 'device')
+    assert dict((kv.key, kv.value) for kv in device.values)['lock'] == 'unlocked'
 
 
 def test_load_and_play_three_axis_keyframes(rig):
@@ -143,11 +134,11 @@ def test_load_and_play_three_axis_keyframes(rig):
     final = ros.wait_for_message('joint_states', JointState)
     assert list(final.position) == pytest.approx(KEYFRAMES[-1][1], abs=1e-3)
     # joint_states followed the path: pan (monotone keyframes) rose through the move
-    pan = [positions(m)['pan'] for m in samples[start:]]
+    pan = [joint_positions(m)['pan'] for m in samples[start:]]
     intermediate = [p for p in pan if 11.0 < p < 299.0]
     assert len(intermediate) >= 3
     assert all(b >= a - 1e-6 for a, b in itertools.pairwise(pan))
-    slider = [positions(m)['slider'] for m in samples[start:]]
+    slider = [joint_positions(m)['slider'] for m in samples[start:]]
     assert max(slider) > 40.0      # went up towards 60 then came back to 30
     # FullStop consumed the move
     again = trigger(ros, 'start_playback')
@@ -209,7 +200,7 @@ def test_move_to_and_joint_command(rig):
     assert not result.success and 'calibrated range' in result.message
     ros.publish('joint_command', JointState(name=['slider'], position=[12.0]))
     ros.wait_for_message('joint_states', JointState,
-                         lambda m: abs(positions(m)['slider'] - 12.0) < 1e-3, timeout=20)
+                         lambda m: abs(joint_positions(m)['slider'] - 12.0) < 1e-3, timeout=20)
     ros.publish('joint_command', JointState(name=['roll'], position=[1.0]))
     node.wait_for_output("unknown joint(s) ['roll']")
 
@@ -245,7 +236,7 @@ def test_calibrate_take_picture_and_home(rig):
                                   timeout=60)
     assert result.success, result.message
     msg = ros.wait_for_message('joint_states', JointState)
-    assert positions(msg)['slider'] == pytest.approx(0.0, abs=0.011)
+    assert joint_positions(msg)['slider'] == pytest.approx(0.0, abs=0.011)
     bad = ros.call(Calibrate, srv('calibrate'), Calibrate.Request(joint_name='roll'))
     assert not bad.success and 'unknown joint' in bad.message
     assert trigger(ros, 'take_picture').success
@@ -268,7 +259,7 @@ def test_axis_fault_offline_motor_and_reset(rig):
     ros, control_port, _, _ = rig
     assert control(control_port, 'fault 3') == 'ok'
     diag = wait_diag(ros, 'tilt', lambda s: s.level[0] == 2)
-    assert 'error 16' in diag_status(diag, 'tilt').message
+    assert 'error 16' in find_diagnostic(diag, NODE, 'tilt').message
     reply = trigger(ros, 'reset_faults')
     assert reply.success and 'tilt' in reply.message      # cleared, needs recalibration
     wait_diag(ros, 'tilt', lambda s: s.level[0] == 1)
