@@ -134,7 +134,7 @@ IDENTIFIERS: tuple[Identifier, ...] = (
     _cmd(1430, "oes_heater_control", "OES heater control", DataType.UCHAR, "-", "-", 1.0,
          "6.9.1", f"1430 (0x596), {_HEX}; 0 off, 1 on"),
     _cmd(1432, "drives_heater_control", "Drives heater control", DataType.UCHAR, "-", "-",
-         1.0, "6.9.2", f"1432 (0x598), {_HEX}; 0 off, 1 on (marked 'not use')"),
+         1.0, "6.9.2", f"1432 (0x598), {_HEX}; 0 off, 1 on", used=False),
     # 7.1 turret data, node 1
     _data(1303, "yaw_position", "Yaw actual position", DataType.FLOAT, "deg", "rad", DEG, _T,
           "7.1.1", f"1303 (0x517), {_HEX}; range -180..180"),
