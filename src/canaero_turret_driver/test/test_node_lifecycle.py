@@ -124,3 +124,26 @@ def test_opt_in_services_when_enabled(managed):
                          timeout=20)
     reply = call(ros, "identify")
     assert reply.success and "software_revision=7" in reply.results
+
+
+def test_node_waits_for_an_absent_device_then_connects(tmp_path):
+    tty, ready = tmp_path / "tty", tmp_path / "ready.json"
+    with DomainLease() as domain:
+        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain, ros_args(
+            "can_interface:=slcan", f"can_channel:={tty}",
+            "can_options:=['sleep_after_open=0']", "reconnect_period:=0.3",
+            "service_timeout:=0.3"))
+        sim = None
+        ros = RosTestClient(domain)
+        try:
+            out = node.wait_for_output("configure failed", timeout=30)
+            assert "cannot open CAN interface slcan" in out
+            sim = ManagedProcess.ros(PKG, "canaero_turret_sim", domain,
+                                     ["--link", str(tty), "--ready-file", str(ready)])
+            ros.wait_for_message("joint_states", JointState, timeout=40)
+            ros.wait_for_lifecycle_state(NODE, "active")
+        finally:
+            ros.close()
+            node.stop()
+            if sim is not None:
+                sim.stop()
