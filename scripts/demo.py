@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import shutil
 import signal
 import sys
@@ -539,11 +540,17 @@ def summary(
         lines.append(f'  {target.title} [{target.node_name}]: {verdict}')
         lines += [f'    done   {d}' for d in target.done]
         lines += [f'    failed {f}' for f in target.failed]
-    lines.append(f'  node logs: {output}/<node>.log')
+    lines.append(f'  logs: {output}/<node>.log, <simulator>.log, record_bag.log')
     if (output / 'demo_failures.log').exists():
         lines.append(f'  failed steps with tracebacks: {output}/demo_failures.log')
     if bag is not None:
-        lines.append(f'  bag: {bag} (open with Foxglove Studio or ros2 bag info)')
+        recorded = ''
+        log = output / 'record_bag.log'
+        counts = re.search(r'(\d+ messages on \d+ topics)', log.read_text()) if log.exists() \
+            else None
+        if counts:
+            recorded = f'{counts.group(1)}; '
+        lines.append(f'  bag: {bag} ({recorded}open with Foxglove Studio or ros2 bag info)')
     if plot is not None:
         lines.append(f'  plot: {plot} (commanded vs. actual joint positions per driver)')
     return '\n'.join(lines)
