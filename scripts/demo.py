@@ -407,12 +407,20 @@ def main() -> int:
     # demo_targets imports this module as `demo`: let it find this one, not a second copy.
     sys.modules.setdefault('demo', sys.modules[__name__])
     output = Path(args.output).resolve()
-    if output.exists():
-        shutil.rmtree(output)
-    output.mkdir(parents=True)
     targets = available_targets()
+    # Only the files an earlier demo wrote are replaced: --output may name any directory.
+    previous = {'demo.mcap', 'positions.png', 'demo_failures.log', 'record_bag.log',
+                *(f'{t.node_name}.log' for t in targets),
+                *(f'{t.sim_executable}.log' for t in targets)}
+    output.mkdir(parents=True, exist_ok=True)
+    for name in previous:
+        (output / name).unlink(missing_ok=True)
     if args.only:
+        built = [t.node_name for t in targets]
         targets = [t for t in targets if t.node_name in args.only]
+        if not targets:
+            print(f'demo: none of {args.only} is built; built: {built}', file=sys.stderr)
+            return 1
     if not targets:
         print('demo: no driver is built; run make build first', file=sys.stderr)
         return 1
