@@ -398,12 +398,11 @@ class TurretClient:
             return
         event, missed = self.sequences.update((message.node_id, message.can_id),
                                               message.message_code)
-        if event in (SequenceEvent.LATE, SequenceEvent.REPEATED):
-            if self.on_sequence is not None:
-                self.on_sequence(ident.key, event, missed)
-            return  # an old or duplicate value must not replace the newer one
-        if event is SequenceEvent.LOST and self.on_sequence is not None:
+        if event not in (SequenceEvent.FIRST, SequenceEvent.IN_ORDER) \
+                and self.on_sequence is not None:
             self.on_sequence(ident.key, event, missed)
+        if not event.accepted:
+            return  # an old or duplicate value must not replace the newer one
         value = message.value
         sample = Sample(ident.key, value, self._to_si(ident, value), time.time(), now,
                         message.message_code, message.node_id)

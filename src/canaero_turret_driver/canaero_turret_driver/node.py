@@ -723,7 +723,11 @@ class CanaeroTurretNode(GimbalDriverNode):
         total = lost + repeated + late
         new = total - self._last_anomalies
         self._last_anomalies = total
-        values = [("lost", str(lost)), ("repeated", str(repeated)), ("late", str(late))]
+        values = [("lost", str(lost)), ("repeated", str(repeated)), ("late", str(late)),
+                  ("restarts", str(sum(s.restarts for s in stats.values())))]
+        unsequenced = sorted(can_id for (_, can_id), s in stats.items() if s.unsequenced)
+        if unsequenced:
+            values.append(("unsequenced_ids", " ".join(map(str, unsequenced))))
         for (_node_id, can_id), s in sorted(stats.items()):
             if s.anomalies:
                 values.append((f"id_{can_id}", f"lost {s.lost} repeated {s.repeated} "

@@ -368,3 +368,14 @@ def test_axis_sign_maps_device_direction(simulator, channel_name):
         turret.stop()
     finally:
         turret.close()
+
+
+def test_device_restart_of_message_codes_is_followed(client, simulator):
+    from canaero_turret_driver.protocol import MessageCodeCounter
+
+    assert wait_for(lambda: client.latest("yaw_position") is not None
+                    and client.latest("yaw_position").message_code > 10)
+    simulator._codes = MessageCodeCounter()  # as after a power cycle: codes from 0 again
+    client.move_to("yaw", 0.2)
+    assert wait_for(lambda: abs((_si(client, "yaw_position") or 9) - 0.2) < 1e-3)
+    assert client.sequences.stats((1, 1303)).restarts == 1

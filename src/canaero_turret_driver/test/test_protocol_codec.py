@@ -261,3 +261,26 @@ def test_axis_status_and_periphery_bits():
     assert bits["case_temperature_sensor_fault"]
     assert not bits["oes_heater_enabled"]
     assert len(bits) == 7  # bits 5 and 6 are not decoded
+
+
+def test_sequence_restart_is_detected_after_a_streak_of_late_codes():
+    tracker = MessageCodeTracker()
+    for code in (97, 98, 99, 100):
+        tracker.update("k", code)
+    assert tracker.update("k", 0)[0] is SequenceEvent.LATE
+    assert tracker.update("k", 1)[0] is SequenceEvent.LATE
+    assert tracker.update("k", 2)[0] is SequenceEvent.RESTARTED
+    assert tracker.update("k", 3)[0] is SequenceEvent.IN_ORDER
+    assert tracker.stats("k").restarts == 1
+
+
+def test_constant_codes_become_unsequenced_then_tracked_again():
+    tracker = MessageCodeTracker()
+    events = [tracker.update("k", 0)[0] for _ in range(5)]
+    assert events == [SequenceEvent.FIRST, SequenceEvent.REPEATED, SequenceEvent.REPEATED,
+                      SequenceEvent.UNSEQUENCED, SequenceEvent.UNSEQUENCED]
+    assert all(e.accepted for e in events[3:]) and not events[1].accepted
+    assert tracker.stats("k").unsequenced
+    assert tracker.update("k", 7)[0] is SequenceEvent.FIRST
+    assert tracker.update("k", 8)[0] is SequenceEvent.IN_ORDER
+    assert not tracker.stats("k").unsequenced

@@ -9,6 +9,14 @@ d == 1 in order; d == 0 repeated; 2 <= d <= `lost_window` lost (d - 1 missing);
 d > `lost_window` (i.e. "behind" the last one) late: an old message arriving after
 newer ones; it is reported and does not move the reference. The default window of 128
 splits the ring in half, the usual choice for an 8-bit sequence number.
+
+Two situations would otherwise make a receiver drop good data for a long time:
+* the transmitter restarted (codes begin again at 0): `streak` late codes in a row
+  re-anchor the sequence (RESTARTED) instead of counting ~128 frames as late;
+* the transmitter does not increment the code at all (non-compliant, or a constant code
+  such as the 0 in the ICD's command examples): `streak` repeats in a row mark the key
+  UNSEQUENCED, after which its messages are accepted without sequence checks until the
+  code changes again.
 """
 
 from __future__ import annotations
@@ -24,6 +32,13 @@ class SequenceEvent(Enum):
     LOST = "lost"
     REPEATED = "repeated"
     LATE = "late"
+    RESTARTED = "restarted"
+    UNSEQUENCED = "unsequenced"
+
+    @property
+    def accepted(self) -> bool:
+        """Should the receiver use the value (False: duplicate or out of date)?"""
+        return self not in (SequenceEvent.REPEATED, SequenceEvent.LATE)
 
 
 @dataclass
@@ -34,7 +49,10 @@ class SequenceStats:
     lost: int = 0
     repeated: int = 0
     late: int = 0
+    restarts: int = 0
     last_code: int | None = None
+    streak: int = 0  # consecutive repeated or late codes
+    unsequenced: bool = False
 
     @property
     def anomalies(self) -> int:
@@ -44,10 +62,11 @@ class SequenceStats:
 class MessageCodeTracker:
     """Per-key (normally (node-id, CAN id)) message-code bookkeeping."""
 
-    def __init__(self, lost_window: int = 128) -> None:
+    def __init__(self, lost_window: int = 128, streak: int = 3) -> None:
         if not 1 <= lost_window <= 255:
             raise ValueError("lost_window must be 1..255")
         self._lost_window = lost_window
+        self._streak = streak
         self._stats: dict[Hashable, SequenceStats] = {}
 
     def update(self, key: Hashable, code: int) -> tuple[SequenceEvent, int]:
@@ -60,16 +79,31 @@ class MessageCodeTracker:
             stats.last_code = code
             return SequenceEvent.FIRST, 0
         distance = (code - stats.last_code) % 256
+        if stats.unsequenced:
+            if distance == 0:
+                return SequenceEvent.UNSEQUENCED, 0
+            stats.unsequenced = False  # the code moves again: track it from here
+            stats.last_code, stats.streak = code, 0
+            return SequenceEvent.FIRST, 0
         if distance == 1:
-            stats.last_code = code
+            stats.last_code, stats.streak = code, 0
             return SequenceEvent.IN_ORDER, 0
         if distance == 0:
+            stats.streak += 1
+            if stats.streak >= self._streak:
+                stats.unsequenced = True
+                return SequenceEvent.UNSEQUENCED, 0
             stats.repeated += 1
             return SequenceEvent.REPEATED, 0
         if distance <= self._lost_window:
             stats.lost += distance - 1
-            stats.last_code = code
+            stats.last_code, stats.streak = code, 0
             return SequenceEvent.LOST, distance - 1
+        stats.streak += 1
+        if stats.streak >= self._streak:
+            stats.restarts += 1
+            stats.last_code, stats.streak = code, 0
+            return SequenceEvent.RESTARTED, 0
         stats.late += 1
         return SequenceEvent.LATE, 0
 
