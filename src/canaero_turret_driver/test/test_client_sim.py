@@ -5,6 +5,8 @@ import time
 
 import can
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from canaero_turret_driver.client import (
     ClientConfig,
@@ -379,3 +381,14 @@ def test_device_restart_of_message_codes_is_followed(client, simulator):
     client.move_to("yaw", 0.2)
     assert wait_for(lambda: abs((_si(client, "yaw_position") or 9) - 0.2) < 1e-3)
     assert client.sequences.stats((1, 1303)).restarts == 1
+
+
+@settings(max_examples=200, deadline=None)
+@given(can_id=st.integers(0, 0x7FF), data=st.binary(max_size=8),
+       extended=st.booleans(), error=st.booleans())
+def test_dispatch_never_raises_on_any_frame(can_id, data, extended, error):
+    turret = TurretClient(ClientConfig())
+    frame = can.Message(arbitration_id=can_id, data=data, is_extended_id=extended,
+                        is_error_frame=error)
+    turret._dispatch(frame)
+    assert turret.counters.frames == 1
