@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import rclpy
+import rclpy.signals
 from mcap.writer import Writer
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -92,6 +93,7 @@ class Recorder:
         self.writer = Writer(self._file)
         self.writer.start(profile='ros2', library='gimbal-suite record_bag')
         self.channels: dict[str, int] = {}
+        self.skipped: set[str] = set()
         self.schemas: dict[str, int] = {}
         self.lock = threading.Lock()
         self.count = 0
@@ -100,7 +102,10 @@ class Recorder:
 
     def discover(self) -> None:
         for topic, types in self.node.get_topic_names_and_types():
-            if topic in self.channels or not types or topic.startswith('/_'):
+            if topic in self.channels or topic in self.skipped or not types:
+                continue
+            if '/_action/' in topic or topic.startswith('/_'):
+                self.skipped.add(topic)  # hidden topics, as `ros2 bag record -a` skips them
                 continue
             type_name = types[0]
             try:
@@ -108,7 +113,7 @@ class Recorder:
                 definition = message_definition(type_name)
             except (AttributeError, ModuleNotFoundError, ValueError, FileNotFoundError) as exc:
                 self.node.get_logger().warning(f'not recording {topic}: {exc}')
-                self.channels[topic] = -1
+                self.skipped.add(topic)
                 continue
             schema_name = type_name.replace('/msg/', '/')
             with self.lock:
@@ -139,11 +144,11 @@ def main() -> int:
     if len(sys.argv) != 2:
         print(__doc__, file=sys.stderr)
         return 2
-    rclpy.init()
-    recorder = Recorder(sys.argv[1])
     stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())  # before init: an early Ctrl-C
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())  # still closes a valid file
+    rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    recorder = Recorder(sys.argv[1])
     while not stop.is_set():
         rclpy.spin_once(recorder.node, timeout_sec=0.1)
     recorder.close()

@@ -49,6 +49,6 @@ echo "setup: colcon build"
 colcon build --base-paths src \
   --cmake-args "-DPython3_EXECUTABLE=$VENV/bin/python" -DBUILD_TESTING=OFF \
   --event-handlers console_stderr- console_start_end- summary+ status- 2>&1 \
-  | grep -v 'AMENT_PREFIX_PATH doesn.t contain' || {
+  | grep -v -e 'AMENT_PREFIX_PATH doesn.t contain' -e 'had stderr output' || {
   echo "setup: colcon build failed (see log/latest_build)" >&2; exit 1; }
 [ -f install/setup.bash ] || { echo "setup: colcon build produced no install/" >&2; exit 1; }

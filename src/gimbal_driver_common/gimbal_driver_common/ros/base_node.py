@@ -103,6 +103,8 @@ class GimbalDriverNode(LifecycleNode):
     DEFAULT_PUBLISH_RATE = 50.0
     #: patterns the driver-side scan offers (a device with its own scans overrides start_scan)
     SCAN_PATTERNS: Sequence[str] = ('sector', 'zigzag', 'square')
+    #: the (pan, tilt) joints a scan sweeps; None: `pan`/`tilt` if named so, else the first two
+    SCAN_JOINTS: tuple[str, str] | None = None
 
     def __init__(self, node_name: str, **kwargs: object) -> None:
         super().__init__(node_name, **kwargs)
@@ -820,7 +822,7 @@ class GimbalDriverNode(LifecycleNode):
             if message is not None:
                 return message
             waypoints = plan_scan(
-                scan, self.joint_names[:2], self.current_positions(), self.limits,
+                scan, self.scan_joints(), self.current_positions(), self.limits,
                 self.SCAN_PATTERNS,
             )
             self._stop_scan_silently()
@@ -843,6 +845,14 @@ class GimbalDriverNode(LifecycleNode):
 
         return self._run_trigger(response, action)
 
+    def scan_joints(self) -> list[str]:
+        """The joints a driver-side scan sweeps as pan and tilt."""
+        if self.SCAN_JOINTS is not None:
+            return list(self.SCAN_JOINTS)
+        if 'pan' in self.joint_names and 'tilt' in self.joint_names:
+            return ['pan', 'tilt']
+        return list(self.joint_names[:2])
+
     def _stop_scan_silently(self) -> None:
         if self._scan_thread is not None and self._scan_thread.is_alive():
             self._scan_stop.set()
@@ -854,8 +864,8 @@ class GimbalDriverNode(LifecycleNode):
         index = 0
         while not stop.is_set() and self._connected:
             target = waypoints[index % len(waypoints)]
-            speeds = {name: (scan.speed if name == self.joint_names[0] else None)
-                      for name in target}
+            pan = self.scan_joints()[0]
+            speeds = {name: (scan.speed if name == pan else None) for name in target}
             try:
                 self.send_moves({n: (p, speeds[n]) for n, p in target.items()})
                 self._targets.update(target)

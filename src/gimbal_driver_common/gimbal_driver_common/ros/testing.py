@@ -34,6 +34,12 @@ def find_diagnostic(array: DiagnosticArray, node: str, part: str) -> DiagnosticS
     return None
 
 
+# Generated message modules import their nested types lazily; two threads doing that
+# for the first time at once can fail ("not an instance of 'capsule'"), so entity
+# creation is serialised.
+_TYPE_SUPPORT_LOCK = threading.Lock()
+
+
 class RosTestClient:
     """Publishes, subscribes, calls services and actions against nodes in ``domain_id``."""
 
@@ -84,7 +90,8 @@ class RosTestClient:
             with self._lock:
                 received.append(msg)
 
-        self.node.create_subscription(msg_type, topic, record, qos)
+        with _TYPE_SUPPORT_LOCK:
+            self.node.create_subscription(msg_type, topic, record, qos)
         return received
 
     def wait_for_message(
@@ -120,7 +127,8 @@ class RosTestClient:
     def publish(self, topic: str, msg: Any) -> None:
         publisher = self._publishers.get(topic)
         if publisher is None:
-            publisher = self.node.create_publisher(type(msg), topic, 10)
+            with _TYPE_SUPPORT_LOCK:
+                publisher = self.node.create_publisher(type(msg), topic, 10)
             self._publishers[topic] = publisher
             wait_for(lambda: publisher.get_subscription_count() > 0, 10.0,
                      f'a subscriber on {topic}')
@@ -135,7 +143,8 @@ class RosTestClient:
         # thread waits on it can end the spin.
         client = self._clients.get((srv_type, name))
         if client is None:
-            client = self.node.create_client(srv_type, name)
+            with _TYPE_SUPPORT_LOCK:
+                client = self.node.create_client(srv_type, name)
             self._clients[(srv_type, name)] = client
         if not client.wait_for_service(timeout_sec=timeout):
             raise TimeoutError(f'service {name} not available after {timeout:g} s')
@@ -151,7 +160,8 @@ class RosTestClient:
         """Send a goal and wait for its result: (result, status, feedback messages)."""
         client = self._clients.get((action_type, name))
         if client is None:
-            client = ActionClient(self.node, action_type, name)
+            with _TYPE_SUPPORT_LOCK:
+                client = ActionClient(self.node, action_type, name)
             self._clients[(action_type, name)] = client
         feedback: list[Any] = []
         if not client.wait_for_server(timeout_sec=timeout):
