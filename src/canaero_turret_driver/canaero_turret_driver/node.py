@@ -201,6 +201,9 @@ class CanaeroTurretNode(GimbalDriverNode):
                                    value_range=(-50.0, 200.0))
         self.eed_hold = p("eed_hold_time", 10.0, "s an EED event keeps the events status WARN",
                           value_range=(0.0, 3600.0))
+        self.fix_frame_id = p("fix_frame_id", "gnss_base", "frame_id of ~/fix")
+        self.inclination_frame_id = p("inclination_frame_id", "turret_base",
+                                      "frame_id of ~/inclination")
         self.allow_node_id_change = p("allow_node_id_change", False,
                                       "allow NIS (set_node_id) through ~/device_command")
         self.allow_data_download = p("allow_data_download", False,
@@ -569,7 +572,7 @@ class CanaeroTurretNode(GimbalDriverNode):
             self._last_published_fix = latitude.received
             fix = NavSatFix()
             fix.header.stamp = self._stamp(latitude.stamp)
-            fix.header.frame_id = "gnss_base"
+            fix.header.frame_id = self.fix_frame_id
             fresh = not (client.is_stale("latitude") or client.is_stale("longitude"))
             fix.status.status = NavSatStatus.STATUS_FIX if fresh else NavSatStatus.STATUS_NO_FIX
             fix.status.service = NavSatStatus.SERVICE_GPS
@@ -592,7 +595,7 @@ class CanaeroTurretNode(GimbalDriverNode):
         if pitch is not None and roll is not None and not client.is_stale("global_pitch"):
             msg = Vector3Stamped()
             msg.header.stamp = self._stamp(pitch.stamp)
-            msg.header.frame_id = "turret_base"
+            msg.header.frame_id = self.inclination_frame_id
             msg.vector.x, msg.vector.y = roll.si, pitch.si
             self._inclination_pub.publish(msg)
         zoom = client.latest("zoom_position")
