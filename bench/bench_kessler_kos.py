@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from driver_bench import add_note, codec_figures, joint_command, node_figures
+from driver_bench import codec_figures, explain_latency, joint_command, node_figures
 from driver_bench import tcp_wire_limit_frames_per_s as tcp_limit
 from harness import CommandProbe
 
@@ -59,13 +59,10 @@ def run(domain: int) -> dict:
         }, probe, command))
     finally:
         sim.stop()
-    latency = results.get('sim_to_subscriber', {})
-    if latency.get('p99_ms', 0.0) >= 5.0:
-        add_note(results, (
-            'sim_to_subscriber p99 over 5 ms: the kOS device is polled, not streamed. The '
-            'client sends GetMotorInfo every poll_period (0.05 s) and the node publishes the '
-            f'latest reply at publish_rate ({DEFAULT_PUBLISH_RATE:g} Hz) on an unsynchronised '
-            'timer, so each joint_state carries a report up to one poll period old '
-            '(uniform 0..50 ms, p50 ~25 ms). The transfer itself (reply read -> subscriber) '
-            'is the rclpy pub/sub figure; a lower poll_period lowers the age.'))
+    explain_latency(results, (
+        'The kOS device is polled, not streamed: the client sends GetMotorInfo every '
+        'poll_period (0.05 s, checked on a 20 ms tick, so about every 60 ms) and the node '
+        f'republishes the newest reply at publish_rate ({DEFAULT_PUBLISH_RATE:g} Hz), so each '
+        'joint_state carries a report up to one poll interval old (sample and hold). A shorter '
+        'poll_period lowers the age; the transfer itself is the rclpy pub/sub figure.'))
     return results
