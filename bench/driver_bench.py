@@ -16,7 +16,6 @@ While the node runs, this process' GIL switch interval is lowered (see
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -235,10 +234,6 @@ def command_latencies(ros: RosTestClient, probe: CommandProbe,
 
 def joint_command(names: Sequence[str], positions: Sequence[float]) -> JointState:
     return JointState(name=list(names), position=[float(p) for p in positions])
-
-
-def close(a: float | None, b: float, tolerance: float) -> bool:
-    return a is not None and math.isfinite(a) and abs(a - b) <= tolerance
 
 
 def add_note(results: dict, note: str) -> None:
