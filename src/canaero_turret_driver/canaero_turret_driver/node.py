@@ -228,7 +228,7 @@ class CanaeroTurretNode(GimbalDriverNode):
 
     # ------------------------------------------------------------------ interfaces
     def _create_device_interfaces(self) -> None:
-        group = self._service_group
+        group = self.service_group
         self._fix_pub = self.create_publisher(NavSatFix, "~/fix", 10)
         self._heading_pub = self.create_publisher(Float64, "~/heading", 10)
         self._inclination_pub = self.create_publisher(Vector3Stamped, "~/inclination", 10)
@@ -388,8 +388,8 @@ class CanaeroTurretNode(GimbalDriverNode):
             positions = self.current_positions()
             if not positions:
                 raise DeviceError("no joint position received yet")
-        assert self._preset_store is not None
-        self._preset_store.set(index, name, positions)
+        assert self.preset_store is not None
+        self.preset_store.set(index, name, positions)
         return f"preset {index} stored (driver-side): " + ", ".join(
             f"{k}={v:.4f}" for k, v in positions.items())
 
@@ -401,20 +401,20 @@ class CanaeroTurretNode(GimbalDriverNode):
             with self._device() as client:
                 client.restore_position()
             if self._remembered:
-                self._targets.update(self._remembered)
+                self.commanded_targets.update(self._remembered)
             return "moving to preset 0 (the turret's saved position)"
-        assert self._preset_store is not None
+        assert self.preset_store is not None
         try:
-            preset = self._preset_store.get(index)
+            preset = self.preset_store.get(index)
         except PresetError as exc:
             raise DeviceError(str(exc)) from exc
         names = [n for n in preset.positions if n in self.limits]
         speeds = [speed] * len(names) if speed > 0 else []
         plan = validate_joint_command(names, [preset.positions[n] for n in names], speeds,
                                       self.limits)
-        self._watchdog.cancel(names)
+        self.jog_watchdog.cancel(names)
         self.send_moves(plan.moves)
-        self._targets.update({k: v[0] for k, v in plan.moves.items()})
+        self.commanded_targets.update({k: v[0] for k, v in plan.moves.items()})
         return f"moving to preset {index} ({preset.name})"
 
     def device_list_presets(self) -> list[Preset]:
@@ -423,20 +423,20 @@ class CanaeroTurretNode(GimbalDriverNode):
             presets.append(Preset(index=0, name="turret saved position",
                                   joint_names=list(self._remembered),
                                   positions=list(self._remembered.values())))
-        assert self._preset_store is not None
+        assert self.preset_store is not None
         presets += [Preset(index=p.index, name=p.name, joint_names=list(p.positions),
                            positions=list(p.positions.values()))
-                    for p in self._preset_store.list()]
+                    for p in self.preset_store.list()]
         return presets
 
     def device_clear_preset(self, index: int | None) -> str:
-        assert self._preset_store is not None
+        assert self.preset_store is not None
         if index == PRESET_DEVICE_INDEX:
             self._remembered = None
             return ("preset 0 lives in the turret and cannot be erased; the driver forgot "
                     "its record of it")
         try:
-            self._preset_store.clear(index)
+            self.preset_store.clear(index)
         except PresetError as exc:
             raise DeviceError(str(exc)) from exc
         if index is None:
@@ -468,7 +468,7 @@ class CanaeroTurretNode(GimbalDriverNode):
                     client.set_actuator_mode(self._axis_of[joint], MODE_NAMES[mode])
             return "actuator mode " + ", ".join(f"{j}={m}" for j, m in targets)
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _bool_service(self, name: str, method: str):
         def callback(request, response):
@@ -480,7 +480,7 @@ class CanaeroTurretNode(GimbalDriverNode):
                     return "cover " + ("opening" if request.data else "closing")
                 return f"{what} " + ("on" if request.data else "off")
 
-            return self._run_trigger(response, action)
+            return self.serve_request(response, action)
 
         return callback
 
@@ -556,7 +556,7 @@ class CanaeroTurretNode(GimbalDriverNode):
                                "set_interval, upload, download, set_node_id, "
                                "store_configuration")
 
-        response = self._run_trigger(response, action)
+        response = self.serve_request(response, action)
         response.results = results
         return response
 

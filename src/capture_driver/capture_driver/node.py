@@ -327,10 +327,10 @@ class CaptureDriverNode(GimbalDriverNode):
         if now >= self._next_status:
             self._next_status = now + self.status_period
             self._refresh_status(client)
-        if self._active and self._has_imu and self.imu_rate > 0 and now >= self._next_imu:
+        if self.active and self._has_imu and self.imu_rate > 0 and now >= self._next_imu:
             self._next_imu = now + 1.0 / self.imu_rate
             self._publish_imu(client)
-        if self._active and self._has_gps and self.fix_rate > 0 and now >= self._next_fix:
+        if self.active and self._has_gps and self.fix_rate > 0 and now >= self._next_fix:
             self._next_fix = now + 1.0 / self.fix_rate
             self._publish_fix(client)
         with self._status_lock:
@@ -557,7 +557,7 @@ class CaptureDriverNode(GimbalDriverNode):
                     client.run('CFG_SetGeneralSpd', self._axis[joint], math.degrees(speed))
             self._leave_device_programs(client)
             client.run('PRST_GoToPreset', index)
-            self._targets.update(self._preset_positions(record))
+            self.commanded_targets.update(self._preset_positions(record))
             return f'moving to device preset {index} ({record.name or "unnamed"})'
 
         return self._device_call(action)
@@ -603,7 +603,7 @@ class CaptureDriverNode(GimbalDriverNode):
 
             return self._device_call(run)
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_stop_loop(self, request, response):
         def action() -> str:
@@ -612,7 +612,7 @@ class CaptureDriverNode(GimbalDriverNode):
             self.stop_axes(None)
             return 'preset looping stopped'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     # ---------------------------------------------------------------- scans
     def start_device_scan(self, request: ScanRequest) -> str | None:
@@ -679,7 +679,7 @@ class CaptureDriverNode(GimbalDriverNode):
             self._next_status = 0.0
             return f'stabilisation {"on" if request.data else "off"}'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_emergency_stop(self, request, response):
         def action() -> str:
@@ -690,10 +690,10 @@ class CaptureDriverNode(GimbalDriverNode):
                 return 'emergency stop set: all axes stopped, motion commands refused'
             return 'emergency stop cleared (the controller reset the axes to relative mode)'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_goto_lla(self, msg: NavSatFix) -> None:
-        refusal = self._refuse()
+        refusal = self.command_refusal()
         if refusal:
             self.get_logger().warning(f'~/goto_lla ignored: {refusal}')
             return
@@ -725,7 +725,7 @@ class CaptureDriverNode(GimbalDriverNode):
             validate_joint_command(list(pose), list(pose.values()), [], self.limits)
             self._leave_device_programs(client)
             client.goto_lla(self.gps_target_slot, target)
-            self._targets.update(pose)
+            self.commanded_targets.update(pose)
             self.get_logger().info(f'aiming at lat {target.latitude:.6f} lon '
                                    f'{target.longitude:.6f}: pan {pan_deg:.2f} tilt '
                                    f'{tilt_deg:.2f} deg')
@@ -759,7 +759,7 @@ class CaptureDriverNode(GimbalDriverNode):
                 return f'{cmd.name}: ' + ', '.join(response.results)
             return f'{cmd.name}: ACK'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     # ------------------------------------------------------ status/diagnostics
     def device_status_parts(self) -> list[StatusPart]:

@@ -458,7 +458,7 @@ class KosDriverNode(GimbalDriverNode):
                     f'{trajectory.effective_duration():.3f} s; now ~/setup_playback and '
                     '~/start_playback')
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _keyframes(self, trajectory) -> list[Keyframe]:
         names = list(trajectory.joint_names)
@@ -523,7 +523,7 @@ class KosDriverNode(GimbalDriverNode):
                                   f'{self.playback_timeout:g} s')
             return 'motors at the first key frame, move set up; call ~/start_playback'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_start_playback(self, request, response):
         def action() -> str:
@@ -535,14 +535,14 @@ class KosDriverNode(GimbalDriverNode):
                 raise DeviceError(str(exc)) from exc
             return 'playback started; follow ~/playback_status (FullStop ends the move)'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_stop_playback(self, request, response):
         def action() -> str:
             self._client().stop_playback()
             return 'StopPlayback sent: motors stop, the device reports FullStop'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_calibrate(self, request, response):
         def action() -> str:
@@ -570,7 +570,7 @@ class KosDriverNode(GimbalDriverNode):
             raise CommandError(f'action {request.action} is not MARK_BEGIN (0), MARK_END (1) '
                                'or RESET (2)')
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_take_picture(self, request, response):
         def action() -> str:
@@ -580,7 +580,7 @@ class KosDriverNode(GimbalDriverNode):
                 raise DeviceError(str(exc)) from exc
             return f'picture taken (exposure {self.picture_exposure:g} s)'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     # ------------------------------------------------------------ diagnostics
     def device_status_parts(self) -> list[StatusPart]:

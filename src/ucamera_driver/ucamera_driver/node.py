@@ -545,7 +545,7 @@ class UCameraDriverNode(GimbalDriverNode):
                 f"device did not report mode {name} within {self.mode_timeout:g} s "
                 f"(reports {mode_name(reported) if reported is not None else 'nothing'})")
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_save_configuration(self, request, response):
         def action() -> str:
@@ -554,7 +554,7 @@ class UCameraDriverNode(GimbalDriverNode):
             return ("configuration saved to non-volatile memory (the gimbal is silent for "
                     "about 1 s)")
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_save_ffc(self, request, response):
         def action() -> str:
@@ -565,7 +565,7 @@ class UCameraDriverNode(GimbalDriverNode):
             client.save_ffc()
             return "FFC calibration saved to the IR module (may take up to 10 s)"
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _check_nv_allowed(self, what: str) -> None:
         if not self.allow_nv_write:
@@ -575,7 +575,7 @@ class UCameraDriverNode(GimbalDriverNode):
 
     # ----------------------------------------------------------- subscribers
     def _command_refusal(self, what: str) -> bool:
-        refusal = self._refuse()
+        refusal = self.command_refusal()
         if refusal:
             self.get_logger().warning(f"{what} ignored: {refusal}", throttle_duration_sec=2.0)
         return bool(refusal)

@@ -117,16 +117,17 @@ class GimbalDriverNode(LifecycleNode):
         self._link_error = 'not configured'
         self._reconnects = 0
         self._latest: JointSample | None = None
-        self._targets: dict[str, float] = {}
+        #: last position target sent per joint (shown as AxisState.target_position)
+        self.commanded_targets: dict[str, float] = {}
         self._stop_event = threading.Event()
         self._device_thread: threading.Thread | None = None
         self._scan_thread: threading.Thread | None = None
         self._scan_stop = threading.Event()
         self._move_generation = 0
-        self._watchdog = JogWatchdog(self.command_timeout, self._on_jog_expired)
+        self.jog_watchdog = JogWatchdog(self.command_timeout, self._on_jog_expired)
         self._joint_rate = FrequencyMonitor(self.publish_rate)
-        self._preset_store: PresetStore | None = None
-        self._service_group = ReentrantCallbackGroup()
+        self.preset_store: PresetStore | None = None
+        self.service_group = ReentrantCallbackGroup()
         self._create_ros_interfaces()
 
     # ------------------------------------------------------------------ hooks
@@ -150,7 +151,8 @@ class GimbalDriverNode(LifecycleNode):
         raise NotImplementedError
 
     def link_healthy(self) -> bool:
-        """For clients that reconnect by themselves: False while their link is down."""
+        """For clients that watch their own link: False (or raise DeviceError with the
+        reason, which then shows in the log and diagnostics) while it is down."""
         return True
 
     def send_moves(self, moves: dict[str, tuple[float, float | None]]) -> None:
@@ -312,7 +314,7 @@ class GimbalDriverNode(LifecycleNode):
             JointState, 'joint_command', self._on_joint_command, 1,
             callback_group=MutuallyExclusiveCallbackGroup(),
         )
-        group = self._service_group
+        group = self.service_group
         self.create_service(Trigger, '~/stop', self._on_stop, callback_group=group)
         self.create_service(
             Trigger, '~/reset_faults', self._on_reset_faults, callback_group=group
@@ -345,12 +347,12 @@ class GimbalDriverNode(LifecycleNode):
         watchdog_period = (
             min(0.05, self.command_timeout / 4) if self.command_timeout > 0 else 0.5
         )
-        self.create_timer(watchdog_period, self._watchdog.check, callback_group=group)
+        self.create_timer(watchdog_period, self.jog_watchdog.check, callback_group=group)
 
     # -------------------------------------------------------------- lifecycle
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
-            self._preset_store = PresetStore(self.presets_file)
+            self.preset_store = PresetStore(self.presets_file)
         except PresetError as exc:
             self.get_logger().error(str(exc))
             return TransitionCallbackReturn.FAILURE
@@ -427,7 +429,7 @@ class GimbalDriverNode(LifecycleNode):
 
     def _halt(self, why: str) -> None:
         """Stop every axis and everything that would move it again."""
-        self._watchdog.cancel()
+        self.jog_watchdog.cancel()
         self._scan_stop.set()
         self._move_generation += 1
         if not self._connected:
@@ -472,7 +474,7 @@ class GimbalDriverNode(LifecycleNode):
         with self._state_lock:
             self._connected = False
             self._link_error = f'link lost: {exc}'
-        self._watchdog.cancel()
+        self.jog_watchdog.cancel()
         self.get_logger().error(
             f'device link lost ({exc}); reconnecting every {self.reconnect_period:g} s'
         )
@@ -510,8 +512,8 @@ class GimbalDriverNode(LifecycleNode):
         self._joint_rate.tick()
 
     # -------------------------------------------------------------- commands
-    def _refuse(self) -> str | None:
-        """Why commands cannot be served now, or None."""
+    def command_refusal(self) -> str | None:
+        """Why commands cannot be served now (inactive, disconnected), or None."""
         if not self._active:
             return 'node is not active (lifecycle); activate it first'
         if not self._connected:
@@ -519,7 +521,7 @@ class GimbalDriverNode(LifecycleNode):
         return None
 
     def _on_joint_command(self, msg: JointState) -> None:
-        refusal = self._refuse()
+        refusal = self.command_refusal()
         if refusal:
             self.get_logger().warning(
                 f'joint_command ignored: {refusal}', throttle_duration_sec=2.0
@@ -533,15 +535,15 @@ class GimbalDriverNode(LifecycleNode):
         try:
             if plan.moves:
                 self._stop_scan_silently()
-                self._watchdog.cancel(plan.moves)
+                self.jog_watchdog.cancel(plan.moves)
                 self.send_moves(plan.moves)
-                self._targets.update({k: v[0] for k, v in plan.moves.items()})
+                self.commanded_targets.update({k: v[0] for k, v in plan.moves.items()})
             if plan.jogs:
                 self._stop_scan_silently()
                 self.send_jogs(plan.jogs)
                 moving = [j for j, v in plan.jogs.items() if v != 0.0]
-                self._watchdog.feed(moving)
-                self._watchdog.cancel([j for j, v in plan.jogs.items() if v == 0.0])
+                self.jog_watchdog.feed(moving)
+                self.jog_watchdog.cancel([j for j, v in plan.jogs.items() if v == 0.0])
         except Exception as exc:  # noqa: BLE001
             self.get_logger().error(f'joint_command failed on the device: {exc}')
 
@@ -557,7 +559,7 @@ class GimbalDriverNode(LifecycleNode):
             self.get_logger().error(f'stopping expired jog failed: {exc}')
 
     def _on_stop(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        self._watchdog.cancel()
+        self.jog_watchdog.cancel()
         self._scan_stop.set()
         self._move_generation += 1
         if not self._connected:
@@ -579,10 +581,16 @@ class GimbalDriverNode(LifecycleNode):
     def _on_reset_faults(
         self, request: Trigger.Request, response: Trigger.Response
     ) -> Trigger.Response:
-        return self._run_trigger(response, self.reset_faults)
+        return self.serve_request(response, self.reset_faults)
 
-    def _run_trigger(self, response: Trigger.Response, action: Callable[[], str]) -> object:
-        refusal = self._refuse()
+    def serve_request(self, response: Trigger.Response, action: Callable[[], str]) -> object:
+        """Answer a service with ``success``/``message`` from ``action()``.
+
+        Drivers use it for their own services: the request is refused while the
+        node is inactive or disconnected, and any exception becomes
+        ``success=false`` with a message instead of escaping into rclpy.
+        """
+        refusal = self.command_refusal()
         if refusal:
             response.success, response.message = False, refusal
             return response
@@ -603,7 +611,7 @@ class GimbalDriverNode(LifecycleNode):
     def _execute_move(self, goal_handle):
         goal = goal_handle.request
         result = MoveTo.Result()
-        refusal = self._refuse()
+        refusal = self.command_refusal()
         names = list(goal.joint_names)
         try:
             if refusal:
@@ -625,9 +633,9 @@ class GimbalDriverNode(LifecycleNode):
                     )
                 moves[name] = (targets[name], speed)
             self._stop_scan_silently()
-            self._watchdog.cancel(names)
+            self.jog_watchdog.cancel(names)
             self.send_moves(moves)
-            self._targets.update(targets)
+            self.commanded_targets.update(targets)
         except Exception as exc:  # noqa: BLE001
             goal_handle.abort()
             result.success, result.message = False, f'move refused, nothing sent: {exc}'
@@ -680,7 +688,7 @@ class GimbalDriverNode(LifecycleNode):
         joints = list(goal_handle.request.joint_names) or list(self.joint_names)
         result = Home.Result()
         unknown = [j for j in joints if j not in self.limits]
-        refusal = self._refuse() or (
+        refusal = self.command_refusal() or (
             f'unknown joint(s) {unknown}; this device has {self.joint_names}' if unknown else None
         )
         if refusal:
@@ -697,7 +705,7 @@ class GimbalDriverNode(LifecycleNode):
             goal_handle.publish_feedback(feedback)
 
         self._stop_scan_silently()
-        self._watchdog.cancel(joints)
+        self.jog_watchdog.cancel(joints)
         try:
             result.message = self.home(joints, report, cancelled) or 'homed'
             result.success = True
@@ -743,13 +751,13 @@ class GimbalDriverNode(LifecycleNode):
                     request.index, request.name,
                     None if request.use_current_position else positions,
                 )
-            assert self._preset_store is not None
-            self._preset_store.set(request.index, request.name, positions)
+            assert self.preset_store is not None
+            self.preset_store.set(request.index, request.name, positions)
             return f'preset {request.index} stored: ' + ', '.join(
                 f'{k}={v:.4f}' for k, v in positions.items()
             )
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_goto_preset(self, request, response):
         def action() -> str:
@@ -758,36 +766,36 @@ class GimbalDriverNode(LifecycleNode):
             if self.DEVICE_PRESETS:
                 self._stop_scan_silently()
                 return self.device_goto_preset(request.index, request.speed)
-            assert self._preset_store is not None
-            preset = self._preset_store.get(request.index)
+            assert self.preset_store is not None
+            preset = self.preset_store.get(request.index)
             names = [n for n in preset.positions if n in self.limits]
             speeds = [request.speed] * len(names) if request.speed > 0 else []
             plan = validate_joint_command(
                 names, [preset.positions[n] for n in names], speeds, self.limits
             )
             self._stop_scan_silently()
-            self._watchdog.cancel(names)
+            self.jog_watchdog.cancel(names)
             self.send_moves(plan.moves)
-            self._targets.update({k: v[0] for k, v in plan.moves.items()})
+            self.commanded_targets.update({k: v[0] for k, v in plan.moves.items()})
             return f'moving to preset {request.index} ({preset.name})'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_list_presets(self, request, response):
         try:
             if self.DEVICE_PRESETS:
-                refusal = self._refuse()
+                refusal = self.command_refusal()
                 if refusal:
                     raise DeviceError(refusal)
                 response.presets = self.device_list_presets()
             else:
-                assert self._preset_store is not None
+                assert self.preset_store is not None
                 response.presets = [
                     Preset(
                         index=p.index, name=p.name, joint_names=list(p.positions),
                         positions=list(p.positions.values()),
                     )
-                    for p in self._preset_store.list()
+                    for p in self.preset_store.list()
                 ]
             response.success = True
             response.message = f'{len(response.presets)} preset(s)'
@@ -800,11 +808,11 @@ class GimbalDriverNode(LifecycleNode):
             index = None if request.all else request.index
             if self.DEVICE_PRESETS:
                 return self.device_clear_preset(index)
-            assert self._preset_store is not None
-            self._preset_store.clear(index)
+            assert self.preset_store is not None
+            self.preset_store.clear(index)
             return 'all presets cleared' if index is None else f'preset {index} cleared'
 
-        if not self.DEVICE_PRESETS and self._preset_store is not None:
+        if not self.DEVICE_PRESETS and self.preset_store is not None:
             # Driver-side presets can be edited without a device.
             try:
                 response.message = action()
@@ -812,7 +820,7 @@ class GimbalDriverNode(LifecycleNode):
             except PresetError as exc:
                 response.success, response.message = False, str(exc)
             return response
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     # ------------------------------------------------------------------ scans
     def _on_start_scan(self, request, response):
@@ -834,7 +842,7 @@ class GimbalDriverNode(LifecycleNode):
             self._scan_thread.start()
             return f'{scan.pattern} scan started over {len(waypoints)} waypoints (driver-side)'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def _on_stop_scan(self, request, response):
         def action() -> str:
@@ -843,7 +851,7 @@ class GimbalDriverNode(LifecycleNode):
             self.stop_axes(None)
             return 'scan stopped'
 
-        return self._run_trigger(response, action)
+        return self.serve_request(response, action)
 
     def scan_joints(self) -> list[str]:
         """The joints a driver-side scan sweeps as pan and tilt."""
@@ -868,7 +876,7 @@ class GimbalDriverNode(LifecycleNode):
             speeds = {name: (scan.speed if name == pan else None) for name in target}
             try:
                 self.send_moves({n: (p, speeds[n]) for n, p in target.items()})
-                self._targets.update(target)
+                self.commanded_targets.update(target)
             except Exception as exc:  # noqa: BLE001
                 self.get_logger().error(f'scan aborted: {exc}')
                 return
@@ -945,13 +953,13 @@ class GimbalDriverNode(LifecycleNode):
         except Exception as exc:  # noqa: BLE001
             msg.active_errors = [f'status unavailable: {exc}']
         sample = self._latest
-        jogging = set(self._watchdog.jogging)
+        jogging = set(self.jog_watchdog.jogging)
         for name in self.joint_names:
             axis = AxisState(name=name)
             axis.position = sample.positions.get(name, math.nan) if sample else math.nan
             axis.velocity = sample.velocities.get(name, math.nan) if sample else math.nan
             axis.effort = sample.efforts.get(name, math.nan) if sample else math.nan
-            axis.target_position = self._targets.get(name, math.nan)
+            axis.target_position = self.commanded_targets.get(name, math.nan)
             if not self._connected:
                 axis.state = AxisState.STATE_UNKNOWN
             elif name in jogging:
