@@ -15,7 +15,14 @@ import time
 from pathlib import Path
 
 import can
-from driver_bench import add_note, codec_figures, explain_latency, joint_command, node_figures
+from driver_bench import (
+    add_note,
+    check_targets,
+    codec_figures,
+    explain_latency,
+    joint_command,
+    node_figures,
+)
 from harness import CommandProbe, can_frame_bits, wire_limit_frames_per_s
 
 from canaero_turret_driver.protocol import CanAerospaceMessage, DataType
@@ -148,4 +155,5 @@ def run(domain: int) -> dict:
             'frames/s in this run, before any driver code. The rest is the rclpy floor (the '
             'bare reference publisher of this run). On SocketCAN the kernel delivers whole '
             'frames; the driver code itself (decode, sequence check, cache) is a few % .'))
+    check_targets(results)
     return results

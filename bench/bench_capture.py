@@ -13,7 +13,14 @@ import math
 import threading
 import time
 
-from driver_bench import add_note, codec_figures, explain_latency, joint_command, node_figures
+from driver_bench import (
+    add_note,
+    check_targets,
+    codec_figures,
+    explain_latency,
+    joint_command,
+    node_figures,
+)
 from driver_bench import tcp_wire_limit_frames_per_s as tcp_limit
 from harness import CommandProbe, percentiles, wire_limit_frames_per_s
 
@@ -151,6 +158,7 @@ def run(domain: int) -> dict:
     finally:
         sim.stop()
     explain(results)
+    check_targets(results, RATE_TARGET_HZ)
     return results
 
 

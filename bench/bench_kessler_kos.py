@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from driver_bench import codec_figures, explain_latency, joint_command, node_figures
+from driver_bench import check_targets, codec_figures, explain_latency, joint_command, node_figures
 from driver_bench import tcp_wire_limit_frames_per_s as tcp_limit
 from harness import CommandProbe
 
@@ -65,4 +65,5 @@ def run(domain: int) -> dict:
         f'republishes the newest reply at publish_rate ({DEFAULT_PUBLISH_RATE:g} Hz), so each '
         'joint_state carries a report up to one poll interval old (sample and hold). A shorter '
         'poll_period lowers the age; the transfer itself is the rclpy pub/sub figure.'))
+    check_targets(results)
     return results

@@ -10,7 +10,14 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from driver_bench import add_note, codec_figures, explain_latency, joint_command, node_figures
+from driver_bench import (
+    add_note,
+    check_targets,
+    codec_figures,
+    explain_latency,
+    joint_command,
+    node_figures,
+)
 from harness import CommandProbe, wire_limit_frames_per_s
 
 from ucamera_driver.protocol import FrameParser
@@ -79,4 +86,5 @@ def run(domain: int) -> dict:
             f'{TELEMETRY_RATE} Hz stream sampled by a {DEFAULT_PUBLISH_RATE:g} Hz loop with '
             'jitter leaves some ticks with no new report (two reports land in one period); '
             'joint_states can at most follow device_reports_hz.'))
+    check_targets(results)
     return results

@@ -254,3 +254,26 @@ def explain_latency(results: dict, cause: str, label: str = '') -> None:
         f'{first.get("p99_ms")} ms; device reports {results.get("device_reports_hz")} Hz). '
         f'{cause} What exceeds that is scheduling delay on a machine shared with other '
         'processes: compare the bare rclpy pub/sub p99 of the same run (reference).'))
+
+
+def check_targets(results: dict, rate_target_hz: float | None = None) -> None:
+    """``results['targets']``: each issue-7 target with the measured value, met or not, and
+    the margin (positive = better than the target)."""
+    checks: dict[str, tuple[float | None, float, bool]] = {
+        'codec decode >= 100,000 frames/s': (
+            results.get('codec', {}).get('decode_frames_per_s'), 100_000.0, True),
+        'sim_to_subscriber p99 < 5 ms': (
+            results.get('sim_to_subscriber', {}).get('p99_ms'), 5.0, False),
+        'node CPU < 10 % at the default rate': (results.get('cpu_percent'), 10.0, False),
+    }
+    if rate_target_hz is not None:
+        checks[f'joint_states >= {rate_target_hz:g} Hz'] = (
+            results.get('joint_states_hz'), rate_target_hz, True)
+    targets = {}
+    for name, (measured, limit, higher_is_better) in checks.items():
+        if measured is None:
+            continue
+        margin = measured - limit if higher_is_better else limit - measured
+        met = margin >= 0 if higher_is_better else margin > 0
+        targets[name] = {'measured': measured, 'met': met, 'margin': round(margin, 3)}
+    results['targets'] = targets
