@@ -158,6 +158,9 @@ def rclpy_reference(domain: int, rate_hz: float = 100.0, seconds: float = 5.0) -
         with RosTestClient(domain, 'bench_reference') as ros:
             probe = JointStateProbe(ros, 'reference_joint_states')
             wait_for(lambda: len(probe.arrivals) > 5, 30, 'the reference publisher')
+            # skip the start-up transient (discovery), as the driver benchmarks do
+            time.sleep(2.0)
+            probe.clear()
             cpu = cpu_percent(publisher.process.pid, seconds)
             latencies = probe.stamp_latencies()[-int(rate_hz * seconds):]
             achieved = probe.achieved_rate(2.0)
