@@ -131,8 +131,12 @@ def test_load_and_play_three_axis_keyframes(rig):
     assert names[-3:] == ['StartForward', 'EndOfMove', 'FullStop']
     assert full_stop.joint_names == JOINTS
     assert full_stop.positions == pytest.approx(KEYFRAMES[-1][1], abs=1e-3)
-    final = ros.wait_for_message('joint_states', JointState)
-    assert list(final.position) == pytest.approx(KEYFRAMES[-1][1], abs=1e-3)
+    # joint_states are polled: the first ones after FullStop may still be in flight from
+    # before it, so wait (briefly) for the device's final position to show.
+    final_position = pytest.approx(KEYFRAMES[-1][1], abs=1e-3)
+    final = ros.wait_for_message('joint_states', JointState,
+                                 lambda m: list(m.position) == final_position, timeout=5.0)
+    assert list(final.position) == final_position
     # joint_states followed the path: pan (monotone keyframes) rose through the move
     pan = [joint_positions(m)['pan'] for m in samples[start:]]
     intermediate = [p for p in pan if 11.0 < p < 299.0]
