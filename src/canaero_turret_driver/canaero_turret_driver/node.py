@@ -106,12 +106,16 @@ def _parse_intervals(items: Sequence[str]) -> dict[str, int]:
     return intervals
 
 
+POSITION_KEYS = frozenset(f"{axis}_position" for axis in AXES)
+
+
 class CanaeroTurretNode(GimbalDriverNode):
     DEFAULT_JOINT_NAMES = ("yaw", "pitch")
     DEFAULT_POSITION_MIN = (-math.pi, math.radians(-30.0))
     DEFAULT_POSITION_MAX = (math.pi, math.radians(60.0))
     DEFAULT_VELOCITY_MAX = (math.radians(60.0), math.radians(40.0))
     DEVICE_PRESETS = True  # preset 0 on the device, the rest in the YAML store
+    STREAMED = True  # positions arrive as NOD broadcasts; publish each as it comes
 
     def __init__(self) -> None:
         super().__init__(NODE_NAME)
@@ -260,9 +264,14 @@ class CanaeroTurretNode(GimbalDriverNode):
             raise DeviceError(str(exc)) from exc
 
     # ------------------------------------------------------------------ device hooks
+    def _on_sample(self, sample) -> None:
+        if sample.key in POSITION_KEYS:
+            self.notify_new_data()  # publish joint_states now, not at the next tick
+
     def open_device(self) -> DeviceInfo:
         config = self._client_config()
         client = TurretClient(config)
+        client.on_sample = self._on_sample
         try:
             client.open()
             info = client.identify()

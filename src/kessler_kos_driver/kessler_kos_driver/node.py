@@ -93,6 +93,7 @@ class _RosLogHandler(logging.Handler):
 
 class KosDriverNode(GimbalDriverNode):
     DEFAULT_JOINT_NAMES = ('slider', 'pan', 'tilt')
+    STREAMED = True  # positions come from notifications and the client's position polls
     # Device limits are the calibrated ranges and the motors' MaxMax speeds (checked by the
     # client); these parameter defaults only bound what the driver accepts at all.
     DEFAULT_POSITION_MIN = (-1000.0,)
@@ -219,6 +220,7 @@ class KosDriverNode(GimbalDriverNode):
         )
         client.on_playback = self._publish_playback
         client.on_error = self._on_device_error
+        client.on_motor_update = self.notify_new_data  # publish positions as they arrive
         try:
             client.connect()
         except KosError as exc:
@@ -241,7 +243,7 @@ class KosDriverNode(GimbalDriverNode):
     def close_device(self) -> None:
         client, self.client = self.client, None
         if client is not None:
-            client.on_playback = client.on_error = None
+            client.on_playback = client.on_error = client.on_motor_update = None
             client.close()
 
     def link_healthy(self) -> bool:

@@ -49,6 +49,7 @@ from gimbal_msgs.srv import SetMode
 from .client import UCameraClient, UCameraError
 from .protocol import (
     MODE_NAMES,
+    AnglesReport,
     GimbalMode,
     GimbalType,
     GpsFeed,
@@ -118,6 +119,7 @@ class UCameraDriverNode(GimbalDriverNode):
     """U-Camera driver (UCSP over RS-232)."""
 
     DEFAULT_JOINT_NAMES = ("pan", "tilt")
+    STREAMED = True  # angles arrive as periodic reports; publish each as it comes
     DEFAULT_POSITION_MIN = (-math.pi, -math.pi / 2)
     DEFAULT_POSITION_MAX = (math.pi, math.pi / 2)
     DEFAULT_VELOCITY_MAX = (1.0, 1.0)
@@ -479,6 +481,8 @@ class UCameraDriverNode(GimbalDriverNode):
     # ------------------------------------------------------ reports -> topics
     def _on_report(self, packet: Packet, stamp: float) -> None:
         """Runs on the client's I/O thread for every received packet."""
+        if isinstance(packet, AnglesReport):
+            self.notify_new_data()  # publish joint_states now, not at the next tick
         if not self.active or not self.context.ok():
             return
         if not self._report_limiter.allow(type(packet).__name__):

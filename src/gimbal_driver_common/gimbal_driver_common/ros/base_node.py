@@ -56,6 +56,9 @@ from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import AxisState, GimbalStatus, Preset
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
 
+#: longest a STREAMED driver's device thread waits for data before checking the link
+STREAM_WAIT_S = 0.05
+
 
 class DeviceError(Exception):
     """A device request failed in a way a person should read (NACK, refused, timeout)."""
@@ -103,6 +106,11 @@ class GimbalDriverNode(LifecycleNode):
     DEFAULT_PUBLISH_RATE = 50.0
     #: patterns the driver-side scan offers (a device with its own scans overrides start_scan)
     SCAN_PATTERNS: Sequence[str] = ('sector', 'zigzag', 'square')
+    #: True when poll_device only reads a cache that the client's receive thread fills:
+    #: the device thread then publishes each new sample when the driver calls
+    #: notify_new_data() (at most publish_rate) instead of sampling on a fixed tick, so
+    #: joint_states carry no tick delay. Polled devices (request/reply) leave it False.
+    STREAMED = False
     #: the (pan, tilt) joints a scan sweeps; None: `pan`/`tilt` if named so, else the first two
     SCAN_JOINTS: tuple[str, str] | None = None
 
@@ -120,6 +128,7 @@ class GimbalDriverNode(LifecycleNode):
         #: last position target sent per joint (shown as AxisState.target_position)
         self.commanded_targets: dict[str, float] = {}
         self._stop_event = threading.Event()
+        self._data_arrived = threading.Event()
         self._device_thread: threading.Thread | None = None
         self._scan_thread: threading.Thread | None = None
         self._scan_stop = threading.Event()
@@ -446,12 +455,23 @@ class GimbalDriverNode(LifecycleNode):
 
     # ---------------------------------------------------------- device thread
     def _device_loop(self) -> None:
+        """Poll (or, for STREAMED drivers, wait for) samples and publish joint_states."""
         period = 1.0 / self.publish_rate
         next_tick = time.monotonic()
+        last_publish = -math.inf
+        last_stamp: float | None = None
         while not self._stop_event.is_set():
             if not self._connected:
                 self._try_reconnect()
                 continue
+            if self.STREAMED:
+                # Publish each new sample as it arrives, at most publish_rate (10 % slack so
+                # a device streaming at exactly that rate is not throttled by jitter).
+                hold = last_publish + 0.9 * period - time.monotonic()
+                if hold > 0 and self._stop_event.wait(hold):
+                    break
+                if self._data_arrived.wait(STREAM_WAIT_S):
+                    self._data_arrived.clear()
             try:
                 if not self.link_healthy():
                     raise DeviceError('the client reports its link is down')
@@ -459,16 +479,25 @@ class GimbalDriverNode(LifecycleNode):
             except Exception as exc:  # noqa: BLE001 - any failure is a lost link
                 self._on_link_lost(exc)
                 continue
-            if sample is not None:
+            fresh = sample is not None and not (self.STREAMED and sample.stamp == last_stamp)
+            if fresh:
                 self._latest = sample
+                last_stamp = sample.stamp
                 if self._active and self.context.ok():
                     self._publish_joint_state(sample)
+                    last_publish = time.monotonic()
+            if self.STREAMED:
+                continue
             next_tick += period
             delay = next_tick - time.monotonic()
             if delay < -period:  # fell behind (slow device): do not burst to catch up
                 next_tick = time.monotonic()
                 delay = 0.0
             self._stop_event.wait(max(delay, 0.0))
+
+    def notify_new_data(self) -> None:
+        """Wake the device thread: a STREAMED driver's client calls this on each new frame."""
+        self._data_arrived.set()
 
     def _on_link_lost(self, exc: BaseException) -> None:
         with self._state_lock:
