@@ -1,15 +1,22 @@
 """Benchmark of kessler_kos_driver: kOS codec, node against the in-process kOS simulator (TCP).
 
 The node polls GetMotorInfo every ``poll_period`` (0.05 s) and receives MotorPosition /
-PlaybackStatus notifications; joint_states go out at ``publish_rate`` carrying the time the
-latest motor report was read (the ``header.stamp``).
+PlaybackStatus notifications; it publishes joint_states as each report arrives (at most
+``publish_rate``) with the time the report was read as ``header.stamp``.
 """
 
 from __future__ import annotations
 
 import math
 
-from driver_bench import check_targets, codec_figures, explain_latency, joint_command, node_figures
+from driver_bench import (
+    check_targets,
+    codec_figures,
+    explain_latency,
+    explain_streamed_rate,
+    joint_command,
+    node_figures,
+)
 from driver_bench import tcp_wire_limit_frames_per_s as tcp_limit
 from harness import CommandProbe
 
@@ -60,10 +67,11 @@ def run(domain: int) -> dict:
     finally:
         sim.stop()
     explain_latency(results, (
-        'The kOS device is polled, not streamed: the client sends GetMotorInfo every '
-        'poll_period (0.05 s, checked on a 20 ms tick, so about every 60 ms) and the node '
-        f'republishes the newest reply at publish_rate ({DEFAULT_PUBLISH_RATE:g} Hz), so each '
-        'joint_state carries a report up to one poll interval old (sample and hold). A shorter '
-        'poll_period lowers the age; the transfer itself is the rclpy pub/sub figure.'))
+        'The node publishes each MotorInfo reply or MotorPosition/PlaybackStatus '
+        'notification as it arrives (stamp = when the client read it), so the figure is '
+        'publish + DDS transfer.'))
+    explain_streamed_rate(results, (
+        'the GetMotorInfo polls: every poll_period (0.05 s), checked on the client\'s 20 ms '
+        'tick, so every 60 ms (16.7 Hz); a motor that stops also sends MotorPosition'))
     check_targets(results)
     return results

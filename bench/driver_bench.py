@@ -25,13 +25,13 @@ from harness import (
     ROOT,
     CommandProbe,
     JointStateProbe,
+    ProbeClient,
     cpu_percent,
     percentiles,
     wire_limit_frames_per_s,
 )
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import ManagedProcess, wait_for
 
 # Bytes a TCP segment adds to its payload on 100BASE-TX Ethernet: preamble+SFD 8, MAC header
@@ -150,7 +150,7 @@ def node_figures(
     sys.setswitchinterval(BENCH_SWITCH_INTERVAL_S)
     node = start_node(domain, package, parameters)
     try:
-        with RosTestClient(domain, f'bench_{package}') as ros:
+        with ProbeClient(domain, f'bench_{package}') as ros:
             states = JointStateProbe(ros)
             try:
                 wait_for(lambda: len(states.arrivals) > 10, startup_timeout,
@@ -208,7 +208,7 @@ def report_freshness(states: JointStateProbe) -> dict:
     }
 
 
-def command_latencies(ros: RosTestClient, probe: CommandProbe,
+def command_latencies(ros: ProbeClient, probe: CommandProbe,
                       commands: Callable[[int], CommandSample], samples: int,
                       gap: float) -> dict:
     """``samples`` joint_command publishes, each timed until its target reaches the model."""
@@ -277,3 +277,14 @@ def check_targets(results: dict, rate_target_hz: float | None = None) -> None:
         met = margin >= 0 if higher_is_better else margin > 0
         targets[name] = {'measured': measured, 'met': met, 'margin': round(margin, 3)}
     results['targets'] = targets
+
+
+def explain_streamed_rate(results: dict, source: str) -> None:
+    """A STREAMED node publishes each new device sample (at most publish_rate), so its
+    joint_states rate is the device's report rate: a note when that is below publish_rate."""
+    achieved, rate = results.get('joint_states_hz', 0.0), results.get('publish_rate') or 0.0
+    if achieved < 0.95 * rate:
+        add_note(results, (
+            f'joint_states {achieved} Hz at publish_rate {rate:g}: the node publishes each new '
+            f'device sample as it arrives (publish_rate is the upper bound), so the rate is '
+            f'that of {source} (device reports {results.get("device_reports_hz")} Hz).'))

@@ -19,6 +19,7 @@ Latency definitions (wall clock, one machine):
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import statistics
@@ -30,6 +31,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
@@ -117,10 +120,58 @@ def cpu_percent(pid: int, seconds: float) -> float:
     return round(100.0 * (ticks() - start_ticks) / hz / (time.monotonic() - start), 1)
 
 
+class ProbeClient:
+    """A measuring rclpy node in its own context, spun by a SingleThreadedExecutor.
+
+    Not RosTestClient: rclpy's MultiThreadedExecutor re-waits while a worker thread has not
+    yet taken a ready message and spins hot on the GIL meanwhile; at 100 messages/s that
+    took a whole core here, starved the callbacks and let the subscription queue fill (up to
+    1 s of latency), and slowed simulators sharing the process. One thread taking each
+    message at once costs a few % of a core.
+    """
+
+    def __init__(self, domain_id: int, name: str) -> None:
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._publishers: dict[str, object] = {}
+        self._thread = threading.Thread(target=self._spin, daemon=True, name=f'{name}-spin')
+        self._thread.start()
+
+    def _spin(self) -> None:
+        # shutdown races end the spin with assorted errors; that is expected
+        with contextlib.suppress(Exception):
+            self.executor.spin()
+
+    def publish(self, topic: str, msg: object) -> None:
+        """Publish ``msg``; the first call creates the publisher and waits for a subscriber."""
+        publisher = self._publishers.get(topic)
+        if publisher is None:
+            publisher = self.node.create_publisher(type(msg), topic, 10)
+            self._publishers[topic] = publisher
+            wait_for(lambda: publisher.get_subscription_count() > 0, 10.0,
+                     f'a subscriber on {topic}')
+        publisher.publish(msg)
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=2.0)
+
+    def __enter__(self) -> ProbeClient:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
 class JointStateProbe:
     """Subscribes to a joint_states topic and records arrival time and stamp of each message."""
 
-    def __init__(self, ros: RosTestClient, topic: str = 'joint_states') -> None:
+    def __init__(self, ros: RosTestClient | ProbeClient, topic: str = 'joint_states') -> None:
         self.arrivals: list[tuple[float, float, JointState]] = []
         self._lock = threading.Lock()
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -155,7 +206,7 @@ def rclpy_reference(domain: int, rate_hz: float = 100.0, seconds: float = 5.0) -
     publisher = ManagedProcess([sys.executable, str(script), str(rate_hz)], ros_env(domain),
                                name='reference_publisher')
     try:
-        with RosTestClient(domain, 'bench_reference') as ros:
+        with ProbeClient(domain, 'bench_reference') as ros:
             probe = JointStateProbe(ros, 'reference_joint_states')
             wait_for(lambda: len(probe.arrivals) > 5, 30, 'the reference publisher')
             # skip the start-up transient (discovery), as the driver benchmarks do
