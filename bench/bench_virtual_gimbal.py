@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import time
 
-from harness import CommandProbe, JointStateProbe, cpu_percent, percentiles
+from harness import CommandProbe, JointStateProbe, ProbeClient, cpu_percent, percentiles
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import ManagedProcess, wait_for
 from gimbal_driver_common.virtual_gimbal import make_server
 
@@ -22,7 +21,7 @@ def run(domain: int) -> dict:
                 '--ros-args', '-p', f'port:={server.port}', '-p', f'publish_rate:={rate}',
                 '-p', 'command_timeout:=0.0'])
             try:
-                with RosTestClient(domain, 'bench_virtual') as ros:
+                with ProbeClient(domain, 'bench_virtual') as ros:
                     states = JointStateProbe(ros)
                     wait_for(lambda s=states: len(s.arrivals) > 10, 30, 'joint_states')
                     if rate == 50.0:
@@ -31,6 +30,9 @@ def run(domain: int) -> dict:
                         states.clear()
                         time.sleep(2.0)
                         results['sim_to_subscriber'] = percentiles(states.stamp_latencies())
+                        # the first publish creates the publisher and waits for discovery
+                        ros.publish('joint_command', JointState(name=['pan'], position=[0.0]))
+                        time.sleep(0.3)
                         latencies = []
                         for i in range(30):
                             target = 0.01 * (i + 1) * (-1) ** i
