@@ -133,7 +133,7 @@ def run(domain: int) -> dict:
         results.update(node_figures(domain, PACKAGE, {
             'can_channel': server.port_name,
             'presets_file': str(Path(tmp.name, 'presets.yaml')),
-            'publish_rate': DEFAULT_PUBLISH_RATE, 'command_timeout': 0.0,
+            'publish_rate': DEFAULT_PUBLISH_RATE,
         }, probe, command, observe=broadcasts.figures))
     finally:
         server.stop()

@@ -138,8 +138,7 @@ def run(domain: int) -> dict:
         return (joint_command(['tilt'], [target]),
                 lambda: tilt.target is not None and abs(tilt.target - degrees) < 1e-3)
 
-    base = {'transport': 'tcp', 'host': '127.0.0.1', 'port': sim.tcp.port,
-            'command_timeout': 0.0}
+    base = {'transport': 'tcp', 'host': '127.0.0.1', 'port': sim.tcp.port}
     try:
         # the node at the target rate first: joint_states rate, its latency and CPU there
         fast = node_figures(domain, PACKAGE, {**base, 'publish_rate': RATE_TARGET_HZ},

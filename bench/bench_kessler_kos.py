@@ -62,7 +62,7 @@ def run(domain: int) -> dict:
     try:
         results.update(node_figures(domain, PACKAGE, {
             'host': '127.0.0.1', 'port': sim.port, 'publish_rate': DEFAULT_PUBLISH_RATE,
-            'command_timeout': 0.0, 'reconnect_period': 0.5,
+            'reconnect_period': 0.5,
         }, probe, command))
     finally:
         sim.stop()
