@@ -247,7 +247,7 @@ class CanaeroTurretNode(GimbalDriverNode):
                                 callback_group=group)
         self.create_service(DeviceCommand, "~/device_command", self._on_device_command,
                             callback_group=group)
-        self.create_timer(0.1, self._publish_sensors, callback_group=group)
+        self.add_periodic(0.1, self._publish_sensors)
 
     def link_description(self) -> str:
         return f"{self.can_interface}:{self.can_channel}"

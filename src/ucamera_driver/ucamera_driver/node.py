@@ -165,7 +165,7 @@ class UCameraDriverNode(GimbalDriverNode):
         self.create_subscription(TwistStamped, "~/ext/velocity", self._on_ext_velocity, 5,
                                  callback_group=group)
         self.create_subscription(Imu, "~/ext/imu", self._on_ext_imu, 5, callback_group=group)
-        self.create_timer(0.05, self._step_ramp, callback_group=group)
+        self.add_periodic(0.05, self._step_ramp)
 
     # ------------------------------------------------------------ parameters
     def declare_device_parameters(self) -> None:

@@ -129,6 +129,10 @@ class GimbalDriverNode(LifecycleNode):
         self.commanded_targets: dict[str, float] = {}
         self._stop_event = threading.Event()
         self._data_arrived = threading.Event()
+        self._periodic: list[list] = []
+        self._periodic_lock = threading.Lock()
+        self._housekeeping: threading.Thread | None = None
+        self._housekeeping_stop = threading.Event()
         self._device_thread: threading.Thread | None = None
         self._scan_thread: threading.Thread | None = None
         self._scan_stop = threading.Event()
@@ -350,13 +354,49 @@ class GimbalDriverNode(LifecycleNode):
             goal_callback=self._accept_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
             callback_group=group,
         )
-        self.create_timer(self.diagnostics_period, self._publish_diagnostics, callback_group=group)
-        self.create_timer(1.0 / min(self.publish_rate, 10.0), self._publish_status,
-                          callback_group=group)
-        watchdog_period = (
-            min(0.05, self.command_timeout / 4) if self.command_timeout > 0 else 0.5
-        )
-        self.create_timer(watchdog_period, self.jog_watchdog.check, callback_group=group)
+        self.add_periodic(self.diagnostics_period, self._publish_diagnostics)
+        self.add_periodic(1.0 / min(self.publish_rate, 10.0), self._publish_status)
+        if self.command_timeout > 0:
+            self.add_periodic(min(0.05, self.command_timeout / 4), self.jog_watchdog.check)
+
+    def add_periodic(self, period: float, callback: Callable[[], object]) -> None:
+        """Run ``callback`` every ``period`` s on the node's housekeeping thread.
+
+        Used instead of executor timers: every wake-up of rclpy's MultiThreadedExecutor
+        rebuilds its wait set in Python and competes for the GIL with the device thread,
+        which showed as CPU and joint_states latency. Callbacks must be thread-safe.
+        """
+        with self._periodic_lock:
+            self._periodic.append([period, time.monotonic() + period, callback])
+        if self._housekeeping is None:
+            self._housekeeping = threading.Thread(
+                target=self._housekeeping_loop, name='housekeeping', daemon=True)
+            self._housekeeping.start()
+
+    def _housekeeping_loop(self) -> None:
+        while not self._housekeeping_stop.is_set():
+            now = time.monotonic()
+            with self._periodic_lock:
+                due = [entry for entry in self._periodic if entry[1] <= now]
+                for entry in due:
+                    entry[1] = max(entry[1] + entry[0], now)
+                next_due = min(entry[1] for entry in self._periodic)
+            for _, _, callback in due:
+                if not self.context.ok():
+                    return
+                try:
+                    callback()
+                except Exception as exc:  # noqa: BLE001 - keep the other periodic jobs alive
+                    self.get_logger().error(
+                        f'periodic {getattr(callback, "__name__", callback)} failed: {exc}',
+                        throttle_duration_sec=10.0)
+            self._housekeeping_stop.wait(max(0.0, next_due - time.monotonic()))
+
+    def destroy_node(self) -> None:
+        self._housekeeping_stop.set()
+        if self._housekeeping is not None and self._housekeeping is not threading.current_thread():
+            self._housekeeping.join(timeout=2.0)
+        super().destroy_node()
 
     # -------------------------------------------------------------- lifecycle
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -1011,40 +1051,51 @@ class GimbalDriverNode(LifecycleNode):
 
 
 def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = None) -> int:
-    """Entry point body for a driver executable: construct, autostart, spin, stop cleanly."""
-    # rclpy's own SIGINT handler would shut the context down before on_shutdown runs, so
-    # the "axes stopped" log and any last message would be lost: handle SIGINT (and SIGTERM,
-    # which launch sends after SIGINT) here, as KeyboardInterrupt in the executor thread.
+    """Entry point body for a driver executable: construct, autostart, spin, stop cleanly.
+
+    rclpy's own SIGINT handler would shut the context down before ``on_shutdown`` runs,
+    losing the "axes stopped" log and any last message; so signals are handled here. The
+    executor spins in a worker thread and the main thread waits on an Event, which (unlike
+    a blocking rcl_wait) lets the Python signal handler run at once.
+    """
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, _interrupt)
-    signal.signal(signal.SIGTERM, _interrupt)
-    node: GimbalDriverNode | None = None
-    executor = MultiThreadedExecutor(num_threads=4)
-    status = 0
+    stop = threading.Event()
+
+    def request_stop(signum: int, frame: object) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, request_stop)
+    signal.signal(signal.SIGTERM, request_stop)  # launch sends SIGTERM after SIGINT
     try:
-        try:
-            node = node_class()
-        except ParameterError as exc:
-            rclpy.logging.get_logger(node_class.__name__).fatal(f'invalid parameter: {exc}')
-            return 2
-        executor.add_node(node)
-        if node.autostart:
-            threading.Thread(target=_autostart, args=(node,), daemon=True).start()
+        node = node_class()
+    except ParameterError as exc:
+        rclpy.logging.get_logger(node_class.__name__).fatal(f'invalid parameter: {exc}')
+        rclpy.try_shutdown()
+        return 2
+    executor = MultiThreadedExecutor(num_threads=4)
+    executor.add_node(node)
+    spinner = threading.Thread(target=_spin, args=(executor, stop), name='executor',
+                               daemon=True)
+    spinner.start()
+    if node.autostart:
+        threading.Thread(target=_autostart, args=(node,), daemon=True).start()
+    while not stop.wait(1.0):
+        pass
+    node.on_shutdown(None)
+    node.destroy_node()
+    executor.shutdown(timeout_sec=1.0)
+    rclpy.try_shutdown()
+    spinner.join(timeout=2.0)
+    return 0
+
+
+def _spin(executor: MultiThreadedExecutor, stop: threading.Event) -> None:
+    try:
         executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except (ExternalShutdownException, KeyboardInterrupt):
         pass
     finally:
-        if node is not None:
-            node.on_shutdown(None)
-            node.destroy_node()
-        executor.shutdown(timeout_sec=1.0)
-        if rclpy.ok():
-            rclpy.shutdown()
-    return status
-
-
-def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt(signal.Signals(signum).name)
+        stop.set()
 
 
 def _autostart(node: GimbalDriverNode) -> None:
