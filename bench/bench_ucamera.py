@@ -80,13 +80,11 @@ def run(domain: int) -> dict:
     cpu = results.get('cpu_percent', 0.0)
     if cpu >= 10.0:
         add_note(results, (
-            f'node CPU {cpu} % misses < 10 % by {cpu - 10.0:.1f} points. A cProfile of the node '
-            'in this setup (per thread, blocking calls excluded) put about a quarter in the '
-            'serial input (pyserial reads and UCSP parsing of the 7 reports x 50 Hz = 350 '
-            'packets/s) and an eighth in publishing joint_states; about half is the node\'s '
-            'rclpy MultiThreadedExecutor, which rebuilds its wait set in Python on every wake-up '
-            '(its timers: ~/status 10 Hz, jog watchdog 20 Hz, angle ramp 20 Hz, diagnostics; '
-            'profiled at revision 4820eb1). The '
-            'bare rclpy publisher of the same run (one timer) is the floor for that part.'))
+            f'node CPU {cpu} % misses < 10 % by {cpu - 10.0:.1f} points. A per-thread cProfile '
+            'of the node in this setup (blocking calls excluded) puts about a quarter of its '
+            'work in the serial input (pyserial reads and UCSP parsing of 7 reports x 50 Hz = '
+            '350 packets/s) and an eighth in publishing joint_states; the rest is rclpy '
+            '(executor wake-ups, status and diagnostics), for which the bare rclpy publisher '
+            'of the same run is the floor.'))
     check_targets(results)
     return results
