@@ -81,10 +81,10 @@ def run(domain: int) -> dict:
     if cpu >= 10.0:
         add_note(results, (
             f'node CPU {cpu} % misses < 10 % by {cpu - 10.0:.1f} points. A per-thread cProfile '
-            'of the node in this setup (blocking calls excluded) puts about a quarter of its '
-            'work in the serial input (pyserial reads and UCSP parsing of 7 reports x 50 Hz = '
-            '350 packets/s) and an eighth in publishing joint_states; the rest is rclpy '
-            '(executor wake-ups, status and diagnostics), for which the bare rclpy publisher '
-            'of the same run is the floor.'))
+            'of the node in this setup (blocking calls excluded; revision a70fddd) puts about '
+            '40 % of its Python work in the serial input (pyserial reads and UCSP parsing of 7 '
+            'reports x 50 Hz = 350 packets/s), a fifth in publishing joint_states and the rest '
+            'in rclpy and the housekeeping thread (status, diagnostics), for which the bare '
+            'rclpy publisher of the same run is the floor.'))
     check_targets(results)
     return results
