@@ -41,12 +41,17 @@ class LogicalChannel(Enum):
         return self.value[1]
 
 
+# (first id, last id, channel): channel_of runs for every received frame, and iterating the
+# Enum with its properties was most of the decode time (make bench)
+_CHANNEL_RANGES = tuple((c.first_id, c.last_id, c) for c in LogicalChannel)
+
+
 def channel_of(can_id: int) -> LogicalChannel | None:
     """The logical channel of an 11-bit id; None for 2032..2047 (not assigned)."""
     if not 0 <= can_id <= MAX_STANDARD_ID:
         raise CodecError(f"CAN id {can_id} is not an 11-bit CAN 2.0A identifier")
-    for channel in LogicalChannel:
-        if channel.first_id <= can_id <= channel.last_id:
+    for first_id, last_id, channel in _CHANNEL_RANGES:
+        if first_id <= can_id <= last_id:
             return channel
     return None
 

@@ -16,6 +16,7 @@ Reconstruction decisions (see also the README "spec notes"):
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -181,6 +182,9 @@ class MotorInfoEntry:
         return self.end_position != 0.0
 
 
+_MOTOR_INFO_VALUES = struct.Struct('>6f')   # Position, Begin, End, 3 maxima
+
+
 @dataclass
 class MotorInfo(Message):
     """MotorInfo(Response). Devices send one motor per frame (MotorCount 1) with type 0x82
@@ -210,7 +214,8 @@ class MotorInfo(Message):
         motors = []
         for _ in range(count):
             raw = reader.u8('MotorAddress')
-            values = [reader.f32() for _ in range(6)]
+            # the six Float32 fields in one unpack: the polled hot path (make bench)
+            values = _MOTOR_INFO_VALUES.unpack(reader.take(24, 'MotorInfo Float32 x 6'))
             motors.append(MotorInfoEntry(raw & 0x7F, *values, is_fiz=bool(raw & FIZ_FLAG)))
         return cls(motors, message_type == MessageType.RESPONSE_MORE)
 
