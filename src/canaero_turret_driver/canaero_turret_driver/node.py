@@ -265,12 +265,24 @@ class CanaeroTurretNode(GimbalDriverNode):
 
     # ------------------------------------------------------------------ device hooks
     def _on_sample(self, sample) -> None:
-        if sample.key in POSITION_KEYS:
-            self.notify_new_data()  # publish joint_states now, not at the next tick
+        """Publish joint_states as soon as both axes of a broadcast cycle are in.
+
+        Runs on the client's receive thread. Yaw and pitch positions are separate frames;
+        waking the device thread on the first would publish it and then hold the second
+        for a publish period. If one axis goes quiet, the base node's periodic check still
+        publishes the other.
+        """
+        if sample.key not in POSITION_KEYS:
+            return
+        self._cycle_keys.add(sample.key)
+        if self._cycle_keys >= POSITION_KEYS:
+            self._cycle_keys.clear()
+            self.notify_new_data()
 
     def open_device(self) -> DeviceInfo:
         config = self._client_config()
         client = TurretClient(config)
+        self._cycle_keys: set[str] = set()
         client.on_sample = self._on_sample
         try:
             client.open()

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import signal
+import sys
 import threading
 import time
 import traceback
@@ -58,6 +59,8 @@ from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, Sta
 
 #: longest a STREAMED driver's device thread waits for data before checking the link
 STREAM_WAIT_S = 0.05
+#: Python thread switch interval in driver processes (default 5 ms)
+GIL_SWITCH_INTERVAL_S = 0.001
 
 
 class DeviceError(Exception):
@@ -1059,6 +1062,9 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
     a blocking rcl_wait) lets the Python signal handler run at once.
     """
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    # The device thread must not wait the default 5 ms for the GIL while a receive thread
+    # (e.g. python-can's byte-wise slcan reader) is busy: that showed as joint_states latency.
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     stop = threading.Event()
 
     def request_stop(signum: int, frame: object) -> None:
