@@ -450,11 +450,18 @@ class KosClient:
         threading.Thread(target=self._teardown, args=(True,), name='kos-teardown',
                          daemon=True).start()
 
+    def _tick_wait(self, next_poll: float) -> float:
+        if self.poll_period <= 0:
+            return 0.02
+        return max(0.0, min(0.02, next_poll - time.monotonic()))
+
     def _tick_loop(self, stop: threading.Event) -> None:
         """State polling (GetMotorInfo), the keep-alive (GetNetworkInfo when idle) and the
         silent-device check (requests sent, nothing received for silence_timeout)."""
         next_poll = time.monotonic()
-        while not stop.wait(0.02):
+        # Wake for the next poll exactly (a fixed 20 ms tick made a 50 ms poll period 60 ms),
+        # and at least every 20 ms for the silence and keep-alive checks.
+        while not stop.wait(self._tick_wait(next_poll)):
             now = time.monotonic()
             waiting = self._unanswered_since
             if waiting is not None and now - waiting > self.silence_timeout:
@@ -462,7 +469,9 @@ class KosClient:
                 return
             try:
                 if self.poll_period > 0 and now >= next_poll:
-                    next_poll = now + self.poll_period
+                    next_poll += self.poll_period
+                    if next_poll <= now:  # fell behind: do not burst to catch up
+                        next_poll = now + self.poll_period
                     self.send(GetMotorInfo())
                 elif self.keepalive_period > 0 and now - self._last_tx >= self.keepalive_period:
                     self.send(GetNetworkInfo(False))

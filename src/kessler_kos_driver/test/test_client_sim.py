@@ -430,6 +430,10 @@ def test_discovery_by_network_info_datagrams(make_client):
 
 def test_motor_calibrated_notification_updates_state(calibrated):
     sim, client = calibrated
+    # Only the notification may update the state here: stop the MotorInfo polls, which would
+    # (rightly) overwrite the notified value with the simulator's own calibration.
+    client.poll_period = 0.0
+    time.sleep(0.1)  # let a poll already in flight be answered
     with sim.device.lock:
         sim.device.broadcast(MotorCalibrated(1, 0.0, 42.0))
     assert wait_until(lambda: client.motors[1].end_position == 42.0)
