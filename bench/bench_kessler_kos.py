@@ -71,7 +71,7 @@ def run(domain: int) -> dict:
         'notification as it arrives (stamp = when the client read it), so the figure is '
         'publish + DDS transfer.'))
     explain_streamed_rate(results, (
-        'the GetMotorInfo polls: every poll_period (0.05 s), checked on the client\'s 20 ms '
-        'tick, so every 60 ms (16.7 Hz); a motor that stops also sends MotorPosition'))
+        'the GetMotorInfo polls, one every poll_period (0.05 s, so 20 Hz); a motor that '
+        'stops also sends MotorPosition. Lower poll_period for a higher rate'))
     check_targets(results)
     return results
