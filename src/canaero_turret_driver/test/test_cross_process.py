@@ -6,10 +6,10 @@ interface on the pty slave, and faults are injected through the simulator's cont
 port on 127.0.0.1.
 """
 
+import contextlib
 import json
 import os
 import pathlib
-import subprocess
 import sys
 import time
 
@@ -19,6 +19,7 @@ import canaero_turret_driver
 import gimbal_driver_common
 from canaero_turret_driver.client import ClientConfig, ServiceError, TurretClient
 from canaero_turret_driver.sim import ControlClient
+from gimbal_driver_common.testing import ManagedProcess
 
 
 def wait_for(condition, timeout=8.0, interval=0.02):
@@ -37,14 +38,14 @@ def _python_path() -> str:
     return os.pathsep.join([*paths, os.environ.get("PYTHONPATH", "")])
 
 
-@pytest.fixture
-def sim_process(tmp_path):
+@contextlib.contextmanager
+def running_sim(tmp_path: pathlib.Path, *arguments: str):
+    """`canaero_turret_sim` in another process; yields (endpoint, control client)."""
     ready = tmp_path / "ready.json"
-    env = dict(os.environ, PYTHONPATH=_python_path())
-    process = subprocess.Popen(
-        [sys.executable, "-m", "canaero_turret_driver.sim", "--link", str(tmp_path / "tty"),
+    process = ManagedProcess(
+        [sys.executable, "-m", "canaero_turret_driver.sim", *arguments,
          "--ready-file", str(ready)],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        dict(os.environ, PYTHONPATH=_python_path()), name="canaero_turret_sim")
     try:
         assert wait_for(ready.exists, timeout=20.0), "simulator did not start"
         endpoint = json.loads(ready.read_text())
@@ -52,12 +53,13 @@ def sim_process(tmp_path):
         yield endpoint, control
         control.close()
     finally:
-        process.terminate()
-        try:
-            process.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+        process.stop(timeout=5.0)
+
+
+@pytest.fixture
+def sim_process(tmp_path):
+    with running_sim(tmp_path, "--link", str(tmp_path / "tty")) as sim:
+        yield sim
 
 
 @pytest.fixture
@@ -127,25 +129,8 @@ def test_link_drop_reconnects_by_itself(sim_process, remote_client):
 
 @pytest.fixture
 def socketcand_sim(tmp_path):
-    ready = tmp_path / "ready.json"
-    env = dict(os.environ, PYTHONPATH=_python_path())
-    process = subprocess.Popen(
-        [sys.executable, "-m", "canaero_turret_driver.sim", "--transport", "socketcand",
-         "--ready-file", str(ready)],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    try:
-        assert wait_for(ready.exists, timeout=20.0), "simulator did not start"
-        endpoint = json.loads(ready.read_text())
-        control = ControlClient(endpoint["control_port"])
-        yield endpoint, control
-        control.close()
-    finally:
-        process.terminate()
-        try:
-            process.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+    with running_sim(tmp_path, "--transport", "socketcand") as sim:
+        yield sim
 
 
 def _socketcand_client(endpoint) -> TurretClient:
