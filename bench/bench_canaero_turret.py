@@ -119,7 +119,7 @@ def run(domain: int) -> dict:
     simulator = TurretSimulator(SimConfig())
     broadcasts = BroadcastCounter(simulator)
     server = PtySimServer(lambda: SlcanSession(simulator), link_path=str(Path(tmp.name, 'tty')))
-    probe = CommandProbe(server)   # before start(): the pty's first session is wrapped
+    probe = CommandProbe(server)
     server.start()
     pitch = simulator.axes[PITCH]
 

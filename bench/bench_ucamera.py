@@ -56,7 +56,7 @@ def run(domain: int) -> dict:
                                   f'{TELEMETRY_RATE} Hz', 'codec': codec()}
     tmp = tempfile.TemporaryDirectory(prefix='bench-ucamera-')
     sim = UCameraSim(SimConfig(init_time=0.1), link_path=str(Path(tmp.name, 'tty')))
-    probe = CommandProbe(sim.server)   # before start(): the pty's first session is wrapped
+    probe = CommandProbe(sim.server)
     sim.start()
     model = sim.model
 

@@ -235,8 +235,8 @@ __all__ = ['rclpy', 'wait_for']
 class CommandProbe:
     """Times joint_command publish -> command bytes handled by the in-process simulator.
 
-    Wraps the server's sessions so that after every ``on_bytes`` the device-side
-    predicate ``arrived()`` is checked; the first time it holds after :meth:`arm`,
+    A receive hook on the simulator server checks the device-side predicate
+    ``arrived()`` after every ``on_bytes``; the first time it holds after :meth:`arm`,
     the arrival time is recorded.
     """
 
@@ -244,25 +244,14 @@ class CommandProbe:
         self._armed: Callable[[], bool] | None = None
         self._arrived_at: float | None = None
         self._event = threading.Event()
-        factory = server._session_factory
+        server.add_receive_hook(self._check)
 
-        def wrapped_factory() -> object:
-            session = factory()
-            original = session.on_bytes
-
-            def on_bytes(data: bytes) -> bytes:
-                reply = original(data)
-                check = self._armed
-                if check is not None and check():
-                    self._arrived_at = time.time()
-                    self._armed = None
-                    self._event.set()
-                return reply
-
-            session.on_bytes = on_bytes
-            return session
-
-        server._session_factory = wrapped_factory
+    def _check(self) -> None:
+        check = self._armed
+        if check is not None and check():
+            self._arrived_at = time.time()
+            self._armed = None
+            self._event.set()
 
     def measure(self, send: Callable[[], None], arrived: Callable[[], bool],
                 timeout: float = 5.0) -> float | None:

@@ -66,6 +66,12 @@ class _SimServerBase:
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self.connections = 0  # connections accepted so far (tests watch reconnects)
+        self._receive_hooks: list[Callable[[], None]] = []
+
+    def add_receive_hook(self, hook: Callable[[], None]) -> None:
+        """Call ``hook()`` after a session has handled received bytes (instrumentation,
+        e.g. timing when a command reached the device model)."""
+        self._receive_hooks.append(hook)
 
     def inject(self, data: bytes) -> None:
         """Send ``data`` (garbage, a corrupted frame, ...) to the connected client(s)."""
@@ -106,6 +112,8 @@ class _SimServerBase:
                         return
                     if not self._faults.silent:
                         out += session.on_bytes(data)
+                        for hook in self._receive_hooks:
+                            hook()
                 now = time.monotonic()
                 if now >= next_poll:
                     next_poll = now + self.poll_interval

@@ -92,3 +92,16 @@ def test_pty_session_drop_and_recreate() -> None:
         stream.close()
     finally:
         server.stop()
+
+
+def test_receive_hook_runs_after_each_handled_request(tcp_server: TcpSimServer) -> None:
+    calls: list[int] = []
+    tcp_server.add_receive_hook(lambda: calls.append(1))
+    with TcpStream(*tcp_server.address) as stream:
+        stream.write(b'a')
+        assert read_exactly(stream, 1, 2.0) == b'A'
+        wait_for(lambda: calls, 2.0, 'the receive hook')
+        tcp_server.set_silent(True)  # a silent device handles nothing
+        stream.write(b'b')
+        assert stream.read(10, 0.2) == b''
+    assert len(calls) == 1
