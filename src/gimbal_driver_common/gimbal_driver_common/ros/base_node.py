@@ -592,6 +592,20 @@ class GimbalDriverNode(LifecycleNode):
             return f'device not connected ({self._link_error})'
         return None
 
+    def axis_refusal(self, joints: Sequence[str]) -> str | None:
+        """Why the named joints cannot move now (drive off, faulted), or None.
+
+        Drivers whose device reports per-axis power or fault state override
+        this; the base node asks it before any motion command (joint_command
+        moves and non-zero jogs, move_to, goto_preset, start_scan) and sends
+        nothing when it answers with a reason. Stops are never refused.
+        """
+        return None
+
+    def motion_refusal(self, joints: Sequence[str]) -> str | None:
+        """command_refusal() or axis_refusal(joints): the one check before motion."""
+        return self.command_refusal() or self.axis_refusal(list(joints))
+
     def _on_joint_command(self, msg: JointState) -> None:
         refusal = self.command_refusal()
         if refusal:
@@ -603,6 +617,13 @@ class GimbalDriverNode(LifecycleNode):
             plan = validate_joint_command(msg.name, msg.position, msg.velocity, self.limits)
         except CommandError as exc:
             self.get_logger().warning(f'joint_command rejected, nothing sent: {exc}')
+            return
+        movers = list(plan.moves) + [j for j, v in plan.jogs.items() if v != 0.0]
+        refusal = self.axis_refusal(movers) if movers else None
+        if refusal:
+            self.get_logger().warning(
+                f'joint_command refused, nothing sent: {refusal}', throttle_duration_sec=2.0
+            )
             return
         try:
             if plan.moves:
@@ -683,8 +704,8 @@ class GimbalDriverNode(LifecycleNode):
     def _execute_move(self, goal_handle):
         goal = goal_handle.request
         result = MoveTo.Result()
-        refusal = self.command_refusal()
         names = list(goal.joint_names)
+        refusal = self.motion_refusal(names)
         try:
             if refusal:
                 raise DeviceError(refusal)
@@ -836,11 +857,17 @@ class GimbalDriverNode(LifecycleNode):
             if request.speed < 0 or not math.isfinite(request.speed):
                 raise CommandError(f'speed {request.speed} must be >= 0 rad/s')
             if self.DEVICE_PRESETS:
+                refusal = self.axis_refusal(list(self.joint_names))
+                if refusal:
+                    raise DeviceError(refusal)
                 self._stop_scan_silently()
                 return self.device_goto_preset(request.index, request.speed)
             assert self.preset_store is not None
             preset = self.preset_store.get(request.index)
             names = [n for n in preset.positions if n in self.limits]
+            refusal = self.axis_refusal(names)
+            if refusal:
+                raise DeviceError(refusal)
             speeds = [request.speed] * len(names) if request.speed > 0 else []
             plan = validate_joint_command(
                 names, [preset.positions[n] for n in names], speeds, self.limits
@@ -898,6 +925,9 @@ class GimbalDriverNode(LifecycleNode):
     def _on_start_scan(self, request, response):
         def action() -> str:
             scan = ScanRequest.from_msg(request)
+            refusal = self.axis_refusal(self.scan_joints())
+            if refusal:
+                raise DeviceError(refusal)
             message = self.start_device_scan(scan)
             if message is not None:
                 return message
