@@ -204,8 +204,8 @@ def test_unknown_and_unresolved_commands_are_refused():
 def test_table_is_consistent():
     assert len(BY_OPCODE) == len(COMMANDS)
     for cmd in COMMANDS.values():
-        assert re.fullmatch(r'[A-Z]{2,4}_[A-Za-z0-9]+', cmd.name)
-        assert cmd.confidence in ('high', 'medium'), cmd.name
+        assert re.fullmatch(r'[A-Z]{2,6}_[A-Za-z0-9]+', cmd.name)
+        assert cmd.confidence in ('high', 'medium', 'low'), cmd.name
         assert cmd.evidence
         assert cmd.name not in UNRESOLVED
     # Anchors printed legibly in the spec.
@@ -219,14 +219,92 @@ def test_table_is_consistent():
         assert COMMANDS[name].opcode == opcode
 
 
+# Dual-gimbal weapon and CapSnap entries (rev 2.17.0/2.17.1): active weapon, ballistic
+# offset, safety, load, CapSnap I/O, bullets, CapSnap ready.
+DG_WEAPON_OPCODES = {0x0FB6, 0x0FB7, 0x0FBD, 0x0FBE, 0x0FBF, 0x0FC0, 0x0FC1, 0x0FC2, 0x0FC3,
+                     0x0FC4}
+WEAPON_WORDS = ('weapon', 'ballistic', 'bullet', 'safety', 'capsnap', 'trigger', 'load',
+                'fire', 'arm')
+
+
 def test_out_of_scope_groups_absent():
     for cmd in COMMANDS.values():
         assert not 0x0B00 <= cmd.opcode <= 0x0BFF  # weapon control unit group
-        assert not 0x0FA0 <= cmd.opcode <= 0x0FCF  # dual-gimbal group (weapon-adjacent)
+        assert cmd.opcode not in DG_WEAPON_OPCODES, cmd.name
+        if cmd.name.startswith('DG_'):
+            assert not any(word in cmd.name.lower() for word in WEAPON_WORDS), cmd.name
+
+
+def test_second_witness_settles_the_guessed_opcodes():
+    """Entries the OCR lost, now taken from the Cap-Track dissector's opcode table."""
+    for name, opcode in [
+        ('MOT_ResetFaults', 0x0143), ('COM_Reboot', 0x0700), ('COM_GetPn', 0x0C2D),
+        ('COM_GetSn', 0x0C2F), ('COM_GetHw', 0x0C4C), ('MOT_SetShortPath', 0x014E),
+        ('MOT_GetShortPath', 0x014F), ('MOT_GetMaxCurrent', 0x012E),
+        ('MOT_SetMaxCurrent', 0x0166), ('STB_SetSpdKp', 0x0D04), ('STB_GetSpdKp', 0x0D08),
+        ('STB_SetSpdKi', 0x0D05), ('STB_GetSpdKi', 0x0D09), ('STB_SetSpdKd', 0x0D06),
+        ('STB_GetSpdKd', 0x0D0A), ('STB_SetPosKp', 0x0D16), ('STB_GetPosKp', 0x0D17),
+        ('STB_SetPosKi', 0x0D18), ('STB_GetPosKi', 0x0D19), ('STB_SetPosKd', 0x0D1A),
+        ('STB_GetPosKd', 0x0D1B), ('STB_SaveStabilizationCfg', 0x0D07),
+        ('IP_GetControllerPort', 0x070E), ('DG_SetSyncMode', 0x0FA0),
+        ('DG_GoToCamera', 0x0FA9), ('DG_SetMainGimbal', 0x0FAB),
+    ]:
+        cmd = COMMANDS[name]
+        assert cmd.opcode == opcode, name
+        assert 'witness' in cmd.evidence, name
+    # Nothing confirms GPS_GetLatitude: it stays a low-confidence guess.
+    assert COMMANDS['GPS_GetLatitude'].confidence == 'low'
+
+
+def test_new_entries_encode_with_typed_arguments():
+    # ResetFaults on axis 2: 50 54 04 00 02 01 43 | checksum = 04+00+02+01+43 = 0x4A
+    assert encode('MOT_ResetFaults', 2) == bytes.fromhex('505404000201434A')
+    # Speed-loop Kp 1.5 on axis 1: float 0x3FC00000 big-endian (5.1.1 byte order)
+    assert encode('STB_SetSpdKp', 1, 1.5) == bytes.fromhex('5054080001 0D04 3FC00000 19'
+                                                           .replace(' ', ''))
+    # Pelco-D: turbo speed is pan-only; the axis byte defaults to 1
+    assert encode('PELCOD_SetTurboSpd', None, 90.0)[4] == 1
+    with pytest.raises(ProtocolError, match='pan axis only'):
+        encode('PELCOD_SetTurboSpd', 2, 90.0)
+    assert encode('PELCOD_SetAxisNum', 2, 2)[5:8] == bytes([0x0C, 0x84, 2])
+    # Relay module and video tracker: camera index travels in the group byte (4.11)
+    assert encode('RLY_ActivateModule', None, 1)[5:8] == bytes([0x0D, 0x24, 1])
+    frame = COMMANDS['VDT_setTrackingOn'].frame(2, 1)
+    assert (frame.group, frame.axis, frame.opcode, frame.data) == (2, 0, 0x0A01, b'\x01')
+    with pytest.raises(ProtocolError, match=r'camera index .* 4 is outside 0..3'):
+        encode('VDT_isTrackingOn', 4)
+    # Dual gimbals: axes 1, 2, 4, 5 only
+    assert encode('DG_GetBoresightOffset', 5)[4] == 5
+    with pytest.raises(ProtocolError, match='1, 2, 4, 5'):
+        encode('DG_GetBoresightOffset', 3)
+    with pytest.raises(ProtocolError, match=r'outside 4\.\.5'):
+        encode('DG_GetCTCoffset', 1)
+
+
+def test_targets_list_format():
+    """5.1.5: five (width, height) uint16 pairs, 20 bytes; absent targets are (0, 0)."""
+    cmd = COMMANDS['VDT_GetTargetsList']
+    assert cmd.opcode == 0x0732
+    data = encode_value(DataType.TARGETS, [(120, 80), (16, 9)])
+    assert len(data) == 20 and data[:8] == bytes.fromhex('0078005000100009')
+    reply = Frame(1, 0, 0x0732, data)
+    assert cmd.decode_reply(reply) == ((120, 80), (16, 9), (0, 0), (0, 0), (0, 0))
+    with pytest.raises(ProtocolError, match='expected 20 data bytes'):
+        cmd.decode_reply(Frame(1, 0, 0x0732, data[:18]))
+    with pytest.raises(ProtocolError, match='at most 5'):
+        encode_value(DataType.TARGETS, [(1, 1)] * 6)
+    with pytest.raises(ProtocolError, match=r'outside 0\.\.65535'):
+        encode_value(DataType.TARGETS, [(70000, 1)])
 
 
 def test_safety_classes():
     assert COMMANDS['COM_Reboot'].safety is Safety.REBOOT
+    assert COMMANDS['STB_SaveStabilizationCfg'].safety is Safety.NV_WRITE
+    for name in ('PELCOD_EnPelcoD', 'PELCOD_SetAddress', 'COM_SetComType',
+                 'IP_SetControllerSubnetMask'):
+        assert COMMANDS[name].safety is Safety.NETWORK, name
+    for name in ('VDT_setTrackingOn', 'DG_GoToCamera', 'DG_SetSyncMode'):
+        assert COMMANDS[name].safety is Safety.MOTION, name
     assert COMMANDS['IP_SetControllerIP'].safety is Safety.NETWORK
     assert COMMANDS['MOT_SaveMotorSetting'].safety is Safety.NV_WRITE
 

@@ -10,11 +10,17 @@ The OCR of the specification garbled most per-command opcode lines ("Dx010", "0x
 * **example** a byte example in section 2 or chapter 7 whose checksum adds up;
 * **order**  the position of the command inside its group: commands of a group are
   numbered consecutively in section order, so a command whose only free slot lies
-  between two established neighbours gets that slot.
+  between two established neighbours gets that slot;
+* **witness** the opcode table of a public third-party Cap-Track Wireshark dissector
+  (and the tools built from it), a second witness for what the OCR lost. It agrees with
+  81 of the 82 opcodes the document prints legibly; its facts (opcode, name) are used,
+  never its encodings.
 
-Confidence: ``high`` = printed legibly (text/rev/table/example) or the single free slot
-between two established neighbours; ``medium`` = taken from section order with both ends
-of the run established (a wrong guess would shift by one inside the run). Commands whose
+Confidence: ``high`` = printed legibly (text/rev/table/example), the single free slot
+between two established neighbours, or a document fragment/order the witness confirms;
+``medium`` = one source only (the witness where the document prints nothing, or section
+order with both ends of the run established); ``low`` = section order with no witness
+(GPS_GetLatitude): the node treats such polls as optional. Commands whose
 opcode could not be established are **not** in :data:`COMMANDS`; they are listed in
 :data:`UNRESOLVED` with the reason, and the encoder refuses them.
 
@@ -39,25 +45,37 @@ class UnknownCommand(ProtocolError):
 
 @dataclass(frozen=True)
 class AxisRule:
-    """What the axis byte means for a command and which values it accepts."""
+    """What the axis byte means for a command and which values it accepts.
+
+    ``allowed`` narrows ``low..high`` to a set (dual-gimbal axes 1, 2, 4, 5);
+    ``in_group_byte`` means the number travels in the group byte and the axis byte is 0
+    (the video tracker's camera index, 4.11).
+    """
 
     name: str
     low: int
     high: int
     meaning: str
+    allowed: tuple[int, ...] | None = None
+    in_group_byte: bool = False
 
     def check(self, axis: int | None, command: str) -> int:
         if axis is None:
             if self.low == self.high:
                 return self.low
-            raise ProtocolError(f'{command} needs {self.meaning} ({self.low}..{self.high})')
+            raise ProtocolError(f'{command} needs {self.meaning} ({self._choices()})')
         if isinstance(axis, bool) or not isinstance(axis, int):
             raise ProtocolError(f'{command}: {self.meaning} must be an integer, got {axis!r}')
-        if not self.low <= axis <= self.high:
+        if not self.low <= axis <= self.high or (self.allowed and axis not in self.allowed):
             raise ProtocolError(
-                f'{command}: {self.meaning} {axis} is outside {self.low}..{self.high}'
+                f'{command}: {self.meaning} {axis} is outside {self._choices()}'
             )
         return axis
+
+    def _choices(self) -> str:
+        if self.allowed:
+            return ', '.join(str(v) for v in self.allowed)
+        return f'{self.low}..{self.high}'
 
 
 MOTOR = AxisRule('motor', 1, 3, 'motor axis (1 yaw/pan, 2 pitch/tilt, 3 roll)')
@@ -70,11 +88,20 @@ IMU_AXIS = AxisRule('imu_axis', 1, 3, 'IMU axis (1 yaw, 2 pitch, 3 roll)')
 CENTRAL_AXIS = AxisRule('central_axis', 0, 2, 'sensor axis (0 x, 1 y, 2 z)')
 COMPENSATION = AxisRule('compensation', 2, 3, 'compensation (2 tilt, 3 roll)')
 MEASUREMENT = AxisRule('measurement', 1, 5, 'LRF measurement (target) number')
+CAMERA = AxisRule('camera', 0, 3, 'camera index (sent in the group byte, 4.11)',
+                  in_group_byte=True)
+PAN = AxisRule('pan', 1, 1, 'axis byte (pan axis only, 1)')
+PELCO_AXIS = AxisRule('pelco_axis', 1, 2, 'Pelco-D axis (1 pan, 2 tilt)')
+DG_PAIR = AxisRule('dg_pair', 1, 2, 'axis pair (1 pan/pan 2, 2 tilt/tilt 2)')
+DG_AXIS = AxisRule('dg_axis', 1, 5, 'dual-gimbal axis (1 pan, 2 tilt, 4 pan 2, 5 tilt 2)',
+                   allowed=(1, 2, 4, 5))
+DG_GIMBAL2 = AxisRule('dg_gimbal2', 4, 5, 'gimbal 2 axis (4 pan 2, 5 tilt 2)')
 
 AXIS_RULES = {
     rule.name: rule
     for rule in (MOTOR, SYSTEM, TARGET, PRESET, DIGITAL_IO, IMU_SENSOR, IMU_AXIS,
-                 CENTRAL_AXIS, COMPENSATION, MEASUREMENT)
+                 CENTRAL_AXIS, COMPENSATION, MEASUREMENT, CAMERA, PAN, PELCO_AXIS, DG_PAIR,
+                 DG_AXIS, DG_GIMBAL2)
 }
 
 
@@ -115,6 +142,8 @@ class Command:
         payload = encode_value(self.arg, value, f'{self.name} argument')
         if not 0 <= group <= 0xFF:
             raise ProtocolError(f'{self.name}: group id {group} is outside 0..255')
+        if self.axis.in_group_byte:  # camera index in the group byte, axis byte 0 (4.11)
+            return Frame(axis_byte, 0, self.opcode, payload)
         return Frame(group, axis_byte, self.opcode, payload)
 
     def encode(self, axis: int | None = None, value: Any = None, group: int = 0) -> bytes:
@@ -138,12 +167,21 @@ N, U8, BOOL, U16, U32, F32, F64 = (
     DataType.F64,
 )
 ASCII, IPV4, LLA, PRESET_FMT = DataType.ASCII, DataType.IPV4, DataType.LLA, DataType.PRESET
+TARGETS = DataType.TARGETS
 
 _ORDER_MOT = (
     'order: 4.2.11-4.2.15 fill 0x013C.. after MOT_SetPositionMode 0x013B (7.1 example) '
     'toward MOT_MotionComplete 0x0144 (4.2.19 text); 4.2.15 fragment "Dx014" agrees'
 )
 _ERR_TABLE = 'table: 4.10.22 error-message table'
+_ORDER_PELCO = 'order: 4.13 section order, one opcode per command from 0x0C80'
+# Second witness: a public Wireshark Lua dissector for the Cap-Track protocol and the C#
+# and Python tools built from its opcode table. It agrees with 81 of the 82 opcodes the
+# document prints legibly (the 82nd is a duplicate-key typo in the dissector:
+# IP_GetControllerSubnetMask listed at 0x070B, SetControllerPort's opcode; 4.7.6 prints
+# 0x071B). Only its opcode/name facts are used; encodings come from the document.
+_WITNESS = 'witness: CapTrack dissector table'
+_AGREE = '; ' + _WITNESS + ' agrees'
 
 # (name, opcode, axis, arg, arg_unit, ret, ret_unit, confidence, evidence, safety, summary)
 _TABLE: list[tuple[Any, ...]] = [
@@ -209,17 +247,29 @@ _TABLE: list[tuple[Any, ...]] = [
      'speed (velocity) mode'),
     ('MOT_SetPositionMode', 0x013B, MOTOR, N, '', N, '', 'high',
      'example: 7.1 50 54 04 00 01 01 3B 41, checksum adds up', Safety.NONE, 'position mode'),
-    ('MOT_AxisOn', 0x013C, MOTOR, N, '', N, '', 'medium', _ORDER_MOT, Safety.NONE,
+    ('MOT_AxisOn', 0x013C, MOTOR, N, '', N, '', 'high', _ORDER_MOT + _AGREE, Safety.NONE,
      'power the motor (resumes a buffered motion)'),
-    ('MOT_AxisOff', 0x013D, MOTOR, N, '', N, '', 'medium', _ORDER_MOT, Safety.NONE,
+    ('MOT_AxisOff', 0x013D, MOTOR, N, '', N, '', 'high', _ORDER_MOT + _AGREE, Safety.NONE,
      'power off the motor'),
-    ('MOT_AxisReset', 0x013E, MOTOR, N, '', N, '', 'medium', _ORDER_MOT, Safety.REBOOT,
+    ('MOT_AxisReset', 0x013E, MOTOR, N, '', N, '', 'high', _ORDER_MOT + _AGREE, Safety.REBOOT,
      'reset the axis (it re-homes; wait 3 s)'),
-    ('MOT_SetTum', 0x013F, MOTOR, N, '', N, '', 'medium',
-     _ORDER_MOT + '; the 7.1 example repeats 0x3B (a copy of SetPositionMode)', Safety.NONE,
+    ('MOT_SetTum', 0x013F, MOTOR, N, '', N, '', 'high',
+     _ORDER_MOT + '; the 7.1 example repeats 0x3B (a copy of SetPositionMode)' + _AGREE,
+     Safety.NONE,
      'target update mode: rebuild the profile on each MOT_Update'),
-    ('MOT_ResetFaults', 0x0140, MOTOR, N, '', N, '', 'medium', _ORDER_MOT, Safety.NONE,
+    ('MOT_ResetFaults', 0x0143, MOTOR, N, '', N, '', 'high',
+     _WITNESS + ' 0x0143; 4.2.15 prints only "Dx014", which it completes (was 0x0140 by '
+     'section order: the run 0x013C..0x0143 has more slots than commands)', Safety.NONE,
      'reset latched faults of the axis'),
+    ('MOT_SetShortPath', 0x014E, MOTOR, BOOL, 'flag', N, '', 'medium',
+     _WITNESS + ' 0x014E; 4.2.16 prints only "Dx014"', Safety.NONE,
+     'shortest way to an absolute position'),
+    ('MOT_GetShortPath', 0x014F, MOTOR, N, '', BOOL, 'flag', 'medium',
+     _WITNESS + ' 0x014F; 4.1.11 prints only "Dx014"', Safety.NONE, 'short-path flag'),
+    ('MOT_GetMaxCurrent', 0x012E, MOTOR, N, '', F32, 'mA', 'medium',
+     _WITNESS + ' 0x012E; 4.1.12 prints only "Dx0"', Safety.NONE, 'motor current limit'),
+    ('MOT_SetMaxCurrent', 0x0166, MOTOR, F32, 'mA', N, '', 'medium',
+     _WITNESS + ' 0x0166; 4.2.18 has no opcode line', Safety.NONE, 'motor current limit'),
     ('MOT_MotionComplete', 0x0144, MOTOR, N, '', N, '', 'high',
      'text: 4.2.19 "OpCode 0x0144"', Safety.NONE, 'wait for the current move before the next'),
     ('MOT_SaveMotorSetting', 0x0165, MOTOR, N, '', N, '', 'high',
@@ -243,15 +293,16 @@ _TABLE: list[tuple[Any, ...]] = [
     ('SWLS_IsActiveSWLS', 0x0110, MOTOR, N, '', BOOL, 'flag', 'high',
      'rev: 2.10.1 "MOT_IsActiveSWLS - 0x0110"', Safety.NONE, 'software limits enabled'),
     # --- scanning (4.3); all sent to axis 0 ---------------------------------------------
-    ('SCN_SetYawMin', 0x0400, SYSTEM, F32, 'deg', N, '', 'medium',
+    ('SCN_SetYawMin', 0x0400, SYSTEM, F32, 'deg', N, '', 'high',
      'order: 4.3.1-4.3.4 are the four slots below SCN_SetStepHeight 0x0404 (4.3.5 text); '
-     'fragments "Dx04.0"', Safety.NONE, 'left edge of the scan (motor position)'),
-    ('SCN_SetYawMax', 0x0401, SYSTEM, F32, 'deg', N, '', 'medium',
-     'order: as SCN_SetYawMin', Safety.NONE, 'right edge of the scan'),
-    ('SCN_SetPitchMin', 0x0402, SYSTEM, F32, 'deg', N, '', 'medium',
-     'order: as SCN_SetYawMin', Safety.NONE, 'bottom edge of the scan'),
-    ('SCN_SetNumSteps', 0x0403, SYSTEM, U8, 'steps', N, '', 'medium',
-     'order: as SCN_SetYawMin; 4.3.4 heading lost, named after the NumSteps parameter',
+     'fragments "Dx04.0"' + _AGREE, Safety.NONE, 'left edge of the scan (motor position)'),
+    ('SCN_SetYawMax', 0x0401, SYSTEM, F32, 'deg', N, '', 'high',
+     'order: as SCN_SetYawMin' + _AGREE, Safety.NONE, 'right edge of the scan'),
+    ('SCN_SetPitchMin', 0x0402, SYSTEM, F32, 'deg', N, '', 'high',
+     'order: as SCN_SetYawMin' + _AGREE, Safety.NONE, 'bottom edge of the scan'),
+    ('SCN_SetNumSteps', 0x0403, SYSTEM, U8, 'steps', N, '', 'high',
+     'order: as SCN_SetYawMin; 4.3.4 heading lost, named after the NumSteps parameter'
+     + _AGREE,
      Safety.NONE, 'rows (ZigZag/Snake) or rectangles (Square)'),
     ('SCN_SetStepHeight', 0x0404, SYSTEM, F32, 'deg', N, '', 'high',
      'text: 4.3.5 "Dx0404"', Safety.NONE, 'pitch step between rows'),
@@ -275,8 +326,10 @@ _TABLE: list[tuple[Any, ...]] = [
      'rev: 2.24.0 "GPS_GetHeading - 0x0502"', Safety.NONE, 'system heading'),
     ('GPS_GetLongitude', 0x0504, SYSTEM, N, '', F64, 'DDMM.mmmm', 'high',
      'text: 4.4.1 "Dx0504"', Safety.NONE, 'GPS longitude, east positive'),
-    ('GPS_GetLatitude', 0x0505, SYSTEM, N, '', F64, 'DDMM.mmmm', 'medium',
-     'order: next after 0x0504 (4.4.2 follows 4.4.1), fragment "Dx050"', Safety.NONE,
+    ('GPS_GetLatitude', 0x0505, SYSTEM, N, '', F64, 'DDMM.mmmm', 'low',
+     'order: next after 0x0504 (4.4.2 follows 4.4.1), fragment "Dx050"; the witness table '
+     'has no GPS group, so nothing confirms it (the node stops polling it if the device '
+     'answers "opcode not recognized")', Safety.NONE,
      'GPS latitude, north positive'),
     ('GPS_PositionReady', 0x050A, SYSTEM, N, '', BOOL, 'flag', 'high',
      'text: 4.4.6 "Dx050A"', Safety.NONE, 'valid GPS position lock'),
@@ -399,14 +452,17 @@ _TABLE: list[tuple[Any, ...]] = [
     ('IMU_GetGyroDrift', 0x0652, IMU_SENSOR, N, '', F32, 'deg/s', 'high', 'rev: 2.21.0',
      Safety.NONE, 'calculated drift'),
     # --- communication (4.6) ------------------------------------------------------------
-    ('COM_Reboot', 0x0701, SYSTEM, N, '', N, '', 'medium',
-     'order: 4.6.1-4.6.3 fill 0x0701-0x0703 below COM_IsConnected 0x0704 (4.6.4 text)',
+    ('COM_Reboot', 0x0700, SYSTEM, N, '', N, '', 'medium',
+     _WITNESS + ' 0x0700 (was 0x0701 by section order; the document prints no opcode, '
+     'and the witness puts Connect/Disconnect at 0x0702/0x0703 as the order does)',
      Safety.REBOOT, 'reboot the controller (about 20 s)'),
-    ('COM_Connect', 0x0702, SYSTEM, N, '', N, '', 'medium',
-     'order: as COM_Reboot. Over TCP the controller greets with its own COM_Connect '
-     'packet (6.1), and the client answers with the opcode the controller used',
+    ('COM_Connect', 0x0702, SYSTEM, N, '', N, '', 'high',
+     'order: below COM_IsConnected 0x0704 (4.6.4 text)' + _AGREE
+     + '. Over TCP the controller greets with its own COM_Connect packet (6.1), and the '
+     'client answers with the opcode the controller used',
      Safety.NONE, 'start the conversation (activates both axes)'),
-    ('COM_Disconnect', 0x0703, SYSTEM, N, '', N, '', 'medium', 'order: as COM_Reboot',
+    ('COM_Disconnect', 0x0703, SYSTEM, N, '', N, '', 'high',
+     'order: the slot below COM_IsConnected 0x0704' + _AGREE,
      Safety.NONE, 'end the conversation (motors off)'),
     ('COM_IsConnected', 0x0704, SYSTEM, N, '', BOOL, 'flag', 'high',
      'text: 4.6.4 "Dx0704"; rev 2.12.0', Safety.NONE, 'controller initialised'),
@@ -428,20 +484,30 @@ _TABLE: list[tuple[Any, ...]] = [
      Safety.NONE, 'set/reset digital output 1..6'),
     ('COM_getDigitalIO', 0x0724, DIGITAL_IO, N, '', BOOL, 'flag', 'high', 'rev: 2.22.0',
      Safety.NONE, 'state of digital I/O 1..6'),
-    ('COM_GetPn', 0x0C48, SYSTEM, N, '', ASCII, '', 'medium',
-     'order: 4.6.13-4.6.16 (Pn, Sn, Fw, Hw) around COM_GetFw 0x0C4A; 4.6.16 fragment "Dx0C4"',
+    ('COM_GetPn', 0x0C2D, SYSTEM, N, '', ASCII, '', 'medium',
+     _WITNESS + ' 0x0C2D; 4.6.13 prints no opcode (was 0x0C48 by section order)',
      Safety.NONE, 'part number'),
-    ('COM_GetSn', 0x0C49, SYSTEM, N, '', U32, '', 'medium', 'order: as COM_GetPn',
+    ('COM_GetSn', 0x0C2F, SYSTEM, N, '', U32, '', 'medium',
+     _WITNESS + ' 0x0C2F; 4.6.14 prints no opcode (was 0x0C49 by section order)',
      Safety.NONE, 'serial number'),
     ('COM_GetFw', 0x0C4A, SYSTEM, N, '', ASCII, '', 'high', 'text: 4.6.15 "Dx0C4 A"',
      Safety.NONE, 'firmware revision'),
-    ('COM_GetHw', 0x0C4B, SYSTEM, N, '', F32, '', 'medium', 'order: as COM_GetPn',
+    ('COM_GetHw', 0x0C4C, SYSTEM, N, '', F32, '', 'high',
+     _WITNESS + ' 0x0C4C, which completes 4.6.16\'s "Dx0C4" (was 0x0C4B by section order)',
      Safety.NONE, 'hardware revision'),
+    ('COM_SetComType', 0x0719, SYSTEM, U8, '1 eth/2 232/3 422/4 485', N, '', 'medium',
+     _WITNESS + ' 0x0719; 4.6.11 heading and opcode lost', Safety.NETWORK,
+     'communication type after the next reboot'),
     # --- IP settings (4.7), TCP only ----------------------------------------------------
     ('IP_SetControllerIP', 0x070A, SYSTEM, IPV4, 'ip', N, '', 'high',
      'text: 4.7.1 "OpCode 0x070A"', Safety.NETWORK, 'new controller IP (after save+reboot)'),
     ('IP_SetControllerPort', 0x070B, SYSTEM, U16, 'port', N, '', 'high',
      'text: 4.7.3 "Dx070B"', Safety.NETWORK, 'new controller port'),
+    ('IP_GetControllerPort', 0x070E, SYSTEM, N, '', U16, 'port', 'medium',
+     _WITNESS + ' 0x070E; 4.7.4 prints no opcode', Safety.NONE, 'controller port'),
+    ('IP_SetControllerSubnetMask', 0x071A, SYSTEM, IPV4, 'ip', N, '', 'medium',
+     _WITNESS + ' 0x071A, the slot below the getter 0x071B (4.7.6); 4.7.5 prints no opcode',
+     Safety.NETWORK, 'new subnet mask (after save+reboot)'),
     ('IP_GetControllerIP', 0x070D, SYSTEM, N, '', IPV4, 'ip', 'high',
      'text: 4.7.2 "OpCode 0x070D"', Safety.NONE, 'controller IP'),
     ('IP_SaveIP', 0x0710, SYSTEM, N, '', N, '', 'high', 'text: 4.7.7 "OpCode 0x0710"',
@@ -449,11 +515,12 @@ _TABLE: list[tuple[Any, ...]] = [
     ('IP_GetControllerSubnetMask', 0x071B, SYSTEM, N, '', IPV4, 'ip', 'high',
      'text: 4.7.6 "OpCode 0x071B"', Safety.NONE, 'controller subnet mask'),
     # --- stabilisation (4.8) ------------------------------------------------------------
-    ('STB_StabilizationOn', 0x0800, SYSTEM, N, '', N, '', 'medium',
+    ('STB_StabilizationOn', 0x0800, SYSTEM, N, '', N, '', 'high',
      'order: 4.8.1/4.8.2 take 0x0800/0x0801, the only slots below the removed '
-     'STB_StabMoveRel 0x0802 (rev 2.9.0)', Safety.NONE, 'stabilise at the current position'),
-    ('STB_StabilizationOff', 0x0801, SYSTEM, N, '', N, '', 'medium',
-     'order: as STB_StabilizationOn', Safety.NONE, 'stop stabilisation'),
+     'STB_StabMoveRel 0x0802 (rev 2.9.0)' + _AGREE, Safety.NONE,
+     'stabilise at the current position'),
+    ('STB_StabilizationOff', 0x0801, SYSTEM, N, '', N, '', 'high',
+     'order: as STB_StabilizationOn' + _AGREE, Safety.NONE, 'stop stabilisation'),
     ('STB_IsStabActive', 0x0807, SYSTEM, N, '', BOOL, 'flag', 'high', 'rev: 2.21.0',
      Safety.NONE, 'stabilisation active'),
     ('STB_GetStabMinAccel', 0x083A, MOTOR, N, '', F32, 'deg/s^2', 'high',
@@ -478,6 +545,60 @@ _TABLE: list[tuple[Any, ...]] = [
      Safety.NONE, 'stabilise this axis'),
     ('STB_GetAxisStabEnable', 0x0858, MOTOR, N, '', BOOL, 'flag', 'high', 'rev: 2.19.0',
      Safety.NONE, 'axis stabilisation enabled'),
+    # --- stabilisation gains and settings (4.8.4-4.8.30): the document prints only some
+    # opcodes (0x0D04, 0x0D09, 0x0D0A, 0x0D16, 0x0D18, 0x0D1A), every one of which the
+    # witness table confirms; the witness settles the rest.
+    ('STB_GetStabError', 0x0822, MOTOR, N, '', F32, 'deg', 'medium',
+     _WITNESS + ' 0x0822; 4.8.4 prints no opcode', Safety.NONE,
+     'stabilisation position error'),
+    ('STB_SetStabMinAccel', 0x0839, MOTOR, F32, 'deg/s^2', N, '', 'high',
+     _WITNESS + ' 0x0839, the slot below its getter 0x083A (4.8.6 text)', Safety.NONE,
+     'minimum stabilisation acceleration'),
+    ('STB_SetDistanceToTarget', 0x082B, SYSTEM, F32, 'm', N, '', 'medium',
+     _WITNESS + ' 0x082B, next to its getter 0x082A (4.8.20 text); 4.8.19 prints "Dp" only',
+     Safety.NONE, 'distance to target (roll compensation)'),
+    ('STB_SetCentralAxes', 0x0825, CENTRAL_AXIS, F32, 'm', N, '', 'high',
+     _WITNESS + ' 0x0825, the slot below its getter 0x0826 (4.8.22 text); 4.8.21 "Dx08"',
+     Safety.NONE, 'sensor-to-centre distance'),
+    ('STB_SaveStabilizationCfg', 0x0D07, SYSTEM, N, '', N, '', 'medium',
+     _WITNESS + ' 0x0D07 (inside the speed-gain run 0x0D04..0x0D0A); 4.8.30 no opcode',
+     Safety.NV_WRITE, 'save the stabilisation settings to controller memory'),
+    ('STB_SetSpdKp', 0x0D04, MOTOR, F32, 'factor', N, '', 'high',
+     'text: 4.8.7 "Dx0D04"' + _AGREE,
+     Safety.NONE, 'Kp of the speed PID'),
+    ('STB_GetSpdKp', 0x0D08, MOTOR, N, '', F32, 'factor', 'medium',
+     _WITNESS + ' 0x0D08; no opcode printed',
+     Safety.NONE, 'Kp of the speed PID'),
+    ('STB_SetSpdKi', 0x0D05, MOTOR, F32, 'factor', N, '', 'medium',
+     _WITNESS + ' 0x0D05; no opcode printed',
+     Safety.NONE, 'Ki of the speed PID'),
+    ('STB_GetSpdKi', 0x0D09, MOTOR, N, '', F32, 'factor', 'high',
+     'text: 4.8.10 "Dx0D09"' + _AGREE,
+     Safety.NONE, 'Ki of the speed PID'),
+    ('STB_SetSpdKd', 0x0D06, MOTOR, F32, 'factor', N, '', 'medium',
+     _WITNESS + ' 0x0D06; no opcode printed',
+     Safety.NONE, 'Kd of the speed PID'),
+    ('STB_GetSpdKd', 0x0D0A, MOTOR, N, '', F32, 'factor', 'high',
+     'text: "Dx0D0A" printed under 4.8.11, whose neighbour 4.8.12 lost its heading' + _AGREE,
+     Safety.NONE, 'Kd of the speed PID'),
+    ('STB_SetPosKp', 0x0D16, MOTOR, F32, 'factor', N, '', 'high',
+     'text: 4.8.13 "Dx0D16"' + _AGREE,
+     Safety.NONE, 'Kp of the position PID'),
+    ('STB_GetPosKp', 0x0D17, MOTOR, N, '', F32, 'factor', 'medium',
+     _WITNESS + ' 0x0D17; no opcode printed',
+     Safety.NONE, 'Kp of the position PID'),
+    ('STB_SetPosKi', 0x0D18, MOTOR, F32, 'factor', N, '', 'high',
+     'text: 4.8.15 "0x0D18"' + _AGREE,
+     Safety.NONE, 'Ki of the position PID'),
+    ('STB_GetPosKi', 0x0D19, MOTOR, N, '', F32, 'factor', 'medium',
+     _WITNESS + ' 0x0D19; no opcode printed',
+     Safety.NONE, 'Ki of the position PID'),
+    ('STB_SetPosKd', 0x0D1A, MOTOR, F32, 'factor', N, '', 'high',
+     'text: 4.8.17 "Dx0D1A"' + _AGREE,
+     Safety.NONE, 'Kd of the position PID'),
+    ('STB_GetPosKd', 0x0D1B, MOTOR, N, '', F32, 'factor', 'medium',
+     _WITNESS + ' 0x0D1B; no opcode printed',
+     Safety.NONE, 'Kd of the position PID'),
     # --- presets (4.9); preset number in the axis byte ----------------------------------
     ('PRST_GetPreset', 0x0D00, PRESET, N, '', PRESET_FMT, 'name+deg', 'high',
      'text: 5.1.4 "GetPreset (0x0D00)"', Safety.NONE, 'read preset 1..15'),
@@ -592,6 +713,133 @@ _TABLE: list[tuple[Any, ...]] = [
      Safety.MOTION, 'move the servo to a predefined position'),
     ('SRV_GetPosition', 0x0F79, SYSTEM, N, '', U8, 'position (4 unknown)', 'high',
      'rev: 2.21.0', Safety.NONE, 'servo position number'),
+    # --- video tracking (4.11); camera index 0..3 in the group byte ----------------------
+    ('VDT_setTrackingOn', 0x0A01, CAMERA, U8, '0 off/1 manual/2 auto', N, '', 'high',
+     'text: 4.11.1 "OpCode 0x0A01"; rev 2.21.0', Safety.MOTION,
+     'video tracking off (0), manual (1) or automatic (2): the pedestal follows the target'),
+    ('VDT_isTrackingOn', 0x0A02, CAMERA, N, '', BOOL, 'flag', 'high',
+     'text: 4.11.2 "OpCode 0x0A02"; rev 2.21.0', Safety.NONE, 'video tracking active'),
+    ('VDT_isAutoModeOn', 0x0A04, CAMERA, N, '', BOOL, 'flag', 'high',
+     'text: 4.11.3 "Dx0A04"; rev 2.21.0', Safety.NONE, 'automatic tracking mode'),
+    ('VDT_isTargetDetected', 0x0A13, CAMERA, N, '', BOOL, 'flag', 'high',
+     'rev: 2.21.0 "VDT_isTargetDetected - 0x0A13" (4.11.4 prints "Dx0A")', Safety.NONE,
+     'a target is detected'),
+    ('VDT_GetTargetsList', 0x0732, CAMERA, N, '', TARGETS, 'width x height', 'high',
+     'text: 5.1.5 "GetTargetsList command (0x0732)" (named VDT_ here: it lists the '
+     "tracker's detected targets; the camera index is assumed in the group byte as for "
+     'every VDT command)', Safety.NONE, 'up to 5 detected targets, (0, 0) when absent'),
+    # --- Pelco-D settings (4.13): fourteen commands in section order fill 0x0C80..0x0C8D;
+    # the printed 0x0C84 (5th), 0x0C86 (7th), 0x0C8A (11th) and 0x0C8D (14th) all agree.
+    ('PELCOD_EnPelcoD', 0x0C80, SYSTEM, BOOL, 'flag', N, '', 'medium',
+     _ORDER_PELCO + ' below the first anchor 0x0C84 (fragments "Dx0C8")', Safety.NETWORK,
+     'enable Pelco-D control over RS-485 (the axes then obey Pelco-D messages)'),
+    ('PELCOD_IsActivePelcoD', 0x0C81, SYSTEM, N, '', BOOL, 'flag', 'medium',
+     _ORDER_PELCO + ' below the first anchor 0x0C84 (fragments "Dx0C8")', Safety.NONE,
+     'Pelco-D support enabled'),
+    ('PELCOD_SetAddress', 0x0C82, SYSTEM, U8, 'address', N, '', 'medium',
+     _ORDER_PELCO + ' below the first anchor 0x0C84 (fragments "Dx0C8")', Safety.NETWORK,
+     'Pelco-D device address'),
+    ('PELCOD_GetAddress', 0x0C83, SYSTEM, N, '', U8, 'address', 'medium',
+     _ORDER_PELCO + ' below the first anchor 0x0C84 (fragments "Dx0C8")', Safety.NONE,
+     'Pelco-D device address'),
+    ('PELCOD_SetAxisNum', 0x0C84, PELCO_AXIS, U8, 'system axis', N, '', 'high',
+     'text: 4.13.5 "Dx0C84"', Safety.NONE,
+     'system axis driven by this Pelco-D axis'),
+    ('PELCOD_GetAxisNum', 0x0C85, PELCO_AXIS, N, '', U8, 'system axis', 'high',
+     _ORDER_PELCO + ' between two printed anchors', Safety.NONE,
+     'system axis driven by this Pelco-D axis'),
+    ('PELCOD_SetMinSpd', 0x0C86, MOTOR, F32, 'deg/s', N, '', 'high',
+     'text: 4.13.7 "Dx0C86"', Safety.NONE,
+     'lowest speed of the Pelco-D speed range'),
+    ('PELCOD_GetMinSpd', 0x0C87, MOTOR, N, '', F32, 'deg/s', 'high',
+     _ORDER_PELCO + ' between two printed anchors', Safety.NONE,
+     'lowest speed of the Pelco-D speed range'),
+    ('PELCOD_SetMaxSpd', 0x0C88, MOTOR, F32, 'deg/s', N, '', 'high',
+     _ORDER_PELCO + ' between two printed anchors', Safety.NONE,
+     'highest speed of the Pelco-D speed range'),
+    ('PELCOD_GetMaxSpd', 0x0C89, MOTOR, N, '', F32, 'deg/s', 'high',
+     _ORDER_PELCO + ' between two printed anchors', Safety.NONE,
+     'highest speed of the Pelco-D speed range'),
+    ('PELCOD_SetTurboSpd', 0x0C8A, PAN, F32, 'deg/s', N, '', 'high',
+     'text: 4.13.11 "Dx0C8A"', Safety.NONE,
+     'Pelco-D turbo speed (pan only)'),
+    ('PELCOD_GetTurboSpd', 0x0C8B, PAN, N, '', F32, 'deg/s', 'high',
+     _ORDER_PELCO + ' between two printed anchors', Safety.NONE,
+     'Pelco-D turbo speed (pan only)'),
+    ('PELCOD_SetAccel', 0x0C8C, MOTOR, F32, 'deg/s^2', N, '', 'high',
+     _ORDER_PELCO + ' between two printed anchors', Safety.NONE,
+     'Pelco-D acceleration'),
+    ('PELCOD_GetAccel', 0x0C8D, MOTOR, N, '', F32, 'deg/s^2', 'high',
+     'text: 4.13.14 "Dx0C8D"', Safety.NONE,
+     'Pelco-D acceleration'),
+    # --- relays (4.14): only two opcodes are printed; 0x0D24..0x0D2A has 7 slots for the
+    # 10 commands up to RLY_GetModuleIP, so section order cannot place the others.
+    ('RLY_ActivateModule', 0x0D24, SYSTEM, BOOL, 'flag', N, '', 'high',
+     'text: 4.14.1 "OpCode Dx0D24"', Safety.NONE, 'activate the relay module'),
+    ('RLY_GetModuleIP', 0x0D2A, SYSTEM, N, '', IPV4, 'ip', 'high',
+     'text: 4.14.10 "Dx0D2A"', Safety.NONE, 'IP address of the relay module'),
+    # --- dual gimbals (4.15): camera and synchronisation functions only. The weapon and
+    # CapSnap entries (active weapon, ballistic offset, safety, load, I/O, bullets) are out
+    # of scope and deliberately absent. Axis byte: 1 pan, 2 tilt, 4 pan 2, 5 tilt 2.
+    ('DG_SetSyncMode', 0x0FA0, SYSTEM, BOOL, 'flag', N, '', 'medium',
+     _WITNESS + ' 0x0FA0, the slot below DG_SetInnerMode 0x0FA1 (4.15.2 text)',
+     Safety.MOTION, 'synchronise both gimbals (gimbal 2 follows gimbal 1)'),
+    ('DG_SetInnerMode', 0x0FA1, SYSTEM, BOOL, 'flag', N, '', 'high',
+     'text: 4.15.2 "OpCode 0x0FA1"' + _AGREE, Safety.NONE,
+     'inner (1) or outer (0) azimuth mode of gimbal 2'),
+    ('DG_IsSyncMode', 0x0FA2, SYSTEM, N, '', BOOL, 'flag', 'high',
+     _WITNESS + ' 0x0FA2, completing 4.15.3 "Dx0FA"', Safety.NONE, 'sync mode active'),
+    ('DG_IsInnerMode', 0x0FA3, SYSTEM, N, '', BOOL, 'flag', 'high',
+     _WITNESS + ' 0x0FA3, completing 4.15.4 "DxOFA"', Safety.NONE, 'inner mode active'),
+    ('DG_GetPosDiff', 0x0FA5, DG_PAIR, N, '', F32, 'deg', 'high',
+     _WITNESS + ' 0x0FA5, completing 4.15.5 "Dx0FA"', Safety.NONE,
+     'angle between the paired axes of the two gimbals'),
+    ('DG_SetMaxDiff', 0x0FA6, DG_PAIR, F32, 'deg', N, '', 'high',
+     'rev: 2.17.0 "DG_SetMaxDiff - 0x0FA6"' + _AGREE, Safety.NONE,
+     'largest difference counted as synchronised (min 0.0026)'),
+    ('DG_GetMaxDiff', 0x0FA7, DG_PAIR, N, '', F32, 'deg', 'high',
+     'rev: 2.17.0 "DG_GetMaxDiff - 0x0FA7"' + _AGREE, Safety.NONE,
+     'largest difference counted as synchronised'),
+    ('DG_IsAxesSynced', 0x0FA8, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'rev: 2.19.0 "DG_IsAxesSynced - 0x0FA8"', Safety.NONE, 'both axis pairs within MaxDiff'),
+    ('DG_GoToCamera', 0x0FA9, SYSTEM, N, '', N, '', 'high',
+     _WITNESS + ' 0x0FA9, completing 4.15.9 "Dx0FAS"', Safety.MOTION,
+     'drive gimbal 1 to the current position of gimbal 2'),
+    ('DG_SetSyncSpd', 0x0FAA, DG_PAIR, F32, 'deg/s', N, '', 'high',
+     'rev: 2.17.0 "DG_SetSyncSpd - 0x0FAA"' + _AGREE, Safety.NONE,
+     'speed of the synchronisation (gimbal 1 axes)'),
+    ('DG_SetMainGimbal', 0x0FAB, SYSTEM, U8, 'gimbal 1/2', N, '', 'medium',
+     _WITNESS + ' 0x0FAB; 4.15.11 prints "DxO0FAE" (E read for B; 0x0FAE would break '
+     'the Set/Get pair with DG_GetMainGimbal 0x0FAC)', Safety.NONE,
+     'gimbal that scans, presets and targets move'),
+    ('DG_GetMainGimbal', 0x0FAC, SYSTEM, N, '', U8, 'gimbal 1/2', 'high',
+     _WITNESS + ' 0x0FAC, completing 4.15.12 "DxO0FA"; 4.15.12 prints the setter\'s '
+     'formats, a getter returns the uint8', Safety.NONE, 'main gimbal'),
+    ('DG_CTC', 0x0FB0, SYSTEM, N, '', N, '', 'high',
+     'rev: 2.15.1 "DG_SetSightingIn - 0x0FB0", renamed CTC in 2.17.0' + _AGREE, Safety.NONE,
+     'centre-to-centre: store the gimbal 2 origin offsets (all axes on one target)'),
+    ('DG_GetCTCoffset', 0x0FB1, DG_GIMBAL2, N, '', F32, 'deg', 'high',
+     'rev: 2.15.1 "DG_GetSightingInOffset - 0x0FB1", renamed' + _AGREE, Safety.NONE,
+     'centre-to-centre offset of a gimbal 2 axis'),
+    ('DG_ResetCTCoffset', 0x0FB2, SYSTEM, N, '', N, '', 'high',
+     'rev: 2.15.1 "DG_ResetSightingInOffset - 0x0FB2", renamed' + _AGREE, Safety.NONE,
+     'clear the centre-to-centre offsets'),
+    ('DG_GetSyncSpd', 0x0FB5, DG_PAIR, N, '', F32, 'deg/s', 'high',
+     'rev: 2.17.0 "DG_GetSyncSpd - 0x0FB5"' + _AGREE, Safety.NONE,
+     'speed of the synchronisation'),
+    ('DG_IsBoresightEn', 0x0FB9, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'rev: 2.17.1; text 4.15.23 "Dx0FB9"' + _AGREE, Safety.NONE,
+     'boresight (pointing-axis intersection) enabled'),
+    ('DG_SetActiveCamera', 0x0FBA, SYSTEM, U8, 'camera 1..4', N, '', 'high',
+     'rev: 2.17.0 "DG_SetActiveCamera - 0x0FBA"' + _AGREE, Safety.NONE,
+     'camera whose dimensions the boresight uses'),
+    ('DG_GetActiveCamera', 0x0FBB, SYSTEM, N, '', U8, 'camera 1..4', 'high',
+     'rev: 2.17.0; text 4.15.22 "DxOFBB"' + _AGREE, Safety.NONE, 'active camera'),
+    ('DG_GetBoresightOffset', 0x0FBC, DG_AXIS, N, '', F32, 'deg', 'high',
+     'rev: 2.17.1 "DG_GetBoresightOffset - 0x0FBC"' + _AGREE, Safety.NONE,
+     'boresight addition to the go-to-camera position of an axis'),
+    ('DG_IsSynchronizing', 0x0FCA, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'rev: 2.22.0 "IsSynchronizing - 0x0FCA"', Safety.NONE, 'synchronisation running'),
 ]
 
 COMMANDS: dict[str, Command] = {}
@@ -607,38 +855,26 @@ del _row, _cmd
 
 # Commands of the in-scope groups whose opcode could not be established; never encoded.
 UNRESOLVED: dict[str, str] = {
-    'MOT_GetShortPath': '4.1.11 prints "Dx014" (0x014?), outside the get-data run; '
-                        'the 0x0141-0x0143 slots are shared with SetShortPath/SetMaxCurrent',
-    'MOT_SetShortPath': '4.2.16 prints "Dx014"; 0x0141..0x0143 all fit',
-    'MOT_GetMaxCurrent': '4.1.12 prints "Dx0"; no anchor',
-    'MOT_SetMaxCurrent': '4.2.18 has no opcode line; 0x0141..0x0143 all fit',
-    'GPS_GetAltitude': '4.4.4 has no opcode line; 0x0506..0x0509 all fit',
-    'GPS_GetSatellites': '4.4.5 has no opcode line; 0x0506..0x0509 all fit',
+    'GPS_GetAltitude': '4.4.4 has no opcode line; 0x0506..0x0509 all fit; no witness',
+    'GPS_GetSatellites': '4.4.5 has no opcode line; 0x0506..0x0509 all fit; no witness',
     'GPS_StartTargetTracking': '4.4.16 no opcode; 0x0515 or 0x0518.. (tracker systems only)',
     'GPS_StopTargetTracking': '4.4.17 no opcode (tracker systems only)',
     'GPS_GetStartupStatus': '4.4.18 no opcode',
     'IMU_Reset': '4.5.8 heading lost, "Dx060" only; 0x0608..0x0636 all fit',
     'IMU_setGyroFilterGain': 'rev 2.18.0 says get=0x0640/set=0x0641 but 4.5.20 prints '
-                             '"0x064(0" for the setter: contradictory',
+                             '"0x064(0" for the setter: contradictory; no witness',
     'IMU_getGyroFilterGain': 'see IMU_setGyroFilterGain',
-    'COM_SetComType': '4.6.11 heading and opcode lost; also a communication change',
-    'IP_GetControllerPort': '4.7.4 no opcode; 0x070C or 0x070E',
-    'IP_SetControllerSubnetMask': '4.7.5 no opcode',
-    'STB_GetStabPosError': '4.8.4 heading and opcode lost',
-    'STB_SetStabMinAccel': '4.8.5 no opcode (0x0839 likely, not printed)',
-    'STB_Set/Get Spd/Pos Kp/Ki/Kd': '4.8.7-4.8.18 print 0x0D04/0x0D09/0x0D0A/0x0D16/0x0D18/'
-                                    '0x0D1A, inside the preset group and not in a '
-                                    'consistent order: contradictory',
-    'STB_SetDistanceToTarget': '4.8.19 no opcode; 0x0829 was a removed command',
-    'STB_SetCentralAxes': '4.8.21 "Dx08" only',
-    'STB_GetAxisRadiusCompensation': '4.8.24 no opcode',
-    'STB_SaveStabilizationCfg': '4.8.30 no opcode',
+    'STB_GetAxisRadiusCompensation': '4.8.24 no opcode; the witness lists only the older '
+                                     'STB_Set/GetRollCompensation 0x0C76/0x0C77, not this '
+                                     'command (its setter is 0x0854)',
     'SWLS_SetHandler/GetHandler/SetOffsetValue/GetOffsetValue/SetSlowdownValue/'
-    'GetSlowdownValue': '4.16.7-4.16.12 print only fragments ("Dx( 6", "Dx0 B")',
-    'VDT_* (video tracker)': 'camera index travels in the group byte; not used by this '
-                             'pan-tilt driver (opcodes 0x0A01/0x0A02/0x0A04/0x0A13 are known)',
-    'PELCOD_*, RLY_*, DG_* (non-weapon)': 'Pelco-D settings, relay module and dual-gimbal '
-                                          'synchronisation: not reconstructed',
+    'GetSlowdownValue': '4.16.7-4.16.12 print only fragments ("Dx( 6", "Dx0 B"); no witness',
+    'RLY_IsActivateModule/SetRelay/GetRelay/SetRelayPeriod/SetRelayJogging/GetModuleErr/'
+    'RstComModule/SetModuleIP/SetNumRelays/GetNumRelays':
+        'only 0x0D24 (4.14.1) and 0x0D2A (4.14.10) are printed; 7 slots for 10 commands, so '
+        'section order does not hold; no witness',
+    'DG_SetStabGimbal/GetStabGimbal': '4.15.13/4.15.14 print "DXOFA" only; 0x0FA4, 0x0FAD..'
+                                      '0x0FAF all fit; not in the witness',
 }
 
 

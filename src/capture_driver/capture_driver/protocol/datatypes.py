@@ -6,6 +6,8 @@ Composite formats:
 * Preset (5.1.4): 16-byte ASCII name, then azimuth, elevation, roll, X, Y, Z as f32 degrees;
   40 bytes. (PRST_GetPreset/SetPreset refer to "section 5.1.5" for it; 5.1.5 is the
   targets list, so the reference is off by one and 5.1.4 is meant.)
+* Targets list (5.1.5, GetTargetsList 0x0732): five (width, height) uint16 pairs, 20 bytes;
+  absent targets are (0, 0).
 * IPv4 (4.7): four bytes, most significant first (192.168.10.13 -> C0 A8 0A 0D; the
   examples in 4.7.1/4.7.2/4.7.5 printing 0x04/0x04A/0x0A4 for the third byte are OCR errors,
   4.7.6 prints the consistent 0x0A).
@@ -40,12 +42,15 @@ class DataType(Enum):
     IPV4 = 'ipv4'
     LLA = 'target_lla'
     PRESET = 'preset'
+    TARGETS = 'targets_list'  # 5.1.5: five (width, height) uint16 pairs
 
 
 PRESET_NAME_SIZE = 16
+TARGETS_LIST_SIZE = 5  # 5.1.5: "the system can hold up to 5 targets at once"
 PRESET_AXES = ('azimuth', 'elevation', 'roll', 'x', 'y', 'z')
 _LLA = struct.Struct('>ddf')
 _PRESET = struct.Struct(f'>{PRESET_NAME_SIZE}s6f')
+_TARGETS = struct.Struct(f'>{2 * TARGETS_LIST_SIZE}H')
 
 FIXED_SIZES: dict[DataType, int] = {
     DataType.NONE: 0,
@@ -58,6 +63,7 @@ FIXED_SIZES: dict[DataType, int] = {
     DataType.IPV4: 4,
     DataType.LLA: _LLA.size,
     DataType.PRESET: _PRESET.size,
+    DataType.TARGETS: _TARGETS.size,
 }
 
 _FLOAT32_MAX = 3.4028234663852886e38
@@ -155,7 +161,21 @@ def encode_value(dtype: DataType, value: Any, what: str = 'value') -> bytes:
             for axis, a in zip(PRESET_AXES, record.angles, strict=True)
         ]
         return _PRESET.pack(name.ljust(PRESET_NAME_SIZE, b'\0'), *angles)
+    if dtype is DataType.TARGETS:
+        return _TARGETS.pack(*_targets_from(value, what))
     raise ProtocolError(f'unsupported data type {dtype}')  # pragma: no cover
+
+
+def _targets_from(value: Any, what: str) -> list[int]:
+    """Flatten up to five (width, height) pairs; missing targets are (0, 0) (5.1.5)."""
+    try:
+        pairs = [tuple(pair) for pair in value]
+    except TypeError as exc:
+        raise ProtocolError(f'{what} needs (width, height) pairs, got {value!r}') from exc
+    if len(pairs) > TARGETS_LIST_SIZE or any(len(pair) != 2 for pair in pairs):
+        raise ProtocolError(f'{what} needs at most {TARGETS_LIST_SIZE} (width, height) pairs')
+    pairs += [(0, 0)] * (TARGETS_LIST_SIZE - len(pairs))
+    return [_need_int(v, 0, 0xFFFF, f'{what} target size') for pair in pairs for v in pair]
 
 
 def _geo_from(value: Any, what: str) -> GeoPoint:
@@ -213,6 +233,9 @@ def decode_value(dtype: DataType, data: bytes, what: str = 'reply') -> Any:
         raw_name, *angles = _PRESET.unpack(data)
         name = raw_name.split(b'\0', 1)[0].decode('ascii', errors='replace')
         return PresetRecord(name, tuple(angles))  # type: ignore[arg-type]
+    if dtype is DataType.TARGETS:
+        values = _TARGETS.unpack(data)
+        return tuple(zip(values[0::2], values[1::2], strict=True))
     raise ProtocolError(f'unsupported data type {dtype}')  # pragma: no cover
 
 
