@@ -45,9 +45,11 @@ from .protocol import (
     command,
     ddmm_to_degrees,
 )
-from .protocol.registers import CSR_ERROR_STRINGS, REGISTERS
+from .protocol.registers import CSR_ERROR_STRINGS, CSR_PROTOCOL_ERROR, REGISTERS
 
 LOG = logging.getLogger('capture_driver.client')
+
+GPS_FIX_COMMANDS = ('GPS_PositionReady', 'GPS_GetLatitude', 'GPS_GetLongitude')
 
 SCAN_COMMANDS = {
     'zigzag': 'SCN_StartScanZigZag',
@@ -134,6 +136,9 @@ class CaptureClient:
         self.connects = 0
         self.stats = {'requests': 0, 'timeouts': 0, 'nacks': 0, 'stale': 0}
         self.on_connect: Callable[[], None] | None = None
+        # Commands the host sends on its own whose opcode the device refused with 0xA6
+        # (name -> the device's answer); never sent again on this client.
+        self.unsupported: dict[str, str] = {}
 
     # ---------------------------------------------------------------- link
     @property
@@ -386,18 +391,49 @@ class CaptureClient:
         except DeviceNack as exc:
             raise self.explain_nack(exc) from None
 
+    def optional(self, name: str, axis: int | None = None) -> Any:
+        """A request the host makes on its own (identity, polls, probes); None if refused.
+
+        Some of these opcodes are reconstructions, and a device may lack the function. When
+        the device answers 0xA6 the command lands in :attr:`unsupported` with the device's
+        reason and is never sent again, so the host does not keep raising the controller's
+        protocol-error flag; the one flag this request raised is cleared again when it is
+        the only CSR bit set (ERR_ClearErrors would otherwise also clear real errors).
+        Timeouts and other NACKs return None for this call only.
+        """
+        if name in self.unsupported:
+            return None
+        try:
+            return self.request(name, axis)
+        except DeviceNack as exc:
+            if exc.code != ReplyCode.INVALID_COMMAND:
+                LOG.info('%s', exc)
+                return None
+            explained = self.explain_nack(exc)
+            self.unsupported[name] = (
+                f'0x{command(name).opcode:04X} answered NACK 0xA6'
+                + (f' "{explained.detail}"' if explained.detail else ''))
+            LOG.warning('%s: the device does not support it (%s); not sent again',
+                        name, self.unsupported[name])
+            self._clear_own_protocol_error()
+        except DeviceTimeout as exc:
+            LOG.info('%s', exc)
+        return None
+
+    def _clear_own_protocol_error(self) -> None:
+        with contextlib.suppress(CaptureError, ProtocolError):
+            if self.request('ERR_CaptureSystemRegister') == CSR_PROTOCOL_ERROR:
+                self.request('ERR_ClearErrors')
+
     # ----------------------------------------------------- device functions
     def identity(self) -> Identity:
         """Serial number, firmware, hardware and part number (blank where refused)."""
         ident = Identity()
         for attr, name in (('serial_number', 'COM_GetSn'), ('firmware', 'COM_GetFw'),
                            ('hardware', 'COM_GetHw'), ('part_number', 'COM_GetPn')):
-            try:
-                value = self.request(name)
-            except (DeviceNack, DeviceTimeout) as exc:
-                LOG.info('identity: %s', exc)
-                continue
-            setattr(ident, attr, f'{value:g}' if isinstance(value, float) else str(value))
+            value = self.optional(name)
+            if value is not None:
+                setattr(ident, attr, f'{value:g}' if isinstance(value, float) else str(value))
         return ident
 
     def read_axis(self, axis: int, with_current: bool = False) -> tuple[float, float, float | None]:
@@ -508,12 +544,19 @@ class CaptureClient:
         keys = ('roll', 'pitch', 'yaw', 'gyro_x', 'gyro_y', 'gyro_z')
         return {key: self.request(name) for key, name in zip(keys, names, strict=True)}
 
-    def gps_fix(self) -> tuple[bool, float, float]:
-        """(position valid, latitude deg, longitude deg); converts DDMM.mmmm (4.4.1)."""
-        ready = self.request('GPS_PositionReady')
-        latitude = ddmm_to_degrees(self.request('GPS_GetLatitude'))
-        longitude = ddmm_to_degrees(self.request('GPS_GetLongitude'))
-        return bool(ready), latitude, longitude
+    def gps_fix(self) -> tuple[bool, float, float] | None:
+        """(position valid, latitude deg, longitude deg), converted from DDMM.mmmm (4.4.1);
+        None once the device has refused one of the three (the fix poll then stops)."""
+        if any(name in self.unsupported for name in GPS_FIX_COMMANDS):
+            return None
+        values = []
+        for name in GPS_FIX_COMMANDS:
+            value = self.optional(name)
+            if value is None:
+                return None
+            values.append(value)
+        ready, latitude, longitude = values
+        return bool(ready), ddmm_to_degrees(latitude), ddmm_to_degrees(longitude)
 
     def goto_lla(self, target: int, point: GeoPoint) -> None:
         self.run('GPS_SetTargetLLA', target, point)

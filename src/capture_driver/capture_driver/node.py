@@ -41,6 +41,7 @@ from .client import (
     CaptureError,
     DeviceNack,
     DeviceTimeout,
+    Identity,
     NotConnected,
 )
 from .protocol import COMMANDS, DataType, GeoPoint, PresetRecord, ProtocolError, Safety
@@ -60,7 +61,12 @@ DEDICATED = {
     'GPS_StartTargetLooping': 'nothing (target poses are not limit-checked); use ~/goto_lla',
     'IMU_Leveling': 'nothing (the levelling pose is not limit-checked); use ~/move_to',
 }
-ALLOWED_MOTION = {'SRV_MoveTo'}  # the auxiliary servo is not a joint
+# Motion commands ~/command sends anyway: the auxiliary servo is not a joint; video
+# tracking and the dual-gimbal synchronisation move the axes under the controller's own
+# (software-limit) control with no driver-side target to check, so they get the axis-state
+# check (off/faulted axes refuse) but no limit check.
+ALLOWED_MOTION = {'SRV_MoveTo', 'VDT_setTrackingOn', 'DG_SetSyncMode', 'DG_GoToCamera'}
+JOINT_MOTION = ALLOWED_MOTION - {'SRV_MoveTo'}
 OPT_IN = {
     Safety.NV_WRITE: 'allow_nv_write',
     Safety.REBOOT: 'allow_reboot',
@@ -123,6 +129,8 @@ def format_result(cmd_name: str, value: Any) -> list[str]:
     if isinstance(value, PresetRecord):
         return [f'name={value.name}', *(f'{axis}={angle:.4f} deg' for axis, angle in zip(
             ('azimuth', 'elevation', 'roll', 'x', 'y', 'z'), value.angles, strict=True))]
+    if cmd.ret is DataType.TARGETS:
+        return [f'target{i}={width}x{height}' for i, (width, height) in enumerate(value, 1)]
     if cmd.ret_unit == 'bits':
         return [f'0x{value:04X}']
     if isinstance(value, float):
@@ -268,9 +276,9 @@ class CaptureDriverNode(GimbalDriverNode):
         client.connect()
         self.client = client
         ident = client.identity()
-        self._has_imu = self._probe('IMU_IsReadyImu')
-        self._has_gps = self._probe('GPS_isConnectedGPS')
-        self._device_scanning = bool(self._probe('SCN_IsScanOn'))
+        self._has_imu = bool(client.optional('IMU_IsReadyImu'))
+        self._has_gps = bool(client.optional('GPS_isConnectedGPS'))
+        self._device_scanning = bool(client.optional('SCN_IsScanOn'))
         self._preset_looping = False
         self._next_status = 0.0
         client.start()
@@ -280,21 +288,24 @@ class CaptureDriverNode(GimbalDriverNode):
         )
         firmware = ident.firmware + (f' (hw {ident.hardware})' if ident.hardware else '')
         serial = ident.serial_number
-        # hardware_id: serial number and firmware (the link address if the serial is unknown)
-        hardware_id = f'capture-sn{serial}' if serial else f'capture@{self.link_description()}'
-        if ident.firmware:
-            hardware_id += f'-fw{ident.firmware}'
         return DeviceInfo(
             model=ident.part_number or 'Capture pedestal', serial_number=serial,
-            firmware_version=firmware, hardware_id=hardware_id,
+            firmware_version=firmware, hardware_id=self._hardware_id(ident),
         )
 
-    def _probe(self, name: str) -> bool:
-        assert self.client is not None
-        try:
-            return bool(self.client.request(name))
-        except (DeviceNack, DeviceTimeout):
-            return False
+    def _hardware_id(self, ident: Identity) -> str:
+        """capture[-pn<part>]-sn<serial>[-hw<rev>][-fw<firmware>] from what the device
+        answered; the link address stands in for a serial number it does not give."""
+        parts = ['capture']
+        if ident.part_number:
+            parts.append(f'pn{ident.part_number}')
+        parts.append(f'sn{ident.serial_number}' if ident.serial_number
+                     else f'@{self.link_description()}')
+        if ident.hardware:
+            parts.append(f'hw{ident.hardware}')
+        if ident.firmware:
+            parts.append(f'fw{ident.firmware}')
+        return '-'.join(parts)
 
     def close_device(self) -> None:
         client, self.client = self.client, None
@@ -385,10 +396,14 @@ class CaptureDriverNode(GimbalDriverNode):
 
     def _publish_fix(self, client: CaptureClient) -> None:
         try:
-            ready, latitude, longitude = client.gps_fix()
+            fix = client.gps_fix()
         except (DeviceNack, DeviceTimeout, ProtocolError) as exc:
             self.get_logger().warning(f'GPS read failed: {exc}', throttle_duration_sec=10.0)
             return
+        if fix is None:  # the device refused a GPS getter: the fix poll stops (diagnostics)
+            self._has_gps = False
+            return
+        ready, latitude, longitude = fix
         msg = NavSatFix()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.header.frame_id = self.gps_frame_id
@@ -452,18 +467,51 @@ class CaptureDriverNode(GimbalDriverNode):
         self._device_call(action)
 
     def reset_faults(self) -> str:
+        """Per axis MOT_ResetFaults + MOT_AxisOn (4.10) and a stop, then ERR_ClearErrors;
+        the answer quotes the device (its NACK and reason, or the axis state it reports
+        afterwards), and fails while an axis is still off or faulted."""
         def action(client: CaptureClient) -> str:
-            done = []
             for joint in self.joint_names:
                 axis = self._axis[joint]
-                client.reset_faults(axis)  # ResetFaults + AxisOn (4.10)
-                client.stop_axis(axis)  # AxisOn resumes a buffered move (4.2.11): cancel it
-                done.append(joint)
+                try:
+                    client.reset_faults(axis)  # ResetFaults + AxisOn (4.10)
+                    client.stop_axis(axis)  # AxisOn resumes a buffered move (4.2.11)
+                except (DeviceNack, DeviceTimeout) as exc:
+                    self._next_status = 0.0
+                    raise DeviceError(f'{joint}: {exc}') from exc
             client.request('ERR_ClearErrors')
-            self._next_status = 0.0
-            return f'faults reset and axes on: {", ".join(done)}'
+            self._refresh_status(client)  # motion checks see the new state at once
+            still = self.axis_refusal(self.joint_names)
+            if still:
+                raise DeviceError('the device ACKed MOT_ResetFaults and MOT_AxisOn, but ' + still)
+            return ('device ACKed MOT_ResetFaults, MOT_AxisOn and ERR_ClearErrors; registers '
+                    'now show ' + ', '.join(f'{j} on, no fault' for j in self.joint_names))
 
         return self._device_call(action)
+
+    def axis_refusal(self, joints: Sequence[str]) -> str | None:
+        """Refuse motion on an axis whose last registers show a fault or the drive off.
+
+        The device ACKs position commands to an axis that is off and then does not move;
+        the registers polled every ``status_period`` say why, so the node refuses first.
+        """
+        with self._status_lock:
+            axes = self._status.get('axes', {})
+        reasons = []
+        for joint in joints:
+            registers = axes.get(joint)
+            if registers is None:
+                continue
+            active = [a for r in AXIS_REGISTERS for a in r.decode(registers.get(r.name, 0))]
+            names = {a.flag.name for a in active}
+            faults = sorted({a.key for a in active if a.flag.level >= Level.ERROR})
+            if 'fault' in names or faults:
+                reasons.append(f'{joint} is faulted ({", ".join(faults) or "fault"})')
+            elif 'axis_off' in names:
+                reasons.append(f'{joint} drive is off (SRL axis_off)')
+        if not reasons:
+            return None
+        return '; '.join(reasons) + '; call ~/reset_faults (MOT_ResetFaults + MOT_AxisOn)'
 
     def home(self, joints: Sequence[str], report: Callable[[str], None],
              cancelled: threading.Event) -> str:
@@ -742,6 +790,10 @@ class CaptureDriverNode(GimbalDriverNode):
                 where = DEDICATED.get(cmd.name, 'the dedicated interface')
                 raise CommandError(f"{cmd.name} moves the axes without the driver's limit "
                                    f'checks; use {where}')
+            if cmd.name in JOINT_MOTION:
+                refusal = self.axis_refusal(self.joint_names)
+                if refusal:
+                    raise CommandError(f'{cmd.name} refused, nothing sent: {refusal}')
             opt_in = OPT_IN.get(cmd.safety)
             if opt_in and not getattr(self, opt_in):
                 raise CommandError(f'{cmd.name} is a {cmd.safety.value} command; set the '
@@ -787,6 +839,9 @@ class CaptureDriverNode(GimbalDriverNode):
         values += [(f'error.{name}', text) for name, text in status.get('errors', {}).items()
                    if text]
         values += [(f'problem.{i}', text) for i, text in enumerate(status['problems'])]
+        unsupported = dict(client.unsupported) if client is not None else {}
+        values += [(f'unsupported.{name}', f'{answer}; not polled')
+                   for name, answer in unsupported.items()]
         if client is not None:
             values += [('link', client.description)] + [
                 (f'link.{k}', str(v)) for k, v in client.stats.items()
@@ -801,6 +856,8 @@ class CaptureDriverNode(GimbalDriverNode):
         texts = [t for t in errors.values() if t]
         if texts:
             part.message += ' | ' + '; '.join(texts)
+        if unsupported:  # informational: an optional function the device lacks
+            part.message += ' | device does not know: ' + ', '.join(unsupported)
         parts.append(part)
         return parts
 

@@ -25,8 +25,8 @@ import signal
 import socket
 import threading
 import time
-from collections import deque
-from collections.abc import Callable
+from collections import Counter, deque
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 from gimbal_driver_common.sim_server import LOOPBACK, PtySimServer, TcpSimServer
@@ -269,6 +269,7 @@ class PedestalModel:
         time_scale: float = 1.0,
         serial_number: int = 24017,
         firmware: str = '2.24.0',
+        unknown_commands: Iterable[str] = (),
     ) -> None:
         if axes not in (2, 3):
             raise ValueError('the simulator models 2 or 3 axes')
@@ -281,6 +282,11 @@ class PedestalModel:
         self.time_scale = time_scale
         self.serial_number = serial_number
         self.firmware = firmware
+        self.part_number = f'CAP-PT{axes}-SIM'
+        self.hardware_revision = 3.1
+        # Opcodes this device does not know (an older firmware, or a table guess that is
+        # wrong): answered 0xA6 "Opcode not Recognized" like any opcode outside the table.
+        self.unknown_opcodes = {COMMANDS[name].opcode for name in unknown_commands}
         self.emergency_stop = False
         self.stabilization = False
         self.scan: ScanState | None = None
@@ -303,6 +309,10 @@ class PedestalModel:
         self.csr_latched = 0
         self.protocol_error = ''
         self.stored: dict[tuple[str, int], object] = {}
+        # video tracker (4.11), per camera index 0..3: mode 0 off/1 manual/2 auto, and the
+        # targets the camera detects (5.1.5 width x height); tests set the latter
+        self.tracking_mode: dict[int, int] = {}
+        self.detected_targets: dict[int, list[tuple[int, int]]] = {}
         # fault injection
         self.nack_queue: deque[tuple[ReplyCode, int | None]] = deque()
         self.drop_replies = 0
@@ -481,7 +491,7 @@ class PedestalModel:
             except RequestRejected as exc:
                 self.protocol_error = exc.reason
                 if exc.code == ReplyCode.INVALID_COMMAND:
-                    self.csr_latched |= 1 << 7
+                    self.csr_latched |= reg.CSR_PROTOCOL_ERROR
                 reply = bytes([exc.code])
             if self.drop_replies:
                 self.drop_replies -= 1
@@ -506,7 +516,7 @@ class PedestalModel:
 
     def _execute(self, frame: Frame, session: CaptureSession) -> bytes:
         cmd = BY_OPCODE.get(frame.opcode)
-        if cmd is None:
+        if cmd is None or frame.opcode in self.unknown_opcodes:
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Opcode not Recognized')
         if not session.connected and cmd.name != 'COM_Connect':
             # sim: commands are processed only after COM_Connect (4.6.2)
@@ -517,8 +527,14 @@ class PedestalModel:
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input') from exc
         if cmd.axis.name == 'motor':
             self._axis(frame)
-        elif not cmd.axis.low <= frame.axis <= cmd.axis.high and cmd.axis.name != 'none':
-            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
+        elif cmd.axis.in_group_byte:
+            if not cmd.axis.low <= frame.group <= cmd.axis.high:
+                raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
+        elif cmd.axis.name != 'none':
+            try:
+                cmd.axis.check(frame.axis, cmd.name)
+            except ProtocolError as exc:
+                raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input') from exc
         if cmd.name.startswith(('GPS_', 'ERR_GetGps')) and not self.gps_present and not (
             cmd.name.startswith(('GPS_SetInserted', 'GPS_GetInserted', 'GPS_SetOvd',
                                  'GPS_GetOvd', 'GPS_SetTarget', 'GPS_GetTarget',
@@ -545,17 +561,38 @@ class PedestalModel:
         """Setters store, getters return what was stored (or a zero of the right type)."""
         group, _, rest = name.partition('_')
         key_rest = rest[3:] if rest[:3].lower() in ('set', 'get') else rest
-        key = (f'{group}_{key_rest.lower()}', frame.axis)
         cmd = COMMANDS[name]
+        key = (f'{group}_{key_rest.lower()}',
+               frame.group if cmd.axis.in_group_byte else frame.axis)
         if cmd.replies_with_data:
             if key in self.stored:
                 return self.stored[key]
             return {DataType.BOOL: False, DataType.ASCII: '', DataType.IPV4: '0.0.0.0',
                     DataType.LLA: GeoPoint(0.0, 0.0, 0.0),
-                    DataType.PRESET: PresetRecord('')}.get(cmd.ret, 0)
+                    DataType.PRESET: PresetRecord(''), DataType.TARGETS: ()}.get(cmd.ret, 0)
         if arg is not None:
             self.stored[key] = arg
         return None
+
+    # --- video tracker (4.11): the camera index is the group byte
+    def _do_VDT_setTrackingOn(self, frame, arg, session):
+        if arg not in (0, 1, 2):
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
+        self.tracking_mode[frame.group] = arg
+
+    def _do_VDT_isTrackingOn(self, frame, arg, session):
+        # manual and automatic modes both track only while a target is detected (4.11.1)
+        return bool(self.tracking_mode.get(frame.group)) and bool(
+            self.detected_targets.get(frame.group))
+
+    def _do_VDT_isAutoModeOn(self, frame, arg, session):
+        return self.tracking_mode.get(frame.group) == 2
+
+    def _do_VDT_isTargetDetected(self, frame, arg, session):
+        return bool(self.detected_targets.get(frame.group))
+
+    def _do_VDT_GetTargetsList(self, frame, arg, session):
+        return self.detected_targets.get(frame.group, [])[:5]
 
     # --- COM
     def _do_COM_Connect(self, frame, arg, session):
@@ -611,10 +648,10 @@ class PedestalModel:
         return self.firmware
 
     def _do_COM_GetHw(self, frame, arg, session):
-        return 3.1
+        return self.hardware_revision
 
     def _do_COM_GetPn(self, frame, arg, session):
-        return f'CAP-PT{len(self.axes)}-SIM'
+        return self.part_number
 
     # --- MOT reads
     def _do_MOT_GetLoadPosition(self, frame, arg, session):
@@ -1156,6 +1193,9 @@ class CaptureSimulator:
                 self.drop_link(float(args[0]) if args else 0.0)
             elif verb == 'silent':
                 self.set_silent(args[0].lower() in ('1', 'on', 'true'))
+            elif verb == 'unknown':
+                with model.lock:
+                    model.unknown_opcodes.add(COMMANDS[args[0]].opcode)
             elif verb == 'pose':
                 model.set_pose(int(args[0]), float(args[1]))
             elif verb == 'state':
@@ -1170,6 +1210,9 @@ class CaptureSimulator:
                         'presets': sorted(model.presets),
                         'keepalive': model.keepalive_on,
                         'requests': len(model.requests),
+                        'requests_by_command': dict(Counter(
+                            BY_OPCODE[f.opcode].name if f.opcode in BY_OPCODE
+                            else f'0x{f.opcode:04X}' for f in model.requests)),
                         'connections': self.tcp.connections if self.tcp else 0,
                     })
             elif verb == 'help':
@@ -1184,7 +1227,7 @@ class CaptureSimulator:
 CONTROL_HELP = (
     'fault AXIS NAME (NAME in ' + ','.join(FAULTS) + ') | system_fault CSR_FLAG | '
     'nack HEXCODE [COMMAND|*] [COUNT] | lose [COUNT] | garbage [HEX] | drop [OFFLINE_S] | '
-    'silent on|off | pose AXIS DEG | state | help'
+    'silent on|off | unknown COMMAND | pose AXIS DEG | state | help'
 )
 
 
@@ -1227,11 +1270,18 @@ def main(argv: list[str] | None = None) -> int:
                         help='simulated seconds per real second (faster tests)')
     parser.add_argument('--control-port', type=int, default=-1,
                         help='fault-injection console on 127.0.0.1 (0 = any free port)')
+    parser.add_argument('--unknown', action='append', default=[], metavar='COMMAND',
+                        help='play a device that does not know this table command: it '
+                             'answers 0xA6 "Opcode not Recognized" (repeatable)')
     parser.add_argument('--log-level', default='INFO')
     args = parser.parse_args(argv)
+    for name in args.unknown:
+        if name not in COMMANDS:
+            parser.error(f'--unknown {name}: not a command of the table')
     logging.basicConfig(level=args.log_level.upper(), format='%(name)s: %(message)s')
     model = PedestalModel(axes=args.axes, gps=not args.no_gps, imu=not args.no_imu,
-                          gear_ratio=args.gear_ratio, time_scale=args.time_scale)
+                          gear_ratio=args.gear_ratio, time_scale=args.time_scale,
+                          unknown_commands=args.unknown)
     sim = CaptureSimulator(model, tcp_port=None if args.port < 0 else args.port,
                            pty=args.pty, pty_link=args.pty_link)
     sim.start()

@@ -381,3 +381,85 @@ def test_three_axis_pedestal():
         c.close()
     two_axis = PedestalModel(axes=2)
     assert 3 not in two_axis.axes
+
+
+def _sent(sim, name: str) -> int:
+    opcode = COMMANDS[name].opcode
+    return sum(1 for frame in list(sim.model.requests) if frame.opcode == opcode)
+
+
+def test_identity_uses_the_witnessed_opcodes(client, sim):
+    ident = client.identity()
+    assert (ident.part_number, ident.serial_number, ident.hardware, ident.firmware) == (
+        'CAP-PT2-SIM', '24017', '3.1', '2.24.0')
+    assert not client.unsupported
+    for name, opcode in (('COM_GetPn', 0x0C2D), ('COM_GetSn', 0x0C2F), ('COM_GetHw', 0x0C4C)):
+        assert _sent(sim, name) == 1 and COMMANDS[name].opcode == opcode
+
+
+def test_poll_of_an_opcode_the_device_does_not_know_stops():
+    """A device without GPS_GetLatitude: one 0xA6, recorded with the device's reason, the
+    protocol-error flag it raised is cleared, and the fix poll never sends it again."""
+    model = PedestalModel(time_scale=8.0, unknown_commands=['GPS_GetLatitude'])
+    with CaptureSimulator(model, tcp_port=0) as sim:
+        c = tcp_client(sim)
+        c.connect()
+        assert c.gps_fix() is None
+        assert c.unsupported == {'GPS_GetLatitude': '0x0505 answered NACK 0xA6 '
+                                                    '"Opcode not Recognized"'}
+        assert c.request('ERR_CaptureSystemRegister') == 0  # the flag it raised is cleared
+        before = len(sim.model.requests)
+        for _ in range(3):
+            assert c.gps_fix() is None
+        assert len(sim.model.requests) == before  # nothing at all is sent for the fix
+        assert _sent(sim, 'GPS_GetLatitude') == 1
+        c.close()
+
+
+def test_protocol_error_flag_is_kept_when_other_errors_are_set():
+    model = PedestalModel(time_scale=8.0, unknown_commands=['COM_GetSn'])
+    with CaptureSimulator(model, tcp_port=0) as sim:
+        sim.model.inject_system_fault('gps_position_error')
+        c = tcp_client(sim)
+        c.connect()
+        assert c.identity().serial_number == ''
+        assert 'COM_GetSn' in c.unsupported
+        assert c.request('ERR_CaptureSystemRegister') & (1 << 7)  # not ours alone to clear
+        c.close()
+
+
+def test_reset_faults_on_a_device_without_the_opcode_reports_its_answer():
+    model = PedestalModel(time_scale=8.0, unknown_commands=['MOT_ResetFaults'])
+    with CaptureSimulator(model, tcp_port=0) as sim:
+        c = tcp_client(sim)
+        c.connect()
+        sim.model.inject_fault(1, 'over_current')
+        with pytest.raises(DeviceNack, match=r'MOT_ResetFaults \(axis 1\): NACK 0xA6.*'
+                                             r'device says: Opcode not Recognized'):
+            c.reset_faults(1)
+        assert sim.model.axes[1].faulted
+        c.close()
+
+
+def test_video_tracker_pelco_relay_and_dual_gimbal_commands(client, sim):
+    # camera index in the group byte: each camera keeps its own mode and detections
+    sim.model.detected_targets[2] = [(120, 80), (16, 9)]
+    client.request('VDT_setTrackingOn', 2, 1)
+    assert sim.model.requests[-1].group == 2 and sim.model.requests[-1].axis == 0
+    assert client.request('VDT_isTrackingOn', 2) is True
+    assert client.request('VDT_isAutoModeOn', 2) is False
+    assert client.request('VDT_GetTargetsList', 2) == ((120, 80), (16, 9)) + ((0, 0),) * 3
+    client.request('VDT_setTrackingOn', 1, 2)  # automatic: waits for a detection
+    assert client.request('VDT_isAutoModeOn', 1) is True
+    assert client.request('VDT_isTrackingOn', 1) is False
+    assert client.request('VDT_isTargetDetected', 1) is False
+    with pytest.raises(DeviceNack, match='0xA6'):
+        client.request('VDT_setTrackingOn', 0, 3)
+    client.request('PELCOD_SetMaxSpd', 2, 45.0)
+    assert client.request('PELCOD_GetMaxSpd', 2) == 45.0
+    assert client.request('PELCOD_GetMaxSpd', 1) == 0.0
+    client.request('RLY_ActivateModule', None, 1)
+    client.request('STB_SetPosKi', 1, 0.25)
+    assert client.request('STB_GetPosKi', 1) == 0.25
+    client.request('DG_SetMaxDiff', 2, 0.01)
+    assert client.request('DG_GetMaxDiff', 2) == pytest.approx(0.01)
