@@ -1194,8 +1194,12 @@ class CaptureSimulator:
             elif verb == 'silent':
                 self.set_silent(args[0].lower() in ('1', 'on', 'true'))
             elif verb == 'unknown':
+                opcode = COMMANDS[args[0]].opcode
                 with model.lock:
-                    model.unknown_opcodes.add(COMMANDS[args[0]].opcode)
+                    if len(args) > 1 and args[1].lower() in ('off', '0', 'false'):
+                        model.unknown_opcodes.discard(opcode)
+                    else:
+                        model.unknown_opcodes.add(opcode)
             elif verb == 'pose':
                 model.set_pose(int(args[0]), float(args[1]))
             elif verb == 'state':
@@ -1227,7 +1231,7 @@ class CaptureSimulator:
 CONTROL_HELP = (
     'fault AXIS NAME (NAME in ' + ','.join(FAULTS) + ') | system_fault CSR_FLAG | '
     'nack HEXCODE [COMMAND|*] [COUNT] | lose [COUNT] | garbage [HEX] | drop [OFFLINE_S] | '
-    'silent on|off | unknown COMMAND | pose AXIS DEG | state | help'
+    'silent on|off | unknown COMMAND [on|off] | pose AXIS DEG | state | help'
 )
 
 

@@ -99,7 +99,8 @@ def test_joint_states_and_identity(rig):
     assert msg.name == ['pan', 'tilt']
     assert len(msg.velocity) == 2
     status = ros.wait_for_diagnostic(NODE, 'connection', lambda s: s.level == b'\x00')
-    assert status.hardware_id == 'capture-sn24017-fw2.24.0'
+    # part number, serial number, hardware revision and firmware, all read from the device
+    assert status.hardware_id == 'capture-pnCAP-PT2-SIM-sn24017-hw3.1-fw2.24.0'
     values = {kv.key: kv.value for kv in status.values}
     assert values['serial_number'] == '24017'
     assert values['firmware'].startswith('2.24.0')
@@ -305,6 +306,70 @@ def test_fault_reported_then_reset(rig):
     reply = ros.call(Trigger, srv('reset_faults'), Trigger.Request())
     assert reply.success, reply.message
     ros.wait_for_diagnostic(NODE, 'pan', lambda s: s.level == b'\x00')
+
+
+MOTION_COMMANDS = ('MOT_SendPosition', 'MOT_Update', 'MOT_SetSpeed', 'PRST_GoToPreset',
+                   'SCN_StartScanZigZag', 'SCN_StartScanSnake', 'DG_GoToCamera')
+
+
+def motion_sent(control_port: int) -> dict[str, int]:
+    counts = sim_state(control_port)['requests_by_command']
+    return {name: counts.get(name, 0) for name in MOTION_COMMANDS}
+
+
+def assert_motion_refused(ros, control_port, reason: str) -> None:
+    """joint_command, move_to, goto_preset, start_scan and ~/command motion on the pan axis
+    are refused naming ``reason``, and the simulator receives no motion command."""
+    before = motion_sent(control_port)
+    ros.publish('joint_command', JointState(name=['pan'], position=[0.3]))
+    goal = MoveTo.Goal(joint_names=['pan', 'tilt'], positions=[0.3, 0.0])
+    result, _, _ = ros.run_action(MoveTo, srv('move_to'), goal, timeout=40)
+    assert not result.success and reason in result.message, result.message
+    reply = ros.call(GotoPreset, srv('goto_preset'), GotoPreset.Request(index=2))
+    assert not reply.success and reason in reply.message, reply.message
+    reply = ros.call(StartScan, srv('start_scan'), StartScan.Request(
+        pattern='snake', pan_min=-0.2, pan_max=0.2, tilt_min=0.0, tilt_max=0.2, speed=0.5,
+        tilt_step=0.1))
+    assert not reply.success and reason in reply.message, reply.message
+    reply = ros.call(DeviceCommand, srv('command'), DeviceCommand.Request(
+        command='DG_GoToCamera'))
+    assert not reply.success and reason in reply.message, reply.message
+    assert motion_sent(control_port) == before
+    assert not sim_state(control_port)['scanning']
+
+
+def test_motion_on_faulted_or_off_axis_is_refused_and_reset_quotes_device(rig):
+    ros, control_port, *_ = rig
+    assert control(control_port, 'fault 1 over_current') == 'ok'
+    status = ros.wait_for_diagnostic(NODE, 'pan', lambda s: s.level == b'\x02')
+    assert 'SRH.fault' in {kv.key for kv in status.values}
+    assert_motion_refused(ros, control_port, 'pan is faulted')
+    # A device that does not know MOT_ResetFaults: the reply quotes its answer.
+    assert control(control_port, 'unknown MOT_ResetFaults') == 'ok'
+    try:
+        reply = ros.call(Trigger, srv('reset_faults'), Trigger.Request())
+    finally:
+        assert control(control_port, 'unknown MOT_ResetFaults off') == 'ok'
+    assert not reply.success
+    assert 'MOT_ResetFaults (axis 1): NACK 0xA6' in reply.message, reply.message
+    assert 'Opcode not Recognized' in reply.message, reply.message
+    assert_motion_refused(ros, control_port, 'pan is faulted')
+    reply = ros.call(Trigger, srv('reset_faults'), Trigger.Request())
+    assert reply.success, reply.message
+    assert 'ACKed MOT_ResetFaults' in reply.message and 'pan on, no fault' in reply.message
+    # Drive switched off: refused with the axis state, on again after reset_faults.
+    off = ros.call(DeviceCommand, srv('command'), DeviceCommand.Request(
+        command='MOT_AxisOff', axis=1))
+    assert off.success, off.message
+    ros.wait_for_diagnostic(NODE, 'pan', lambda s: any(
+        kv.key == 'SRL.axis_off' for kv in s.values))
+    assert_motion_refused(ros, control_port, 'pan drive is off')
+    reply = ros.call(Trigger, srv('reset_faults'), Trigger.Request())
+    assert reply.success, reply.message
+    assert sim_state(control_port)['axes']['1']['axis_on']
+    goal = MoveTo.Goal(joint_names=['pan'], positions=[0.05])
+    result, _, _ = ros.run_action(MoveTo, srv('move_to'), goal, timeout=40)
+    assert result.success, result.message
 
 
 def test_stop_service(rig):

@@ -1,0 +1,111 @@
+"""A healthy device with default parameters shows every diagnostics status OK, also when it
+does not know an opcode the node polls on its own (GPS_GetLatitude is a low-confidence
+reconstruction): the poll stops after the device's 0xA6, the diagnostics name the command
+once, and the device's protocol-error flag does not stay set.
+
+Node and simulator run as processes; waits are "up to a timeout", never timing assertions.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+
+import pytest
+
+pytest.importorskip('rclpy', reason='node tests need the ROS environment')
+pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+
+from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
+
+pytestmark = pytest.mark.ros
+
+PKG = 'capture_driver'
+NODE = 'capture_driver'
+OK = b'\x00'
+
+
+def sim_state(port: int) -> dict:
+    with socket.create_connection(('127.0.0.1', port), timeout=5.0) as sock:
+        stream = sock.makefile('rw')
+        stream.write('state\n')
+        stream.flush()
+        answer = stream.readline().strip()
+    assert answer.startswith('ok '), answer
+    return json.loads(answer[3:])
+
+
+def run_default_node(sim_args: list[str]):
+    """Simulator with ``sim_args`` and a node with default parameters (but host/port)."""
+    lease = DomainLease()
+    domain = lease.acquire()
+    port, control_port = free_tcp_port(), free_tcp_port()
+    sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
+        '--port', str(port), '--control-port', str(control_port), *sim_args])
+    sim.wait_for_output('capture_sim ready')
+    node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
+        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}'])
+    ros = RosTestClient(domain)
+
+    def close() -> None:
+        ros.close()
+        node.stop()
+        sim.stop()
+        lease.release()
+        print('--- node log (tail) ---\n' + node.output()[-4000:])
+
+    return ros, control_port, close
+
+
+def all_ok(array: DiagnosticArray) -> bool:
+    mine = [s for s in array.status if s.name.startswith(f'{NODE}:')]
+    names = {s.name.split(': ', 1)[1] for s in mine}
+    return {'connection', 'joint_states frequency', 'pan', 'tilt', 'device'} <= names and all(
+        s.level == OK for s in mine)
+
+
+def device_status(array: DiagnosticArray):
+    return next(s for s in array.status if s.name == f'{NODE}: device')
+
+
+def test_healthy_device_with_default_parameters_is_all_ok():
+    ros, control_port, close = run_default_node([])
+    try:
+        ros.wait_for_message('joint_states', JointState, timeout=30)
+        array = ros.wait_for_message('/diagnostics', DiagnosticArray, all_ok, timeout=30)
+        device = device_status(array)
+        assert not any(kv.key.startswith('unsupported.') for kv in device.values)
+        assert 'does not know' not in device.message
+        counts = sim_state(control_port)['requests_by_command']
+        assert counts.get('GPS_GetLatitude', 0) >= 1  # the fix poll runs
+    finally:
+        close()
+
+
+def test_device_without_gps_latitude_stops_that_poll_and_stays_ok():
+    ros, control_port, close = run_default_node(['--unknown', 'GPS_GetLatitude'])
+    try:
+        ros.wait_for_message('joint_states', JointState, timeout=30)
+        array = ros.wait_for_message(
+            '/diagnostics', DiagnosticArray,
+            lambda a: all_ok(a) and 'does not know' in device_status(a).message, timeout=30)
+        device = device_status(array)
+        mentions = [kv for kv in device.values if 'GPS_GetLatitude' in kv.key]
+        assert [kv.key for kv in mentions] == ['unsupported.GPS_GetLatitude']
+        assert 'Opcode not Recognized' in mentions[0].value
+        assert device.message.count('GPS_GetLatitude') == 1
+        first = sim_state(control_port)['requests_by_command']
+        # Several more fix periods (1 s by default): the poll stays stopped, the device
+        # status stays OK (its protocol-error flag is not raised again).
+        for _ in range(4):
+            array = ros.wait_for_message('/diagnostics', DiagnosticArray, timeout=15)
+            assert all_ok(array), [(s.name, s.level, s.message) for s in array.status]
+        later = sim_state(control_port)['requests_by_command']
+        assert first['GPS_GetLatitude'] == later['GPS_GetLatitude'] == 1
+        assert later.get('GPS_PositionReady', 0) == first.get('GPS_PositionReady', 0)
+        assert later['MOT_GetLoadPosition'] > first['MOT_GetLoadPosition']  # still polling
+    finally:
+        close()
