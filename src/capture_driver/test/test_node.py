@@ -254,6 +254,20 @@ def test_command_service(rig):
     assert not bad.success and 'bad argument' in bad.message
     bad_axis = run('MOT_GetLoadPosition', 9)
     assert not bad_axis.success and 'outside 1..3' in bad_axis.message
+    # Typed groups the second witness and the document settle.
+    assert run('STB_SetSpdKp', 2, ['1.5']).success
+    assert run('STB_GetSpdKp', 2).results == ['1.5 factor']
+    assert run('PELCOD_SetMaxSpd', 1, ['40']).success
+    assert run('PELCOD_GetMaxSpd', 1).results == ['40 deg/s']
+    assert run('VDT_setTrackingOn', 1, ['2']).success  # camera 1, automatic
+    assert run('VDT_isAutoModeOn', 1).results == ['True flag']
+    assert run('VDT_GetTargetsList', 1).results == [f'target{i}=0x0' for i in range(1, 6)]
+    assert run('VDT_setTrackingOn', 1, ['0']).success
+    assert run('DG_GetBoresightOffset', 3).message.count('1, 2, 4, 5') == 1
+    for name, args, opt_in in (('PELCOD_SetAddress', ['5'], 'allow_network_config'),
+                               ('STB_SaveStabilizationCfg', [], 'allow_nv_write')):
+        refused = run(name, 0, args)
+        assert not refused.success and opt_in in refused.message, refused.message
 
 
 def test_imu_and_fix_topics(rig):
