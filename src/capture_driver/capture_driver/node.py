@@ -19,7 +19,7 @@ from rclpy.callback_groups import ReentrantCallbackGroup
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
 from std_srvs.srv import SetBool, Trigger
 
-from gimbal_driver_common.diagnostics import Level
+from gimbal_driver_common.diagnostics import ActiveFlag, Level
 from gimbal_driver_common.joint_command import CommandError, validate_joint_command
 from gimbal_driver_common.ros.base_node import (
     DeviceError,
@@ -73,6 +73,11 @@ OPT_IN = {
     Safety.NETWORK: 'allow_network_config',
 }
 MAX_PRESETS = 15
+
+
+def _axis_flags(registers: dict[str, int]) -> list[ActiveFlag]:
+    """Active flags of one axis' polled registers (MER, DER, SRH, SRL, MSR, CMER, OPR)."""
+    return [a for r in AXIS_REGISTERS for a in r.decode(registers.get(r.name, 0))]
 
 
 def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
@@ -502,7 +507,7 @@ class CaptureDriverNode(GimbalDriverNode):
             registers = axes.get(joint)
             if registers is None:
                 continue
-            active = [a for r in AXIS_REGISTERS for a in r.decode(registers.get(r.name, 0))]
+            active = _axis_flags(registers)
             names = {a.flag.name for a in active}
             faults = sorted({a.key for a in active if a.flag.level >= Level.ERROR})
             if 'fault' in names or faults:
@@ -826,7 +831,7 @@ class CaptureDriverNode(GimbalDriverNode):
             if registers is None:
                 parts.append(StatusPart(joint, Level.STALE, 'registers unavailable'))
                 continue
-            active = [a for r in AXIS_REGISTERS for a in r.decode(registers.get(r.name, 0))]
+            active = _axis_flags(registers)
             values = [(f'{name}_raw', f'0x{value:04X}') for name, value in registers.items()]
             current = status['current'].get(joint)
             if current is not None:
@@ -876,7 +881,7 @@ class CaptureDriverNode(GimbalDriverNode):
             system = self._status.get('system', {})
         if registers is None:
             return {}
-        active = [a for r in AXIS_REGISTERS for a in r.decode(registers.get(r.name, 0))]
+        active = _axis_flags(registers)
         names = {a.flag.name for a in active}
         details: dict[str, object] = {
             'active_errors': sorted({a.key for a in active if a.flag.level > Level.OK}),
