@@ -795,15 +795,15 @@ class CaptureDriverNode(GimbalDriverNode):
                 where = DEDICATED.get(cmd.name, 'the dedicated interface')
                 raise CommandError(f"{cmd.name} moves the axes without the driver's limit "
                                    f'checks; use {where}')
-            if cmd.name in JOINT_MOTION:
-                refusal = self.axis_refusal(self.joint_names)
-                if refusal:
-                    raise CommandError(f'{cmd.name} refused, nothing sent: {refusal}')
             opt_in = OPT_IN.get(cmd.safety)
             if opt_in and not getattr(self, opt_in):
                 raise CommandError(f'{cmd.name} is a {cmd.safety.value} command; set the '
                                    f'parameter {opt_in}:=true to allow it')
             value = parse_arguments(cmd.arg, list(request.arguments))
+            if cmd.name in JOINT_MOTION and value != 0:  # 0 switches tracking/sync off
+                refusal = self.axis_refusal(self.joint_names)
+                if refusal:
+                    raise CommandError(f'{cmd.name} refused, nothing sent: {refusal}')
             axis = request.axis if (cmd.axis.low != cmd.axis.high or request.axis) else None
             try:
                 cmd.frame(axis, value, self.group_id)  # argument and axis checks, nothing sent

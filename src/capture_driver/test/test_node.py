@@ -358,6 +358,9 @@ def test_motion_on_faulted_or_off_axis_is_refused_and_reset_quotes_device(rig):
     status = ros.wait_for_diagnostic(NODE, 'pan', lambda s: s.level == b'\x02')
     assert 'SRH.fault' in {kv.key for kv in status.values}
     assert_motion_refused(ros, control_port, 'pan is faulted')
+    stop_tracking = ros.call(DeviceCommand, srv('command'), DeviceCommand.Request(
+        command='VDT_setTrackingOn', axis=0, arguments=['0']))
+    assert stop_tracking.success, stop_tracking.message  # switching off is never refused
     # A device that does not know MOT_ResetFaults: the reply quotes its answer.
     assert control(control_port, 'unknown MOT_ResetFaults') == 'ok'
     try:
