@@ -672,11 +672,13 @@ _TABLE: list[tuple[Any, ...]] = [
      'rev: 2.16.0 "New Error register was added operations error - 0x0E12"', Safety.NONE,
      'Operation Register'),
     # --- laser rangefinder (4.17); axis byte unused except for the measurement number -----
-    ('LRF_SetManualDistance', 0x0300, SYSTEM, F32, 'm', N, '', 'medium',
+    ('LRF_SetManualDistance', 0x0300, SYSTEM, F32, 'm', N, '', 'high',
      'rev: 2.17 "LRF_SetRange - 0x0300"; 4.17.1 is that command renamed ("Set the range to '
-     'the target"), first of the group', Safety.NONE, 'manual distance to the target'),
-    ('LRF_GetManualDistance', 0x0301, SYSTEM, N, '', F32, 'm', 'medium',
-     'rev: 2.17 "LRF_GetRange - 0x0301" (renamed, as LRF_SetManualDistance)', Safety.NONE,
+     'the target"), first of the group' + _AGREE + ' (as LRF_SetRange)', Safety.NONE,
+     'manual distance to the target'),
+    ('LRF_GetManualDistance', 0x0301, SYSTEM, N, '', F32, 'm', 'high',
+     'rev: 2.17 "LRF_GetRange - 0x0301" (renamed, as LRF_SetManualDistance)' + _AGREE,
+     Safety.NONE,
      'manual distance to the target'),
     ('LRF_SetMinMeasurement', 0x0302, SYSTEM, U16, 'm', N, '', 'high', 'rev: 2.20.0',
      Safety.NONE, 'minimum of the measurement range'),
