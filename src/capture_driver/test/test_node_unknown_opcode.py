@@ -86,7 +86,9 @@ def test_healthy_device_with_default_parameters_is_all_ok():
 
 
 def test_device_without_gps_latitude_stops_that_poll_and_stays_ok():
-    ros, control_port, close = run_default_node(['--unknown', 'GPS_GetLatitude'])
+    """GPS_GetLatitude (low confidence) and COM_GetHw unknown to the device."""
+    ros, control_port, close = run_default_node(
+        ['--unknown', 'GPS_GetLatitude', '--unknown', 'COM_GetHw'])
     try:
         ros.wait_for_message('joint_states', JointState, timeout=30)
         array = ros.wait_for_message(
@@ -97,6 +99,10 @@ def test_device_without_gps_latitude_stops_that_poll_and_stays_ok():
         assert [kv.key for kv in mentions] == ['unsupported.GPS_GetLatitude']
         assert 'Opcode not Recognized' in mentions[0].value
         assert device.message.count('GPS_GetLatitude') == 1
+        # identity: what the device answers ends in hardware_id, the rest is left out
+        connection = next(s for s in array.status if s.name == f'{NODE}: connection')
+        assert connection.hardware_id == 'capture-pnCAP-PT2-SIM-sn24017-fw2.24.0'
+        assert 'unsupported.COM_GetHw' in {kv.key for kv in device.values}
         first = sim_state(control_port)['requests_by_command']
         # Several more fix periods (1 s by default): the poll stays stopped, the device
         # status stays OK (its protocol-error flag is not raised again).
