@@ -5,9 +5,12 @@ watchdog, ~/stop, ~/move_to, ~/home, presets, scans and /diagnostics plumbing. T
 node adds the turret's specifics: the CAN parameters, the identifier-to-joint mapping,
 preset 0 = the turret's remember/restore position (driver-side YAML presets beyond),
 actuator mode, cover, fan, heaters and charging services, ~/device_command (IDS, TIS,
-and the opt-in NIS/FPS), ~/fix, ~/heading, ~/inclination, ~/zoom, and diagnostics from
-the status bytes, periphery status, temperatures, voltages, EED events, message-code
-gaps and stale identifiers.
+and the opt-in NIS/FPS), ~/fix, ~/heading and ~/global_yaw (sensor_msgs/Imu),
+~/time_reference, ~/inclination, ~/zoom, and diagnostics from the status bytes, periphery
+status, temperatures, voltages, EED events, message-code gaps, stale identifiers and the
+transmission intervals in use (TIS at every connect for publish_rate). Relative MoveTo
+goals go out as the turret's relative set-points; motion on an axis whose drive is off or
+faulted is refused before anything is sent.
 
 A turret node that stops sending (no frame for `node_timeout`) counts as a lost link:
 the base node marks the device disconnected (ERROR in /diagnostics), stops publishing

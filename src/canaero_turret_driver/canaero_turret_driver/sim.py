@@ -453,6 +453,16 @@ class TurretSimulator:
             frames.append(self._frame(message))
         return frames
 
+    def _next_slot(self, interval_ms: int) -> float:
+        """The next multiple of `interval_ms` since start: identifiers given the same interval
+        by TIS go out in the same cycle, like a device scheduler with one time base (yaw and
+        pitch positions of one cycle then arrive together, whatever the TIS order)."""
+        if interval_ms <= 0:
+            return self._clock()
+        period = interval_ms / 1000.0
+        elapsed = self._clock() - self._start
+        return self._start + math.ceil(elapsed / period) * period
+
     def _take_malformed(self) -> list[can.Message]:
         frames = []
         node = self.config.turret_node_id
@@ -666,7 +676,7 @@ class TurretSimulator:
                 if can_id in self._ids_of_node(node_id) and valid_interval \
                         and not self.config.refuse_tis:
                     self._intervals[can_id] = interval
-                    self._next_due[can_id] = self._clock()
+                    self._next_due[can_id] = self._next_slot(interval)
                     status = ns.ServiceStatus.OK
             return ns.tis_response(node_id, status, channel)
         if service == ns.ServiceCode.FPS:
