@@ -7,7 +7,6 @@ and read the device state.
 
 from __future__ import annotations
 
-import json
 import math
 import signal
 
@@ -21,9 +20,7 @@ from sensor_msgs.msg import Imu, JointState, NavSatFix, TimeReference
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
-from canaero_turret_driver.sim import ControlClient
-from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.testing import wait_for
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import GimbalStatus
 from gimbal_msgs.srv import (
@@ -42,44 +39,23 @@ NODE = "canaero_turret_driver"
 
 
 def node_params(tty: str, presets: str) -> list[str]:
-    params = [
+    return [
         "can_interface:=slcan", f"can_channel:={tty}", "can_options:=['sleep_after_open=0']",
         "service_timeout:=0.3", "reconnect_period:=0.3", "diagnostics_period:=0.25",
         "command_timeout:=0.4", "node_timeout:=0.6", "stale_timeout:=0.6",
         f"presets_file:={presets}", "publish_rate:=20.0",
         "actuator_mode:=auto_brake",
     ]
-    return ["--ros-args", *[x for p in params for x in ("-p", p)]]
 
 
 @pytest.fixture(scope="module")
-def rig(tmp_path_factory):
-    lease = DomainLease()
-    domain = lease.acquire()
+def rig(tmp_path_factory, sim_and_node):
     tmp = tmp_path_factory.mktemp("canaero")
-    tty, ready, presets = tmp / "tty", tmp / "ready.json", tmp / "presets.yaml"
-    sim = ManagedProcess.ros(PKG, "canaero_turret_sim", domain,
-                             ["--link", str(tty), "--ready-file", str(ready)])
-    node = None
-    ros = None
-    control = None
-    try:
-        wait_for(ready.exists, 20, "the simulator to start")
-        control = ControlClient(json.loads(ready.read_text())["control_port"])
-        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain,
-                                  node_params(str(tty), str(presets)))
-        ros = RosTestClient(domain)
+    presets = tmp / "presets.yaml"
+    with sim_and_node(tmp, lambda tty: node_params(tty, str(presets))) as (ros, control,
+                                                                             node):
         ros.wait_for_message("joint_states", JointState, timeout=40)
         yield ros, control, presets, node
-    finally:
-        if ros is not None:
-            ros.close()
-        if node is not None:
-            node.stop()
-        if control is not None:
-            control.close()
-        sim.stop()
-        lease.release()
 
 
 def sim_axis(control, axis: str) -> dict:

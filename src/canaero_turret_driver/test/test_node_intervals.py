@@ -8,7 +8,6 @@ way every diagnostics status of the node must turn OK.
 
 from __future__ import annotations
 
-import json
 import time
 
 import pytest
@@ -18,45 +17,23 @@ pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (mak
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
-from canaero_turret_driver.sim import ControlClient
-from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
-
 pytestmark = pytest.mark.ros
 
-PKG = "canaero_turret_driver"
 NODE = "canaero_turret_driver"
 
 
 @pytest.fixture(params=["accepts_tis", "refuses_tis"])
-def default_rig(request, tmp_path):
-    lease = DomainLease()
-    domain = lease.acquire()
-    tty, ready = tmp_path / "tty", tmp_path / "ready.json"
-    sim_args = ["--link", str(tty), "--ready-file", str(ready)]
-    if request.param == "refuses_tis":
-        sim_args.append("--refuse-tis")
-    sim = ManagedProcess.ros(PKG, "canaero_turret_sim", domain, sim_args)
-    node = ros = control = None
-    try:
-        wait_for(ready.exists, 20, "the simulator to start")
-        control = ControlClient(json.loads(ready.read_text())["control_port"])
-        params = ["can_interface:=slcan", f"can_channel:={tty}",
-                  "can_options:=['sleep_after_open=0']",
-                  f"presets_file:={tmp_path / 'presets.yaml'}"]
-        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain,
-                                  ["--ros-args", *[x for p in params for x in ("-p", p)]])
-        ros = RosTestClient(domain)
+def default_rig(request, tmp_path, sim_and_node):
+    """The node at its default parameters (only the link and the presets file set)."""
+    sim_args = ["--refuse-tis"] if request.param == "refuses_tis" else []
+
+    def params(tty: str) -> list[str]:
+        return ["can_interface:=slcan", f"can_channel:={tty}",
+                "can_options:=['sleep_after_open=0']",
+                f"presets_file:={tmp_path / 'presets.yaml'}"]
+
+    with sim_and_node(tmp_path, params, sim_args) as (ros, control, _):
         yield request.param, ros, control
-    finally:
-        if ros is not None:
-            ros.close()
-        if node is not None:
-            node.stop()
-        if control is not None:
-            control.close()
-        sim.stop()
-        lease.release()
 
 
 def _node_statuses(array: DiagnosticArray) -> dict[str, object]:
