@@ -32,6 +32,7 @@ def ros_args(*params: str) -> list[str]:
     ("actuator_mode:=sideways", "actuator_mode"),
     ("can_options:=['novalue']", "can_options"),
     ("service_channel:=50", "service_channel"),
+    ("transfer_first_number:=2", "transfer_first_number"),
 ])
 def test_invalid_parameters_are_refused_at_start(param, expected):
     with DomainLease() as domain:
