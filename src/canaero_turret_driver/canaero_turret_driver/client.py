@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import can
 
 from .protocol import nodeservice as ns
-from .protocol.datatypes import DataType, codec_for
+from .protocol.datatypes import DataType
 from .protocol.eed import EmergencyEvent, decode_eed, is_eed
 from .protocol.errors import CodecError
 from .protocol.identifiers import (
@@ -50,6 +50,7 @@ from .protocol.identifiers import (
 )
 from .protocol.message import CanAerospaceMessage
 from .protocol.sequencing import MessageCodeCounter, MessageCodeTracker, SequenceEvent
+from .slcan import open_bus
 
 LOG = logging.getLogger("canaero_turret_driver.client")
 
@@ -106,6 +107,8 @@ class ClientConfig:
     pitch_sign: float = 1.0
     allow_node_id_change: bool = False
     allow_flash_programming: bool = False
+    # DDS/DUS data messages count from 0 or from 1 (the ICD does not say, see nodeservice)
+    transfer_first_number: int = ns.DEFAULT_FIRST_NUMBER
 
 
 @dataclass(frozen=True)
@@ -167,10 +170,11 @@ class _Exchange:
 
 
 def _default_bus_factory(config: ClientConfig) -> can.BusABC:
+    """python-can's bus for the configured interface (slcan: the chunked reader)."""
     kwargs = dict(config.bus_options)
     if config.bitrate:
         kwargs["bitrate"] = config.bitrate
-    return can.Bus(interface=config.interface, channel=config.channel, **kwargs)
+    return open_bus(config.interface, config.channel, **kwargs)
 
 
 class TurretClient:
@@ -188,7 +192,8 @@ class TurretClient:
         self._cache_lock = threading.Lock()
         self._cache: dict[str, Sample] = {}
         self._node_seen: dict[int, float] = {}
-        self._intervals_ms: dict[str, int] = {}
+        self._intervals_ms: dict[str, int] = {}  # TIS intervals the nodes accepted
+        self.refused_intervals: dict[str, str] = {}  # key -> why TIS was refused
         self._observed_interval: dict[str, float] = {}
         self._exchange: _Exchange | None = None
         self._codes = MessageCodeCounter()
@@ -391,7 +396,7 @@ class TurretClient:
             self.counters.foreign_node += 1
             return
         self._node_seen[message.node_id] = now
-        if not self._type_acceptable(ident, message.data_type):
+        if message.data_type != ident.data_type:
             self.counters.type_mismatch += 1
             self._malformed(f"id {message.can_id} ({ident.key}) carries {message.type_name}, "
                             f"the ICD says {ident.data_type.name}")
@@ -413,14 +418,6 @@ class TurretClient:
             self._learn_interval(ident.key, now - previous.received)
         if self.on_sample is not None:
             self.on_sample(sample)
-
-    def _type_acceptable(self, ident: Identifier, data_type: int) -> bool:
-        if data_type == ident.data_type:
-            return True
-        if ident.key == "zoom_position":  # type not given by the ICD: any numeric scalar
-            codec = codec_for(data_type)
-            return codec is not None and codec.kind in ("int", "float")
-        return False
 
     def _sign(self, key: str) -> float:
         if key in ("yaw_position", "yaw_velocity"):
@@ -463,15 +460,15 @@ class TurretClient:
             self._observed_interval[key] = 0.8 * estimate + 0.2 * gap
 
     def stale_timeout_for(self, key: str) -> float:
-        """`stale_timeout`, or 3 transmission intervals for slower identifiers."""
-        timeout = self.config.stale_timeout
-        interval_ms = self._intervals_ms.get(key)
-        if interval_ms:
-            timeout = max(timeout, 3.0 * interval_ms / 1000.0)
-        observed = self._observed_interval.get(key)
-        if observed is not None:
-            timeout = max(timeout, 3.0 * observed)
-        return timeout
+        """`stale_timeout`, or 3 transmission intervals for slower identifiers.
+
+        The interval is the one the node accepted by TIS; without one (never requested,
+        or refused) it is the interval observed on the bus.
+        """
+        interval = self.interval_of(key)
+        if interval is None:
+            return self.config.stale_timeout
+        return max(self.config.stale_timeout, 3.0 * interval)
 
     def age(self, key: str, now: float | None = None) -> float | None:
         sample = self.latest(key)
@@ -635,10 +632,13 @@ class TurretClient:
         match the bytes sent raise ServiceError.
         """
         node = self.config.turret_node_id if node_id is None else node_id
+        first = self.config.transfer_first_number
         try:
-            chunks = ns.split_block(bytes(data))
+            request_id, _ = ns.service_channel_ids(self.config.service_channel)
+            messages = ns.transfer_messages(request_id, node, ns.ServiceCode.DDS, bytes(data),
+                                            first)
             start = ns.start_transfer_request(node, ns.ServiceCode.DDS, memory_id,
-                                              len(chunks), self.config.service_channel)
+                                              len(messages), self.config.service_channel)
         except CodecError as exc:
             raise CommandError(f"DDS: {exc}") from exc
         timeout = self.config.service_timeout
@@ -650,18 +650,16 @@ class TurretClient:
                                    f"{timeout * 1000:.0f} ms")
             flow = ns.response_status(reply)
             final = None
-            for number, chunk in enumerate(chunks, start=1):
+            for message in messages:
                 while flow != ns.ServiceStatus.XON:
                     if flow in (ns.ServiceStatus.ABORT, ns.ServiceStatus.INVALID):
-                        raise ServiceError(f"node {node} ended the download: "
-                                           f"{ns.status_text(ns.ServiceCode.DDS, flow)}")
+                        raise ServiceError(self._download_ended(node, flow))
                     reply = exchange.wait_next(timeout * 10)  # XOFF: wait for XON
                     if reply is None:
                         raise ServiceError(f"node {node} paused the download (XOFF) and "
                                            "never resumed")
                     flow = ns.response_status(reply)
-                self.send(ns.chunk_message(start.can_id, node, ns.ServiceCode.DDS, number,
-                                           chunk))
+                self.send(message)
                 for pending in exchange.drain():
                     if pending.data_type == DataType.CHKSUM:
                         final = pending
@@ -681,14 +679,29 @@ class TurretClient:
         if reply.value != expected:
             raise ServiceError(f"DDS checksum mismatch: node {node} reports {reply.value}, "
                                f"sent bytes sum to {expected}")
+        last = messages[-1].message_code
+        if reply.message_code != last:
+            raise ServiceError(f"DDS checksum response of node {node} carries message "
+                               f"number {reply.message_code}, the last data message was "
+                               f"{last}: {self._numbering_hint()}")
         return expected
 
-    @staticmethod
-    def _download_reply(reply: CanAerospaceMessage, node: int) -> int:
+    def _numbering_hint(self) -> str:
+        first = self.config.transfer_first_number
+        return (f"this client counts DDS/DUS data messages from {first}; the node may count "
+                f"from {1 - first} (transfer_first_number)")
+
+    def _download_ended(self, node: int, status: int) -> str:
+        text = (f"node {node} ended the download: "
+                f"{ns.status_text(ns.ServiceCode.DDS, status)}")
+        if status == ns.ServiceStatus.ABORT:
+            text += f" (a node aborts on an unexpected message number; {self._numbering_hint()})"
+        return text
+
+    def _download_reply(self, reply: CanAerospaceMessage, node: int) -> int:
         status = ns.response_status(reply)
         if status in (ns.ServiceStatus.ABORT, ns.ServiceStatus.INVALID):
-            raise ServiceError(f"node {node} ended the download: "
-                               f"{ns.status_text(ns.ServiceCode.DDS, status)}")
+            raise ServiceError(self._download_ended(node, status))
         return status
 
     def upload(self, memory_id: int, length: int, node_id: int | None = None) -> bytes:
@@ -728,10 +741,16 @@ class TurretClient:
                 value = reply.value
                 received[reply.message_code] = bytes(value if isinstance(value, tuple)
                                                      else (value,))
-        missing = [n for n in range(1, count + 1) if n not in received]
+        numbers = ns.data_numbers(count, self.config.transfer_first_number)
+        missing = [n for n in numbers if n not in received]
         if missing:
-            raise ServiceError(f"DUS from node {node}: data messages {missing} missing")
-        data = b"".join(received[n] for n in range(1, count + 1))
+            raise ServiceError(f"DUS from node {node}: data messages {missing} missing "
+                               f"(received {sorted(received)}; {self._numbering_hint()})")
+        if reply.message_code != numbers[-1]:
+            raise ServiceError(f"DUS checksum response of node {node} carries message "
+                               f"number {reply.message_code}, expected {numbers[-1]}: "
+                               f"{self._numbering_hint()}")
+        data = b"".join(received[n] for n in numbers)
         if reply.value != ns.block_checksum(data):
             raise ServiceError(f"DUS checksum mismatch: node {node} reports {reply.value}, "
                                f"received bytes sum to {ns.block_checksum(data)}")
@@ -760,6 +779,36 @@ class TurretClient:
                                f"{interval_ms} ms: {ns.status_text(ns.ServiceCode.TIS, status)}")
         self._intervals_ms[key] = int(interval_ms)
         self._observed_interval.pop(key, None)
+
+    def request_intervals(self, intervals: dict[str, int]) -> dict[str, str]:
+        """TIS for several identifiers; returns {key: reason} for those that were refused.
+
+        A refusal (negative status or no answer) is not an error: the identifier keeps the
+        rate the node chose, which staleness and rate checks then learn from the frames
+        (`interval_of`). A closed interface still raises LinkError.
+        """
+        refused: dict[str, str] = {}
+        for key, interval_ms in intervals.items():
+            try:
+                self.set_transmission_interval(key, interval_ms)
+            except ServiceError as exc:
+                if self._bus is None:
+                    raise LinkError(str(exc)) from exc
+                refused[key] = str(exc)
+                self._intervals_ms.pop(key, None)
+        self.refused_intervals = refused
+        return refused
+
+    def interval_of(self, key: str) -> float | None:
+        """Seconds between two frames of `key`: the accepted TIS interval, else as observed."""
+        interval_ms = self._intervals_ms.get(key)
+        if interval_ms:
+            return interval_ms / 1000.0
+        return self._observed_interval.get(key)
+
+    def accepted_interval_ms(self, key: str) -> int | None:
+        """The interval (ms) a node accepted by TIS for `key`, None when never set."""
+        return self._intervals_ms.get(key)
 
     def _data_ident(self, key: str) -> Identifier:
         for ident in self._table.values():

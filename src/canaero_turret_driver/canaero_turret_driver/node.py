@@ -5,9 +5,12 @@ watchdog, ~/stop, ~/move_to, ~/home, presets, scans and /diagnostics plumbing. T
 node adds the turret's specifics: the CAN parameters, the identifier-to-joint mapping,
 preset 0 = the turret's remember/restore position (driver-side YAML presets beyond),
 actuator mode, cover, fan, heaters and charging services, ~/device_command (IDS, TIS,
-and the opt-in NIS/FPS), ~/fix, ~/heading, ~/inclination, ~/zoom, and diagnostics from
-the status bytes, periphery status, temperatures, voltages, EED events, message-code
-gaps and stale identifiers.
+and the opt-in NIS/FPS), ~/fix, ~/heading and ~/global_yaw (sensor_msgs/Imu),
+~/time_reference, ~/inclination, ~/zoom, and diagnostics from the status bytes, periphery
+status, temperatures, voltages, EED events, message-code gaps, stale identifiers and the
+transmission intervals in use (TIS at every connect for publish_rate). Relative MoveTo
+goals go out as the turret's relative set-points; motion on an axis whose drive is off or
+faulted is refused before anything is sent.
 
 A turret node that stops sending (no frame for `node_timeout`) counts as a lost link:
 the base node marks the device disconnected (ERROR in /diagnostics), stops publishing
@@ -23,7 +26,7 @@ import time
 from collections.abc import Iterator, Sequence
 
 from geometry_msgs.msg import Vector3Stamped
-from sensor_msgs.msg import NavSatFix, NavSatStatus
+from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, TimeReference
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool
 
@@ -107,6 +110,30 @@ def _parse_intervals(items: Sequence[str]) -> dict[str, int]:
 
 
 POSITION_KEYS = frozenset(f"{axis}_position" for axis in AXES)
+# Imu orientation covariance for the axes a heading does not measure (roll, pitch), and
+# the REP-145 marker for "not provided" (as ublox_gps publishes its navheading).
+UNMEASURED_ANGLE_VARIANCE = 1e6
+NOT_PROVIDED = -1.0
+
+
+def heading_imu(heading_rad: float, accuracy_rad: float | None) -> Imu:
+    """A yaw-only sensor_msgs/Imu in ENU from a compass heading (clockwise from north).
+
+    REP-103: yaw counts counter-clockwise from east, so yaw = pi/2 - heading. The heading
+    accuracy (1 sigma) squared goes to orientation_covariance[8]; 0 there = unknown.
+    """
+    yaw = math.remainder(math.pi / 2.0 - heading_rad, math.tau)
+    msg = Imu()
+    msg.orientation.z = math.sin(yaw / 2.0)
+    msg.orientation.w = math.cos(yaw / 2.0)
+    yaw_variance = accuracy_rad ** 2 if accuracy_rad is not None else 0.0
+    msg.orientation_covariance = [UNMEASURED_ANGLE_VARIANCE, 0.0, 0.0,
+                                  0.0, UNMEASURED_ANGLE_VARIANCE, 0.0,
+                                  0.0, 0.0, yaw_variance]
+    msg.angular_velocity_covariance[0] = NOT_PROVIDED
+    msg.linear_acceleration_covariance[0] = NOT_PROVIDED
+    return msg
+MIN_TIS_INTERVAL_MS = 1  # TIS counts whole milliseconds
 
 
 class CanaeroTurretNode(GimbalDriverNode):
@@ -129,10 +156,13 @@ class CanaeroTurretNode(GimbalDriverNode):
         self._remembered: dict[str, float] | None = None
         self._last_anomalies = 0
         self._last_published_fix: float | None = None
+        self._last_published_utc: float | None = None
+        self._last_published_heading: dict[str, float] = {}
         self._ids_info = None
         self._speed_warned = False
         self._eed_seen_count = 0
         self._eed_seen_at = -math.inf
+        self._tis_refusal_logged = False
         self._create_device_interfaces()
 
     # ------------------------------------------------------------------ parameters
@@ -178,6 +208,9 @@ class CanaeroTurretNode(GimbalDriverNode):
                               "s without any frame from the turret before it is silent "
                               "(link lost, ERROR)", value_range=(0.05, 600.0))
         self.pad_frames = p("pad_frames", False, "send 8-byte frames (zero padded)")
+        self.transfer_first_number = p(
+            "transfer_first_number", 0, "number of the first DDS/DUS data message: 0 "
+            "(libcanaerospace) or 1 (the ICD leaves it open)", value_range=(0, 1))
         self.yaw_direction = p("yaw_direction", 1, "+1 or -1: device yaw sign vs REP-103",
                                value_range=(-1, 1))
         self.pitch_direction = p("pitch_direction", 1,
@@ -187,6 +220,9 @@ class CanaeroTurretNode(GimbalDriverNode):
         self.transmission_intervals = _parse_intervals([i for i in p(
             "transmission_intervals", [""], "TIS at configure: <data key>=<ms> "
             "(e.g. yaw_position=20); 0 stops an identifier", element_type=str) if i])
+        self.request_intervals = p(
+            "request_intervals", True, "TIS at every (re)connect: yaw/pitch position and "
+            "velocity every 1/publish_rate (the turret's own default is slower)")
         self.actuator_mode_name = p("actuator_mode", "", "actuator mode set at activate "
                                     "(free_run, without_brake, auto_brake; '' = leave)")
         if self.actuator_mode_name and self.actuator_mode_name not in MODE_NAMES:
@@ -208,6 +244,8 @@ class CanaeroTurretNode(GimbalDriverNode):
         self.fix_frame_id = p("fix_frame_id", "gnss_base", "frame_id of ~/fix")
         self.inclination_frame_id = p("inclination_frame_id", "turret_base",
                                       "frame_id of ~/inclination")
+        self.heading_frame_id = p("heading_frame_id", "gnss_rover",
+                                  "frame_id of ~/heading and ~/global_yaw")
         self.allow_node_id_change = p("allow_node_id_change", False,
                                       "allow NIS (set_node_id) through ~/device_command")
         self.allow_data_download = p("allow_data_download", False,
@@ -228,13 +266,16 @@ class CanaeroTurretNode(GimbalDriverNode):
             pad_frames=self.pad_frames, yaw_sign=float(self.yaw_direction),
             pitch_sign=float(self.pitch_direction),
             allow_node_id_change=self.allow_node_id_change,
-            allow_flash_programming=self.allow_flash_programming, **self.node_ids)
+            allow_flash_programming=self.allow_flash_programming,
+            transfer_first_number=self.transfer_first_number, **self.node_ids)
 
     # ------------------------------------------------------------------ interfaces
     def _create_device_interfaces(self) -> None:
         group = self.service_group
         self._fix_pub = self.create_publisher(NavSatFix, "~/fix", 10)
-        self._heading_pub = self.create_publisher(Float64, "~/heading", 10)
+        self._heading_pub = self.create_publisher(Imu, "~/heading", 10)
+        self._global_yaw_pub = self.create_publisher(Imu, "~/global_yaw", 10)
+        self._time_pub = self.create_publisher(TimeReference, "~/time_reference", 10)
         self._inclination_pub = self.create_publisher(Vector3Stamped, "~/inclination", 10)
         self._zoom_pub = self.create_publisher(Float64, "~/zoom", 10)
         self.create_service(SetMode, "~/set_actuator_mode", self._on_set_mode,
@@ -287,11 +328,16 @@ class CanaeroTurretNode(GimbalDriverNode):
         try:
             client.open()
             info = client.identify()
-            for key, interval in self.transmission_intervals.items():
-                client.set_transmission_interval(key, interval)
+            refused = client.request_intervals(self._interval_requests())
         except TurretError:
             client.close()
             raise
+        if refused and not self._tis_refusal_logged:
+            self._tis_refusal_logged = True
+            self.get_logger().warning(
+                f"the turret refused TIS for {', '.join(sorted(refused))}: rate and staleness "
+                "checks follow the intervals it actually sends (see /diagnostics "
+                "'transmission intervals')")
         self._client = client
         self._ids_info = info
         node = config.turret_node_id
@@ -301,6 +347,35 @@ class CanaeroTurretNode(GimbalDriverNode):
             firmware_version=f"hw {info.hardware_revision} sw {info.software_revision}",
             hardware_id=f"canaerospace node {node} on {self.link_description()}",
         )
+
+    def _interval_requests(self) -> dict[str, int]:
+        """TIS requests for a (re)connect: what joint_states needs, then the parameter.
+
+        The ICD does not say how often a turret sends by default (a real one: 100 ms), so
+        with `request_intervals` the positions and velocities are asked for at
+        1/publish_rate; `transmission_intervals` entries override or add to that.
+        """
+        intervals: dict[str, int] = {}
+        if self.request_intervals:
+            interval_ms = max(MIN_TIS_INTERVAL_MS, round(1000.0 / self.publish_rate))
+            intervals = {f"{axis}_{what}": interval_ms for axis in AXES
+                         for what in ("position", "velocity")}
+        intervals.update(self.transmission_intervals)
+        return intervals
+
+    def expected_joint_rate(self) -> float:
+        """publish_rate, or the slower rate at which the turret sends both positions.
+
+        Taken from the interval the turret accepted by TIS or, when it refused, the one
+        observed on the bus; until that is known, publish_rate.
+        """
+        client = self._client
+        if client is None:
+            return self.publish_rate
+        intervals = [client.interval_of(key) for key in sorted(POSITION_KEYS)]
+        if any(interval is None or interval <= 0 for interval in intervals):
+            return self.publish_rate
+        return min(self.publish_rate, 1.0 / max(intervals))  # type: ignore[type-var]
 
     def on_activate(self, state):
         result = super().on_activate(state)
@@ -357,13 +432,53 @@ class CanaeroTurretNode(GimbalDriverNode):
 
     def send_moves(self, moves: dict[str, tuple[float, float | None]]) -> None:
         with self._device() as client:
-            for joint, (position, speed) in moves.items():
-                if speed is not None and not self._speed_warned:
-                    self._speed_warned = True
-                    self.get_logger().warning(
-                        "the turret's position set-point has no speed field: moves use the "
-                        "device's own profile (speed checked against velocity_max only)")
+            self._warn_speed_once(moves)
+            for joint, (position, _speed) in moves.items():
                 client.move_to(self._axis_of[joint], position)
+
+    def send_relative_moves(self, offsets: dict[str, float],
+                            moves: dict[str, tuple[float, float | None]]) -> bool:
+        """A relative MoveTo as the turret's relative set-points (6.1.4, 1302/1312).
+
+        The base node has already checked the resolved targets against the limits; the
+        device gets the offsets themselves, so it moves by exactly that much from where
+        it is (no round trip through a possibly older position sample).
+        """
+        with self._device() as client:
+            self._warn_speed_once(moves)
+            for joint, offset in offsets.items():
+                client.move_by(self._axis_of[joint], offset)
+        return True
+
+    def _warn_speed_once(self, moves: dict[str, tuple[float, float | None]]) -> None:
+        if self._speed_warned or all(speed is None for _, speed in moves.values()):
+            return
+        self._speed_warned = True
+        self.get_logger().warning(
+            "the turret's set-points have no speed field: moves use the device's own "
+            "profile (speed checked against velocity_max only)")
+
+    def axis_refusal(self, joints: Sequence[str]) -> str | None:
+        """Refuse motion on an axis whose status byte says its drive is off or faulted."""
+        client = self._client
+        if client is None:
+            return None
+        reasons = []
+        for joint in joints:
+            axis = self._axis_of.get(joint)
+            sample = client.latest(f"{axis}_status") if axis is not None else None
+            if sample is None or client.is_stale(f"{axis}_status"):
+                continue
+            status = AxisStatus.decode(sample.value)
+            if status.enabled:
+                continue
+            why = ("drive in free run (not driven)" if status.actuator_mode ==
+                   ActuatorMode.FREE_RUN else "drive disabled (fault)")
+            reasons.append(f"joint {joint!r}: {why}, status byte 0x{status.raw:02X}")
+        if not reasons:
+            return None
+        return ("; ".join(reasons) + "; ~/reset_faults or ~/set_actuator_mode enables it "
+                "again")
 
     def send_jogs(self, jogs: dict[str, float]) -> None:
         with self._device() as client:
@@ -609,9 +724,17 @@ class CanaeroTurretNode(GimbalDriverNode):
             else:
                 fix.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
             self._fix_pub.publish(fix)
-        heading = client.latest("global_yaw")
-        if heading is not None and not client.is_stale("global_yaw"):
-            self._heading_pub.publish(Float64(data=heading.si))
+        self._publish_heading(client, "rover_heading", self._heading_pub)
+        self._publish_heading(client, "global_yaw", self._global_yaw_pub)
+        utc = client.latest("utc_time")
+        if utc is not None and utc.received != self._last_published_utc \
+                and not client.is_stale("utc_time"):
+            self._last_published_utc = utc.received
+            reference = TimeReference()
+            reference.header.stamp = self._stamp(utc.stamp)
+            reference.time_ref = self._stamp(float(utc.value))
+            reference.source = "base_gnss"
+            self._time_pub.publish(reference)
         pitch, roll = client.latest("global_pitch"), client.latest("global_roll")
         if pitch is not None and roll is not None and not client.is_stale("global_pitch"):
             msg = Vector3Stamped()
@@ -622,6 +745,21 @@ class CanaeroTurretNode(GimbalDriverNode):
         zoom = client.latest("zoom_position")
         if zoom is not None and not client.is_stale("zoom_position") and zoom.si is not None:
             self._zoom_pub.publish(Float64(data=zoom.si))
+
+    def _publish_heading(self, client: TurretClient, key: str, publisher) -> None:
+        """One fresh heading frame -> one Imu; the accuracy is the rover GNSS's (7.3.2)."""
+        sample = client.latest(key)
+        if sample is None or sample.si is None or client.is_stale(key) \
+                or self._last_published_heading.get(key) == sample.received:
+            return
+        self._last_published_heading[key] = sample.received
+        accuracy = client.latest("rover_heading_accuracy")
+        fresh_accuracy = accuracy is not None and accuracy.si is not None \
+            and not client.is_stale("rover_heading_accuracy")
+        msg = heading_imu(sample.si, abs(accuracy.si) if fresh_accuracy else None)
+        msg.header.stamp = self._stamp(sample.stamp)
+        msg.header.frame_id = self.heading_frame_id
+        publisher.publish(msg)
 
     @staticmethod
     def _stamp(wall: float):
@@ -651,7 +789,35 @@ class CanaeroTurretNode(GimbalDriverNode):
         parts.append(self._sequence_part(client))
         parts.append(self._events_part(client))
         parts.append(self._stale_part(client, now))
+        parts.append(self._interval_part(client))
         return parts
+
+    def _interval_part(self, client: TurretClient) -> StatusPart:
+        """Which transmission intervals the rate and staleness checks are based on.
+
+        A turret that refuses TIS is not a fault (the ICD leaves intervals to the device):
+        the part stays OK and says once, in its message, that the observed rates are used.
+        """
+        values = []
+        for key in sorted(self._interval_requests()):
+            accepted = client.accepted_interval_ms(key)
+            observed = client.interval_of(key)
+            if accepted is not None:
+                values.append((key, f"{accepted} ms (accepted)"))
+            elif observed is not None:
+                values.append((key, f"{observed * 1000:.0f} ms (observed)"))
+            else:
+                values.append((key, "not received yet"))
+        values.append(("expected_joint_states_hz", f"{self.expected_joint_rate():.2f}"))
+        refused = client.refused_intervals
+        if refused:
+            for key, reason in sorted(refused.items()):
+                values.append((f"refused_{key}", reason))
+            return StatusPart("transmission intervals", Level.OK,
+                              f"the turret refused TIS for {', '.join(sorted(refused))}: "
+                              "checks follow the intervals it sends", values)
+        return StatusPart("transmission intervals", Level.OK,
+                          "intervals accepted by the turret", values)
 
     def _node_part(self, client: TurretClient, now: float) -> StatusPart:
         counters = client.counters

@@ -60,6 +60,7 @@ from .protocol.identifiers import (
 )
 from .protocol.message import CanAerospaceMessage
 from .protocol.sequencing import MessageCodeCounter
+from .slcan import open_bus
 
 LOG = logging.getLogger("canaero_turret_sim")
 
@@ -89,10 +90,11 @@ class Operation(IntEnum):
 
 LOCATION = {YAW: 1, PITCH: 2}
 
-# Default transmission intervals in ms (the ICD only fixes cover state = 100 ms; the
-# rest are simulator choices, changeable with TIS).
+# Default transmission intervals in ms (the ICD only fixes cover state = 100 ms). A real
+# turret sends its positions and velocities every 100 ms until a master asks for more by
+# TIS, so the simulator does the same; the slower ones are simulator choices.
 DEFAULT_INTERVALS_MS: dict[str, int] = {
-    "yaw_position": 40, "yaw_velocity": 40, "pitch_position": 40, "pitch_velocity": 40,
+    "yaw_position": 100, "yaw_velocity": 100, "pitch_position": 100, "pitch_velocity": 100,
     "yaw_status": 100, "pitch_status": 100, "yaw_actuator_mode_state": 500,
     "pitch_actuator_mode_state": 500, "yaw_current": 200, "pitch_current": 200,
     "yaw_motor_temperature": 1000, "pitch_motor_temperature": 1000,
@@ -241,8 +243,8 @@ class Memory:
 class _Download:
     node_id: int
     memory_id: int
-    count: int
-    next_number: int = 1
+    numbers: range  # the message codes the data messages must carry, in order
+    received: int = 0
     data: bytearray = field(default_factory=bytearray)
 
 
@@ -266,6 +268,10 @@ class SimConfig:
     longitude_deg: float = 11.5756
     altitude_m: float = 519.0
     pad_frames: bool = False
+    # Answer every TIS with -6 (out of range), like a turret with fixed intervals.
+    refuse_tis: bool = False
+    # DDS/DUS data messages count from 0 (default) or 1 (the ICD does not say)
+    transfer_first_number: int = ns.DEFAULT_FIRST_NUMBER
     intervals_ms: dict[str, int] = field(default_factory=lambda: dict(DEFAULT_INTERVALS_MS))
 
 
@@ -299,7 +305,7 @@ class TurretSimulator:
         self._cover_target: int | None = None
         self._cover_arrival = 0.0
         self.saved_position: tuple[float, float] | None = None
-        self.zoom_position = 1.0
+        self.zoom_position = 2500  # Camera0 zoom, LONG counts (ICD 7.5.1)
         self.stored_configuration: dict[str, object] | None = None
         self.received_commands: list[tuple[str, object]] = []
         self.malformed_received = 0
@@ -446,6 +452,16 @@ class TurretSimulator:
             self._repeat[can_id] -= 1
             frames.append(self._frame(message))
         return frames
+
+    def _next_slot(self, interval_ms: int) -> float:
+        """The next multiple of `interval_ms` since start: identifiers given the same interval
+        by TIS go out in the same cycle, like a device scheduler with one time base (yaw and
+        pitch positions of one cycle then arrive together, whatever the TIS order)."""
+        if interval_ms <= 0:
+            return self._clock()
+        period = interval_ms / 1000.0
+        elapsed = self._clock() - self._start
+        return self._start + math.ceil(elapsed / period) * period
 
     def _take_malformed(self) -> list[can.Message]:
         frames = []
@@ -606,7 +622,8 @@ class TurretSimulator:
                     self._download = None
                     return [ns.long_response(node_id, service, ns.ServiceStatus.INVALID,
                                              request.message_code, channel)]
-                self._download = _Download(node_id, memory_id, count)
+                self._download = _Download(
+                    node_id, memory_id, ns.data_numbers(count, self.config.transfer_first_number))
                 return [ns.long_response(node_id, service, ns.ServiceStatus.XON,
                                          request.message_code, channel)]
             if memory is None or not 1 <= count <= 255 or count * 4 > len(memory.data) + 3:
@@ -616,10 +633,11 @@ class TurretSimulator:
             data = bytes(memory.data[:count * 4])
             replies = [ns.long_response(node_id, service, ns.ServiceStatus.OK,
                                         request.message_code, channel)]
-            replies += [ns.chunk_message(response_id, node_id, service, number, chunk)
-                        for number, chunk in enumerate(ns.split_block(data), start=1)]
+            chunks = ns.transfer_messages(response_id, node_id, service, data,
+                                          self.config.transfer_first_number)
+            replies += chunks
             replies.append(ns.checksum_response(node_id, service, ns.block_checksum(data),
-                                                count, channel))
+                                                chunks[-1].message_code, channel))
             return replies
         # a DDS data message
         download = self._download
@@ -627,21 +645,21 @@ class TurretSimulator:
             return []
         value = request.value
         chunk = bytes(value if isinstance(value, tuple) else (value,))  # type: ignore[arg-type]
-        if request.message_code != download.next_number or \
+        if request.message_code != download.numbers[download.received] or \
                 request.data_type not in (DataType.UCHAR, DataType.UCHAR2, DataType.UCHAR3,
                                           DataType.UCHAR4):
             self._download = None
             return [ns.long_response(node_id, service, ns.ServiceStatus.ABORT,
                                      request.message_code, channel)]
         download.data += chunk
-        download.next_number += 1
-        if request.message_code < download.count:
+        download.received += 1
+        if download.received < len(download.numbers):
             return []
         self._download = None
         memory = self.memories[download.memory_id]
         memory.data[:len(download.data)] = download.data
         return [ns.checksum_response(node_id, service, ns.block_checksum(bytes(download.data)),
-                                     download.count, channel)]
+                                     request.message_code, channel)]
 
     def _service_for_node(self, node_id: int, request: CanAerospaceMessage,
                           channel: int) -> CanAerospaceMessage | None:
@@ -655,9 +673,10 @@ class TurretSimulator:
             if request.data_type == DataType.SHORT2:
                 can_id, interval = request.value  # type: ignore[misc]
                 valid_interval = interval == 0 or MIN_INTERVAL_MS <= interval <= MAX_INTERVAL_MS
-                if can_id in self._ids_of_node(node_id) and valid_interval:
+                if can_id in self._ids_of_node(node_id) and valid_interval \
+                        and not self.config.refuse_tis:
                     self._intervals[can_id] = interval
-                    self._next_due[can_id] = self._clock()
+                    self._next_due[can_id] = self._next_slot(interval)
                     status = ns.ServiceStatus.OK
             return ns.tis_response(node_id, status, channel)
         if service == ns.ServiceCode.FPS:
@@ -756,6 +775,8 @@ class TurretSimulator:
                 "intervals_ms": {self._table[i].key: v for i, v in self._intervals.items()},
                 "stored_configuration": self.stored_configuration is not None,
                 "commands_received": len(self.received_commands),
+                "recent_commands": [[key, value] for key, value in
+                                    self.received_commands[-10:]],
                 "malformed_received": self.malformed_received,
             }
 
@@ -1144,6 +1165,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--turret-node-id", type=int, default=TURRET_NODE_ID)
     parser.add_argument("--zoom-position-id", type=int, default=DEFAULT_ZOOM_POSITION_ID)
     parser.add_argument("--fps-security-code", type=int, default=DEFAULT_FPS_SECURITY_CODE)
+    parser.add_argument("--refuse-tis", action="store_true",
+                        help="answer every TIS request with -6 (fixed transmission intervals)")
+    parser.add_argument("--transfer-first-number", type=int, choices=ns.FIRST_NUMBERS,
+                        default=ns.DEFAULT_FIRST_NUMBER,
+                        help="number of the first DDS/DUS data message (default 0)")
     parser.add_argument("--pad-frames", action="store_true",
                         help="send 8-byte frames (zero padded) like the ICD examples")
     parser.add_argument("--ready-file", default=None,
@@ -1158,7 +1184,9 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     config = SimConfig(turret_node_id=args.turret_node_id,
                        zoom_position_id=args.zoom_position_id,
-                       fps_security_code=args.fps_security_code, pad_frames=args.pad_frames)
+                       fps_security_code=args.fps_security_code, pad_frames=args.pad_frames,
+                       refuse_tis=args.refuse_tis,
+                       transfer_first_number=args.transfer_first_number)
     simulator = TurretSimulator(config)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -1181,7 +1209,7 @@ def main(argv: list[str] | None = None) -> int:
         endpoint = {"interface": "socketcand", "channel": "can0", "host": link.host,
                     "port": link.port}
     else:
-        bus = can.Bus(interface=args.interface, channel=args.channel)
+        bus = open_bus(args.interface, args.channel)
         runner = BusSimRunner(simulator, bus).start()
         endpoint = {"interface": args.interface, "channel": args.channel}
     control = ControlServer(simulator, args.control_port, link).start()

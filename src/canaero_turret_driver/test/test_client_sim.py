@@ -17,7 +17,8 @@ from canaero_turret_driver.client import (
     TurretClient,
 )
 from canaero_turret_driver.protocol import ActuatorMode, AxisStatus, CanAerospaceMessage
-from canaero_turret_driver.sim import EedCode
+from canaero_turret_driver.protocol.identifiers import DEFAULT_ZOOM_POSITION_ID
+from canaero_turret_driver.sim import BusSimRunner, EedCode, SimConfig, TurretSimulator
 
 
 def wait_for(condition, timeout=5.0, interval=0.01):
@@ -148,6 +149,55 @@ def test_transmission_interval_service(client, simulator):
         client.set_transmission_interval("yaw_position", 5)
     with pytest.raises(CommandError):
         client.set_transmission_interval("yaw_position_setpoint", 50)
+
+
+def test_zoom_position_is_a_long_count_on_id_1342(client):
+    assert DEFAULT_ZOOM_POSITION_ID == 1342
+    assert wait_for(lambda: client.latest("zoom_position") is not None)
+    sample = client.latest("zoom_position")
+    assert sample.value == 2500 and isinstance(sample.value, int)
+    assert client.data_type_of("zoom_position").name == "LONG"
+
+
+def test_accepted_intervals_drive_staleness(client, simulator):
+    # the simulator, like the turret, sends positions every 100 ms until asked otherwise
+    assert simulator.state()["intervals_ms"]["yaw_position"] == 100
+    refused = client.request_intervals({"yaw_position": 20, "pitch_position": 20,
+                                        "case_temperature": 2000})
+    assert refused == {} and client.refused_intervals == {}
+    assert simulator.state()["intervals_ms"]["yaw_position"] == 20
+    assert client.interval_of("yaw_position") == pytest.approx(0.02)
+    assert client.accepted_interval_ms("case_temperature") == 2000
+    assert client.stale_timeout_for("case_temperature") == pytest.approx(6.0)
+    assert client.stale_timeout_for("yaw_position") == client.config.stale_timeout
+
+
+@pytest.fixture
+def refusing_client(channel_name):
+    sim = TurretSimulator(SimConfig(refuse_tis=True))
+    bus = can.Bus(interface="virtual", channel=channel_name)
+    runner = BusSimRunner(sim, bus).start()
+    turret = TurretClient(ClientConfig(interface="virtual", channel=channel_name,
+                                       service_timeout=0.5, stale_timeout=0.1))
+    turret.open()
+    yield turret, sim
+    turret.close()
+    runner.stop()
+    bus.shutdown()
+
+
+def test_refused_intervals_fall_back_to_the_observed_rate(refusing_client):
+    client, sim = refusing_client
+    refused = client.request_intervals({"yaw_position": 20, "pitch_position": 20})
+    assert set(refused) == {"yaw_position", "pitch_position"}
+    assert "out of range" in refused["yaw_position"]
+    assert sim.state()["intervals_ms"]["yaw_position"] == 100
+    assert client.accepted_interval_ms("yaw_position") is None
+    # learned from the frames: about 100 ms, so staleness allows 3 x that
+    assert wait_for(lambda: client.interval_of("yaw_position") is not None
+                    and client.interval_of("yaw_position") > 0.05)
+    assert client.stale_timeout_for("yaw_position") > 0.15
+    assert wait_for(lambda: not client.is_stale("yaw_position"))
 
 
 def test_node_id_and_flash_services_need_opt_in(client, simulator):
@@ -353,6 +403,56 @@ def test_data_download_and_upload(client, simulator):
     with pytest.raises(CommandError):
         client.upload(1, 2000)
     assert client.identify().software_revision == 7  # the service channel is free again
+
+
+@pytest.fixture
+def numbered_rig(channel_name, request):
+    """(client, simulator) counting DDS/DUS data messages from client_first / sim_first."""
+    client_first, sim_first = request.param
+    sim = TurretSimulator(SimConfig(transfer_first_number=sim_first))
+    bus = can.Bus(interface="virtual", channel=channel_name)
+    runner = BusSimRunner(sim, bus).start()
+    spy = can.Bus(interface="virtual", channel=channel_name)
+    turret = TurretClient(ClientConfig(interface="virtual", channel=channel_name,
+                                       service_timeout=0.5,
+                                       transfer_first_number=client_first))
+    turret.open()
+    yield turret, sim, spy
+    turret.close()
+    spy.shutdown()
+    runner.stop()
+    bus.shutdown()
+
+
+def _transfer_numbers(spy, can_id):
+    numbers = []
+    while (frame := spy.recv(timeout=0)) is not None:  # what is queued so far
+        if frame.arbitration_id == can_id and frame.data[1] in (10, 19, 27, 16):  # UCHAR..4
+            numbers.append(frame.data[3])
+    return numbers
+
+
+@pytest.mark.parametrize("numbered_rig", [(0, 0), (1, 1)], indirect=True,
+                         ids=["from_0", "from_1"])
+def test_transfers_in_either_numbering(numbered_rig):
+    client, _, spy = numbered_rig
+    first = client.config.transfer_first_number
+    block = bytes(range(1, 10))  # 9 bytes: 3 data messages
+    assert client.download(1, block) == sum(block)
+    assert _transfer_numbers(spy, 128) == [first, first + 1, first + 2]
+    assert client.upload(1, 9) == block
+    assert _transfer_numbers(spy, 129) == [first, first + 1, first + 2]
+
+
+@pytest.mark.parametrize("numbered_rig", [(1, 0), (0, 1)], indirect=True,
+                         ids=["client_1_node_0", "client_0_node_1"])
+def test_transfer_numbering_mismatch_is_named(numbered_rig, channel_name):
+    client, sim, _ = numbered_rig
+    with pytest.raises(ServiceError, match="transfer_first_number"):
+        client.download(1, b"abcdefgh")
+    assert bytes(sim.memories[1].data[:8]) == bytes(8)  # nothing was written
+    with pytest.raises(ServiceError, match="transfer_first_number"):
+        client.upload(16, 8)
 
 
 def test_axis_sign_maps_device_direction(simulator, channel_name):

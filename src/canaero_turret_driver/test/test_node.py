@@ -7,7 +7,6 @@ and read the device state.
 
 from __future__ import annotations
 
-import json
 import math
 import signal
 
@@ -17,13 +16,11 @@ pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (mak
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
-from sensor_msgs.msg import JointState, NavSatFix
+from sensor_msgs.msg import Imu, JointState, NavSatFix, TimeReference
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
-from canaero_turret_driver.sim import ControlClient
-from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.testing import wait_for
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import GimbalStatus
 from gimbal_msgs.srv import (
@@ -42,45 +39,23 @@ NODE = "canaero_turret_driver"
 
 
 def node_params(tty: str, presets: str) -> list[str]:
-    params = [
+    return [
         "can_interface:=slcan", f"can_channel:={tty}", "can_options:=['sleep_after_open=0']",
         "service_timeout:=0.3", "reconnect_period:=0.3", "diagnostics_period:=0.25",
         "command_timeout:=0.4", "node_timeout:=0.6", "stale_timeout:=0.6",
         f"presets_file:={presets}", "publish_rate:=20.0",
-        "transmission_intervals:=['yaw_position=20','pitch_position=20']",
         "actuator_mode:=auto_brake",
     ]
-    return ["--ros-args", *[x for p in params for x in ("-p", p)]]
 
 
 @pytest.fixture(scope="module")
-def rig(tmp_path_factory):
-    lease = DomainLease()
-    domain = lease.acquire()
+def rig(tmp_path_factory, sim_and_node):
     tmp = tmp_path_factory.mktemp("canaero")
-    tty, ready, presets = tmp / "tty", tmp / "ready.json", tmp / "presets.yaml"
-    sim = ManagedProcess.ros(PKG, "canaero_turret_sim", domain,
-                             ["--link", str(tty), "--ready-file", str(ready)])
-    node = None
-    ros = None
-    control = None
-    try:
-        wait_for(ready.exists, 20, "the simulator to start")
-        control = ControlClient(json.loads(ready.read_text())["control_port"])
-        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain,
-                                  node_params(str(tty), str(presets)))
-        ros = RosTestClient(domain)
+    presets = tmp / "presets.yaml"
+    with sim_and_node(tmp, lambda tty: node_params(tty, str(presets))) as (ros, control,
+                                                                             node):
         ros.wait_for_message("joint_states", JointState, timeout=40)
         yield ros, control, presets, node
-    finally:
-        if ros is not None:
-            ros.close()
-        if node is not None:
-            node.stop()
-        if control is not None:
-            control.close()
-        sim.stop()
-        lease.release()
 
 
 def sim_axis(control, axis: str) -> dict:
@@ -129,6 +104,33 @@ def test_move_to_absolute_and_relative(rig):
     assert sim_axis(control, "yaw")["position"] == pytest.approx(math.degrees(0.4), abs=0.1)
     result, _, _ = move(ros, ["yaw"], [-0.2], relative=True)
     assert result.success and result.positions[0] == pytest.approx(0.2, abs=0.011)
+    # sent as the turret's relative set-point (6.1.4), not as a resolved absolute one
+    key, value = control.state()["recent_commands"][-1]
+    assert key == "yaw_relative_setpoint" and value == pytest.approx(math.degrees(-0.2))
+    before = control.state()["commands_received"]
+    result, _, _ = move(ros, ["pitch"], [2.0], relative=True)
+    assert not result.success and "outside" in result.message
+    assert control.state()["commands_received"] == before
+
+
+def test_motion_refused_on_a_faulted_axis_before_sending(rig):
+    ros, control, _, _ = rig
+    assert control.command("fault yaw") == "ok"
+    wait_diag(ros, "yaw", 2)
+    before = control.state()["commands_received"]
+    result, _, _ = move(ros, ["yaw"], [0.3])
+    assert not result.success and "'yaw': drive disabled (fault)" in result.message
+    result, _, _ = move(ros, ["yaw"], [0.1], relative=True)
+    assert not result.success and "fault" in result.message
+    reply = ros.call(GotoPreset, f"/{NODE}/goto_preset", GotoPreset.Request(index=0))
+    assert not reply.success and "yaw" in reply.message
+    ros.publish("joint_command", JointState(name=["yaw"], velocity=[0.2]))
+    assert control.state()["commands_received"] == before  # nothing reached the turret
+    assert move(ros, ["pitch"], [0.1])[0].success  # the healthy axis still moves
+    reply = ros.call(Trigger, f"/{NODE}/reset_faults", Trigger.Request())
+    assert reply.success, reply.message
+    wait_diag(ros, "yaw", 0)
+    assert move(ros, ["yaw"], [0.3])[0].success
 
 
 def test_move_refused_out_of_limits_and_unknown_joint(rig):
@@ -240,10 +242,39 @@ def test_gnss_heading_and_inclination_topics(rig):
     fix = ros.wait_for_message(f"/{NODE}/fix", NavSatFix)
     assert fix.latitude == pytest.approx(48.1372) and fix.longitude == pytest.approx(11.5756)
     assert fix.altitude == pytest.approx(519.0) and fix.position_covariance[0] > 0
-    heading = ros.wait_for_message(f"/{NODE}/heading", Float64)
-    assert heading.data == pytest.approx(math.radians(123.45678), abs=1e-4)
     incl = ros.wait_for_message(f"/{NODE}/inclination", Vector3Stamped)
     assert incl.vector.x == pytest.approx(math.radians(-0.8), abs=1e-4)
+    # rover heading 123.45678 deg (compass, 7.3.1) +- 0.25 deg (7.3.2) -> ENU yaw
+    enu_yaw = math.pi / 2 - math.radians(123.45678)
+    for topic in ("heading", "global_yaw"):
+        imu = ros.wait_for_message(f"/{NODE}/{topic}", Imu,
+                                   lambda m: m.orientation_covariance[8] > 0)
+        yaw = 2.0 * math.atan2(imu.orientation.z, imu.orientation.w)
+        assert yaw == pytest.approx(enu_yaw, abs=1e-5), topic
+        assert imu.orientation.x == 0.0 and imu.orientation.y == 0.0
+        assert imu.orientation_covariance[8] == pytest.approx(math.radians(0.25) ** 2)
+        assert imu.orientation_covariance[0] >= 1e3 and imu.orientation_covariance[4] >= 1e3
+        assert imu.angular_velocity_covariance[0] == -1.0
+        assert imu.linear_acceleration_covariance[0] == -1.0
+        assert imu.header.frame_id == "gnss_rover" and imu.header.stamp.sec > 0
+    reference = ros.wait_for_message(f"/{NODE}/time_reference", TimeReference)
+    assert reference.source == "base_gnss" and reference.time_ref.nanosec == 0
+    assert abs(reference.time_ref.sec - reference.header.stamp.sec) <= 2
+    zoom = ros.wait_for_message(f"/{NODE}/zoom", Float64)
+    assert zoom.data == 2500.0  # Camera0 zoom position, LONG counts on id 1342
+
+
+def test_transmission_intervals_requested_at_connect(rig):
+    ros, control, _, _ = rig
+    # publish_rate 20 Hz -> TIS 50 ms for positions and velocities (the sim starts at 100)
+    intervals = control.state()["intervals_ms"]
+    assert intervals["yaw_position"] == intervals["pitch_velocity"] == 50
+    diag = wait_diag(ros, "transmission intervals", 0)
+    values = {kv.key: kv.value for kv in part(diag, "transmission intervals").values}
+    assert values["yaw_position"] == "50 ms (accepted)"
+    diag = wait_diag(ros, "joint_states frequency", 0, timeout=20)
+    values = {kv.key: kv.value for kv in part(diag, "joint_states frequency").values}
+    assert values["expected_hz"] == "20"
 
 
 def test_diagnostics_on_injected_faults_and_reset(rig):

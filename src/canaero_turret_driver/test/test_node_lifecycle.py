@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 
 import pytest
@@ -12,7 +11,6 @@ pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (mak
 from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 
-from canaero_turret_driver.sim import ControlClient
 from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 from gimbal_msgs.action import MoveTo
@@ -34,6 +32,7 @@ def ros_args(*params: str) -> list[str]:
     ("actuator_mode:=sideways", "actuator_mode"),
     ("can_options:=['novalue']", "can_options"),
     ("service_channel:=50", "service_channel"),
+    ("transfer_first_number:=2", "transfer_first_number"),
 ])
 def test_invalid_parameters_are_refused_at_start(param, expected):
     with DomainLease() as domain:
@@ -48,34 +47,16 @@ def test_invalid_parameters_are_refused_at_start(param, expected):
 
 
 @pytest.fixture(scope="module")
-def managed(tmp_path_factory):
-    lease = DomainLease()
-    domain = lease.acquire()
-    tmp = tmp_path_factory.mktemp("canaero_managed")
-    tty, ready = tmp / "tty", tmp / "ready.json"
-    sim = ManagedProcess.ros(PKG, "canaero_turret_sim", domain,
-                             ["--link", str(tty), "--ready-file", str(ready)])
-    node = ros = control = None
-    try:
-        wait_for(ready.exists, 20, "the simulator to start")
-        control = ControlClient(json.loads(ready.read_text())["control_port"])
-        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain, ros_args(
-            "can_interface:=slcan", f"can_channel:={tty}",
-            "can_options:=['sleep_after_open=0']", "autostart:=false",
-            "service_timeout:=0.3", "reconnect_period:=0.3", "command_timeout:=5.0",
-            "allow_node_id_change:=true", "allow_flash_programming:=true",
-            "allow_data_download:=true"))
-        ros = RosTestClient(domain)
-        yield ros, control, node
-    finally:
-        if ros is not None:
-            ros.close()
-        if node is not None:
-            node.stop()
-        if control is not None:
-            control.close()
-        sim.stop()
-        lease.release()
+def managed(tmp_path_factory, sim_and_node):
+    params = ["can_options:=['sleep_after_open=0']", "autostart:=false",
+              "service_timeout:=0.3", "reconnect_period:=0.3", "command_timeout:=5.0",
+              "allow_node_id_change:=true", "allow_flash_programming:=true",
+              "allow_data_download:=true", "can_interface:=slcan",
+              "transfer_first_number:=1"]  # DDS/DUS numbered from 1 on both sides
+    with sim_and_node(tmp_path_factory.mktemp("canaero_managed"),
+                      lambda tty: [*params, f"can_channel:={tty}"],
+                      ["--transfer-first-number", "1"]) as rig:
+        yield rig
 
 
 def test_managed_lifecycle_and_deactivate_stops_axes(managed):

@@ -251,6 +251,23 @@ def test_transfer_helpers():
         ns.split_block(bytes(1021))
 
 
+@pytest.mark.parametrize("first", [0, 1])
+def test_transfer_messages_are_numbered_from_the_chosen_first_number(first):
+    data = bytes(range(10))
+    messages = ns.transfer_messages(0x81, 1, ns.ServiceCode.DUS, data, first)
+    assert [m.message_code for m in messages] == [first, first + 1, first + 2]
+    assert [m.data_type for m in messages] == [DataType.UCHAR4, DataType.UCHAR4,
+                                               DataType.UCHAR2]
+    assert messages[0].to_bytes() == bytes((1, DataType.UCHAR4, 3, first, 0, 1, 2, 3))
+    assert list(ns.data_numbers(255, first))[-1] == 254 + first  # still one byte
+    assert ns.DEFAULT_FIRST_NUMBER == 0  # libcanaerospace's numbering
+
+
+def test_transfer_numbering_other_than_0_or_1_is_refused():
+    with pytest.raises(CodecError, match="0 or 1"):
+        ns.data_numbers(3, 2)
+
+
 def test_axis_status_and_periphery_bits():
     status = AxisStatus.decode(0b1000_1001)
     assert (status.target_name, status.mode_name, status.enabled) == ("reached",

@@ -20,7 +20,8 @@ Errors found in the ICD text and the rule followed instead:
   1.7 puts it in LONG data: the client accepts both.
 * Figure 4 (EED layout) was lost: error code bytes 4-5, operation id byte 6, location id
   byte 7 (CANaerospace 1.7).
-* 7.5.1 Camera0 zoom position: id and type missing (text truncated): configurable id.
+* 7.5.1 Camera0 zoom position: on the file's last line (no trailing newline): 1342
+  (0x53E), LONG, counts.
 * Table of contents and headings repeat 6.1.1-6.1.5 and 6.7.1 for different entries.
 """
 
@@ -104,7 +105,7 @@ PRINTED_ID_PAIRS = [
     (1405, 0x57D), (1413, 0x585), (1415, 0x587), (1431, 0x597), (1433, 0x599),
     (1435, 0x59B), (1801, 0x709), (1802, 0x70A), (1409, 0x581), (1507, 0x5E3),
     (1509, 0x5E5), (1800, 0x708), (1520, 0x5F0), (1521, 0x5F1), (1523, 0x5F3),
-    (1524, 0x5F4), (1528, 0x5F8),
+    (1524, 0x5F4), (1528, 0x5F8), (1342, 0x53E),
 ]
 
 
@@ -116,7 +117,7 @@ def test_identifier_table_decimal_matches_hex(decimal, hexadecimal):
 
 def test_every_table_entry_was_cross_checked():
     checked = {d for d, _ in PRINTED_ID_PAIRS}
-    assert set(BY_ID) - checked == {1330}  # the reconstructed zoom id only
+    assert set(BY_ID) == checked  # every id, the zoom position (7.5.1) included
 
 
 def test_printed_weapon_pairs_disagree_and_are_not_in_table():

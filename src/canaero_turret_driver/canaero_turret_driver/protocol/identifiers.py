@@ -12,11 +12,10 @@ ignores it, so frames carrying those functions are dropped without being decoded
 Reconstruction decisions:
 * "UCAR" (Stop actuators 6.1.1, Yaw/Pitch current status 7.1.10/7.1.20) is read as
   UCHAR: the value is an 8-bit bit field and the other single-byte entries say UCHAR.
-* Camera0 zoom position (7.5.1): the OCR text ends inside the table, before the id and
-  type. The id is a configuration value (`zoom_position_id`, default below) and the value
-  is decoded by the data type carried in the header, which CANaerospace messages always
-  carry. Default 1330 follows the 10-per-camera blocks of 6.2 (Camera1 1340, Camera2 1350,
-  ...): a guess to be confirmed with the device, documented in the README.
+* Camera0 zoom position (7.5.1): the ICD's very last line (the file has no trailing
+  newline, which an earlier reading dropped) gives `1342 (0x53E) Camera0 zoom position
+  LONG count`: id 1342, LONG, raw counts (decimal and hex agree). The id stays
+  configurable (`zoom_position_id`) for installations that moved it.
 * Humidity is sent in % and is converted to a 0..1 fraction (sensor_msgs convention).
 * Latitude/longitude stay in degrees (sensor_msgs/NavSatFix uses degrees).
 """
@@ -35,7 +34,7 @@ COVER_NODE_ID = 2
 ROVER_GNSS_NODE_ID = 5
 BASE_GNSS_NODE_ID = 6
 ZOOM_NODE_ID = 7
-DEFAULT_ZOOM_POSITION_ID = 1330
+DEFAULT_ZOOM_POSITION_ID = 1342  # ICD 7.5.1, last line
 
 DEG = math.pi / 180.0
 
@@ -215,10 +214,10 @@ IDENTIFIERS: tuple[Identifier, ...] = (
           "m", 1e-4, BASE_GNSS_NODE_ID, "7.4.4", f"1524 (0x5F4), {_HEX}"),
     _data(1528, "utc_time", "UTC time", DataType.ULONG, "s", "s", 1.0, BASE_GNSS_NODE_ID,
           "7.4.5", f"1528 (0x5F8), {_HEX}"),
-    # 7.5 zoom, node 7 (id and type lost in the OCR, see module notes)
-    _data(DEFAULT_ZOOM_POSITION_ID, "zoom_position", "Camera0 zoom position", DataType.FLOAT,
-          "-", "-", 1.0, ZOOM_NODE_ID, "7.5.1",
-          "id/type missing in the ICD: configurable id, decoded by header type"),
+    # 7.5 zoom, node 7 (the ICD's last line, see module notes)
+    _data(DEFAULT_ZOOM_POSITION_ID, "zoom_position", "Camera0 zoom position", DataType.LONG,
+          "count", "count", 1.0, ZOOM_NODE_ID, "7.5.1",
+          f"1342 (0x53E), {_HEX}; last line of the ICD (no trailing newline)"),
 )
 
 BY_ID: dict[int, Identifier] = {ident.can_id: ident for ident in IDENTIFIERS}

@@ -14,9 +14,13 @@ both: LONG data when present, else the message code read as a signed byte. The
 simulator answers in the ICD's NODATA form.
 
 DDS/DUS reconstruction: the start request's message code holds the number of data
-messages (1..255, "1-1020 bytes, specified by the message number field"); data messages
-are numbered 1..n in the message code; the checksum is the sum of all data bytes
-modulo 2**32 (the ICD: "a checksum calculated from summing up all received data").
+messages n (1..255, "1-1020 bytes, specified by the message number field"); the
+checksum is the sum of all data bytes modulo 2**32 (the ICD: "a checksum calculated
+from summing up all received data") and its response carries the last data message's
+number. The ICD does not say whether data messages count from 0 or from 1: both are
+supported (`first_number`). Default 0, after the second witness: libcanaerospace
+(P. Kirienko, 2013, the public CANaerospace C implementation) numbers them 0..n-1 and
+puts n-1 in the checksum response.
 """
 
 from __future__ import annotations
@@ -33,6 +37,8 @@ MAX_BLOCK_BYTES = 1020
 BROADCAST_NODE_ID = 0
 NIS_MIN_NODE_ID = 1
 NIS_MAX_NODE_ID = 199
+DEFAULT_FIRST_NUMBER = 0  # DDS/DUS data messages count from 0 (see module notes)
+FIRST_NUMBERS = (0, 1)
 
 
 class ServiceCode(IntEnum):
@@ -241,6 +247,22 @@ def chunk_message(can_id: int, node_id: int, service: ServiceCode, number: int,
     value: object = chunk[0] if len(chunk) == 1 else tuple(chunk)
     return CanAerospaceMessage.build(can_id, node_id, _CHUNK_TYPES[len(chunk)], value,
                                      int(service), number)
+
+
+def data_numbers(message_count: int, first_number: int = DEFAULT_FIRST_NUMBER) -> range:
+    """Message codes of the data messages of an n-message transfer, in order."""
+    if first_number not in FIRST_NUMBERS:
+        raise CodecError(f"data messages count from 0 or 1, not {first_number}")
+    return range(first_number, first_number + message_count)
+
+
+def transfer_messages(can_id: int, node_id: int, service: ServiceCode, data: bytes,
+                      first_number: int = DEFAULT_FIRST_NUMBER) -> list[CanAerospaceMessage]:
+    """A 1..1020 byte block as numbered DDS/DUS data messages."""
+    chunks = split_block(data)
+    return [chunk_message(can_id, node_id, service, number, chunk)
+            for number, chunk in zip(data_numbers(len(chunks), first_number), chunks,
+                                     strict=True)]
 
 
 def start_transfer_request(node_id: int, service: ServiceCode, memory_id: int,

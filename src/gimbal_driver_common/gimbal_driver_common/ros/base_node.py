@@ -175,6 +175,17 @@ class GimbalDriverNode(LifecycleNode):
         """Absolute moves: joint -> (target rad, max speed rad/s or None for default)."""
         raise NotImplementedError
 
+    def send_relative_moves(
+        self, offsets: dict[str, float], moves: dict[str, tuple[float, float | None]]
+    ) -> bool:
+        """Send a relative MoveTo as the device's own relative set-points.
+
+        ``offsets`` are the goal's offsets; ``moves`` the absolute targets they resolve to
+        (already checked against the limits) with speeds. Return False (the default) to
+        have the base node send ``moves`` with :meth:`send_moves` instead.
+        """
+        return False
+
     def send_jogs(self, jogs: dict[str, float]) -> None:
         """Velocity commands: joint -> rad/s (0 stops that joint)."""
         raise NotImplementedError
@@ -602,6 +613,15 @@ class GimbalDriverNode(LifecycleNode):
         """
         return None
 
+    def expected_joint_rate(self) -> float:
+        """joint_states rate the frequency check expects (Hz): ``publish_rate``.
+
+        A STREAMED driver whose device sends slower than ``publish_rate`` (and that
+        reports the rate the device agreed to or actually uses) overrides this, so a
+        healthy device is not reported as too slow.
+        """
+        return self.publish_rate
+
     def motion_refusal(self, joints: Sequence[str]) -> str | None:
         """command_refusal() or axis_refusal(joints): the one check before motion."""
         return self.command_refusal() or self.axis_refusal(list(joints))
@@ -727,7 +747,9 @@ class GimbalDriverNode(LifecycleNode):
                 moves[name] = (targets[name], speed)
             self._stop_scan_silently()
             self.jog_watchdog.cancel(names)
-            self.send_moves(moves)
+            offsets = dict(zip(names, map(float, goal.positions), strict=True))
+            if not (goal.relative and self.send_relative_moves(offsets, moves)):
+                self.send_moves(moves)
             self.commanded_targets.update(targets)
         except Exception as exc:  # noqa: BLE001
             goal_handle.abort()
@@ -1013,11 +1035,12 @@ class GimbalDriverNode(LifecycleNode):
             connection.message = f'disconnected: {self._link_error}'
         parts.append(connection)
         if self._active and self._connected:
+            self._joint_rate.expected_hz = self.expected_joint_rate()
             level, message = self._joint_rate.status()
             parts.append(
                 StatusPart(
                     'joint_states frequency', level, message,
-                    [('expected_hz', f'{self.publish_rate:g}'),
+                    [('expected_hz', f'{self._joint_rate.expected_hz:g}'),
                      ('measured_hz', f'{self._joint_rate.rate_hz:.2f}')],
                 )
             )

@@ -1,0 +1,92 @@
+"""slcan (Lawicel ASCII) on a serial port, read in whole chunks instead of byte by byte.
+
+python-can's `slcanBus` reads the port one byte per `read(1)`, and while the port is
+idle it polls with the port's 1 ms read timeout, so every `recv()` costs about a
+thousand select() calls per second plus one Python round trip per received byte (a
+CANaerospace frame is a 14..22 byte record). That was most of the node's CPU at its
+default rate. `ChunkedSlcanBus` keeps everything else of `slcanBus` (open/close and
+bitrate commands, frame parsing, send) and replaces only the reading: it sleeps in
+select() on the port's file descriptor until bytes arrive (or the timeout ends), reads
+all waiting bytes at once and splits them into records at CR (OK) or BEL (error).
+
+Written against python-can 4.6.1 (pinned in requirements.txt): it overrides the
+private `_read` and `flush` of `slcanBus`; re-check both when upgrading python-can.
+"""
+
+from __future__ import annotations
+
+import re
+import select
+from collections import deque
+from typing import Any
+
+import can
+import serial
+from can.exceptions import error_check
+from can.interfaces.slcan import slcanBus
+
+# A record ends at CR (also the adapter's bare OK) or BEL (the adapter's error reply).
+RECORD = re.compile(rb"[^\r\x07]*[\r\x07]")
+MAX_RECORD = 64  # longer than any slcan record of a classic CAN frame (T + 8 + 1 + 16)
+
+
+class ChunkedSlcanBus(slcanBus):
+    """`slcanBus` that reads whole chunks and waits in select() instead of polling."""
+
+    def __init__(self, channel: str, **kwargs: Any) -> None:
+        self._records: deque[str] = deque()
+        self._pending = bytearray()
+        super().__init__(channel, **kwargs)
+
+    def _wait_readable(self, timeout: float | None) -> bool:
+        """Block until the port has bytes (True) or `timeout` s passed (False)."""
+        port = self.serialPortOrig
+        try:
+            fd = port.fileno()
+        except (AttributeError, OSError, ValueError, NotImplementedError):
+            # A URL port without a descriptor (socket://, loop://): wait in its own read.
+            data = port.read(1)
+            self._split(data)
+            return bool(data)
+        readable, _, _ = select.select([fd], [], [], timeout)
+        return bool(readable)
+
+    def _split(self, data: bytes) -> None:
+        """Append bytes and move every complete record (terminator included) to the queue."""
+        self._pending += data
+        end = 0
+        for match in RECORD.finditer(self._pending):
+            self._records.append(match.group().decode("ascii", "replace"))
+            end = match.end()
+        del self._pending[:end]
+        if len(self._pending) > MAX_RECORD:  # no terminator in sight: resynchronise
+            self._records.append(self._pending.decode("ascii", "replace") + "\a")
+            self._pending.clear()
+
+    def _read(self, timeout: float | None) -> str | None:
+        expiry = serial.Timeout(timeout)
+        port = self.serialPortOrig
+        with error_check("Could not read from serial device"):
+            while not self._records:
+                waiting = port.in_waiting
+                if waiting:
+                    self._split(port.read(waiting))
+                    continue
+                left = expiry.time_left()
+                if left is not None and left <= 0:
+                    return None
+                if not self._wait_readable(left):
+                    return None
+            return self._records.popleft()
+
+    def flush(self) -> None:
+        self._records.clear()
+        self._pending.clear()
+        super().flush()
+
+
+def open_bus(interface: str, channel: str, **options: Any) -> can.BusABC:
+    """`can.Bus(...)`, except that `slcan` gets the chunked reader of this module."""
+    if interface == "slcan":
+        return ChunkedSlcanBus(channel, **options)
+    return can.Bus(interface=interface, channel=channel, **options)
