@@ -12,9 +12,12 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
+from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.action import ActionClient
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
@@ -126,6 +129,23 @@ class RosTestClient:
         array = self.wait_for_message('/diagnostics', DiagnosticArray, match, timeout)
         return find_diagnostic(array, node, part)
 
+    def mean_stamp_gap(self, topic: str, msg_type: type, count: int,
+                       timeout: float = 60.0) -> float:
+        """Mean gap between the header stamps of ``count`` + 1 fresh messages, in s.
+
+        Stamps are set where the data arrived, so the gaps show the rate the node
+        produces, not the delivery jitter of a loaded machine.
+        """
+        received = self.subscribe(topic, msg_type)
+        with self._lock:
+            start = len(received)
+        wait_for(lambda: len(received) >= start + count + 1, timeout,
+                 f'{count + 1} messages on {topic}')
+        with self._lock:
+            stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+                      for m in received[start:start + count + 1]]
+        return (stamps[-1] - stamps[0]) / count
+
     def publish(self, topic: str, msg: Any) -> None:
         publisher = self._publishers.get(topic)
         if publisher is None:
@@ -153,6 +173,21 @@ class RosTestClient:
         future = client.call_async(request)
         wait_for(future.done, timeout, f'the reply of {name}')
         return future.result()
+
+    # parameters (what `ros2 param set/get` do: the node's parameter services)
+    def set_parameter(
+        self, node_name: str, name: str, value: Any, timeout: float = 15.0
+    ) -> SetParametersResult:
+        """Set one parameter of ``node_name``; returns rclpy's (successful, reason)."""
+        request = SetParameters.Request(parameters=[Parameter(name, value=value)
+                                                    .to_parameter_msg()])
+        return self.call(SetParameters, f'/{node_name}/set_parameters', request,
+                         timeout).results[0]
+
+    def get_parameter(self, node_name: str, name: str, timeout: float = 15.0) -> Any:
+        reply = self.call(GetParameters, f'/{node_name}/get_parameters',
+                          GetParameters.Request(names=[name]), timeout)
+        return parameter_value_to_python(reply.values[0])
 
     # actions
     def run_action(
