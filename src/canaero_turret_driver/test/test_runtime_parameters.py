@@ -13,8 +13,8 @@ pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (mak
 from sensor_msgs.msg import JointState
 
 from canaero_turret_driver.sim import ControlClient
-from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.ros.testing import driver_rig
+from gimbal_driver_common.testing import wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -25,34 +25,21 @@ FAST = ["yaw_position=20", "pitch_position=20"]
 
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
-    lease = DomainLease()
-    domain = lease.acquire()
     tmp = tmp_path_factory.mktemp("canaero_params")
     tty, ready = tmp / "tty", tmp / "ready.json"
-    sim = ManagedProcess.ros(PKG, "canaero_turret_sim", domain,
-                             ["--link", str(tty), "--ready-file", str(ready)])
-    node = ros = control = None
-    try:
-        wait_for(ready.exists, 20, "the simulator to start")
+    with driver_rig(PKG, "canaero_turret_sim", ["--link", str(tty), "--ready-file", str(ready)],
+                    lambda _: wait_for(ready.exists, 20, "the simulator to start"),
+                    "canaero_turret_driver_node", [
+                        "can_interface:=slcan", f"can_channel:={tty}",
+                        "can_options:=['sleep_after_open=0']", "service_timeout:=0.3",
+                        "reconnect_period:=0.3", "publish_rate:=100.0",
+                        "transmission_intervals:=['yaw_position=20','pitch_position=20']"],
+                    ) as rig:
         control = ControlClient(json.loads(ready.read_text())["control_port"])
-        params = ["can_interface:=slcan", f"can_channel:={tty}",
-                  "can_options:=['sleep_after_open=0']", "service_timeout:=0.3",
-                  "reconnect_period:=0.3", "publish_rate:=100.0",
-                  "transmission_intervals:=['yaw_position=20','pitch_position=20']"]
-        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain,
-                                  ["--ros-args", *[x for p in params for x in ("-p", p)]])
-        ros = RosTestClient(domain)
-        ros.wait_for_message("joint_states", JointState, timeout=40)
-        yield ros, control, node
-    finally:
-        if ros is not None:
-            ros.close()
-        if node is not None:
-            node.stop()
-        if control is not None:
+        try:
+            yield rig.ros, control, rig.node
+        finally:
             control.close()
-        sim.stop()
-        lease.release()
 
 
 def test_transmission_intervals_go_to_the_turret_when_set(rig) -> None:

@@ -10,10 +10,10 @@ import pytest
 
 pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
-from sensor_msgs.msg import Imu, JointState, NavSatFix
+from sensor_msgs.msg import Imu, NavSatFix
 
-from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
+from gimbal_driver_common.ros.testing import driver_rig
+from gimbal_driver_common.testing import free_tcp_port
 
 pytestmark = pytest.mark.ros
 
@@ -23,25 +23,13 @@ NODE = 'capture_driver'
 
 @pytest.fixture(scope='module')
 def rig():
-    lease = DomainLease()
-    domain = lease.acquire()
-    port, control_port = free_tcp_port(), free_tcp_port()
-    sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
-        '--port', str(port), '--control-port', str(control_port), '--time-scale', '4'])
-    sim.wait_for_output('capture_sim ready')
-    node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
-        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
-        '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3', '-p', 'imu_rate:=5.0',
-        '-p', 'fix_rate:=0.0'])
-    ros = RosTestClient(domain)
-    try:
-        ros.wait_for_message('joint_states', JointState, timeout=30)
-        yield ros, node
-    finally:
-        ros.close()
-        node.stop()
-        sim.stop()
-        lease.release()
+    port = free_tcp_port()
+    with driver_rig(PKG, 'capture_sim', ['--port', str(port), '--control-port',
+                                         str(free_tcp_port()), '--time-scale', '4'],
+                    'capture_sim ready', 'capture_driver_node',
+                    ['host:=127.0.0.1', f'port:={port}', 'publish_rate:=20.0',
+                     'reconnect_period:=0.3', 'imu_rate:=5.0', 'fix_rate:=0.0']) as rig:
+        yield rig.ros, rig.node
 
 
 def test_frame_id_and_rate_take_effect_when_set(rig) -> None:

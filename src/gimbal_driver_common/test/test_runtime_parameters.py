@@ -2,7 +2,7 @@
 
 The node runs as a process against the simulator; the test sets parameters
 through the node's /<node>/set_parameters service, as `ros2 param set` does,
-and watches the effect on joint_states, the actions and the simulator.
+and watches the effect on joint_states, ~/status and the actions.
 """
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ from __future__ import annotations
 import pytest
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
-from gimbal_driver_common.virtual_gimbal import VirtualGimbalClient
+from gimbal_driver_common.ros.testing import RosTestClient, driver_rig, joint_positions
+from gimbal_driver_common.testing import free_tcp_port
 from gimbal_msgs.action import MoveTo
+from gimbal_msgs.msg import GimbalStatus
 
 pytestmark = pytest.mark.ros
 
@@ -21,14 +21,12 @@ PKG = 'gimbal_driver_common'
 NODE = 'virtual_gimbal'
 
 
-def device_state(port: int) -> list[float]:
-    """pan, tilt, pan velocity, tilt velocity as the simulator holds them."""
-    client = VirtualGimbalClient('127.0.0.1', port)
-    client.open()
-    try:
-        return [float(w) for w in client.request('GET').split()[1:5]]
-    finally:
-        client.close()
+def tilt(ros: RosTestClient, predicate) -> JointState:
+    """A fresh joint_states whose tilt (position, velocity) satisfies ``predicate``."""
+    return ros.wait_for_message(
+        'joint_states', JointState,
+        lambda m: predicate(joint_positions(m)['tilt'], m.velocity[m.name.index('tilt')]),
+        timeout=20)
 
 
 def move(ros: RosTestClient, names, values):
@@ -38,27 +36,15 @@ def move(ros: RosTestClient, names, values):
 
 @pytest.fixture(scope='module')
 def rig():
-    lease = DomainLease()
-    domain = lease.acquire()
     port = free_tcp_port()
-    sim = ManagedProcess.ros(PKG, 'virtual_gimbal_sim', 0, ['--port', str(port)])
-    sim.wait_for_output('listening')
-    node = ManagedProcess.ros(PKG, 'virtual_gimbal_node', domain, [
-        '--ros-args', '-p', f'port:={port}', '-p', 'reconnect_period:=0.2',
-        '-p', 'command_timeout:=0.4'])
-    ros = RosTestClient(domain)
-    try:
-        ros.wait_for_message('joint_states', JointState, timeout=30)
-        yield ros, port, node
-    finally:
-        ros.close()
-        node.stop()
-        sim.stop()
-        lease.release()
+    with driver_rig(PKG, 'virtual_gimbal_sim', ['--port', str(port)], 'listening',
+                    'virtual_gimbal_node', [f'port:={port}', 'reconnect_period:=0.2',
+                                            'command_timeout:=0.4']) as rig:
+        yield rig.ros, rig.node
 
 
 def test_publish_rate_changes_the_joint_states_rate(rig) -> None:
-    ros, _, _ = rig
+    ros, _ = rig
     result = ros.set_parameter(NODE, 'publish_rate', 2.0)
     assert result.successful, result.reason
     assert ros.get_parameter(NODE, 'publish_rate') == 2.0
@@ -71,7 +57,7 @@ def test_publish_rate_changes_the_joint_states_rate(rig) -> None:
 
 
 def test_invalid_values_are_refused_with_the_start_up_checks(rig) -> None:
-    ros, _, _ = rig
+    ros, _ = rig
     refused = ros.set_parameter(NODE, 'publish_rate', 5000.0)  # descriptor range 0.1..1000
     assert not refused.successful and 'publish_rate' in refused.reason
     refused = ros.set_parameter(NODE, 'position_max', [-4.0, 1.0])  # below position_min
@@ -85,7 +71,7 @@ def test_invalid_values_are_refused_with_the_start_up_checks(rig) -> None:
 
 
 def test_read_only_and_reconfigure_parameters_are_refused_with_the_reason(rig) -> None:
-    ros, _, _ = rig
+    ros, _ = rig
     refused = ros.set_parameter(NODE, 'joint_names', ['a', 'b'])
     assert not refused.successful and 'read-only' in refused.reason
     refused = ros.set_parameter(NODE, 'port', 1234)
@@ -96,7 +82,7 @@ def test_read_only_and_reconfigure_parameters_are_refused_with_the_reason(rig) -
 
 
 def test_new_position_limit_rejects_a_move_that_was_valid(rig) -> None:
-    ros, port, _ = rig
+    ros, _ = rig
     result, _, _ = move(ros, ['pan'], [0.5])
     assert result.success, result.message
     result = ros.set_parameter(NODE, 'position_max', [0.3, 1.0])
@@ -107,25 +93,26 @@ def test_new_position_limit_rejects_a_move_that_was_valid(rig) -> None:
         result, _, _ = move(ros, ['pan'], [0.5])  # valid a moment ago, now refused
         assert not result.success
         assert '0.3000' in result.message and 'nothing sent' in result.message
-        assert abs(device_state(port)[0] - 0.2) < 0.02  # the refused move sent nothing
+        # The refused move sent nothing: the commanded target is still the last move's.
+        status = ros.wait_for_message(f'/{NODE}/status', GimbalStatus, timeout=15)
+        assert status.axes[0].name == 'pan' and status.axes[0].target_position == 0.2
     finally:
         assert ros.set_parameter(NODE, 'position_max', [3.141592653589793, 1.5707963267948966]
                                  ).successful
 
 
 def test_command_timeout_applies_to_a_running_jog(rig) -> None:
-    ros, port, node = rig
+    ros, node = rig
     assert ros.set_parameter(NODE, 'command_timeout', 0.0).successful  # watchdog off
     try:
         ros.publish('joint_command', JointState(name=['tilt'], velocity=[0.1]))
-        wait_for(lambda: abs(device_state(port)[3]) > 0.05, 10, 'the tilt jog to start')
-        # Well past the start-up timeout of 0.4 s the jog still runs: the 0 took effect.
-        node.wait_for_output("parameter 'command_timeout' set to 0.0")
-        wait_for(lambda: abs(device_state(port)[1]) > 0.15, 20, 'tilt to jog past 0.15 rad')
-        assert abs(device_state(port)[3]) > 0.05
+        tilt(ros, lambda _, velocity: velocity > 0.05)  # the jog started
+        # Well past the start-up timeout of 0.4 s (1.5 s at 0.1 rad/s) the jog still runs:
+        # the 0 took effect.
+        tilt(ros, lambda position, velocity: position > 0.15 and velocity > 0.05)
         # A (shorter) timeout set now stops the running jog without any new command.
         assert ros.set_parameter(NODE, 'command_timeout', 0.3).successful
-        wait_for(lambda: device_state(port)[3] == 0.0, 10, 'the watchdog to stop the jog')
+        tilt(ros, lambda _, velocity: velocity == 0.0)  # the watchdog stopped it
         node.wait_for_output('expired (no joint_command for 0.3 s)')
     finally:
         ros.set_parameter(NODE, 'command_timeout', 0.4)

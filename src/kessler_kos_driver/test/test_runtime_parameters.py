@@ -15,8 +15,8 @@ pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
+from gimbal_driver_common.ros.testing import RosTestClient, driver_rig, joint_positions
+from gimbal_driver_common.testing import free_tcp_port
 from gimbal_msgs.action import MoveTo
 
 pytestmark = pytest.mark.ros
@@ -28,26 +28,14 @@ TWO_PI = 2.0 * math.pi
 
 @pytest.fixture(scope='module')
 def rig():
-    lease = DomainLease()
-    domain = lease.acquire()
-    port, control_port = free_tcp_port(), free_tcp_port()
-    sim = ManagedProcess.ros(PKG, 'kessler_kos_sim', domain, [
-        '--port', str(port), '--control-port', str(control_port), '--discovery-port', '0',
-        '--password', 'pw-runtime', '--precalibrated', '--time-scale', '2'])
-    sim.wait_for_output('listening')
-    node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain, [
-        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
-        '-p', 'password:=pw-runtime', '-p', 'reconnect_period:=0.2',
-        '-p', 'command_timeout:=0.0'])
-    ros = RosTestClient(domain)
-    try:
-        ros.wait_for_message('joint_states', JointState, timeout=30)
-        yield ros, node
-    finally:
-        ros.close()
-        node.stop()
-        sim.stop()
-        lease.release()
+    port = free_tcp_port()
+    with driver_rig(PKG, 'kessler_kos_sim', [
+            '--port', str(port), '--control-port', str(free_tcp_port()),
+            '--discovery-port', '0', '--password', 'pw-runtime', '--precalibrated',
+            '--time-scale', '2'], 'listening', 'kessler_kos_driver_node', [
+            'host:=127.0.0.1', f'port:={port}', 'password:=pw-runtime',
+            'reconnect_period:=0.2', 'command_timeout:=0.0']) as rig:
+        yield rig.ros, rig.node
 
 
 def pan_near(ros: RosTestClient, value: float, timeout: float = 20.0) -> JointState:

@@ -17,30 +17,20 @@ pytest.importorskip("gimbal_msgs", reason="needs the built workspace: make build
 
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from gimbal_driver_common.ros.testing import RosTestClient  # noqa: E402
-from gimbal_driver_common.testing import DomainLease, ManagedProcess  # noqa: E402
+from gimbal_driver_common.ros.testing import driver_rig  # noqa: E402
 
 NODE = "ucamera_driver"
 
 
 @pytest.fixture(scope="module")
 def rig():
-    with DomainLease() as domain, tempfile.TemporaryDirectory(prefix="ucamera-params-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="ucamera-params-") as tmp:
         link = str(Path(tmp, "tty"))
-        sim = ManagedProcess.ros("ucamera_driver", "ucamera_sim", domain,
-                                 ["--link", link, "--init-time", "0.1"])
-        sim.wait_for_output(link)
-        node = ManagedProcess.ros("ucamera_driver", "ucamera_driver_node", domain, [
-            "--ros-args", "-p", f"serial_port:={link}", "-p", "reconnect_period:=0.3",
-            "-p", "telemetry_rate:=50"])
-        ros = RosTestClient(domain, name="ucamera_params_client")
-        try:
-            ros.wait_for_message("joint_states", JointState, timeout=30.0)
-            yield ros, node
-        finally:
-            ros.close()
-            node.stop()
-            sim.stop()
+        with driver_rig("ucamera_driver", "ucamera_sim", ["--link", link, "--init-time", "0.1"],
+                        link, "ucamera_driver_node",
+                        [f"serial_port:={link}", "reconnect_period:=0.3", "telemetry_rate:=50"],
+                        client_name="ucamera_params_client") as rig:
+            yield rig.ros, rig.node
 
 
 def test_telemetry_rate_is_sent_to_the_gimbal_when_set(rig) -> None:

@@ -5,7 +5,8 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import rclpy
@@ -21,7 +22,7 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 
 
 def joint_positions(msg: JointState) -> dict[str, float]:
@@ -235,3 +236,43 @@ class RosTestClient:
                 return False
 
         wait_for(reached, timeout, f'{node_name} to reach lifecycle state {label!r}', 0.2)
+
+
+@dataclass
+class DriverRig:
+    """A simulator process, a driver node process and a test client in one leased domain."""
+
+    ros: RosTestClient
+    node: ManagedProcess
+    sim: ManagedProcess
+    domain: int
+
+
+@contextlib.contextmanager
+def driver_rig(
+    package: str, sim_executable: str, sim_arguments: Sequence[str],
+    sim_ready: str | Callable[[ManagedProcess], None], node_executable: str,
+    node_parameters: Sequence[str], client_name: str = 'gimbal_test_client',
+) -> Iterator[DriverRig]:
+    """Start the simulator, wait until it is ready (``sim_ready``: a text it prints, or a
+    function that waits), start the node with ``name:=value`` parameters, and yield once
+    the first joint_states arrived; stops everything on exit."""
+    with DomainLease() as domain:
+        sim = ManagedProcess.ros(package, sim_executable, domain, sim_arguments)
+        node = ros = None
+        try:
+            if isinstance(sim_ready, str):
+                sim.wait_for_output(sim_ready, timeout=30.0)
+            else:
+                sim_ready(sim)
+            node = ManagedProcess.ros(package, node_executable, domain, [
+                '--ros-args', *[x for p in node_parameters for x in ('-p', p)]])
+            ros = RosTestClient(domain, client_name)
+            ros.wait_for_message('joint_states', JointState, timeout=40.0)
+            yield DriverRig(ros, node, sim, domain)
+        finally:
+            if ros is not None:
+                ros.close()
+            if node is not None:
+                node.stop()
+            sim.stop()
