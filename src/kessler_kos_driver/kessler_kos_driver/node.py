@@ -230,6 +230,9 @@ class KosDriverNode(GimbalDriverNode):
             return f'the axes must be idle ({reason})' if reason else None
 
         def set_joint_scales(scales: list[float]) -> None:
+            for (name, mapping), scale in zip(self.joints.items(), scales, strict=True):
+                if name in self.commanded_targets:  # same motor target in the new units
+                    self.commanded_targets[name] *= scale / mapping.scale
             self.joint_scales = scales
             self.joints = {name: JointMapping(name, mapping.address, scale)
                            for (name, mapping), scale in zip(self.joints.items(), scales,

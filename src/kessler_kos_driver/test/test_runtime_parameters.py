@@ -18,6 +18,7 @@ from std_srvs.srv import Trigger
 from gimbal_driver_common.ros.testing import RosTestClient, driver_rig, joint_positions
 from gimbal_driver_common.testing import free_tcp_port
 from gimbal_msgs.action import MoveTo
+from gimbal_msgs.msg import GimbalStatus
 
 pytestmark = pytest.mark.ros
 
@@ -55,6 +56,8 @@ def test_joint_scales_apply_while_idle(rig) -> None:
     result = ros.set_parameter(NODE, 'joint_scales', [TWO_PI, math.pi, TWO_PI])
     assert result.successful, result.reason
     pan_near(ros, 10.0)
+    status = ros.wait_for_message(f'/{NODE}/status', GimbalStatus, timeout=15)
+    assert status.axes[1].target_position == pytest.approx(10.0)  # the target converts too
     # ... and commands convert with the new scale too.
     goal = MoveTo.Goal(joint_names=['pan'], positions=[15.0])
     result, _, _ = ros.run_action(MoveTo, f'/{NODE}/move_to', goal, timeout=30)
