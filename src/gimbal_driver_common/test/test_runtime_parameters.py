@@ -8,6 +8,7 @@ and watches the effect on joint_states, ~/status and the actions.
 from __future__ import annotations
 
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.ros.testing import RosTestClient, driver_rig, joint_positions
@@ -117,3 +118,20 @@ def test_command_timeout_applies_to_a_running_jog(rig) -> None:
     finally:
         ros.set_parameter(NODE, 'command_timeout', 0.4)
         ros.publish('joint_command', JointState(name=['tilt'], velocity=[0.0]))
+
+
+def test_move_timeout_and_diagnostics_period_take_effect(rig) -> None:
+    ros, _ = rig
+    assert ros.set_parameter(NODE, 'move_timeout', 0.1).successful
+    try:
+        result, _, _ = move(ros, ['pan'], [-2.5])  # about 2 s at 1.5 rad/s
+        assert not result.success
+        assert result.message == 'not reached within move_timeout 0.1 s', result.message
+    finally:
+        assert ros.set_parameter(NODE, 'move_timeout', 60.0).successful
+    assert ros.set_parameter(NODE, 'diagnostics_period', 0.1).successful
+    try:
+        ros.mean_stamp_gap('/diagnostics', DiagnosticArray, 1)
+        assert ros.mean_stamp_gap('/diagnostics', DiagnosticArray, 5) < 0.5  # was 1 s
+    finally:
+        assert ros.set_parameter(NODE, 'diagnostics_period', 1.0).successful
