@@ -254,8 +254,7 @@ class GimbalDriverNode(LifecycleNode):
     # --------------------------------------------------------------- helpers
     def declare_param(self, name: str, default: object, description: str, **kwargs):
         """Declare a parameter with a descriptor; see :func:`ros.parameters.declare`."""
-        return declare(self, name, default, description, registry=self.parameter_registry,
-                       **kwargs)
+        return declare(self, name, default, description, **kwargs)
 
     def runtime_parameter(
         self, name: str, apply: Callable[[object], None] | str,
@@ -299,8 +298,8 @@ class GimbalDriverNode(LifecycleNode):
         return dict(sample.positions) if sample else {}
 
     def _declare_common_parameters(self) -> None:
-        self.joint_names: list[str] = self.declare_param(
-            'joint_names', list(self.DEFAULT_JOINT_NAMES),
+        self.joint_names: list[str] = declare(
+            self, 'joint_names', list(self.DEFAULT_JOINT_NAMES),
             'names used in joint_states and commands', read_only=True, element_type=str,
         )
         if not self.joint_names or len(set(self.joint_names)) != len(self.joint_names):
@@ -313,51 +312,51 @@ class GimbalDriverNode(LifecycleNode):
             values = list(values)
             return values if len(values) == n else (values + values[-1:] * n)[:n]
 
-        self.publish_rate = self.declare_param(
-            'publish_rate', float(self.DEFAULT_PUBLISH_RATE),
+        self.publish_rate = declare(
+            self, 'publish_rate', float(self.DEFAULT_PUBLISH_RATE),
             'joint_states rate in Hz', value_range=(0.1, 1000.0),
         )
-        self.diagnostics_period = self.declare_param(
-            'diagnostics_period', 1.0, 'seconds between /diagnostics messages',
+        self.diagnostics_period = declare(
+            self, 'diagnostics_period', 1.0, 'seconds between /diagnostics messages',
             value_range=(0.05, 60.0),
         )
-        self.command_timeout = self.declare_param(
-            'command_timeout', 0.5,
+        self.command_timeout = declare(
+            self, 'command_timeout', 0.5,
             'jog dead-man timeout in s: a jog stops if no joint_command arrives in time '
             '(<= 0 disables)', value_range=(-1.0, 3600.0),
         )
-        self.reconnect_period = self.declare_param(
-            'reconnect_period', 1.0, 'seconds between reconnect attempts',
+        self.reconnect_period = declare(
+            self, 'reconnect_period', 1.0, 'seconds between reconnect attempts',
             value_range=(0.05, 600.0),
         )
-        position_min = self.declare_param(
-            'position_min', per_joint(self.DEFAULT_POSITION_MIN),
+        position_min = declare(
+            self, 'position_min', per_joint(self.DEFAULT_POSITION_MIN),
             'lowest position per joint (rad, m for linear axes)',
         )
-        position_max = self.declare_param(
-            'position_max', per_joint(self.DEFAULT_POSITION_MAX),
+        position_max = declare(
+            self, 'position_max', per_joint(self.DEFAULT_POSITION_MAX),
             'highest position per joint (rad, m for linear axes)',
         )
-        velocity_max = self.declare_param(
-            'velocity_max', per_joint(self.DEFAULT_VELOCITY_MAX),
+        velocity_max = declare(
+            self, 'velocity_max', per_joint(self.DEFAULT_VELOCITY_MAX),
             'highest speed per joint (rad/s, m/s for linear axes)',
         )
         values = {'position_min': position_min, 'position_max': position_max,
                   'velocity_max': velocity_max}
         self.limits: dict[str, JointLimits] = self._limits_from(values.__getitem__)
-        self.presets_file = self.declare_param(
-            'presets_file', '', 'YAML file where driver-side presets persist ("" = memory)'
+        self.presets_file = declare(
+            self, 'presets_file', '', 'YAML file where driver-side presets persist ("" = memory)'
         )
-        self.goal_tolerance = self.declare_param(
-            'goal_tolerance', 0.01, 'rad: a move is done when every joint is this close',
+        self.goal_tolerance = declare(
+            self, 'goal_tolerance', 0.01, 'rad: a move is done when every joint is this close',
             value_range=(1e-6, 1.0),
         )
-        self.move_timeout = self.declare_param(
-            'move_timeout', 60.0, 's: a MoveTo goal fails if not reached in time',
+        self.move_timeout = declare(
+            self, 'move_timeout', 60.0, 's: a MoveTo goal fails if not reached in time',
             value_range=(0.1, 3600.0),
         )
-        self.autostart = self.declare_param(
-            'autostart', True,
+        self.autostart = declare(
+            self, 'autostart', True,
             'walk the lifecycle to active by itself (false for managed bring-up)',
         )
 

@@ -243,8 +243,9 @@ def declare(
 
     ``value_range`` applies to numbers and to every element of numeric arrays;
     ``choices`` restricts strings. Violations raise :class:`ParameterError`.
-    With a ``registry`` the parameter is registered there (read-only, or needs
-    reconfigure until the driver marks it runtime).
+    The parameter is registered in ``registry`` (default: the node's
+    ``parameter_registry``, if it has one) as read-only, or as needing a
+    reconfigure until the driver marks it runtime.
     """
     is_array = isinstance(default, list | tuple)
     descriptor = ParameterDescriptor(
@@ -271,6 +272,7 @@ def declare(
         name, value_range, choices, Change.READ_ONLY if read_only else Change.RECONFIGURE
     )
     value = check_value(spec, value)
+    registry = registry or getattr(node, 'parameter_registry', None)
     if registry is not None:
         registry.add(spec)
     return value
