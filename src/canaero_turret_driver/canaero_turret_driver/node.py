@@ -255,6 +255,35 @@ class CanaeroTurretNode(GimbalDriverNode):
                                          "allow FPS (store_configuration) through "
                                          "~/device_command")
 
+    # ------------------------------------------------------------------ run-time parameters
+    def declare_runtime_parameters(self) -> None:
+        """Turret parameters that apply when set: TIS intervals, thresholds, frame ids.
+
+        ``transmission_intervals`` are checked like at start-up, sent to the turret at
+        once while connected (a node-service refusal refuses the set with its reply) and
+        kept for the next connect. The CAN link, node-ids and opt-ins need a reconfigure.
+        """
+
+        def parse(items: Sequence[str]) -> dict[str, int]:
+            return _parse_intervals([i for i in items if i])
+
+        def send_intervals(items: Sequence[str]) -> None:
+            client = self._client
+            if client is None or not client.connected:
+                return  # applied when the link opens (open_device)
+            for key, interval in parse(items).items():
+                client.set_transmission_interval(key, interval)
+
+        def set_intervals(items: Sequence[str]) -> None:
+            self.transmission_intervals = parse(items)
+
+        self.runtime_parameter("transmission_intervals", set_intervals, send=send_intervals,
+                               check=parse)
+        self.runtime_parameter("eed_hold_time", "eed_hold")
+        for name in ("temperature_warn", "temperature_error", "fix_frame_id",
+                     "inclination_frame_id"):
+            self.runtime_parameter(name, name)
+
     def _client_config(self) -> ClientConfig:
         return ClientConfig(
             interface=self.can_interface, channel=self.can_channel,

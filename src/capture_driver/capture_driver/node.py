@@ -241,6 +241,18 @@ class CaptureDriverNode(GimbalDriverNode):
         self._direction = dict(zip(self.joint_names, self.joint_directions, strict=True))
         self._gear = dict(zip(self.joint_names, self.gear_ratios, strict=True))
 
+    # ------------------------------------------------- run-time parameters
+    def declare_runtime_parameters(self) -> None:
+        """Capture parameters that apply when set: speeds, rates, timeouts, frame ids.
+
+        The link, axis mapping (axis_ids, joint_directions, gear_ratios), keep-alive and
+        the opt-ins (allow_*) need a reconfigure: the opt-ins guard commands that can cut
+        off or brick the controller and are given at start-up only.
+        """
+        for name in ('default_speed', 'acceleration', 'status_period', 'imu_rate', 'fix_rate',
+                     'imu_frame_id', 'gps_frame_id', 'gps_target_slot', 'home_timeout'):
+            self.runtime_parameter(name, name)
+
     # ------------------------------------------------------------ conversions
     def to_device(self, joint: str, radians: float) -> float:
         return math.degrees(radians) * self._direction[joint]

@@ -175,10 +175,7 @@ class KosDriverNode(GimbalDriverNode):
         if len(self.motor_addresses) != n or len(set(self.motor_addresses)) != n:
             raise ParameterError(f'parameter motor_addresses: need {n} distinct addresses '
                                  f'(one per joint), got {self.motor_addresses}')
-        if len(self.joint_scales) != n or any(
-                not math.isfinite(s) or s == 0 for s in self.joint_scales):
-            raise ParameterError(f'parameter joint_scales: need {n} finite non-zero values, '
-                                 f'got {self.joint_scales}')
+        self._check_joint_scales(self.joint_scales)
         self.joints = {
             name: JointMapping(name, address, scale)
             for name, address, scale in zip(self.joint_names, self.motor_addresses,
@@ -208,6 +205,44 @@ class KosDriverNode(GimbalDriverNode):
                            'device password (write-only: always shown redacted)',
                            read_only=True)
         return password
+
+    # ------------------------------------------------- run-time parameters
+    def _check_joint_scales(self, scales: Sequence[float]) -> None:
+        """One value per joint, finite and non-zero (start-up and ``ros2 param set``)."""
+        n = len(self.joint_names)
+        if len(scales) != n or any(not math.isfinite(s) or s == 0 for s in scales):
+            raise ParameterError(f'parameter joint_scales: need {n} finite non-zero values, '
+                                 f'got {list(scales)}')
+
+    def declare_runtime_parameters(self) -> None:
+        """kOS parameters that apply when set; the link settings need a reconfigure.
+
+        joint_scales change the SI<->rotation conversion of every command and reading, so
+        they are taken only while the axes are idle and no device move (playback) runs.
+        """
+
+        def scales_busy() -> str | None:
+            client = self.client
+            if client is not None and client.playback_running:
+                return (f'a move is playing ({playback_state_name(client.playback.status)}); '
+                        'stop it first')
+            reason = self.axes_busy()
+            return f'the axes must be idle ({reason})' if reason else None
+
+        def set_joint_scales(scales: list[float]) -> None:
+            for (name, mapping), scale in zip(self.joints.items(), scales, strict=True):
+                if name in self.commanded_targets:  # same motor target in the new units
+                    self.commanded_targets[name] *= scale / mapping.scale
+            self.joint_scales = scales
+            self.joints = {name: JointMapping(name, mapping.address, scale)
+                           for (name, mapping), scale in zip(self.joints.items(), scales,
+                                                             strict=True)}
+
+        self.runtime_parameter('joint_scales', set_joint_scales, busy=scales_busy,
+                               check=self._check_joint_scales)
+        for name in ('acceleration_scale', 'return_to_home_percent', 'picture_exposure',
+                     'playback_timeout'):
+            self.runtime_parameter(name, name)
 
     # ------------------------------------------------------------------ hooks
     def open_device(self) -> DeviceInfo:

@@ -225,6 +225,47 @@ class UCameraDriverNode(GimbalDriverNode):
             "allow_nv_write", False, "opt-in for ~/save_configuration and ~/save_ffc "
             "(non-volatile memory writes; never in flight)", read_only=True)
 
+    # ------------------------------------------------- run-time parameters
+    def declare_runtime_parameters(self) -> None:
+        """U-Camera parameters that apply when set: telemetry rate, refresh, limits of the
+        forwarded feeds and reports, timeouts, frame id.
+
+        ``telemetry_rate`` is sent to the gimbal at once while connected (volatile, like at
+        connect; 0 keeps the device setting) and refused when the gimbal reports another
+        rate. The serial link, axis signs, GPS feed/antenna/palette set at connect and the
+        non-volatile opt-in need a reconfigure (or are read-only).
+        """
+
+        def send_telemetry_rate(rate: int) -> None:
+            with self._client_lock:
+                client = self.client
+            if client is None or not client.connected or rate == 0:
+                return  # applied when the link opens (_configure_device)
+            achieved = client.set_telemetry_rate(rate)
+            if achieved != rate:
+                raise DeviceError(f"the gimbal reports {achieved} Hz")
+
+        def set_refresh_rate(rate: float) -> None:
+            self.refresh_rate = rate
+            with self._client_lock:
+                if self.client is not None:
+                    self.client.refresh_period = 1.0 / rate
+
+        def set_feed_rate(rate: float) -> None:
+            self.external_feed_rate = rate
+            self._feed_limiter = RateLimiter(rate)
+
+        def set_report_rate(rate: float) -> None:
+            self.report_publish_rate = rate
+            self._report_limiter = RateLimiter(rate)
+
+        self.runtime_parameter("telemetry_rate", "telemetry_rate", send=send_telemetry_rate)
+        self.runtime_parameter("refresh_rate", set_refresh_rate)
+        self.runtime_parameter("external_feed_rate", set_feed_rate)
+        self.runtime_parameter("report_publish_rate", set_report_rate)
+        for name in ("mode_timeout", "home_timeout", "external_velocity_max_age", "frame_id"):
+            self.runtime_parameter(name, name)
+
     # ---------------------------------------------------------------- frames
     def _signs(self) -> tuple[float, float]:
         return (-1.0 if self.invert_pan else 1.0, -1.0 if self.invert_tilt else 1.0)

@@ -50,7 +50,12 @@ from gimbal_driver_common.joint_command import (
 )
 from gimbal_driver_common.presets import PresetError, PresetStore
 from gimbal_driver_common.ros.diagnostics import StatusPart, to_message
-from gimbal_driver_common.ros.parameters import ParameterError, declare
+from gimbal_driver_common.ros.parameters import (
+    ParameterError,
+    ParameterRegistry,
+    ValueOf,
+    declare,
+)
 from gimbal_driver_common.scan import ScanError, ScanRequest, plan_scan
 from gimbal_driver_common.watchdog import JogWatchdog
 from gimbal_msgs.action import Home, MoveTo
@@ -119,6 +124,7 @@ class GimbalDriverNode(LifecycleNode):
 
     def __init__(self, node_name: str, **kwargs: object) -> None:
         super().__init__(node_name, **kwargs)
+        self.parameter_registry = ParameterRegistry(self)
         self._declare_common_parameters()
         self.declare_device_parameters()
         self.device_info = DeviceInfo()
@@ -131,11 +137,14 @@ class GimbalDriverNode(LifecycleNode):
         #: last position target sent per joint (shown as AxisState.target_position)
         self.commanded_targets: dict[str, float] = {}
         self._stop_event = threading.Event()
+        #: wakes the device thread early (stop, or publish_rate changed)
+        self._device_wake = threading.Event()
         self._data_arrived = threading.Event()
         self._periodic: list[list] = []
         self._periodic_lock = threading.Lock()
         self._housekeeping: threading.Thread | None = None
         self._housekeeping_stop = threading.Event()
+        self._housekeeping_wake = threading.Event()
         self._device_thread: threading.Thread | None = None
         self._scan_thread: threading.Thread | None = None
         self._scan_stop = threading.Event()
@@ -145,10 +154,21 @@ class GimbalDriverNode(LifecycleNode):
         self.preset_store: PresetStore | None = None
         self.service_group = ReentrantCallbackGroup()
         self._create_ros_interfaces()
+        self._declare_runtime_parameters()
+        self.declare_runtime_parameters()
+        self.parameter_registry.check_all()
+        self.parameter_registry.attach()
 
     # ------------------------------------------------------------------ hooks
     def declare_device_parameters(self) -> None:
         """Declare the driver's own parameters (use :meth:`declare_param`)."""
+
+    def declare_runtime_parameters(self) -> None:
+        """Mark the driver's parameters that apply at run time (use :meth:`runtime_parameter`).
+
+        Every other parameter is refused at run time with "needs reconfigure"
+        (read-only ones with "read-only").
+        """
 
     def open_device(self) -> DeviceInfo:
         """Open the link and read the device identity; raise on failure."""
@@ -247,6 +267,31 @@ class GimbalDriverNode(LifecycleNode):
         """Declare a parameter with a descriptor; see :func:`ros.parameters.declare`."""
         return declare(self, name, default, description, **kwargs)
 
+    def runtime_parameter(
+        self, name: str, apply: Callable[[object], None] | str,
+        send: Callable[[object], None] | None = None,
+        busy: Callable[[], str | None] | None = None,
+        check: Callable[[object], None] | None = None,
+    ) -> None:
+        """Let ``ros2 param set`` change ``name`` while the node runs.
+
+        ``apply`` stores the accepted value (a string: the attribute to assign);
+        ``send`` pushes it to the device while connected (an exception refuses the
+        set with the device's reply); ``busy`` says why it cannot change right now;
+        ``check`` is the same value check the driver runs at start-up.
+        """
+        if isinstance(apply, str):
+            attribute = apply
+
+            def apply(value: object) -> None:
+                setattr(self, attribute, value)
+
+        self.parameter_registry.make_runtime(name, apply, send=send, busy=busy, check=check)
+
+    def parameter_check(self, names: Sequence[str], check: Callable[[ValueOf], None]) -> None:
+        """A check over several parameters, run at start-up and on every set of one of them."""
+        self.parameter_registry.add_check(names, check)
+
     @property
     def connected(self) -> bool:
         return self._connected
@@ -307,12 +352,9 @@ class GimbalDriverNode(LifecycleNode):
             self, 'velocity_max', per_joint(self.DEFAULT_VELOCITY_MAX),
             'highest speed per joint (rad/s, m/s for linear axes)',
         )
-        try:
-            self.limits: dict[str, JointLimits] = limits_from_parameters(
-                self.joint_names, position_min, position_max, velocity_max
-            )
-        except ValueError as exc:
-            raise ParameterError(f'joint limits: {exc}') from exc
+        values = {'position_min': position_min, 'position_max': position_max,
+                  'velocity_max': velocity_max}
+        self.limits: dict[str, JointLimits] = self._limits_from(values.__getitem__)
         self.presets_file = declare(
             self, 'presets_file', '', 'YAML file where driver-side presets persist ("" = memory)'
         )
@@ -328,6 +370,71 @@ class GimbalDriverNode(LifecycleNode):
             self, 'autostart', True,
             'walk the lifecycle to active by itself (false for managed bring-up)',
         )
+
+    # ------------------------------------------------- run-time parameters
+    def _limits_from(self, value_of: ValueOf) -> dict[str, JointLimits]:
+        """Per-joint limits from position_min/position_max/velocity_max (start-up and set)."""
+        try:
+            return limits_from_parameters(
+                self.joint_names, value_of('position_min'), value_of('position_max'),
+                value_of('velocity_max'),
+            )
+        except ValueError as exc:
+            raise ParameterError(f'joint limits: {exc}') from exc
+
+    def _status_period(self) -> float:
+        return 1.0 / min(self.publish_rate, 10.0)
+
+    def _watchdog_period(self) -> float:
+        """Check jogs 4 times per timeout (at least every 50 ms); slowly while disabled."""
+        return min(0.05, self.command_timeout / 4) if self.command_timeout > 0 else 0.5
+
+    def axes_busy(self) -> str | None:
+        """Why the axes are not idle (jogging, moving, a driver-side scan), or None.
+
+        For parameters that may only change while nothing moves (e.g. unit scales).
+        """
+        jogging = self.jog_watchdog.jogging
+        if jogging:
+            return f'jogging {jogging}'
+        if self._scan_thread is not None and self._scan_thread.is_alive():
+            return 'a driver-side scan is running'
+        sample = self._latest
+        moving = sorted(n for n, m in sample.moving.items() if m) if sample else []
+        if moving:
+            return f'moving {moving}'
+        return None
+
+    def _declare_runtime_parameters(self) -> None:
+        """The common parameters that take effect when set (interfaces.md table)."""
+
+        def set_publish_rate(rate: float) -> None:
+            self.publish_rate = rate
+            self._joint_rate.expected_hz = rate
+            self.set_periodic_period(self._publish_status, self._status_period())
+            self._device_wake.set()  # the device thread picks up the new period now
+
+        def set_diagnostics_period(period: float) -> None:
+            self.diagnostics_period = period
+            self.set_periodic_period(self._publish_diagnostics, period)
+
+        def set_command_timeout(timeout: float) -> None:
+            self.command_timeout = timeout
+            self.jog_watchdog.timeout_s = timeout
+            self.set_periodic_period(self.jog_watchdog.check, self._watchdog_period())
+
+        def set_limits(_: object) -> None:
+            self.limits = self._limits_from(self.parameter_registry.current)
+
+        self.runtime_parameter('publish_rate', set_publish_rate)
+        self.runtime_parameter('diagnostics_period', set_diagnostics_period)
+        self.runtime_parameter('command_timeout', set_command_timeout)
+        for name in ('reconnect_period', 'goal_tolerance', 'move_timeout'):
+            self.runtime_parameter(name, name)
+        limit_names = ('position_min', 'position_max', 'velocity_max')
+        for name in limit_names:
+            self.runtime_parameter(name, set_limits)
+        self.parameter_check(limit_names, self._limits_from)
 
     # --------------------------------------------------------- ROS interfaces
     def _create_ros_interfaces(self) -> None:
@@ -369,9 +476,8 @@ class GimbalDriverNode(LifecycleNode):
             callback_group=group,
         )
         self.add_periodic(self.diagnostics_period, self._publish_diagnostics)
-        self.add_periodic(1.0 / min(self.publish_rate, 10.0), self._publish_status)
-        if self.command_timeout > 0:
-            self.add_periodic(min(0.05, self.command_timeout / 4), self.jog_watchdog.check)
+        self.add_periodic(self._status_period(), self._publish_status)
+        self.add_periodic(self._watchdog_period(), self.jog_watchdog.check)
 
     def add_periodic(self, period: float, callback: Callable[[], object]) -> None:
         """Run ``callback`` every ``period`` s on the node's housekeeping thread.
@@ -386,6 +492,14 @@ class GimbalDriverNode(LifecycleNode):
             self._housekeeping = threading.Thread(
                 target=self._housekeeping_loop, name='housekeeping', daemon=True)
             self._housekeeping.start()
+
+    def set_periodic_period(self, callback: Callable[[], object], period: float) -> None:
+        """Change how often a job added with :meth:`add_periodic` runs; next run in ``period``."""
+        with self._periodic_lock:
+            for entry in self._periodic:
+                if entry[2] == callback:
+                    entry[0], entry[1] = period, time.monotonic() + period
+        self._housekeeping_wake.set()
 
     def _housekeeping_loop(self) -> None:
         while not self._housekeeping_stop.is_set():
@@ -404,10 +518,12 @@ class GimbalDriverNode(LifecycleNode):
                     self.get_logger().error(
                         f'periodic {getattr(callback, "__name__", callback)} failed: {exc}',
                         throttle_duration_sec=10.0)
-            self._housekeeping_stop.wait(max(0.0, next_due - time.monotonic()))
+            if self._housekeeping_wake.wait(max(0.0, next_due - time.monotonic())):
+                self._housekeeping_wake.clear()
 
     def destroy_node(self) -> None:
         self._housekeeping_stop.set()
+        self._housekeeping_wake.set()
         if self._housekeeping is not None and self._housekeeping is not threading.current_thread():
             self._housekeeping.join(timeout=2.0)
         super().destroy_node()
@@ -427,6 +543,7 @@ class GimbalDriverNode(LifecycleNode):
             self._safe_close()
             return TransitionCallbackReturn.FAILURE
         self._stop_event.clear()
+        self._device_wake.clear()
         self._device_thread = threading.Thread(
             target=self._device_loop, name='device', daemon=True
         )
@@ -484,6 +601,7 @@ class GimbalDriverNode(LifecycleNode):
 
     def _stop_device_thread(self) -> None:
         self._stop_event.set()
+        self._device_wake.set()
         self._scan_stop.set()
         thread = self._device_thread
         if thread is not None and thread is not threading.current_thread():
@@ -515,6 +633,9 @@ class GimbalDriverNode(LifecycleNode):
         last_publish = -math.inf
         last_stamp: float | None = None
         while not self._stop_event.is_set():
+            if period != 1.0 / self.publish_rate:  # publish_rate changed at run time
+                period = 1.0 / self.publish_rate
+                next_tick = time.monotonic()
             if not self._connected:
                 self._try_reconnect()
                 continue
@@ -522,8 +643,8 @@ class GimbalDriverNode(LifecycleNode):
                 # Publish each new sample as it arrives, at most publish_rate (10 % slack so
                 # a device streaming at exactly that rate is not throttled by jitter).
                 hold = last_publish + 0.9 * period - time.monotonic()
-                if hold > 0 and self._stop_event.wait(hold):
-                    break
+                if hold > 0 and self._wait_device_wake(hold):
+                    continue
                 if self._data_arrived.wait(STREAM_WAIT_S):
                     self._data_arrived.clear()
             try:
@@ -547,7 +668,14 @@ class GimbalDriverNode(LifecycleNode):
             if delay < -period:  # fell behind (slow device): do not burst to catch up
                 next_tick = time.monotonic()
                 delay = 0.0
-            self._stop_event.wait(max(delay, 0.0))
+            self._wait_device_wake(max(delay, 0.0))
+
+    def _wait_device_wake(self, timeout: float) -> bool:
+        """Sleep up to ``timeout``; True when woken early (stopping or publish_rate changed)."""
+        woken = self._device_wake.wait(timeout)
+        if woken and not self._stop_event.is_set():
+            self._device_wake.clear()
+        return woken
 
     def notify_new_data(self) -> None:
         """Wake the device thread: a STREAMED driver's client calls this on each new frame."""

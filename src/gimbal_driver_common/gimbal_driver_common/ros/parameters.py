@@ -1,8 +1,25 @@
-"""Parameter declaration with descriptors and ranges, and clear start-up errors."""
+"""Parameter declaration with descriptors and ranges, and clear start-up errors.
+
+Every declared parameter is also registered in a :class:`ParameterRegistry`
+with how it may change while the node runs:
+
+* ``Change.RUNTIME``: checked like at start-up, then applied at once by the
+  driver's apply function (and, where the device holds the setting, sent to it);
+* ``Change.READ_ONLY``: refused (rclpy refuses it from the descriptor);
+* ``Change.RECONFIGURE`` (the default): refused with "needs reconfigure",
+  because the value is only read when the node starts or the link opens.
+
+One validation path: :func:`check_value` (element ranges, choices) and the
+registered cross-parameter checks run both at start-up and for every
+``ros2 param set``; rclpy's descriptor checks (type, scalar range, read-only)
+apply to both as well.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import enum
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 from rcl_interfaces.msg import (
@@ -10,8 +27,10 @@ from rcl_interfaces.msg import (
     IntegerRange,
     ParameterDescriptor,
     ParameterType,
+    SetParametersResult,
 )
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 
 class ParameterError(ValueError):
@@ -36,6 +55,179 @@ def _array_type(default: Sequence[Any], element: type | None) -> int:
     }[kind]
 
 
+class Change(enum.Enum):
+    """How a parameter may change while the node runs."""
+
+    RUNTIME = 'runtime'
+    READ_ONLY = 'read-only'
+    RECONFIGURE = 'needs reconfigure'
+
+
+#: what a value check gets to look up other parameters' values (the proposed ones on a set)
+ValueOf = Callable[[str], Any]
+
+
+@dataclass
+class ParameterSpec:
+    """A declared parameter: its value checks and how it may change at run time."""
+
+    name: str
+    value_range: tuple[float, float] | None = None
+    choices: Sequence[str] | None = None
+    change: Change = Change.RECONFIGURE
+    #: stores the new value in the node (runs after rclpy accepted it; must not fail)
+    apply: Callable[[Any], None] | None = None
+    #: sends the new value to the device; runs last in validation, an exception refuses
+    send: Callable[[Any], None] | None = None
+    #: why the value cannot change right now (e.g. an axis is moving), or None
+    busy: Callable[[], str | None] | None = None
+
+
+def plain_value(value: Any) -> Any:
+    """Arrays as lists (rclpy hands out array.array or tuples for array parameters)."""
+    if isinstance(value, str | bytes) or not isinstance(value, Iterable):
+        return value
+    return list(value)
+
+
+def check_value(spec: ParameterSpec, value: Any) -> Any:
+    """The checks rclpy's descriptor cannot express: array element ranges and choices."""
+    value = plain_value(value)
+    if spec.value_range is not None:
+        low, high = spec.value_range
+        for item in value if isinstance(value, list) else [value]:
+            if not low <= item <= high:
+                what = 'element ' if isinstance(value, list) else ''
+                raise ParameterError(
+                    f'parameter {spec.name!r}: {what}{item} outside [{low}, {high}]'
+                )
+    if spec.choices is not None and value not in spec.choices:
+        raise ParameterError(
+            f'parameter {spec.name!r}: {value!r} is not one of {list(spec.choices)}'
+        )
+    return value
+
+
+@dataclass
+class _GroupCheck:
+    names: frozenset[str]
+    check: Callable[[ValueOf], None]
+
+
+@dataclass
+class ParameterRegistry:
+    """Which parameters a node declared and how each may change at run time.
+
+    :meth:`attach` hooks it into rclpy: the on-set callback validates (and
+    refuses read-only / needs-reconfigure ones with the reason), the post-set
+    callback applies the accepted values.
+    """
+
+    node: Node
+    specs: dict[str, ParameterSpec] = field(default_factory=dict)
+    checks: list[_GroupCheck] = field(default_factory=list)
+
+    def add(self, spec: ParameterSpec) -> None:
+        self.specs[spec.name] = spec
+
+    def make_runtime(
+        self, name: str, apply: Callable[[Any], None],
+        send: Callable[[Any], None] | None = None,
+        busy: Callable[[], str | None] | None = None,
+        check: Callable[[Any], None] | None = None,
+    ) -> None:
+        """Mark a declared parameter as applicable at run time.
+
+        ``check(value)`` is an extra per-value check that must be the same one the
+        driver runs at start-up (it raises :class:`ParameterError`).
+        """
+        spec = self.specs[name]
+        if spec.change is Change.READ_ONLY:
+            raise ValueError(f'parameter {name!r} is read-only; it cannot be runtime')
+        spec.change, spec.apply, spec.send, spec.busy = Change.RUNTIME, apply, send, busy
+        if check is not None:
+            self.add_check([name], lambda value_of: check(value_of(name)))
+
+    def add_check(self, names: Iterable[str], check: Callable[[ValueOf], None]) -> None:
+        """A check over several parameters, run at start-up and whenever one of them is set."""
+        self.checks.append(_GroupCheck(frozenset(names), check))
+
+    def check_all(self) -> None:
+        """Run every registered check on the current values (start-up)."""
+        for group in self.checks:
+            self._run(group, self.current)
+
+    def attach(self) -> None:
+        self.node.add_on_set_parameters_callback(self._on_set)
+        self.node.add_post_set_parameters_callback(self._after_set)
+
+    def current(self, name: str) -> Any:
+        """The value ``name`` has now."""
+        return plain_value(self.node.get_parameter(name).value)
+
+    @staticmethod
+    def _run(group: _GroupCheck, value_of: ValueOf) -> None:
+        try:
+            group.check(value_of)
+        except ParameterError:
+            raise
+        except ValueError as exc:
+            raise ParameterError(f'parameter {"/".join(sorted(group.names))}: {exc}') from exc
+
+    def refusal(self, parameters: Sequence[Parameter]) -> str | None:
+        """Why this set must be refused, or None; sends device-held values when it is not."""
+        proposed = {p.name: plain_value(p.value) for p in parameters}
+        touched = [self.specs[p.name] for p in parameters if p.name in self.specs]
+        for spec in touched:
+            if spec.change is Change.READ_ONLY:
+                return f'parameter {spec.name!r} is read-only'
+            if spec.change is Change.RECONFIGURE:
+                return (f'parameter {spec.name!r} needs reconfigure: it is read only when '
+                        'the node starts and opens the device link; restart the node with '
+                        'the new value')
+        try:
+            for spec in touched:
+                check_value(spec, proposed[spec.name])
+            for group in self.checks:
+                if group.names & proposed.keys():
+                    self._run(group, lambda n: proposed[n] if n in proposed else self.current(n))
+        except ParameterError as exc:
+            return str(exc)
+        for spec in touched:
+            reason = spec.busy() if spec.busy else None
+            if reason:
+                return f'parameter {spec.name!r} cannot change now: {reason}'
+        for spec in touched:
+            if spec.send is None:
+                continue
+            try:
+                spec.send(proposed[spec.name])
+            except Exception as exc:  # noqa: BLE001 - the device's refusal becomes the reason
+                return f'parameter {spec.name!r}: the device refused {proposed[spec.name]!r}: {exc}'
+        return None
+
+    def _on_set(self, parameters: list[Parameter]) -> SetParametersResult:
+        reason = self.refusal(parameters)
+        if reason:
+            self.node.get_logger().warning(f'parameter change refused: {reason}')
+            return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _after_set(self, parameters: list[Parameter]) -> None:
+        for parameter in parameters:
+            spec = self.specs.get(parameter.name)
+            if spec is None or spec.apply is None:
+                continue
+            try:
+                spec.apply(plain_value(parameter.value))
+            except Exception as exc:  # noqa: BLE001 - never let a post-set raise into rclpy
+                self.node.get_logger().error(f'applying parameter {parameter.name!r} '
+                                             f'failed: {exc}')
+                continue
+            self.node.get_logger().info(f'parameter {parameter.name!r} set to '
+                                        f'{plain_value(parameter.value)!r}')
+
+
 def declare(
     node: Node,
     name: str,
@@ -45,11 +237,15 @@ def declare(
     element_type: type | None = None,
     read_only: bool = False,
     choices: Sequence[str] | None = None,
+    registry: ParameterRegistry | None = None,
 ) -> Any:
     """Declare ``name`` with a descriptor and return its (checked) value.
 
     ``value_range`` applies to numbers and to every element of numeric arrays;
     ``choices`` restricts strings. Violations raise :class:`ParameterError`.
+    The parameter is registered in ``registry`` (default: the node's
+    ``parameter_registry``, if it has one) as read-only, or as needing a
+    reconfigure until the driver marks it runtime.
     """
     is_array = isinstance(default, list | tuple)
     descriptor = ParameterDescriptor(
@@ -70,15 +266,13 @@ def declare(
         value = node.declare_parameter(name, default, descriptor).value
     except Exception as exc:  # rclpy raises several types for bad overrides
         raise ParameterError(f'parameter {name!r}: {exc}') from exc
-    if is_array:
-        value = list(value) if value is not None else []
-        if value_range is not None:
-            low, high = value_range
-            for item in value:
-                if not low <= item <= high:
-                    raise ParameterError(
-                        f'parameter {name!r}: element {item} outside [{low}, {high}]'
-                    )
-    if choices is not None and value not in choices:
-        raise ParameterError(f'parameter {name!r}: {value!r} is not one of {list(choices)}')
+    if is_array and value is None:
+        value = []
+    spec = ParameterSpec(
+        name, value_range, choices, Change.READ_ONLY if read_only else Change.RECONFIGURE
+    )
+    value = check_value(spec, value)
+    registry = registry or getattr(node, 'parameter_registry', None)
+    if registry is not None:
+        registry.add(spec)
     return value

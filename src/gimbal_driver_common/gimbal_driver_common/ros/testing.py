@@ -5,20 +5,24 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
+from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.action import ActionClient
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 
 
 def joint_positions(msg: JointState) -> dict[str, float]:
@@ -126,6 +130,23 @@ class RosTestClient:
         array = self.wait_for_message('/diagnostics', DiagnosticArray, match, timeout)
         return find_diagnostic(array, node, part)
 
+    def mean_stamp_gap(self, topic: str, msg_type: type, count: int,
+                       timeout: float = 60.0) -> float:
+        """Mean gap between the header stamps of ``count`` + 1 fresh messages, in s.
+
+        Stamps are set where the data arrived, so the gaps show the rate the node
+        produces, not the delivery jitter of a loaded machine.
+        """
+        received = self.subscribe(topic, msg_type)
+        with self._lock:
+            start = len(received)
+        wait_for(lambda: len(received) >= start + count + 1, timeout,
+                 f'{count + 1} messages on {topic}')
+        with self._lock:
+            stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+                      for m in received[start:start + count + 1]]
+        return (stamps[-1] - stamps[0]) / count
+
     def publish(self, topic: str, msg: Any) -> None:
         publisher = self._publishers.get(topic)
         if publisher is None:
@@ -153,6 +174,21 @@ class RosTestClient:
         future = client.call_async(request)
         wait_for(future.done, timeout, f'the reply of {name}')
         return future.result()
+
+    # parameters (what `ros2 param set/get` do: the node's parameter services)
+    def set_parameter(
+        self, node_name: str, name: str, value: Any, timeout: float = 15.0
+    ) -> SetParametersResult:
+        """Set one parameter of ``node_name``; returns rclpy's (successful, reason)."""
+        request = SetParameters.Request(parameters=[Parameter(name, value=value)
+                                                    .to_parameter_msg()])
+        return self.call(SetParameters, f'/{node_name}/set_parameters', request,
+                         timeout).results[0]
+
+    def get_parameter(self, node_name: str, name: str, timeout: float = 15.0) -> Any:
+        reply = self.call(GetParameters, f'/{node_name}/get_parameters',
+                          GetParameters.Request(names=[name]), timeout)
+        return parameter_value_to_python(reply.values[0])
 
     # actions
     def run_action(
@@ -200,3 +236,43 @@ class RosTestClient:
                 return False
 
         wait_for(reached, timeout, f'{node_name} to reach lifecycle state {label!r}', 0.2)
+
+
+@dataclass
+class DriverRig:
+    """A simulator process, a driver node process and a test client in one leased domain."""
+
+    ros: RosTestClient
+    node: ManagedProcess
+    sim: ManagedProcess
+    domain: int
+
+
+@contextlib.contextmanager
+def driver_rig(
+    package: str, sim_executable: str, sim_arguments: Sequence[str],
+    sim_ready: str | Callable[[ManagedProcess], None], node_executable: str,
+    node_parameters: Sequence[str], client_name: str = 'gimbal_test_client',
+) -> Iterator[DriverRig]:
+    """Start the simulator, wait until it is ready (``sim_ready``: a text it prints, or a
+    function that waits), start the node with ``name:=value`` parameters, and yield once
+    the first joint_states arrived; stops everything on exit."""
+    with DomainLease() as domain:
+        sim = ManagedProcess.ros(package, sim_executable, domain, sim_arguments)
+        node = ros = None
+        try:
+            if isinstance(sim_ready, str):
+                sim.wait_for_output(sim_ready, timeout=30.0)
+            else:
+                sim_ready(sim)
+            node = ManagedProcess.ros(package, node_executable, domain, [
+                '--ros-args', *[x for p in node_parameters for x in ('-p', p)]])
+            ros = RosTestClient(domain, client_name)
+            ros.wait_for_message('joint_states', JointState, timeout=40.0)
+            yield DriverRig(ros, node, sim, domain)
+        finally:
+            if ros is not None:
+                ros.close()
+            if node is not None:
+                node.stop()
+            sim.stop()
