@@ -240,7 +240,7 @@ def test_live_motion_with_delay_and_reverse_loop(calibrated):
 
 def test_delay_until_date_and_delay_return(calibrated):
     """DelayMode 2 waits for a wall-clock date (not scaled time); DelayReturn sets up in place."""
-    sim, client = calibrated
+    _sim, client = calibrated
     start_at = math.ceil(time.time()) + 2
     settings = PlaybackSettings(start_time=start_at)
     client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
