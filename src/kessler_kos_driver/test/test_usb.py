@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import LinkClosed, TransportError
 from kessler_kos_driver.client import CommandRejected, KosClient, NotConnected
 from kessler_kos_driver.moves import (
@@ -42,13 +43,9 @@ TWO_PI = 2 * math.pi
 TARGET = UsbTarget(vendor_id=0x1234, product_id=0x5678)
 
 
-def wait_until(predicate, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
+def wait_until(predicate, what='condition'):
+    """True once predicate() holds (generous timeout for a loaded machine)."""
+    return bool(wait_for(predicate, 20.0, what))
 
 
 # ------------------------------------------------------------------------- framing (pure)
