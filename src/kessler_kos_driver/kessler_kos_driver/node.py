@@ -72,7 +72,7 @@ from .protocol import (
     ProtocolError,
     playback_state_name,
 )
-from .usb_link import UsbTarget
+from .usb_link import USB_BACKENDS, UsbTarget
 
 REDACTED = '********'
 TRANSPORTS = ('tcp', 'usb')
@@ -163,6 +163,9 @@ class KosDriverNode(GimbalDriverNode):
             '("" = the first)')
         self.usb_path = self.declare_param(
             'usb_path', '', 'HID device path (e.g. /dev/hidraw0); wins over the ids')
+        self.usb_backend = self.declare_param(
+            'usb_backend', 'hidraw', 'HID backend: hidraw (Linux /dev/hidraw*) or libusb',
+            choices=tuple(USB_BACKENDS))
         self.usb_report_size = self.declare_param(
             'usb_report_size', REPORT_SIZE, 'bytes per HID report including the report ID '
             '0x01 (document: 64)', value_range=(7, 4096))
@@ -176,7 +179,7 @@ class KosDriverNode(GimbalDriverNode):
             try:
                 self.usb_target: UsbTarget | None = UsbTarget(
                     self.usb_vendor_id, self.usb_product_id, self.usb_serial_number,
-                    self.usb_path)
+                    self.usb_path, self.usb_backend)
                 self.usb_target.check()
             except ValueError as exc:
                 raise ParameterError(f'parameters usb_vendor_id/usb_product_id/usb_path: '

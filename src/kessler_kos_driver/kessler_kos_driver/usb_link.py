@@ -1,9 +1,12 @@
 """kOS over USB HID as a ByteStream (no ROS): reports, reassembly and the 4 s keep-alive.
 
-The HID library is cython-hidapi (PyPI `hidapi`, module `hid`); it is imported when a link
-is opened, so TCP users do not need it. Tests inject any object with the methods of
-`hid.device` that this module uses (`open`, `open_path`, `read`, `write`, `close`) through
-`device_factory`; the simulator offers one (`kessler_kos_driver.sim.SimHidDevice`).
+The HID library is cython-hidapi (PyPI `hidapi`; rosdep key `python3-hidapi`, Debian/Ubuntu
+`python3-hid`). It ships two modules with the same API: `hidraw` (Linux /dev/hidraw*, the
+kernel's usbhid driver stays bound; the default) and `hid` (libusb on Linux, which detaches
+the kernel driver and needs access to /dev/bus/usb; the native backend elsewhere). The module
+is imported when a link is opened, so TCP users do not need it. Tests inject any object with
+the methods of `hid.device` that this module uses (`open`, `open_path`, `read`, `write`,
+`close`) through `device_factory`; the simulator offers one (`sim.SimHidDevice`).
 
 The keep-alive thread writes the document's six-byte keep-alive every `keepalive_period`
 whatever else is sent ("must be sent every 4 seconds"). Writes from the client and from the
@@ -13,6 +16,7 @@ keep-alive thread are serialised so the reports of one message are never interle
 from __future__ import annotations
 
 import contextlib
+import importlib
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -40,13 +44,20 @@ class HidDevice(Protocol):
     def close(self) -> None: ...
 
 
-def _hidapi_device() -> HidDevice:
+USB_BACKENDS = {'hidraw': 'hidraw', 'libusb': 'hid'}   # backend name -> cython-hidapi module
+
+
+def hidapi_device(backend: str = 'hidraw') -> HidDevice:
+    """A `device` of cython-hidapi's module for `backend` (not opened yet)."""
+    module_name = USB_BACKENDS.get(backend)
+    if module_name is None:
+        raise TransportError(f'USB backend {backend!r} is not one of {sorted(USB_BACKENDS)}')
     try:
-        import hid
+        module = importlib.import_module(module_name)
     except ImportError as exc:   # the wheel is in requirements.txt; a ROS install needs it too
-        raise TransportError('USB transport needs the hidapi Python package (module "hid"): '
-                             f'{exc}') from exc
-    return hid.device()
+        raise TransportError(f'USB backend {backend} needs the hidapi Python package (module '
+                             f'"{module_name}"): {exc}') from exc
+    return module.device()
 
 
 @dataclass(frozen=True)
@@ -56,7 +67,8 @@ class UsbTarget:
     vendor_id: int = 0
     product_id: int = 0
     serial_number: str = ''
-    path: str = ''
+    path: str = ''                 # as hid.enumerate() lists it for the backend
+    backend: str = 'hidraw'        # 'hidraw' or 'libusb' (see USB_BACKENDS)
 
     def describe(self) -> str:
         if self.path:
@@ -65,6 +77,8 @@ class UsbTarget:
         return f'usb://{self.vendor_id:04x}:{self.product_id:04x}{serial}'
 
     def check(self) -> None:
+        if self.backend not in USB_BACKENDS:
+            raise ValueError(f'backend {self.backend!r} is not one of {sorted(USB_BACKENDS)}')
         if self.path:
             return
         if not (0 < self.vendor_id <= 0xFFFF and 0 < self.product_id <= 0xFFFF):
@@ -87,7 +101,7 @@ class HidStream(ByteStream):
         self.target = target
         self.keepalive_period = keepalive_period
         self.report_size = report_size
-        self._device_factory = device_factory or _hidapi_device
+        self._device_factory = device_factory or (lambda: hidapi_device(target.backend))
         self._device: HidDevice | None = None
         self._write_lock = threading.Lock()
         self._reassembler = ReportReassembler()
@@ -111,7 +125,7 @@ class HidStream(ByteStream):
 
     def open(self) -> None:
         self.close()
-        device = self._device_factory()
+        device = self._device_factory()   # may raise TransportError (library missing)
         try:
             if self.target.path:
                 device.open_path(self.target.path.encode())

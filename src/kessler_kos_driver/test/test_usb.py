@@ -275,3 +275,15 @@ def test_usb_client_without_device_fails_clearly():
     client = KosClient(usb=TARGET, usb_device_factory=lambda: FakeHid(OSError('open failed')))
     with pytest.raises(NotConnected, match='cannot open usb://1234:5678: open failed'):
         client.connect()
+
+
+@pytest.mark.parametrize('backend', ['hidraw', 'libusb'])
+def test_real_hidapi_backends_report_a_missing_device(backend):
+    """The installed cython-hidapi is used as is; no kOS device is plugged in here."""
+    pytest.importorskip('hid', reason='the hidapi wheel (requirements.txt) is not installed')
+    stream = HidStream(UsbTarget(0x1234, 0x5678, backend=backend), keepalive_period=0)
+    with pytest.raises(TransportError, match='cannot open usb://1234:5678'):
+        stream.open()
+    assert not stream.is_open
+    with pytest.raises(ValueError, match='backend'):
+        UsbTarget(0x1234, 0x5678, backend='serial').check()
