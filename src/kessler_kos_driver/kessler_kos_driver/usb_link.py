@@ -8,6 +8,7 @@ is imported when a link is opened, so TCP users do not need it. Tests inject any
 the methods of `hid.device` that this module uses (`open`, `open_path`, `read`, `write`,
 `close`) through `device_factory`; the simulator offers one (`sim.SimHidDevice`).
 
+`close()` waits for a read or write in progress (hidapi frees the device on close).
 The keep-alive thread writes the document's six-byte keep-alive every `keepalive_period`
 whatever else is sent ("must be sent every 4 seconds"). Writes from the client and from the
 keep-alive thread are serialised so the reports of one message are never interleaved.
@@ -104,6 +105,9 @@ class HidStream(ByteStream):
         self._device_factory = device_factory or (lambda: hidapi_device(target.backend))
         self._device: HidDevice | None = None
         self._write_lock = threading.Lock()
+        # hidapi frees the device in close(): a read or write still running in another
+        # thread must finish first (reads are bounded by their timeout).
+        self._read_lock = threading.Lock()
         self._reassembler = ReportReassembler()
         self._pending = b''
         self._keepalive_stop = threading.Event()
@@ -151,7 +155,7 @@ class HidStream(ByteStream):
         thread, self._keepalive_thread = self._keepalive_thread, None
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout=2.0)
-        with self._write_lock:
+        with self._read_lock, self._write_lock:
             device, self._device = self._device, None
         if device is not None:
             with contextlib.suppress(OSError, ValueError):
@@ -195,11 +199,12 @@ class HidStream(ByteStream):
 
     def read(self, max_bytes: int, timeout: float) -> bytes:
         if not self._pending:
-            device = self._require()
-            try:
-                report = device.read(self.report_size, max(int(timeout * 1000), 1))
-            except (OSError, ValueError) as exc:
-                raise LinkClosed(f'read from {self.description} failed: {exc}') from exc
+            with self._read_lock:
+                device = self._require()
+                try:
+                    report = device.read(self.report_size, max(int(timeout * 1000), 1))
+                except (OSError, ValueError) as exc:
+                    raise LinkClosed(f'read from {self.description} failed: {exc}') from exc
             if not report:
                 return b''
             self._pending = self._reassembler.feed(bytes(report))
