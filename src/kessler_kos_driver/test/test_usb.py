@@ -287,3 +287,28 @@ def test_real_hidapi_backends_report_a_missing_device(backend):
     assert not stream.is_open
     with pytest.raises(ValueError, match='backend'):
         UsbTarget(0x1234, 0x5678, backend='serial').check()
+
+
+def test_close_waits_for_a_read_in_progress():
+    """hidapi frees the device on close: a concurrent read must have returned first."""
+    class SlowHid(FakeHid):
+        def __init__(self):
+            super().__init__()
+            self.reading = threading.Event()
+            self.closed_during_read = False
+
+        def read(self, max_length, timeout_ms=0):
+            self.reading.set()
+            time.sleep(timeout_ms / 1000)
+            self.closed_during_read = self.closed
+            return []
+
+    fake = SlowHid()
+    stream = HidStream(TARGET, keepalive_period=0, device_factory=lambda: fake)
+    stream.open()
+    reader = threading.Thread(target=stream.read, args=(64, 0.3))
+    reader.start()
+    assert fake.reading.wait(10)
+    stream.close()
+    reader.join(10)
+    assert fake.closed and not fake.closed_during_read
