@@ -282,6 +282,12 @@ class KosClient:
         host = self._connected_host or self.host or f'discover:udp/{self.discovery_port}'
         return f'tcp://{host}:{self.port}'
 
+    @property
+    def usb_dropped_reports(self) -> int:
+        """USB input reports dropped (other report IDs, padding-only, no header); 0 on TCP."""
+        stream = self._stream
+        return stream.dropped_reports if isinstance(stream, HidStream) else 0
+
     def connect(self) -> None:
         """Open the link and run the initialisation sequence; raises KosError on failure."""
         self._teardown()

@@ -780,6 +780,8 @@ class KosDriverNode(GimbalDriverNode):
             ('malformed_frames', str(client.malformed_frames)),
             ('unsupported_replies', str(client.unsupported_replies)),
             ('transport', self.transport),
+            *([('usb_dropped_reports', str(client.usb_dropped_reports))]
+              if self.transport == 'usb' else []),
             ('aux_inputs', ' '.join(f'{n}={client.aux_inputs >> b & 1}'
                                     for b, n in enumerate(AUX_INPUT_BUTTONS))),
             ('slave_controller_present',

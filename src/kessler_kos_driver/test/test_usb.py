@@ -242,6 +242,8 @@ def test_client_moves_and_plays_a_multi_report_trajectory_over_usb(usb_rig):
     client.start_playback()
     assert client.wait_playback(PlaybackState.FULL_STOP, 20)
     assert hid_device.session.malformed == 0 and client.malformed_frames == 0
+    hid_device.inject_report(b'\x02' + bytes(63))                # another report ID
+    assert wait_until(lambda: client.usb_dropped_reports == 1)
 
 
 def test_aux_inputs_leds_and_software_id_over_usb(usb_rig):
