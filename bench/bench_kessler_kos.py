@@ -1,8 +1,8 @@
 """Benchmark of kessler_kos_driver: kOS codec, node against the in-process kOS simulator (TCP).
 
-The node polls GetMotorInfo every ``poll_period`` (0.05 s) and receives MotorPosition /
-PlaybackStatus notifications; it publishes joint_states as each report arrives (at most
-``publish_rate``) with the time the report was read as ``header.stamp``.
+The node polls GetMotorInfo every ``poll_period`` (default 1/publish_rate) and receives
+MotorPosition / PlaybackStatus notifications; it publishes joint_states as each report
+arrives (at most ``publish_rate``) with the time the report was read as ``header.stamp``.
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def codec() -> dict:
 
 
 def run(domain: int) -> dict:
-    results: dict = {'transport': 'tcp loopback; GetMotorInfo polled every 0.05 s',
+    results: dict = {'transport': 'tcp loopback; GetMotorInfo polled at publish_rate',
                      'codec': codec()}
     sim = KosSimulator(SimSettings(precalibrated=True), port=0, discovery_port=0)
     probe = CommandProbe(sim.server)
@@ -71,7 +71,7 @@ def run(domain: int) -> dict:
         'notification as it arrives (stamp = when the client read it), so the figure is '
         'publish + DDS transfer.'))
     explain_streamed_rate(results, (
-        'the GetMotorInfo polls, one every poll_period (0.05 s, so 20 Hz); a motor that '
-        'stops also sends MotorPosition. Lower poll_period for a higher rate'))
+        'the GetMotorInfo polls, one every poll_period (default 1/publish_rate); a motor '
+        'that stops also sends MotorPosition'))
     check_targets(results)
     return results

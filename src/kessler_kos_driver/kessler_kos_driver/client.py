@@ -1,9 +1,12 @@
-"""Kessler kOS device session over TCP (no ROS).
+"""Kessler kOS device session over TCP or USB HID (no ROS).
 
 Responsibilities: discovery (listen for NetworkInfo datagrams), the initialisation sequence
 (DeviceInfo, UserPassword, MotorInfo, DeviceGUID), request/response matching, notification
-handling (motor, playback, error state), the 10 s keep-alive, periodic state polling, automatic
-reconnection, and checked commands (limits are checked before any byte is sent).
+handling (motor, playback, error state, aux inputs), the 10 s keep-alive, periodic state
+polling, automatic reconnection, and checked commands (limits are checked before any byte is
+sent). Over USB (`usb=UsbTarget(...)`) the link is a :class:`~.usb_link.HidStream` (report
+framing and the 4 s USB keep-alive) and no password message is sent: the document's USB notes
+say UserPassword and DevicePassword are "not required or supported".
 
 Design notes:
 - Set messages and actions have no reply. Where the caller needs to know the outcome the client
@@ -39,7 +42,10 @@ from .protocol import (
     DEFAULT_TCP_PORT,
     KEEPALIVE_PERIOD_S,
     PLAYBACK_RUNNING_STATES,
+    REPORT_SIZE,
     UNCALIBRATED_TARGET,
+    USB_KEEPALIVE_PERIOD_S,
+    AuxInputStatus,
     BumpPositionSpeedAcceleration,
     DeviceGuid,
     DeviceInfo,
@@ -48,9 +54,13 @@ from .protocol import (
     FrameParser,
     GetDeviceGuid,
     GetDeviceInfo,
+    GetLedStatus,
     GetMotorInfo,
     GetNetworkInfo,
+    GetSoftwareId,
     GetTrajectoryData,
+    LedState,
+    LedStatus,
     MarkBeginPosition,
     MarkEndPosition,
     Message,
@@ -67,6 +77,7 @@ from .protocol import (
     ResetAxis,
     SetPositionSpeedAcceleration,
     SetupPlayback,
+    SoftwareId,
     StartPlayback,
     StopPlayback,
     TakePicture,
@@ -80,6 +91,7 @@ from .protocol import (
     validate,
 )
 from .protocol.trajectory import AxisLimits
+from .usb_link import HidDevice, HidStream, UsbTarget
 
 LOG = logging.getLogger('kessler_kos_driver.client')
 
@@ -204,6 +216,10 @@ class KosClient:
         keepalive_period: float = KEEPALIVE_PERIOD_S,
         poll_period: float = 0.1,
         stream_factory: Callable[[str, int], ByteStream] | None = None,
+        usb: UsbTarget | None = None,
+        usb_report_size: int = REPORT_SIZE,
+        usb_keepalive_period: float = USB_KEEPALIVE_PERIOD_S,
+        usb_device_factory: Callable[[], HidDevice] | None = None,
     ) -> None:
         self.host = host
         self.port = int(port)
@@ -215,8 +231,14 @@ class KosClient:
         self.reply_timeout = reply_timeout
         self.keepalive_period = keepalive_period
         self.poll_period = poll_period
-        self._stream_factory = stream_factory or (
-            lambda h, p: TcpStream(h, p, connect_timeout))
+        self.usb = usb
+        if usb is not None:
+            usb.check()
+            self._stream_factory = stream_factory or (lambda _h, _p: HidStream(
+                usb, usb_keepalive_period, usb_report_size, usb_device_factory))
+        else:
+            self._stream_factory = stream_factory or (
+                lambda h, p: TcpStream(h, p, connect_timeout))
         self._stream: ByteStream | None = None
         self._connected_host = ''
         self._lock = threading.RLock()
@@ -249,18 +271,31 @@ class KosClient:
         self.on_error: Callable[[ErrorEvent], None] | None = None
         self.on_connection: Callable[[bool], None] | None = None
         self.on_motor_update: Callable[[], None] | None = None
+        self.aux_inputs = 0            # AuxInputStatus bits (DeviceInfo, then notifications)
+        self.on_aux_inputs: Callable[[int], None] | None = None
 
     # ------------------------------------------------------------------ connection
     @property
     def description(self) -> str:
+        if self.usb is not None:
+            return self.usb.describe()
         host = self._connected_host or self.host or f'discover:udp/{self.discovery_port}'
         return f'tcp://{host}:{self.port}'
+
+    @property
+    def usb_dropped_reports(self) -> int:
+        """USB input reports dropped (other report IDs, padding-only, no header); 0 on TCP."""
+        stream = self._stream
+        return stream.dropped_reports if isinstance(stream, HidStream) else 0
 
     def connect(self) -> None:
         """Open the link and run the initialisation sequence; raises KosError on failure."""
         self._teardown()
-        host = self.host or discover(self.discovery_port, self.discovery_timeout,
-                                     self.discovery_bind)
+        if self.usb is not None:
+            host = ''
+        else:
+            host = self.host or discover(self.discovery_port, self.discovery_timeout,
+                                         self.discovery_bind)
         stream = self._stream_factory(host, self.port)
         try:
             stream.open()
@@ -297,6 +332,12 @@ class KosClient:
         info = self.request(GetDeviceInfo())
         assert isinstance(info, DeviceInfo)
         self.device_info = info
+        with self._lock:
+            self.aux_inputs = info.aux_input_status
+        if self.usb is not None:   # USB: no password messages
+            self.refresh_motors()
+            self._finish_initialisation(info)
+            return
         if info.device_password != self._password:
             # Compare locally (the device reports its password) so a wrong password never
             # reaches the device; the value itself is never logged.
@@ -312,6 +353,9 @@ class KosClient:
                 raise PasswordRejected('the device rejected the password (ErrorStatus 15, '
                                        'locked out)') from exc
             raise
+        self._finish_initialisation(info)
+
+    def _finish_initialisation(self, info: DeviceInfo) -> None:
         guid = self.request(GetDeviceGuid())
         assert isinstance(guid, DeviceGuid)
         self.guid = guid.text
@@ -539,6 +583,10 @@ class KosClient:
                 LOG.warning('device error %d (%s), motor %d', event.code, event.description,
                             event.motor_address)
                 callback = self.on_error and (lambda: self.on_error(event))
+            elif isinstance(message, AuxInputStatus):
+                self.aux_inputs = message.status
+                status = message.status
+                callback = self.on_aux_inputs and (lambda: self.on_aux_inputs(status))
             elif isinstance(message, UnsupportedMessage):
                 self.unsupported_replies += 1
                 LOG.warning('device did not support a message: %s', message.offending.hex())
@@ -713,6 +761,37 @@ class KosClient:
         if not math.isfinite(exposure) or exposure < 0:
             raise CommandRejected(f'exposure must be >= 0 s, got {exposure}')
         self._checked(TakePicture(ALL_MOTORS, exposure), 'TakePicture')
+
+    # ------------------------------------------------------------ device settings
+    def led_status(self) -> tuple[int, int]:
+        """(Get)LEDStatus: (master, slave), each a LedState (0 off, 1 on, 2/3 blink)."""
+        reply = self.request(GetLedStatus())
+        assert isinstance(reply, LedStatus)
+        return reply.master_status, reply.slave_status
+
+    def set_led_status(self, master: int, slave: int) -> tuple[int, int]:
+        """(Set)LEDStatus, then read the LEDs back (a Set has no reply)."""
+        allowed = [int(s) for s in LedState]
+        for name, value in (('master', master), ('slave', slave)):
+            if value not in allowed:
+                raise CommandRejected(f'{name} LED status {value!r} is not one of {allowed} '
+                                      '(0 off, 1 on, 2 slow blink, 3 fast blink)')
+        self.send(LedStatus(int(master), int(slave)))
+        return self.led_status()
+
+    def software_id(self) -> int:
+        """(Get)SoftwareID: the platform id of the last client that used the device."""
+        reply = self.request(GetSoftwareId())
+        assert isinstance(reply, SoftwareId)
+        return reply.device_type
+
+    def set_software_id(self, platform: int) -> int:
+        """(Set)SoftwareID, read back; the caller decides whether writing it is allowed."""
+        if isinstance(platform, bool) or not isinstance(platform, int) \
+                or not 0 <= platform <= 0xFF:
+            raise CommandRejected(f'SoftwareID must be an integer 0..255, got {platform!r}')
+        self.send(SoftwareId(platform))
+        return self.software_id()
 
     # ------------------------------------------------------------- calibration
     def mark_begin(self, address: int) -> None:

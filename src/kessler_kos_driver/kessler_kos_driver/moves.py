@@ -49,7 +49,8 @@ class PlaybackSettings:
     duration: float = 0.0         # s; 0 = the last keyframe's time
     loop_count: int = 0           # 0 once, 255 forever
     rapid_reverse: bool = False
-    start_delay: float = 0.0      # s
+    start_delay: float = 0.0      # s (DelayMode 1)
+    start_time: int = 0           # UnixTime s to start at (DelayMode 2); 0 = not used
     interval: float = 0.0         # time lapse Delay, s
     exposure: float = 0.0         # s
     move_photos: int = 0
@@ -73,14 +74,24 @@ def _blocks(settings: PlaybackSettings, duration: float) -> tuple[PlaybackBlock,
         raise TrajectoryError('loop_count must be 0..255 (255 = forever)')
     if not math.isfinite(settings.start_delay) or settings.start_delay < 0:
         raise TrajectoryError(f'start_delay must be >= 0 s, got {settings.start_delay}')
+    delay_mode, delay_interval = DelayMode.NONE, 0.0
+    if settings.start_time:
+        if settings.start_delay > 0:
+            raise TrajectoryError('give start_delay (s) or start_time (date), not both')
+        if not 0 < settings.start_time <= 0xFFFFFFFF:
+            raise TrajectoryError(f'start_time must be a UnixTime in 1..4294967295 s, got '
+                                  f'{settings.start_time}')
+        delay_mode, delay_interval = DelayMode.UNTIL_DATE, float(settings.start_time)
+    elif settings.start_delay > 0:
+        delay_mode, delay_interval = DelayMode.FOR_TIME, settings.start_delay
     playback = PlaybackBlock(
         playback_mode=settings.mode,
         duration=duration,
         rapid_reverse_duration=duration,      # document: "set to the same value as Duration"
         loop_after_rapid_reverse=settings.loop_count if settings.rapid_reverse else 0,
         loop_after_reverse=0 if settings.rapid_reverse else settings.loop_count,
-        delay_mode=DelayMode.FOR_TIME if settings.start_delay > 0 else DelayMode.NONE,
-        delay_interval=settings.start_delay,
+        delay_mode=delay_mode,
+        delay_interval=delay_interval,
         return_to_home_percent=settings.return_to_home_percent,
     )
     timelapse = TimeLapseBlock()

@@ -3,8 +3,10 @@
 The base node (gimbal_driver_common.ros.base_node) provides the lifecycle, joint_states,
 joint_command, ~/stop, ~/move_to, ~/home, presets (driver-side YAML, kOS has none), scans,
 /diagnostics and ~/status. This node adds the kOS playback services, ~/calibrate,
-~/take_picture and ~/playback_status, and converts SI joint units to motor rotations with
-`joint_scales` (SI units per rotation; a negative scale flips the direction).
+~/take_picture, ~/playback_status, the aux inputs (~/aux_inputs, ~/slave_controller_present),
+~/command (LEDStatus, SoftwareID), and converts SI joint units to motor rotations with
+`joint_scales` (SI units per rotation; a negative scale flips the direction). The link is TCP
+or USB HID (`transport`).
 
 Things the base node does not provide and that live here:
 - the `password` parameter is redacted: rclpy publishes declared parameter values on
@@ -25,6 +27,9 @@ from pathlib import Path
 
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from sensor_msgs.msg import Joy
+from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common.diagnostics import Level
@@ -40,7 +45,7 @@ from gimbal_driver_common.ros.diagnostics import StatusPart
 from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_msgs.msg import AxisState
 from gimbal_msgs.msg import PlaybackStatus as PlaybackStatusMsg
-from gimbal_msgs.srv import Calibrate, LoadTrajectory
+from gimbal_msgs.srv import Calibrate, DeviceCommand, LoadTrajectory
 
 from .client import ErrorEvent, KosClient, KosError
 from .moves import (
@@ -56,16 +61,26 @@ from .protocol import (
     ERROR_CODES,
     MOTOR_ADDRESS_MAX,
     MOTOR_ADDRESS_MIN,
+    REPORT_SIZE,
+    USB_KEEPALIVE_PERIOD_S,
     DeviceType,
     ErrorCode,
+    LedState,
     PlaybackMode,
     PlaybackState,
     PlaybackStatus,
     ProtocolError,
     playback_state_name,
 )
+from .usb_link import USB_BACKENDS, UsbTarget
 
 REDACTED = '********'
+TRANSPORTS = ('tcp', 'usb')
+# AuxInputStatus bits (document "AuxInputStatus"): buttons of ~/aux_inputs in this order;
+# bit 4 (slave controller present) goes to ~/slave_controller_present.
+AUX_INPUT_BUTTONS = ('master_tip', 'master_ring', 'slave_tip', 'slave_ring')
+AUX_SLAVE_PRESENT_BIT = 4
+LED_NAMES = {int(state): state.name.lower() for state in LedState}
 TWO_PI = 2.0 * math.pi
 DEVICE_MODELS = {
     DeviceType.CINESHOOTER: 'Kessler CineShooter',
@@ -106,6 +121,7 @@ class KosDriverNode(GimbalDriverNode):
         self._latched_errors: list[ErrorEvent] = []
         self._errors_lock = threading.Lock()
         self._locked_out = False
+        self._delay_return = False     # from the last ~/load_trajectory, for ~/setup_playback
         super().__init__('kessler_kos_driver', **kwargs)
         package_logger = logging.getLogger('kessler_kos_driver')
         package_logger.addHandler(_RosLogHandler(self))
@@ -113,6 +129,11 @@ class KosDriverNode(GimbalDriverNode):
         package_logger.propagate = False
         group = ReentrantCallbackGroup()
         self._playback_pub = self.create_publisher(PlaybackStatusMsg, '~/playback_status', 10)
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._aux_pub = self.create_publisher(Joy, '~/aux_inputs', latched)
+        self._slave_pub = self.create_publisher(Bool, '~/slave_controller_present', latched)
+        self._device_settings: dict[str, str] = {}
+        self.create_service(DeviceCommand, '~/command', self._on_command, callback_group=group)
         self.create_service(LoadTrajectory, '~/load_trajectory', self._on_load_trajectory,
                             callback_group=group)
         self.create_service(Trigger, '~/setup_playback', self._on_setup_playback,
@@ -128,6 +149,43 @@ class KosDriverNode(GimbalDriverNode):
     # ------------------------------------------------------------ parameters
     def declare_device_parameters(self) -> None:
         n = len(self.joint_names)
+        self.transport = self.declare_param(
+            'transport', 'tcp', 'link to the device: tcp (network) or usb (HID)',
+            choices=TRANSPORTS)
+        self.usb_vendor_id = self.declare_param(
+            'usb_vendor_id', 0, 'USB vendor id of the kOS device (transport usb; 0 = use '
+            'usb_path)', value_range=(0, 0xFFFF))
+        self.usb_product_id = self.declare_param(
+            'usb_product_id', 0, 'USB product id of the kOS device (transport usb)',
+            value_range=(0, 0xFFFF))
+        self.usb_serial_number = self.declare_param(
+            'usb_serial_number', '', 'USB serial number to pick one of several devices '
+            '("" = the first)')
+        self.usb_path = self.declare_param(
+            'usb_path', '', 'HID device path (e.g. /dev/hidraw0); wins over the ids')
+        self.usb_backend = self.declare_param(
+            'usb_backend', 'hidraw', 'HID backend: hidraw (Linux /dev/hidraw*) or libusb',
+            choices=tuple(USB_BACKENDS))
+        self.usb_report_size = self.declare_param(
+            'usb_report_size', REPORT_SIZE, 'bytes per HID report including the report ID '
+            '0x01 (document: 64)', value_range=(7, 4096))
+        self.usb_keepalive_period = self.declare_param(
+            'usb_keepalive_period', USB_KEEPALIVE_PERIOD_S, 's between USB keep-alive '
+            'messages (document: every 4 s)', value_range=(0.1, 4.0))
+        self.allow_software_id_write = self.declare_param(
+            'allow_software_id_write', False, 'allow ~/command SetSoftwareID (changes what '
+            'the device reports to every other client)')
+        if self.transport == 'usb':
+            try:
+                self.usb_target: UsbTarget | None = UsbTarget(
+                    self.usb_vendor_id, self.usb_product_id, self.usb_serial_number,
+                    self.usb_path, self.usb_backend)
+                self.usb_target.check()
+            except ValueError as exc:
+                raise ParameterError(f'parameters usb_vendor_id/usb_product_id/usb_path: '
+                                     f'{exc}') from None
+        else:
+            self.usb_target = None
         self.host = self.declare_param('host', '', 'device IP address or name ("" = discover '
                                        'by listening for NetworkInfo datagrams)')
         self.port = self.declare_param('port', DEFAULT_TCP_PORT, 'device TCP port',
@@ -154,9 +212,12 @@ class KosDriverNode(GimbalDriverNode):
             'acceleration_scale', 0.5,
             'fraction of each motor\'s MaxMaxAcceleration used for moves and jogs',
             value_range=(0.01, 1.0))
+        # Positions come from MotorInfo polls, so the poll runs at publish_rate by default:
+        # joint_states then arrive at publish_rate (issue 12; a fixed 0.05 s gave 20 Hz).
         self.poll_period = self.declare_param(
-            'poll_period', 0.05, 's between (Get)MotorInfo state polls (0 = notifications only)',
-            value_range=(0.0, 10.0))
+            'poll_period', 1.0 / self.publish_rate,
+            's between (Get)MotorInfo state polls (default 1/publish_rate; 0 = notifications '
+            'only)', value_range=(0.0, 10.0))
         self.keepalive_period = self.declare_param(
             'keepalive_period', 10.0, 's of idle link before a (Get)NetworkInfo keep-alive '
             '(the device drops silent links after 30 s)', value_range=(0.5, 29.0))
@@ -252,8 +313,11 @@ class KosDriverNode(GimbalDriverNode):
             discovery_port=self.discovery_port, discovery_timeout=self.discovery_timeout,
             discovery_bind=self.discovery_bind, reply_timeout=self.reply_timeout,
             keepalive_period=self.keepalive_period, poll_period=self.poll_period,
+            usb=self.usb_target, usb_report_size=self.usb_report_size,
+            usb_keepalive_period=self.usb_keepalive_period,
         )
         client.on_playback = self._publish_playback
+        client.on_aux_inputs = self._publish_aux_inputs
         client.on_error = self._on_device_error
         client.on_motor_update = self.notify_new_data  # publish positions as they arrive
         try:
@@ -268,6 +332,8 @@ class KosDriverNode(GimbalDriverNode):
                                       f'device motors: {sorted(client.motors)}')
         self.client = client
         self._locked_out = False
+        self._read_device_settings(client)
+        self._publish_aux_inputs(client.aux_inputs)
         info = client.device_info
         model = DEVICE_MODELS.get(info.device_type, f'kOS device type {info.device_type}') \
             if info else 'kOS device'
@@ -279,13 +345,18 @@ class KosDriverNode(GimbalDriverNode):
         client, self.client = self.client, None
         if client is not None:
             client.on_playback = client.on_error = client.on_motor_update = None
+            client.on_aux_inputs = None
             client.close()
 
     def link_healthy(self) -> bool:
         return self.client is not None and self.client.connected
 
     def link_description(self) -> str:
-        return self.client.description if self.client else f'tcp://{self.host or "?"}:{self.port}'
+        if self.client:
+            return self.client.description
+        if self.usb_target is not None:
+            return self.usb_target.describe()
+        return f'tcp://{self.host or "?"}:{self.port}'
 
     def _client(self) -> KosClient:
         client = self.client
@@ -459,15 +530,99 @@ class KosDriverNode(GimbalDriverNode):
                 msg.positions.append(float(position) * self.joints[name].scale)
         self._playback_pub.publish(msg)
 
+    def _publish_aux_inputs(self, status: int) -> None:
+        """AuxInputStatus bits as sensor_msgs/Joy buttons + the slave controller flag."""
+        msg = Joy()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.buttons = [status >> bit & 1 for bit in range(len(AUX_INPUT_BUTTONS))]
+        self._aux_pub.publish(msg)
+        self._slave_pub.publish(Bool(data=bool(status >> AUX_SLAVE_PRESENT_BIT & 1)))
+
+    def _read_device_settings(self, client: KosClient) -> None:
+        """LEDStatus and SoftwareID once per connection, for diagnostics."""
+        settings: dict[str, str] = {}
+        try:
+            master, slave = client.led_status()
+            settings['led_master'] = LED_NAMES.get(master, str(master))
+            settings['led_slave'] = LED_NAMES.get(slave, str(slave))
+            settings['last_client_software_id'] = str(client.software_id())
+        except KosError as exc:
+            self.get_logger().warning(f'cannot read LEDStatus/SoftwareID: {exc}')
+        self._device_settings = settings
+
     # -------------------------------------------------------------- services
+    def _on_command(self, request, response):
+        """~/command: the kOS Get/Set messages without a dedicated interface."""
+        def action() -> str:
+            client = self._client()
+            name = request.command.strip()
+            args = [a.strip() for a in request.arguments]
+            handler = {'GetLEDStatus': (0, self._get_leds), 'SetLEDStatus': (2, self._set_leds),
+                       'GetSoftwareID': (0, self._get_software_id),
+                       'SetSoftwareID': (1, self._set_software_id)}.get(name)
+            if handler is None:
+                raise CommandError(f'unknown command {name!r}; this driver has GetLEDStatus, '
+                                   'SetLEDStatus MASTER SLAVE, GetSoftwareID, SetSoftwareID ID')
+            count, run = handler
+            if len(args) != count:
+                raise CommandError(f'{name} takes {count} argument(s), got {len(args)}: {args}')
+            if request.axis:
+                raise CommandError(f'{name} is device-wide: axis must be 0, got {request.axis}')
+            try:
+                response.results = run(client, args)
+            except KosError as exc:
+                raise DeviceError(f'{name}: {exc}') from exc
+            return f'{name}: ' + ', '.join(response.results)
+
+        return self.serve_request(response, action)
+
+    def _led_results(self, master: int, slave: int) -> list[str]:
+        self._device_settings['led_master'] = LED_NAMES.get(master, str(master))
+        self._device_settings['led_slave'] = LED_NAMES.get(slave, str(slave))
+        return [f'master={self._device_settings["led_master"]}',
+                f'slave={self._device_settings["led_slave"]}']
+
+    def _get_leds(self, client: KosClient, _args: list[str]) -> list[str]:
+        return self._led_results(*client.led_status())
+
+    def _set_leds(self, client: KosClient, args: list[str]) -> list[str]:
+        states = []
+        by_name = {v: k for k, v in LED_NAMES.items()}
+        for which, text in zip(('master', 'slave'), args, strict=True):
+            value = by_name.get(text.lower(), int(text) if text.isdigit() else None)
+            if value not in LED_NAMES:
+                raise CommandError(f'{which} LED status {text!r} is not one of '
+                                   f'{", ".join(f"{k} ({v})" for k, v in LED_NAMES.items())}')
+            states.append(value)
+        return self._led_results(*client.set_led_status(*states))
+
+    def _get_software_id(self, client: KosClient, _args: list[str]) -> list[str]:
+        value = client.software_id()
+        self._device_settings['last_client_software_id'] = str(value)
+        return [f'software_id={value}']
+
+    def _set_software_id(self, client: KosClient, args: list[str]) -> list[str]:
+        if not self.allow_software_id_write:
+            raise CommandError('SetSoftwareID changes what the device tells every other client '
+                               'about its last user; set the parameter '
+                               'allow_software_id_write:=true to allow it')
+        text = args[0]
+        if not text.isdigit() or int(text) > 0xFF:
+            raise CommandError(f'SoftwareID must be an integer 0..255, got {text!r}')
+        value = client.set_software_id(int(text))
+        self._device_settings['last_client_software_id'] = str(value)
+        return [f'software_id={value}']
+
     def _on_load_trajectory(self, request, response):
         def action() -> str:
             client = self._client()
             self._refuse_during_playback(client)
+            start_time = self._start_time(request.start_time)
             settings = PlaybackSettings(
                 mode=request.playback_mode, duration=request.duration,
                 loop_count=request.loop_count, rapid_reverse=request.rapid_reverse,
-                start_delay=request.start_delay, interval=request.interval,
+                start_delay=request.start_delay, start_time=start_time,
+                interval=request.interval,
                 exposure=request.exposure, move_photos=request.move_photos,
                 pre_move_photos=request.pre_move_photos,
                 post_move_photos=request.post_move_photos,
@@ -488,14 +643,35 @@ class KosDriverNode(GimbalDriverNode):
                 client.load_trajectory(trajectory)
             except (ProtocolError, KosError) as exc:
                 raise DeviceError(f'trajectory not loaded: {exc}') from exc
+            self._delay_return = bool(request.delay_return)
             axes = ', '.join(f'{self._joint_of.get(a, a)}: {len(s)} segment(s)'
                              for a, s in trajectory.axes.items())
             mode = PlaybackMode(request.playback_mode).name.lower()
+            when = ''
+            if start_time:
+                when = time.strftime('; starts at %Y-%m-%dT%H:%M:%SZ', time.gmtime(start_time))
+            elif request.start_delay > 0:
+                when = f'; starts {request.start_delay:g} s after ~/start_playback'
+            if self._delay_return:
+                when += '; delay_return: ~/setup_playback does not move the axes'
             return (f'{mode} move loaded ({axes}), duration '
-                    f'{trajectory.effective_duration():.3f} s; now ~/setup_playback and '
-                    '~/start_playback')
+                    f'{trajectory.effective_duration():.3f} s{when}; now ~/setup_playback '
+                    'and ~/start_playback')
 
         return self.serve_request(response, action)
+
+    def _start_time(self, stamp) -> int:
+        """LoadTrajectory.start_time as UnixTime (0 = not used); a past date is refused."""
+        if stamp.sec == 0 and stamp.nanosec == 0:
+            return 0
+        value = math.ceil(stamp.sec + stamp.nanosec * 1e-9)   # UnixTime is whole seconds
+        now = time.time()
+        if value <= now:
+            raise CommandError(f'start_time {value} (UnixTime s) is {now - value:.0f} s in the '
+                               'past; give a future date or use start_delay')
+        if value > 0xFFFFFFFF:
+            raise CommandError(f'start_time {value} is beyond UnixTime (UInt32) 4294967295')
+        return value
 
     def _keyframes(self, trajectory) -> list[Keyframe]:
         names = list(trajectory.joint_names)
@@ -550,7 +726,7 @@ class KosDriverNode(GimbalDriverNode):
             self._refuse_during_playback(client)
             marker = len(client.playback.history)
             try:
-                client.setup_playback()
+                client.setup_playback(delay_return=self._delay_return)
             except KosError as exc:
                 raise DeviceError(str(exc)) from exc
             if not client.wait_for(
@@ -558,6 +734,9 @@ class KosDriverNode(GimbalDriverNode):
                     self.playback_timeout):
                 raise DeviceError('no SetupCompleted notification within '
                                   f'{self.playback_timeout:g} s')
+            if self._delay_return:
+                return ('move set up without moving (delay_return); ~/start_playback returns '
+                        'to the first key frame, then plays')
             return 'motors at the first key frame, move set up; call ~/start_playback'
 
         return self.serve_request(response, action)
@@ -635,6 +814,14 @@ class KosDriverNode(GimbalDriverNode):
             ('guid', client.guid),
             ('malformed_frames', str(client.malformed_frames)),
             ('unsupported_replies', str(client.unsupported_replies)),
+            ('transport', self.transport),
+            *([('usb_dropped_reports', str(client.usb_dropped_reports))]
+              if self.transport == 'usb' else []),
+            ('aux_inputs', ' '.join(f'{n}={client.aux_inputs >> b & 1}'
+                                    for b, n in enumerate(AUX_INPUT_BUTTONS))),
+            ('slave_controller_present',
+             str(bool(client.aux_inputs >> AUX_SLAVE_PRESENT_BIT & 1))),
+            *sorted(self._device_settings.items()),
             *[(f'error_{e.code}', f'{e.description} (motor {e.motor_address})')
               for e in device_errors],
         ]

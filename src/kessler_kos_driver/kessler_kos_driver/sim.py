@@ -13,6 +13,11 @@ What it models (document sections in brackets):
   documented PlaybackStatus sequences for Live Motion (loops, reverse, rapid reverse) and
   Time Lapse (continuous and shoot-move-shoot, pre/post photos, photo counting);
 - UnsupportedMessage for anything the document does not define;
+- LEDStatus and SoftwareID (Get/Set), AuxInputStatus notifications (control command `aux`);
+- the USB face (document "USB Notes"): `SimHidDevice` has the methods of cython-hidapi's
+  `hid.device` and carries the same device model in 64-byte reports with report ID 0x01, so
+  the client's USB transport runs end to end in-process; a USB session needs no password
+  (UserPassword/DevicePassword get UnsupportedMessage) and takes the six-byte keep-alive;
 - fault injection: link drop, motor offline/online, axis fault (ErrorStatus 16 + reset),
   garbage bytes, silence; from Python or from a line-based control port on 127.0.0.1.
 
@@ -44,6 +49,7 @@ from .protocol import (
     MOTOR_ADDRESS_MAX,
     MOTOR_ADDRESS_MIN,
     UNCALIBRATED_TARGET,
+    AuxInputStatus,
     BumpPositionSpeedAcceleration,
     DeviceGuid,
     DeviceInfo,
@@ -93,6 +99,7 @@ from .protocol import (
     validate,
 )
 from .protocol.trajectory import AxisLimits
+from .protocol.usb import REPORT_SIZE, USB_KEEPALIVE, ReportReassembler, encode_reports
 
 LOG = logging.getLogger('kessler_kos_sim')
 PHYSICS_STEP_S = 0.002          # simulated seconds per integration step
@@ -209,6 +216,7 @@ class _Playback:
     start_after_homing: bool = False
     homing_owed: bool = False   # SetupPlayback(DelayReturn): return after StartPlayback
     homing_targets: dict[int, float] = field(default_factory=dict)
+    start_at: float | None = None   # DelayMode 2: wall-clock UnixTime the move starts at
     status: int = PlaybackState.NO_MOVE
 
 
@@ -335,8 +343,11 @@ class KosDevice:
         traj = pb.trajectory
         assert traj is not None
         delay = traj.playback.delay_interval if traj.playback.delay_mode == 1 else 0.0
+        pb.start_at = None
         if traj.playback.delay_mode == 2:
+            # a date is wall-clock time: it does not run faster with --time-scale
             delay = max(0.0, traj.playback.delay_interval - time.time())
+            pb.start_at = traj.playback.delay_interval
         pb.phase_time = 0.0
         if delay > 0:
             pb.phase = 'delay'
@@ -439,7 +450,9 @@ class KosDevice:
         tl = traj.timelapse
         pb.phase_time += dt
         if pb.phase == 'delay':
-            if pb.phase_time >= pb.pass_length:
+            due = (time.time() >= pb.start_at if pb.start_at is not None
+                   else pb.phase_time >= pb.pass_length)
+            if due:
                 self._after_delay()
         elif pb.phase in ('pre_photos', 'post_photos'):
             wanted = tl.pre_move_photos if pb.phase == 'pre_photos' else tl.post_move_photos
@@ -507,6 +520,9 @@ class KosDevice:
         out = session.outbox
         if not session.unlocked and not isinstance(message, ALLOWED_WHILE_LOCKED):
             return   # "the Device will simply ignore most messages"
+        if session.usb and isinstance(message, (UserPassword, DevicePassword)):
+            out.append(UnsupportedMessage(frame[:64]).encode())   # "not required or supported"
+            return
         if isinstance(message, GetDeviceInfo):
             out.append(self.device_info().encode())
         elif isinstance(message, GetNetworkInfo):
@@ -693,7 +709,10 @@ class KosDevice:
     def device_info(self) -> DeviceInfo:
         fw = self.settings.firmware
         pb = self.playback
-        remaining = max(pb.pass_length - pb.phase_time, 0.0) if pb.phase == 'delay' else 0.0
+        remaining = 0.0
+        if pb.phase == 'delay':
+            remaining = (max(pb.start_at - time.time(), 0.0) if pb.start_at is not None
+                         else max(pb.pass_length - pb.phase_time, 0.0))
         return DeviceInfo(self.settings.device_type, 0, int(self.playback_mode), pb.status,
                           *fw, 0, 0, self.password, self.aux_input, remaining, pb.elapsed,
                           pb.photos)
@@ -730,12 +749,14 @@ class KosDevice:
 
 
 class KosSession:
-    """One TCP connection: framing, lock state, keep-alive and the reply queue."""
+    """One TCP connection or USB HID link: framing, lock state, keep-alive, reply queue."""
 
-    def __init__(self, device: KosDevice) -> None:
+    def __init__(self, device: KosDevice, usb: bool = False) -> None:
         self.device = device
+        self.usb = usb
         self.parser = FrameParser()
-        self.unlocked = False
+        self.unlocked = usb            # USB has no password messages
+        self.usb_keepalives = 0
         self.outbox: list[bytes] = []
         self.last_rx = time.monotonic()
         self.malformed = 0
@@ -748,6 +769,9 @@ class KosSession:
         device.advance()
         with device.lock:
             for frame in self.parser.feed(data):
+                if self.usb and frame == USB_KEEPALIVE:
+                    self.usb_keepalives += 1
+                    continue
                 try:
                     message = decode(frame)
                 except ProtocolError as exc:
@@ -780,6 +804,101 @@ class KosSession:
         with self.device.lock:
             if self in self.device.sessions:
                 self.device.sessions.remove(self)
+
+
+class SimHidDevice:
+    """The simulated device seen through USB HID, with the methods of `hid.device`.
+
+    `write` takes output reports (report ID 0x01 + message bytes, zero padded) and feeds the
+    reassembled kOS bytes to a USB session of the shared `KosDevice`; `read` returns one
+    input report (report ID first, padded to `report_size`) per call, polling the session
+    for notifications while it waits. A session silent for the keep-alive timeout, or a
+    device unplugged with `unplug()`, makes `read`/`write` raise OSError like hidapi does.
+    """
+
+    def __init__(self, device: KosDevice, report_size: int = REPORT_SIZE) -> None:
+        self.device = device
+        self.report_size = report_size
+        self.session: KosSession | None = None
+        self.reports_written: list[bytes] = []   # raw output reports, for inspection
+        self.reports_read: list[bytes] = []
+        self._reassembler = ReportReassembler()
+        self._parser = FrameParser()
+        self._inbox: list[bytes] = []
+        self._lock = threading.Lock()
+        self._unplugged = False
+
+    # -- hid.device methods
+    def open(self, vendor_id: int = 0, product_id: int = 0,
+             serial_number: str | None = None) -> None:
+        self._open()
+
+    def open_path(self, path: bytes) -> None:
+        self._open()
+
+    def _open(self) -> None:
+        if self._unplugged:
+            raise OSError('open failed')
+        self.close()
+        self.session = KosSession(self.device, usb=True)
+
+    def close(self) -> None:
+        session, self.session = self.session, None
+        if session is not None:
+            session.on_disconnect()
+        self._reassembler.reset()
+        self._parser.reset()
+        self._inbox.clear()
+
+    def write(self, buff) -> int:
+        report = bytes(buff)
+        session = self._session()
+        with self._lock:
+            self.reports_written.append(report)
+            self._queue(session.on_bytes(self._reassembler.feed(report)))
+        return len(report)
+
+    def read(self, max_length: int, timeout_ms: int = 0) -> list[int]:
+        deadline = time.monotonic() + timeout_ms / 1000.0
+        while True:
+            session = self._session()
+            with self._lock:
+                if not self._inbox:
+                    try:
+                        self._queue(session.poll())
+                    except ConnectionAbortedError as exc:
+                        self.close()
+                        raise OSError(f'read error ({exc})') from exc
+                if self._inbox:
+                    report = self._inbox.pop(0)
+                    self.reports_read.append(report)
+                    return list(report[:max_length])
+            if time.monotonic() >= deadline:
+                return []
+            time.sleep(0.002)
+
+    # -- test helpers
+    def unplug(self) -> None:
+        """The cable is pulled: reads and writes fail, open fails until `plug_in()`."""
+        self._unplugged = True
+        self.close()
+
+    def plug_in(self) -> None:
+        self._unplugged = False
+
+    def inject_report(self, report: bytes) -> None:
+        """Queue a raw input report (foreign report IDs, garbage)."""
+        with self._lock:
+            self._inbox.append(bytes(report))
+
+    def _session(self) -> KosSession:
+        if self.session is None:
+            raise OSError('read error' if self._unplugged else 'device not open')
+        return self.session
+
+    def _queue(self, data: bytes) -> None:
+        for frame in self._parser.feed(data):
+            self._inbox.extend(encode_reports(frame, self.report_size))
 
 
 class KosSimulator:
@@ -874,6 +993,11 @@ class KosSimulator:
                 with device.lock:
                     device.broadcast(ErrorStatus(int(args[0]), int(args[1]) if len(args) > 1
                                                  else 0))
+            elif verb == 'aux':
+                bits = int(args[0], 0)
+                with device.lock:
+                    device.aux_input = bits
+                    device.broadcast(AuxInputStatus(bits))
             elif verb == 'status':
                 with device.lock:
                     motors = ' '.join(
@@ -884,7 +1008,7 @@ class KosSimulator:
             else:
                 return (f'error unknown command {verb!r}; use drop [s], garbage [hex], '
                         'silent on|off, offline N, online N, fault N [code], error CODE [N], '
-                        'status')
+                        'aux BITS, status')
         except (ValueError, IndexError, KeyError) as exc:
             return f'error {verb}: {exc}'
         return 'ok'

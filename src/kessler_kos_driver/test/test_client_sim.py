@@ -238,6 +238,27 @@ def test_live_motion_with_delay_and_reverse_loop(calibrated):
         S.START_REVERSE, S.END_OF_MOVE, S.START_FORWARD, S.END_OF_MOVE, S.FULL_STOP]
 
 
+def test_delay_until_date_and_delay_return(calibrated):
+    """DelayMode 2 waits for a wall-clock date (not scaled time); DelayReturn sets up in place."""
+    _sim, client = calibrated
+    start_at = math.ceil(time.time()) + 2
+    settings = PlaybackSettings(start_time=start_at)
+    client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
+                                          settings))
+    before = client.motors[2].position
+    client.setup_playback(delay_return=True)
+    assert client.wait_playback(S.SETUP_COMPLETED, 10)
+    assert client.playback.history == [S.SETUP_COMPLETED]     # no MotorsHome: no return yet
+    assert client.motors[2].position == before
+    client.start_playback()
+    assert client.wait_playback(S.DELAY_TIMER_STARTED, 10)
+    assert client.wait_playback(S.START_FORWARD, 20)
+    assert time.time() >= start_at              # 20x time scale does not shorten a date
+    assert client.wait_playback(S.FULL_STOP, 20)
+    assert client.playback.history[:3] == [S.SETUP_COMPLETED, S.MOTORS_HOME,
+                                           S.DELAY_TIMER_STARTED]
+
+
 def test_rapid_reverse_loop_forever_until_stop(calibrated):
     sim, client = calibrated
     settings = PlaybackSettings(loop_count=255, rapid_reverse=True)

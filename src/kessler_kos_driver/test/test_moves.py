@@ -98,3 +98,17 @@ def test_explicit_segments_need_a_duration_and_known_joints():
     traj = from_segments(segments, JOINTS, PlaybackSettings(duration=5.0))
     validate(traj)
     assert traj.axes[2][0].p3_position == 1.0
+
+
+def test_start_time_is_delay_mode_2_with_a_unixtime():
+    keyframes = [Keyframe(0.0, {'pan': 0.0}), Keyframe(2.0, {'pan': -2 * math.pi * 10})]
+    traj = from_keyframes(keyframes, JOINTS, RANGES,
+                          PlaybackSettings(start_time=1_900_000_000))
+    assert traj.playback.delay_mode == DelayMode.UNTIL_DATE
+    encoded = traj.playback.data()
+    assert (1_900_000_000).to_bytes(4, 'big') in encoded   # UInt32, not a Float32
+    with pytest.raises(TrajectoryError, match='not both'):
+        from_keyframes(keyframes, JOINTS, RANGES,
+                       PlaybackSettings(start_time=1_900_000_000, start_delay=1.0))
+    with pytest.raises(TrajectoryError, match='UnixTime'):
+        from_keyframes(keyframes, JOINTS, RANGES, PlaybackSettings(start_time=2**32))

@@ -8,16 +8,19 @@ from __future__ import annotations
 
 import itertools
 import math
+import time
 
 import pytest
 
 pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
-from builtin_interfaces.msg import Duration
+from builtin_interfaces.msg import Duration, Time
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Log
 from rcl_interfaces.srv import GetParameters
-from sensor_msgs.msg import JointState
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from sensor_msgs.msg import JointState, Joy
+from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -25,7 +28,7 @@ from gimbal_driver_common.ros.testing import RosTestClient, find_diagnostic, joi
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import AxisTrajectory, BezierSegment, GimbalStatus, PlaybackStatus
-from gimbal_msgs.srv import Calibrate, LoadTrajectory
+from gimbal_msgs.srv import Calibrate, DeviceCommand, LoadTrajectory
 from kessler_kos_driver.sim import control
 
 pytestmark = pytest.mark.ros
@@ -56,8 +59,7 @@ def rig():
     node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain, [
         '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
         '-p', f'password:={PASSWORD}', '-p', 'reconnect_period:=0.2',
-        '-p', 'diagnostics_period:=0.25', '-p', 'publish_rate:=20.0',
-        '-p', 'command_timeout:=0.4'])
+        '-p', 'diagnostics_period:=0.25', '-p', 'command_timeout:=0.4'])   # publish_rate: default
     ros = RosTestClient(domain)
     logs = ros.subscribe('/rosout', Log)
     try:
@@ -110,6 +112,69 @@ def test_joint_states_status_and_identity(rig):
     assert find_diagnostic(diag, NODE, 'pan').level[0] == 0
     device = find_diagnostic(diag, NODE, 'device')
     assert dict((kv.key, kv.value) for kv in device.values)['lock'] == 'unlocked'
+
+
+def test_joint_states_run_at_the_default_publish_rate(rig):
+    """Issue 12: the MotorInfo poll follows publish_rate (50 Hz default), so the frequency
+    diagnostic is OK with default parameters (it was WARN at 20 Hz)."""
+    ros, _, _, _ = rig
+    diag = wait_diag(ros, 'joint_states frequency',
+                     lambda s: s.level == b'\x00' and s.message != 'measuring', timeout=30.0)
+    values = {kv.key: kv.value for kv in find_diagnostic(
+        diag, NODE, 'joint_states frequency').values}
+    assert float(values['expected_hz']) == 50.0
+    assert float(values['measured_hz']) == pytest.approx(50.0, rel=0.1)
+
+
+def test_aux_inputs_are_published(rig):
+    ros, control_port, _, _ = rig
+
+    def latched(topic, msg_type):
+        received = []
+        ros.node.create_subscription(msg_type, srv(topic), received.append, QoSProfile(
+            depth=5, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        return received
+
+    # latched: the state read from DeviceInfo at connect is there for a late subscriber
+    inputs, slave = latched('aux_inputs', Joy), latched('slave_controller_present', Bool)
+    wait_for(lambda: inputs and slave, 10.0, 'the latched aux inputs')
+    assert list(inputs[0].buttons) == [0, 0, 0, 0] and not slave[0].data
+    assert control(control_port, 'aux 0x13') == 'ok'   # master tip + ring, slave present
+    wait_for(lambda: any(list(m.buttons) == [1, 1, 0, 0] for m in inputs), 10.0,
+             'aux inputs master tip and ring')
+    wait_for(lambda: any(m.data for m in slave), 10.0, 'slave controller present')
+    diag = wait_diag(ros, 'device', lambda s: any(
+        kv.key == 'slave_controller_present' and kv.value == 'True' for kv in s.values))
+    assert diag is not None
+    assert control(control_port, 'aux 0') == 'ok'
+    wait_for(lambda: not slave[-1].data, 10.0, 'slave controller gone')
+
+
+def test_led_status_and_software_id_through_command(rig):
+    ros, _, _, _ = rig
+
+    def command(name, *arguments, axis=0):
+        return ros.call(DeviceCommand, srv('command'), DeviceCommand.Request(
+            command=name, axis=axis, arguments=list(arguments)))
+
+    reply = command('GetLEDStatus')
+    assert reply.success and list(reply.results) == ['master=on', 'slave=off'], reply.message
+    reply = command('SetLEDStatus', 'slow_blink', '3')
+    assert reply.success and list(reply.results) == ['master=slow_blink', 'slave=fast_blink']
+    assert list(command('GetLEDStatus').results) == ['master=slow_blink', 'slave=fast_blink']
+    reply = command('SetLEDStatus', 'purple', 'off')
+    assert not reply.success and "'purple'" in reply.message
+    assert list(command('GetLEDStatus').results) == ['master=slow_blink', 'slave=fast_blink']
+    reply = command('GetSoftwareID')
+    assert reply.success and list(reply.results) == ['software_id=0']
+    reply = command('SetSoftwareID', '7')
+    assert not reply.success and 'allow_software_id_write' in reply.message
+    assert list(command('GetSoftwareID').results) == ['software_id=0']   # nothing was sent
+    assert not command('Fire').success
+    assert not command('GetLEDStatus', axis=2).success
+    diag = wait_diag(ros, 'device', lambda s: any(
+        kv.key == 'led_master' and kv.value == 'slow_blink' for kv in s.values))
+    assert diag is not None
 
 
 def test_load_and_play_three_axis_keyframes(rig):
@@ -190,6 +255,29 @@ def test_explicit_segments_rapid_reverse_loop_and_stop(rig):
     reply = trigger(ros, 'stop_playback')
     assert reply.success, reply.message
     wait_status(statuses, start, PlaybackStatus.FULL_STOP, timeout=10)
+
+
+def test_start_at_a_date_with_delay_return(rig):
+    """DelayMode 2 (start_time) and DelayReturn (delay_return) through the node."""
+    ros, _, _, _ = rig
+    past = keyframe_request(start_time=Time(sec=int(time.time()) - 60))
+    reply = ros.call(LoadTrajectory, srv('load_trajectory'), past)
+    assert not reply.success and 'in the past' in reply.message
+    start_at = int(time.time()) + 4
+    request = keyframe_request(start_time=Time(sec=start_at), delay_return=True)
+    reply = ros.call(LoadTrajectory, srv('load_trajectory'), request)
+    assert reply.success and 'starts at' in reply.message, reply.message
+    statuses = ros.subscribe(srv('playback_status'), PlaybackStatus)
+    start = len(statuses)
+    reply = trigger(ros, 'setup_playback')
+    assert reply.success and 'without moving' in reply.message, reply.message
+    wait_status(statuses, start, PlaybackStatus.SETUP_COMPLETED)
+    assert trigger(ros, 'start_playback').success
+    wait_status(statuses, start, PlaybackStatus.FULL_STOP, timeout=60.0)
+    names = [s.status_name for s in statuses[start:]]
+    assert names[:3] == ['SetupCompleted', 'MotorsHome', 'DelayTimerStarted'], names
+    forward = next(s for s in statuses[start:] if s.status_name == 'StartForward')
+    assert forward.header.stamp.sec >= start_at - 1   # the device waited for the date
 
 
 def test_move_to_and_joint_command(rig):
@@ -285,3 +373,33 @@ def test_stop_and_reconnect_after_link_drop(rig):
     node.wait_for_output('reconnected')
     msg = ros.wait_for_message('joint_states', JointState, timeout=10)
     assert msg.name == JOINTS and all(math.isfinite(p) for p in msg.position)
+
+
+def test_usb_transport_parameters_are_checked_at_startup():
+    with DomainLease() as domain:
+        node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain,
+                                  ['--ros-args', '-p', 'transport:=usb'])
+        try:
+            node.process.wait(30)
+        finally:
+            node.stop()
+        assert node.process.returncode != 0
+        assert 'usb_vendor_id' in node.output()
+
+
+def test_usb_transport_without_a_device_reports_it():
+    """The real hidapi library is used; no kOS device is on the USB bus of a test machine."""
+    with DomainLease() as domain:
+        node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain, [
+            '--ros-args', '-p', 'transport:=usb', '-p', 'usb_vendor_id:=4660',
+            '-p', 'usb_product_id:=22136', '-p', 'reconnect_period:=0.5',
+            '-p', 'diagnostics_period:=0.25'])
+        try:
+            with RosTestClient(domain) as ros:
+                diag = wait_diag(ros, 'connection',
+                                 lambda s: 'usb://1234:5678' in s.message, timeout=30.0)
+                status = find_diagnostic(diag, NODE, 'connection')
+                assert status.level == b'\x02' and 'cannot open' in status.message
+            assert node.running
+        finally:
+            node.stop()

@@ -19,14 +19,48 @@ from .trajectory import (
     TrajectoryData,
     validate,
 )
+from .usb import (
+    REPORT_ID,
+    REPORT_SIZE,
+    USB_KEEPALIVE,
+    USB_KEEPALIVE_PERIOD_S,
+    ReportReassembler,
+    encode_reports,
+)
 from .wire import Reader, Writer, float32
 
 __all__ = [
-    'AxisBlock', 'AxisLimits', 'DecodeError', 'EncodeError', 'FrameParser', 'Header',
-    'PlaybackBlock', 'ProtocolError', 'RawBlock', 'Reader', 'SegmentBlock', 'TimeLapseBlock',
-    'Trajectory', 'TrajectoryData', 'TrajectoryError', 'Writer', 'decode', 'encode_frame',
-    'fit_keyframes', 'float32', 'position_at', 'segment_peak_rates', 'split_frame',
-    'unpack_header', 'validate',
+    'REPORT_ID',
+    'REPORT_SIZE',
+    'USB_KEEPALIVE',
+    'USB_KEEPALIVE_PERIOD_S',
+    'AxisBlock',
+    'AxisLimits',
+    'DecodeError',
+    'EncodeError',
+    'FrameParser',
+    'Header',
+    'PlaybackBlock',
+    'ProtocolError',
+    'RawBlock',
+    'Reader',
+    'ReportReassembler',
+    'SegmentBlock',
+    'TimeLapseBlock',
+    'Trajectory',
+    'TrajectoryData',
+    'TrajectoryError',
+    'Writer',
+    'decode',
+    'encode_frame',
+    'encode_reports',
+    'fit_keyframes',
+    'float32',
+    'position_at',
+    'segment_peak_rates',
+    'split_frame',
+    'unpack_header',
+    'validate',
 ]
 __all__ += [n for n in dir(_constants) if n[:1].isupper()]
 __all__ += list(_messages.__all__)
