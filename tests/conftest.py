@@ -49,6 +49,11 @@ def read_with_mcap(bag: Path, metadata: dict) -> Counter:
             assert 'offered_qos_profiles' in channel.metadata
             assert decoded is not None
             counts[channel.topic] += 1
+        # The MCAP file alone also describes the bag (what rosbag2 reads without metadata.yaml).
+        records = {r.name: r.metadata for r in reader.iter_metadata()}
+    stored = yaml.safe_load(records['rosbag2']['serialized_metadata'])
+    assert stored['version'] == metadata['version']
+    assert stored['topics_with_message_count'] == metadata['topics_with_message_count']
     return counts
 
 
