@@ -7,6 +7,8 @@ ROS graph.
 
 from __future__ import annotations
 
+import importlib.util
+import json
 import re
 import subprocess
 import sys
@@ -16,8 +18,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-
-pytestmark = pytest.mark.ros
 
 ROOT = Path(__file__).resolve().parent.parent
 RECORDER = ROOT / 'scripts' / 'record_bag.py'
@@ -33,6 +33,14 @@ CHOSEN = {
 class Gimbal:
     domain: int
     client: object  # RosTestClient
+
+
+def load_recorder():
+    """scripts/record_bag.py as a module, for the in-process tests."""
+    spec = importlib.util.spec_from_file_location('record_bag', RECORDER)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 @pytest.fixture(scope='module')
@@ -85,13 +93,14 @@ def check_offers(gimbal: Gimbal, metadata: dict, topic: str) -> None:
     assert {entry['type_description_hash']} == {str(p.topic_type_hash) for p in publishers}
 
 
+@pytest.mark.ros
 def test_recorder_writes_chosen_topics_until_ctrl_c(gimbal, tmp_path, check_rosbag2):
     from sensor_msgs.msg import JointState
 
     bag = tmp_path / 'chosen'
     started = time.time_ns()
     recorder = start_recorder(gimbal.domain, '-o', str(bag), '--progress-period', '0.5',
-                              *CHOSEN)
+                              *CHOSEN, '/nobody_publishes_this')
     try:
         for topic in CHOSEN:
             recorder.wait_for_output(f'recording {topic} [{CHOSEN[topic]}]', timeout=60)
@@ -109,6 +118,7 @@ def test_recorder_writes_chosen_topics_until_ctrl_c(gimbal, tmp_path, check_rosb
     final = re.search(rf'^record_bag: (\d+) messages on 3 topics -> {re.escape(str(bag))}$',
                       out, re.MULTILINE)
     assert final, out
+    assert 'no publisher seen on /nobody_publishes_this: not in the bag' in out
 
     metadata, types, messages = check_rosbag2(bag, started, ended)
     assert types == CHOSEN
@@ -123,6 +133,7 @@ def test_recorder_writes_chosen_topics_until_ctrl_c(gimbal, tmp_path, check_rosb
         check_offers(gimbal, metadata, topic)
 
 
+@pytest.mark.ros
 def test_recorder_all_topics_for_a_duration(gimbal, tmp_path, check_rosbag2):
     from sensor_msgs.msg import JointState
 
@@ -182,3 +193,62 @@ def test_recorder_never_overwrites_a_bag(tmp_path):
     assert done.returncode == 2
     assert 'exists already' in done.stderr and 'Traceback' not in done.stderr
     assert (bag / 'metadata.yaml').read_text() == 'kept\n'
+
+
+def test_workspace_types_registers_msg_files_with_their_dependencies(tmp_path):
+    """A type rosbags does not ship is registered from its package's .msg files, and so are
+    the packages it refers to; its definition and hash come out as for a shipped type."""
+    recorder = load_recorder()
+    (tmp_path / 'share' / 'rig_msgs' / 'msg').mkdir(parents=True)
+    (tmp_path / 'share' / 'rig_msgs' / 'msg' / 'Rig.msg').write_text(
+        'std_msgs/Header header\nlens_msgs/Lens[] lenses\nRigMode mode\n')
+    (tmp_path / 'share' / 'rig_msgs' / 'msg' / 'RigMode.msg').write_text(
+        'uint8 IDLE=0\nuint8 value\n')
+    (tmp_path / 'share' / 'lens_msgs' / 'msg').mkdir(parents=True)
+    (tmp_path / 'share' / 'lens_msgs' / 'msg' / 'Lens.msg').write_text('float64 zoom\n')
+    types = recorder.WorkspaceTypes([str(tmp_path)])
+    types.ensure('rig_msgs/msg/Rig')
+    for name in ('rig_msgs/msg/Rig', 'rig_msgs/msg/RigMode', 'lens_msgs/msg/Lens'):
+        assert name in types.store.fielddefs
+    definition, _ = types.store.generate_msgdef('rig_msgs/msg/Rig', ros_version=2)
+    assert 'lens_msgs/msg/Lens[] lenses' in definition or 'lens_msgs/Lens[] lenses' in definition
+    assert types.store.hash_rihs01('rig_msgs/msg/Rig').startswith('RIHS01_')
+    with pytest.raises(LookupError, match='no share/absent_msgs/msg'):
+        types.ensure('absent_msgs/msg/Thing')
+    with pytest.raises(LookupError, match=r'not among the \.msg files of rig_msgs'):
+        types.ensure('rig_msgs/msg/Missing')
+
+
+def test_workspace_types_hash_as_rosidl_generated_them():
+    """Every gimbal_msgs message registered from its installed .msg file hashes exactly as
+    rosidl hashed it at build time (share/gimbal_msgs/msg/*.json), so the definitions and
+    hashes in a bag are the ones the nodes advertise."""
+    recorder = load_recorder()
+    types = recorder.WorkspaceTypes()
+    files = types.msg_files('gimbal_msgs')
+    if not files:
+        pytest.skip('gimbal_msgs is not built (make build)')
+    for path in files:
+        name = f'gimbal_msgs/msg/{path.stem}'
+        generated = json.loads(path.with_suffix('.json').read_text())['type_hashes']
+        types.ensure(name)
+        expected = {h['type_name']: h['hash_string'] for h in generated}
+        assert types.store.hash_rihs01(name) == expected[name], name
+
+
+def test_subscription_adapts_to_the_offers():
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    recorder = load_recorder()
+    reliable_latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                  durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    best_effort = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+    both = recorder.subscription_qos([reliable_latched, best_effort])
+    assert both.reliability == ReliabilityPolicy.BEST_EFFORT
+    assert both.durability == DurabilityPolicy.VOLATILE
+    only = recorder.subscription_qos([reliable_latched])
+    assert only.reliability == ReliabilityPolicy.RELIABLE
+    assert only.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    stored = recorder.offered_qos(reliable_latched)
+    assert (stored.reliability.name, stored.durability.name, stored.depth) == (
+        'RELIABLE', 'TRANSIENT_LOCAL', 1)
