@@ -105,3 +105,12 @@ def test_launch_files_dependencies_are_declared():
         if list(package.glob('launch/*.launch.py')):
             run, _ = declared(package)
             assert {'launch', 'launch_ros'} <= run, package.name
+
+
+@pytest.mark.parametrize('package', PACKAGES, ids=[p.name for p in PACKAGES])
+def test_package_xml_is_valid_for_rosdep_and_colcon(package: Path):
+    """catkin_pkg (what rosdep and colcon parse package.xml with) accepts the manifest."""
+    catkin_package = pytest.importorskip('catkin_pkg.package')
+    manifest = catkin_package.parse_package(package / 'package.xml')
+    manifest.validate()
+    assert manifest.name == package.name
