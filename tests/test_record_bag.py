@@ -35,12 +35,16 @@ class Gimbal:
     client: object  # RosTestClient
 
 
-def load_recorder():
-    """scripts/record_bag.py as a module, for the in-process tests."""
-    spec = importlib.util.spec_from_file_location('record_bag', RECORDER)
+def load_script(name: str):
+    """A script of scripts/ as a module, for the in-process tests."""
+    spec = importlib.util.spec_from_file_location(Path(name).stem, ROOT / 'scripts' / name)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def load_recorder():
+    return load_script('record_bag.py')
 
 
 @pytest.fixture(scope='module')
@@ -131,6 +135,14 @@ def test_recorder_writes_chosen_topics_until_ctrl_c(gimbal, tmp_path, check_rosb
     assert statuses and all([a.name for a in m.axes] == ['pan', 'tilt'] for m in statuses)
     for topic in CHOSEN:
         check_offers(gimbal, metadata, topic)
+
+    # The plot tool reads the same bag: actual from /joint_states, commanded from status.
+    plot_bag = load_script('plot_bag.py')
+    actual, _ = plot_bag.read_series(bag)
+    assert set(actual['/']) == {'pan', 'tilt'}
+    assert len(actual['/']['pan']) == len(joint_states)
+    png = plot_bag.plot(bag, tmp_path / 'positions.png')
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
 @pytest.mark.ros
