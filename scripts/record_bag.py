@@ -306,8 +306,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     node = rclpy.create_node('gimbal_bag_recorder')
     try:
         recorder = BagRecorder(node, args.output, args.topics, args.include_hidden)
-    except WriterError as exc:
+    except (WriterError, OSError) as exc:
         print(f'record_bag: cannot create {args.output}: {exc}', file=sys.stderr)
+        node.destroy_node()
+        rclpy.try_shutdown()
         return 1
     print(f'record_bag: recording to {args.output} '
           f'({", ".join(args.topics) if args.topics else "every topic"}'
