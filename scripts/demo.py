@@ -43,6 +43,7 @@ from gimbal_msgs.action import MoveTo
 from gimbal_msgs.srv import GotoPreset, SetPreset, StartScan
 
 ROOT = Path(__file__).resolve().parent.parent
+BAG_NAME = 'demo_bag'  # the rosbag2 bag directory in --output
 
 
 @dataclass
@@ -409,12 +410,15 @@ def main() -> int:
     output = Path(args.output).resolve()
     targets = available_targets()
     # Only the files an earlier demo wrote are replaced: --output may name any directory.
+    # (demo.mcap: the single-file recording of earlier versions.)
     previous = {'demo.mcap', 'positions.png', 'demo_failures.log', 'record_bag.log',
                 *(f'{t.node_name}.log' for t in targets),
                 *(f'{t.sim_executable}.log' for t in targets)}
     output.mkdir(parents=True, exist_ok=True)
     for name in previous:
         (output / name).unlink(missing_ok=True)
+    if (output / BAG_NAME).is_dir():
+        shutil.rmtree(output / BAG_NAME)  # a rosbag2 bag is never overwritten in place
     if args.only:
         built = [t.node_name for t in targets]
         targets = [t for t in targets if t.node_name in args.only]
@@ -521,20 +525,22 @@ def watch_topics(ros: RosTestClient, targets: list[DemoTarget]) -> None:
 
 
 def start_recorder(domain: int, output: Path) -> ManagedProcess | None:
+    """``scripts/record_bag.py -a``: every topic into a rosbag2 bag (MCAP storage)."""
     recorder = ROOT / 'scripts' / 'record_bag.py'
     if not recorder.exists():
         return None
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-    return ManagedProcess([sys.executable, str(recorder), str(output / 'demo.mcap')], env,
-                          name='record_bag')
+    return ManagedProcess([sys.executable, str(recorder), '-a', '-o', str(output / BAG_NAME)],
+                          env, name='record_bag')
 
 
 def stop_recorder(recorder: ManagedProcess | None) -> Path | None:
+    """The bag directory, once the recorder has closed it (metadata.yaml written)."""
     if recorder is None:
         return None
     recorder.stop()
     path = Path(recorder.args[-1])
-    return path if path.exists() else None
+    return path if (path / 'metadata.yaml').is_file() else None
 
 
 def summary(
@@ -554,11 +560,12 @@ def summary(
     if bag is not None:
         recorded = ''
         log = output / 'record_bag.log'
-        counts = re.search(r'(\d+ messages on \d+ topics)', log.read_text()) if log.exists() \
-            else None
+        counts = re.findall(r'(\d+ messages on \d+ topics) ->', log.read_text()) \
+            if log.exists() else []
         if counts:
-            recorded = f'{counts.group(1)}; '
-        lines.append(f'  bag: {bag} ({recorded}open with Foxglove Studio or ros2 bag info)')
+            recorded = f'{counts[-1]}; '
+        lines.append(f'  bag: {bag} (rosbag2, MCAP storage; {recorded}open with Foxglove, '
+                     f'ros2 bag info / ros2 bag play)')
     if plot is not None:
         lines.append(f'  plot: {plot} (commanded vs. actual joint positions per driver)')
     return '\n'.join(lines)

@@ -1,10 +1,14 @@
-"""Plot commanded vs. actual joint positions per driver from a demo MCAP bag.
+"""Plot commanded vs. actual joint positions per driver from a rosbag2 bag.
 
-Actual positions come from each driver's ``<ns>/joint_states``; commanded ones
-from the ``target_position`` of each axis in ``<ns>/<node>/status`` (the last
-move target the driver sent). One PNG with a row of axes per driver.
+Reads any rosbag2 bag (the demo's, ``scripts/record_bag.py``'s or one from
+``ros2 bag record``, MCAP or SQLite storage) with the ``rosbags`` reader, which
+decodes every message by the definitions stored in the bag. Actual positions
+come from each ``<ns>/joint_states`` (sensor_msgs/msg/JointState); commanded
+ones from the ``target_position`` of each axis in ``<ns>/<node>/status``
+(gimbal_msgs/msg/GimbalStatus: the last move target the driver sent). One PNG
+with a row of axes per driver.
 
-    python scripts/plot_bag.py demo_output/demo.mcap demo_output/positions.png
+    python scripts/plot_bag.py demo_output/demo_bag demo_output/positions.png
 """
 
 from __future__ import annotations
@@ -18,9 +22,10 @@ import matplotlib
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
 
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+GIMBAL_STATUS = 'gimbal_msgs/msg/GimbalStatus'
 Series = dict[str, list[tuple[float, float]]]
 
 
@@ -28,16 +33,18 @@ def read_series(bag: Path) -> tuple[dict[str, Series], dict[str, Series]]:
     """(actual, commanded): namespace -> joint -> [(t, position)]."""
     actual: dict[str, Series] = defaultdict(lambda: defaultdict(list))
     commanded: dict[str, Series] = defaultdict(lambda: defaultdict(list))
-    with bag.open('rb') as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        for _, channel, message, msg in reader.iter_decoded_messages():
-            t = message.log_time / 1e9
-            topic = channel.topic
-            if topic.endswith('/joint_states'):
+    with AnyReader([bag]) as reader:
+        wanted = [c for c in reader.connections
+                  if c.msgtype in (JOINT_STATE, GIMBAL_STATUS)]
+        for connection, stamp, raw in reader.messages(connections=wanted):
+            msg = reader.deserialize(raw, connection.msgtype)
+            t = stamp / 1e9
+            topic = connection.topic
+            if connection.msgtype == JOINT_STATE:
                 ns = topic.rsplit('/', 1)[0] or '/'
                 for name, position in zip(msg.name, msg.position, strict=False):
-                    actual[ns][name].append((t, position))
-            elif topic.endswith('/status') and hasattr(msg, 'axes'):
+                    actual[ns][name].append((t, float(position)))
+            else:
                 ns = topic.rsplit('/', 2)[0] or '/'
                 for axis in msg.axes:
                     if not math.isnan(axis.target_position):

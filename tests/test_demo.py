@@ -1,9 +1,11 @@
-"""`scripts/demo.py` end to end: every simulator and driver, the MCAP bag, the plot.
+"""`scripts/demo.py` end to end: every simulator and driver, the rosbag2 bag, the plot.
 
 Runs the demo as a user would (``source scripts/ros_env.sh; python scripts/demo.py``) into a
 temporary output directory, then checks that it exited 0 with every driver OK, that the bag
-holds each driver's joint_states with its joint names (decoded with mcap_ros2, as
-scripts/plot_bag.py does), that the plot is a PNG, and that no simulator or node outlived it.
+is a rosbag2 bag whose every message both independent readers decode under its stored type
+name (``check_rosbag2``), holding each driver's joint_states with its joint names and its
+status, with no device password in it, that the plot is a PNG, and that no simulator or node
+outlived it.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import os
 import re
 import signal
 import subprocess
+import time
 from collections import defaultdict
 from pathlib import Path
 
@@ -49,14 +52,13 @@ def processes_in_domain(domain: str) -> list[str]:
     return found
 
 
-def test_demo_drives_every_driver_and_records_a_bag(tmp_path):
-    mcap_reader = pytest.importorskip('mcap.reader')
-    mcap_decoder = pytest.importorskip('mcap_ros2.decoder')
+def test_demo_drives_every_driver_and_records_a_bag(tmp_path, check_rosbag2):
     if not (ROOT / 'install' / 'setup.bash').exists():
         pytest.skip('the workspace is not built (make build)')
     output = tmp_path / 'demo'
     command = f'source scripts/ros_env.sh && exec python scripts/demo.py --output {output}'
     env = {k: v for k, v in os.environ.items() if k != 'ROS_DOMAIN_ID'}
+    started = time.time_ns()
     demo = subprocess.Popen(['bash', '-c', command], cwd=ROOT, env=env, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
@@ -65,6 +67,7 @@ def test_demo_drives_every_driver_and_records_a_bag(tmp_path):
         demo.send_signal(signal.SIGINT)  # the demo stops its processes on Ctrl-C
         out, _ = demo.communicate(timeout=60)
         pytest.fail(f'the demo did not finish within 150 s:\n{out[-6000:]}')
+    ended = time.time_ns()
     assert demo.returncode == 0, out[-6000:]
     for node, _ in DRIVERS.values():
         assert re.search(rf'\[{node}\]: OK$', out, re.MULTILINE), f'{node} not OK:\n{out}'
@@ -73,21 +76,26 @@ def test_demo_drives_every_driver_and_records_a_bag(tmp_path):
     domain = re.search(r'ROS_DOMAIN_ID=(\d+)', out).group(1)
     assert processes_in_domain(domain) == [], 'processes left after the demo'
 
-    bag = output / 'demo.mcap'
-    assert bag.is_file()
+    bag = output / 'demo_bag'
+    assert re.search(rf'bag: {re.escape(str(bag))} \(rosbag2, MCAP storage; \d+ messages', out)
+    _, types, messages = check_rosbag2(bag, started, ended)
     joints: dict[str, set[str]] = defaultdict(set)
     counts: dict[str, int] = defaultdict(int)
-    with bag.open('rb') as stream:
-        reader = mcap_reader.make_reader(stream,
-                                         decoder_factories=[mcap_decoder.DecoderFactory()])
-        for _, channel, _, msg in reader.iter_decoded_messages(
-                topics=[f'{ns}/joint_states' for ns in DRIVERS]):
-            namespace = channel.topic.rsplit('/', 1)[0]
+    for topic, _, msg in messages:
+        if topic.endswith('/joint_states'):
+            namespace = topic.rsplit('/', 1)[0]
             joints[namespace].update(msg.name)
             counts[namespace] += 1
-    for namespace, (_, names) in DRIVERS.items():
+    for namespace, (node, names) in DRIVERS.items():
+        assert types[f'{namespace}/joint_states'] == 'sensor_msgs/msg/JointState'
+        assert types[f'{namespace}/{node}/status'] == 'gimbal_msgs/msg/GimbalStatus'
         assert counts[namespace] > 20, f'{namespace}/joint_states: {counts[namespace]} messages'
         assert joints[namespace] == names, namespace
+    assert types['/diagnostics'] == 'diagnostic_msgs/msg/DiagnosticArray'
+    password = re.search(r"KESSLER_PASSWORD = '([^']+)'",
+                         (ROOT / 'scripts' / 'demo_targets.py').read_text()).group(1)
+    for path in bag.iterdir():
+        assert password.encode() not in path.read_bytes(), f'the Kessler password is in {path}'
 
     plot = output / 'positions.png'
     assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
