@@ -27,7 +27,16 @@ _LOCK_DIR = Path(tempfile.gettempdir()) / 'gimbal-ros-domain-locks'
 
 
 class DomainLease:
-    """Exclusive use of one ROS_DOMAIN_ID while held (flock on a per-id file)."""
+    """Exclusive use of one ROS_DOMAIN_ID while held (flock on a per-id file).
+
+    Successive leases in one process walk round the pool instead of taking
+    the first free id again: a domain that a test has just released may
+    still hold the discovery traffic of processes it stopped a moment ago,
+    and the next test must not see their endpoints (it showed as "more than
+    one action server" in an action test that ran right after another).
+    """
+
+    _next_offset = 0
 
     def __init__(self) -> None:
         self.domain_id = -1
@@ -35,7 +44,7 @@ class DomainLease:
 
     def acquire(self) -> int:
         _LOCK_DIR.mkdir(exist_ok=True)
-        start = os.getpid() % len(DOMAIN_POOL)
+        start = (os.getpid() + DomainLease._next_offset) % len(DOMAIN_POOL)
         for offset in range(len(DOMAIN_POOL)):
             candidate = DOMAIN_POOL[(start + offset) % len(DOMAIN_POOL)]
             handle = open(_LOCK_DIR / f'{candidate}.lock', 'w')  # noqa: SIM115 - held open
@@ -45,6 +54,7 @@ class DomainLease:
                 handle.close()
                 continue
             self._file, self.domain_id = handle, candidate
+            DomainLease._next_offset += offset + 1
             return candidate
         raise RuntimeError('no free ROS_DOMAIN_ID in the test pool')
 

@@ -250,3 +250,13 @@ def test_square_shrinks_inward() -> None:
 def test_scan_rejections(request_, message) -> None:
     with pytest.raises(ScanError, match=message):
         plan_scan(request_, ['pan', 'tilt'], {'pan': 0.0, 'tilt': 0.0}, LIMITS, PATTERNS)
+
+
+def test_domain_leases_are_exclusive_and_not_reused_at_once() -> None:
+    """A held id is never handed out twice; a just-released id is not the next one leased."""
+    from gimbal_driver_common.testing import DomainLease
+
+    with DomainLease() as first, DomainLease() as second:
+        assert first != second
+    with DomainLease() as third:
+        assert third not in (first, second)
