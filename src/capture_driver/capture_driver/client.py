@@ -519,6 +519,77 @@ class CaptureClient:
         self.run('GPS_SetTargetLLA', target, point)
         self.run('GPS_GoToTarget', target)
 
+    # ------------------------------------- issue 15: first-class device functions
+    def request_in_group(self, name: str, group: int, axis: int | None = None,
+                         value: Any = None) -> Any:
+        """:meth:`run` with another group byte (4.11: the video tracker's camera index)."""
+        saved = self.group
+        with self._lock:
+            self.group = group
+            try:
+                return self.run(name, axis, value)
+            finally:
+                self.group = saved
+
+    def set_tracking(self, camera: int, mode: int) -> None:
+        """VDT_setTrackingOn: 0 off, 1 manual, 2 automatic (4.11.1) for camera 0..3."""
+        self.request_in_group('VDT_setTrackingOn', camera, None, mode)
+
+    def tracking_state(self, camera: int) -> TrackingState:
+        """Tracking active, automatic mode and target detection of one camera (4.11.2-4)."""
+        return TrackingState(
+            camera=camera,
+            active=bool(self.request_in_group('VDT_isTrackingOn', camera)),
+            automatic=bool(self.request_in_group('VDT_isAutoModeOn', camera)),
+            target_detected=bool(self.request_in_group('VDT_isTargetDetected', camera)),
+        )
+
+    def set_axis_power(self, axis: int, on: bool) -> None:
+        """MOT_AxisOn / MOT_AxisOff (4.2.11-12). Switching on also cancels the motion the
+        drive buffered while off (AxisOn would resume it) by stopping the axis."""
+        if on:
+            self.run('MOT_AxisOn', axis)
+            self.stop_axis(axis)
+        else:
+            self.run('MOT_AxisOff', axis)
+
+    def digital_io(self, numbers: list[int]) -> dict[int, bool]:
+        """State of digital I/O 1..6 (COM_getDigitalIO, the number in the axis byte)."""
+        return {n: bool(self.request('COM_getDigitalIO', n)) for n in numbers}
+
+    def set_digital_output(self, number: int, on: bool) -> None:
+        self.run('COM_setDigitalIO', number, int(on))
+
+    def gps_heading(self) -> tuple[bool, float]:
+        """(heading valid, system heading in compass degrees clockwise from north)."""
+        ready = bool(self.request('GPS_HeadingReady'))
+        return ready, self.request('GPS_GetHeading')
+
+    def stored_targets(self) -> dict[int, GeoPoint]:
+        """Targets 1..15 that hold a position (4.4.12: a cleared target reads all zero)."""
+        targets = {}
+        for number in range(1, 16):
+            point = self.request('GPS_GetTargetLLA', number)
+            if (point.longitude, point.latitude, point.altitude) != (0.0, 0.0, 0.0):
+                targets[number] = point
+        return targets
+
+
+@dataclass
+class TrackingState:
+    """One camera's video-tracker state as the device reports it."""
+
+    camera: int
+    active: bool
+    automatic: bool
+    target_detected: bool
+
+    @property
+    def mode(self) -> str:
+        if self.automatic:
+            return 'auto'
+        return 'manual' if self.active else 'off'
+
 
 def describe_command(cmd: Command) -> str:
     """One line per table entry (README and ~/command help)."""

@@ -592,6 +592,21 @@ _TABLE: list[tuple[Any, ...]] = [
      Safety.MOTION, 'move the servo to a predefined position'),
     ('SRV_GetPosition', 0x0F79, SYSTEM, N, '', U8, 'position (4 unknown)', 'high',
      'rev: 2.21.0', Safety.NONE, 'servo position number'),
+    # --- capture15 block: video tracker (4.11); camera index 0..3 in the GROUP byte -------
+    # Appended by the issue-15 interfaces branch (~/set_tracking, ~/tracking_state); all
+    # four opcodes are printed in revision 2.21.0 ("3.1 ... 0x0A01" to "3.4 ... 0x0A13").
+    ('VDT_setTrackingOn', 0x0A01, SYSTEM, U8, '0 off/1 manual/2 auto', N, '', 'high',
+     'rev: 2.21.0 "VDT_setTrackingOn - 0x0A01"; text 4.11.1 "OpCode 0x0A01"', Safety.NONE,
+     'video tracking off (0), manual (1) or automatic (2); camera index in the group byte'),
+    ('VDT_isTrackingOn', 0x0A02, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'rev: 2.21.0 "VDT_isTrackingOn - 0x0A02"; text 4.11.2 "OpCode 0x0A02"', Safety.NONE,
+     'video tracking active for the camera in the group byte'),
+    ('VDT_isAutoModeOn', 0x0A04, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'rev: 2.21.0 "VDT_isAutoModeOn - 0x0A04"; text 4.11.3 "Dx0A04"', Safety.NONE,
+     'automatic tracking mode enabled'),
+    ('VDT_isTargetDetected', 0x0A13, SYSTEM, N, '', BOOL, 'flag', 'high',
+     'rev: 2.21.0 "VDT_isTargetDetected - 0x0A13" (4.11.4, printed "4.11.1", shows "Dx0A")',
+     Safety.NONE, 'a target is detected by the camera in the group byte'),
 ]
 
 COMMANDS: dict[str, Command] = {}
