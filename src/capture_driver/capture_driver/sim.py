@@ -421,15 +421,18 @@ class PedestalModel:
             nxt = scan.index + scan.direction
         scan.index = nxt
 
-    def _advance_looping(self) -> None:
-        if not self.preset_looping:
-            return
+    def _loop_point_due(self) -> bool:
+        """Preset/target looping: the next point is due once the axes arrived and the
+        looping delay (4.9.9) has passed since."""
         if any(a.target is not None for a in self.axes.values()):
             self._loop_wait_until = time.monotonic() + self.looping_delay_ms / 1000.0 / max(
                 self.time_scale, 1e-6
             )
-            return
-        if time.monotonic() < self._loop_wait_until:
+            return False
+        return time.monotonic() >= self._loop_wait_until
+
+    def _advance_looping(self) -> None:
+        if not self.preset_looping or not self._loop_point_due():
             return
         index = self.preset_looping.pop(0)
         self.preset_looping.append(index)
@@ -437,14 +440,7 @@ class PedestalModel:
 
     def _advance_target_looping(self) -> None:
         """4.4.14: visit the stored targets in turn, dwelling the looping delay (4.9.9)."""
-        if not self.target_looping:
-            return
-        if any(a.target is not None for a in self.axes.values()):
-            self._loop_wait_until = time.monotonic() + self.looping_delay_ms / 1000.0 / max(
-                self.time_scale, 1e-6
-            )
-            return
-        if time.monotonic() < self._loop_wait_until:
+        if not self.target_looping or not self._loop_point_due():
             return
         number = self.target_looping.pop(0)
         self.target_looping.append(number)
@@ -1339,6 +1335,23 @@ def serve_control(sim: CaptureSimulator, port: int, ready: Callable[[int], None]
         except OSError:
             return
         threading.Thread(target=serve, args=(conn,), daemon=True).start()
+
+
+def control(port: int, line: str, timeout: float = 5.0) -> str:
+    """Send one console command to a running simulator; its answer line (tests, users)."""
+    with socket.create_connection((LOOPBACK, port), timeout=timeout) as sock:
+        stream = sock.makefile('rw')
+        stream.write(line + '\n')
+        stream.flush()
+        return stream.readline().strip()
+
+
+def console_state(port: int) -> dict:
+    """The console's ``state`` answer as a dict (raises if the simulator refuses)."""
+    answer = control(port, 'state')
+    if not answer.startswith('ok '):
+        raise RuntimeError(f'capture_sim state: {answer}')
+    return json.loads(answer[3:])
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,9 +7,7 @@ and one node serve the whole module; tests run in file order (link drop last). W
 
 from __future__ import annotations
 
-import json
 import math
-import socket
 
 import pytest
 
@@ -19,6 +17,8 @@ from rcl_interfaces.msg import Log
 from sensor_msgs.msg import Imu, JointState, NavSatFix
 from std_srvs.srv import SetBool, Trigger
 
+from capture_driver.sim import console_state as sim_state
+from capture_driver.sim import control
 from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
@@ -40,20 +40,6 @@ NODE = 'capture_driver'
 
 def srv(name: str) -> str:
     return f'/{NODE}/{name}'
-
-
-def control(port: int, line: str) -> str:
-    with socket.create_connection(('127.0.0.1', port), timeout=5.0) as sock:
-        stream = sock.makefile('rw')
-        stream.write(line + '\n')
-        stream.flush()
-        return stream.readline().strip()
-
-
-def sim_state(port: int) -> dict:
-    answer = control(port, 'state')
-    assert answer.startswith('ok '), answer
-    return json.loads(answer[3:])
 
 
 @pytest.fixture(scope='module')
