@@ -63,6 +63,7 @@ DEDICATED = {
     'GPS_GoToTarget': '~/goto_lla',
     'GPS_StartTargetLooping': '~/start_target_loop',
     'IMU_Leveling': '~/level',
+    'VDT_setTrackingOn': '~/set_tracking (the tracker drives pan and tilt)',
 }
 ALLOWED_MOTION = {'SRV_MoveTo'}  # the auxiliary servo is not a joint
 OPT_IN = {
@@ -779,7 +780,11 @@ class CaptureDriverNode(GimbalDriverNode):
                 cmd.frame(axis, value, self.group_id)  # argument and axis checks, nothing sent
             except ProtocolError as exc:
                 raise CommandError(str(exc)) from None
-            result = self._device_call(lambda c: c.run(cmd.name, axis, value))
+            if cmd.name.startswith('VDT_'):  # 4.11: the camera index is the group byte
+                result = self._device_call(lambda c: c.request_in_group(
+                    cmd.name, self.tracker_camera, axis, value))
+            else:
+                result = self._device_call(lambda c: c.run(cmd.name, axis, value))
             response.results = format_result(cmd.name, result) if cmd.replies_with_data else []
             self._next_status = 0.0
             if response.results:

@@ -56,7 +56,7 @@ def rig():
         '-p', 'range_rate:=5.0', '-p', 'range_min:=2.0', '-p', 'range_max:=3000.0',
         '-p', 'range_field_of_view:=0.003', '-p', 'tracking_rate:=4.0',
         '-p', 'digital_outputs:=[1, 2]', '-p', 'digital_io_rate:=4.0', '-p', 'fix_rate:=4.0',
-        '-p', 'gyro_drift_time:=2.0'])
+        '-p', 'gyro_drift_time:=2.0', '-p', 'command_timeout:=3.0'])
     ros = RosTestClient(domain)
     try:
         ros.wait_for_message('joint_states', JointState, timeout=30)
@@ -98,6 +98,13 @@ def test_range_published_while_ranging_is_on(rig):
     reply = ros.call(SetBool, srv('set_ranging'), SetBool.Request(data=False))
     assert reply.success, reply.message
     assert not sim_state(control_port)['lrf_measuring']
+    # no more ranges: while ~/digital_io publishes 8 times (2 s), ~/range stays silent
+    ranges = ros.subscribe(f'/{NODE}/range', Range)
+    dio = ros.subscribe(f'/{NODE}/digital_io', UInt8MultiArray)
+    wait_for(lambda: len(dio) >= 2, 15.0, 'digital_io messages')
+    silent_from = len(ranges)
+    wait_for(lambda: len(dio) >= 10, 15.0, 'eight more digital_io messages')
+    assert len(ranges) == silent_from
 
 
 def test_set_tracking_modes_and_tracking_state(rig):
@@ -118,6 +125,11 @@ def test_set_tracking_modes_and_tracking_state(rig):
     auto = ros.call(SetMode, srv('set_tracking'), SetMode.Request(mode='AUTO'))
     assert auto.success, auto.message
     assert sim_state(control_port)['tracker_mode']['0'] == 2
+    # ~/command reads the tracker of tracker_camera (group byte) but leaves setting it to
+    # ~/set_tracking, whose checks it would skip
+    assert command(ros, 'VDT_isAutoModeOn').results == ['True flag']
+    refused = command(ros, 'VDT_setTrackingOn', 0, ['0'])
+    assert not refused.success and '~/set_tracking' in refused.message
     off = ros.call(SetMode, srv('set_tracking'), SetMode.Request(mode='off'))
     assert off.success, off.message
     assert sim_state(control_port)['tracker_mode']['0'] == 0
@@ -212,6 +224,16 @@ def test_level_refused_while_scanning(rig):
     assert not drift.success and 'scan' in drift.message
     assert sim_state(control_port)['scanning']  # nothing stopped or started it
     assert sim_state(control_port)['requests'] >= requests_before
+    assert ros.call(Trigger, srv('stop'), Trigger.Request()).success
+
+
+def test_level_refused_while_a_joint_moves(rig):
+    ros, control_port = rig
+    wait_at_rest(ros, control_port)
+    ros.publish('joint_command', JointState(name=['pan'], velocity=[0.2]))
+    ros.wait_for_message('joint_states', JointState, lambda m: abs(m.velocity[0]) > 0.1)
+    result, _, _ = ros.run_action(Home, srv('level'), Home.Goal(joint_names=['tilt']))
+    assert not result.success and 'pan moving' in result.message, result.message
     assert ros.call(Trigger, srv('stop'), Trigger.Request()).success
 
 

@@ -596,7 +596,7 @@ _TABLE: list[tuple[Any, ...]] = [
     # Appended by the issue-15 interfaces branch (~/set_tracking, ~/tracking_state); all
     # four opcodes are printed in revision 2.21.0 ("3.1 ... 0x0A01" to "3.4 ... 0x0A13").
     ('VDT_setTrackingOn', 0x0A01, SYSTEM, U8, '0 off/1 manual/2 auto', N, '', 'high',
-     'rev: 2.21.0 "VDT_setTrackingOn - 0x0A01"; text 4.11.1 "OpCode 0x0A01"', Safety.NONE,
+     'rev: 2.21.0 "VDT_setTrackingOn - 0x0A01"; text 4.11.1 "OpCode 0x0A01"', Safety.MOTION,
      'video tracking off (0), manual (1) or automatic (2); camera index in the group byte'),
     ('VDT_isTrackingOn', 0x0A02, SYSTEM, N, '', BOOL, 'flag', 'high',
      'rev: 2.21.0 "VDT_isTrackingOn - 0x0A02"; text 4.11.2 "OpCode 0x0A02"', Safety.NONE,
