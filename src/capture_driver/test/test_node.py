@@ -318,6 +318,10 @@ def test_dropped_link_reconnects_and_diagnostics_report_it(rig):
     ('axis_ids:=[1,1]', 'axis_ids'),
     ('joint_directions:=[1.0,0.5]', 'joint_directions'),
     ('transport:=udp', 'transport'),
+    ('range_min:=6000.0', 'range_min'),  # range_max defaults to 5000 m
+    ('digital_outputs:=[2,7]', 'digital_outputs'),
+    ('digital_outputs:=[3,3]', 'digital_outputs'),
+    ('tracker_camera:=4', 'tracker_camera'),
 ])
 def test_invalid_parameters_are_refused_naming_them(override, name):
     with DomainLease() as domain:

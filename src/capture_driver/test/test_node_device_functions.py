@@ -291,20 +291,3 @@ def test_enable_refuses_a_faulted_drive(rig):
     msg = ros.wait_for_message('joint_states', JointState)
     assert set(joint_positions(msg)) == {'pan', 'tilt'}
 
-
-@pytest.mark.parametrize(('override', 'name'), [
-    ('range_min:=6000.0', 'range_min'),  # range_max defaults to 5000 m
-    ('digital_outputs:=[2,7]', 'digital_outputs'),
-    ('digital_outputs:=[3,3]', 'digital_outputs'),
-    ('tracker_camera:=4', 'tracker_camera'),
-])
-def test_invalid_device_function_parameters_are_refused_naming_them(override, name):
-    with DomainLease() as domain:
-        node = ManagedProcess.ros(PKG, 'capture_driver_node', domain,
-                                  ['--ros-args', '-p', override])
-        try:
-            node.process.wait(30)
-        finally:
-            node.stop()
-        assert node.process.returncode != 0
-        assert name in node.output()
