@@ -875,7 +875,6 @@ class CaptureDriverNode(GimbalDriverNode):
         flags = [a.key for a in CSR.decode(system.get('CSR', 0)) if a.flag.level > Level.OK]
         return flags + [text for text in errors.values() if text]
 
-
     # ============================================ issue 15: first-class device functions
     def _declare_device_function_parameters(self) -> None:
         p = self.declare_param
@@ -944,8 +943,14 @@ class CaptureDriverNode(GimbalDriverNode):
                          cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=group)
 
     def _probe_device_functions(self, client: CaptureClient) -> None:
-        """Which optional units answer (a missing video tracker NACKs with 0x76)."""
-        self._ranging = False
+        """Which optional units answer (a missing video tracker NACKs with 0x76); ranging
+        that was on before a reconnect is started again (the controller may have rebooted)."""
+        if self._ranging:
+            try:
+                client.run('LRF_StartMeasurement')
+            except (DeviceNack, DeviceTimeout) as exc:
+                self._ranging = False
+                self.get_logger().warning(f'ranging not restarted after reconnect: {exc}')
         self._target_looping = False
         self._next_extra = {}
         try:

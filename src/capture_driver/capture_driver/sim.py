@@ -1273,6 +1273,10 @@ class CaptureSimulator:
                 self.set_silent(args[0].lower() in ('1', 'on', 'true'))
             elif verb == 'pose':
                 model.set_pose(int(args[0]), float(args[1]))
+            elif verb == 'count':
+                opcode = COMMANDS[args[0]].opcode
+                with model.lock:
+                    return f'ok {sum(1 for f in model.requests if f.opcode == opcode)}'
             elif verb == 'detect':
                 model.set_target_detected(int(args[0]), args[1].lower() in ('1', 'on', 'true'))
             elif verb == 'dio':
@@ -1311,7 +1315,8 @@ class CaptureSimulator:
 CONTROL_HELP = (
     'fault AXIS NAME (NAME in ' + ','.join(FAULTS) + ') | system_fault CSR_FLAG | '
     'nack HEXCODE [COMMAND|*] [COUNT] | lose [COUNT] | garbage [HEX] | drop [OFFLINE_S] | '
-    'silent on|off | pose AXIS DEG | detect CAMERA on|off | dio N 0|1 | state | help'
+    'silent on|off | pose AXIS DEG | detect CAMERA on|off | dio N 0|1 | count COMMAND | '
+    'state | help'
 )
 
 

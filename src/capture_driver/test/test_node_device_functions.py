@@ -291,3 +291,16 @@ def test_enable_refuses_a_faulted_drive(rig):
     msg = ros.wait_for_message('joint_states', JointState)
     assert set(joint_positions(msg)) == {'pan', 'tilt'}
 
+
+
+def test_ranging_restarts_after_a_reconnect(rig):
+    ros, control_port = rig
+    assert ros.call(SetBool, srv('set_ranging'), SetBool.Request(data=True)).success
+    starts = int(control(control_port, 'count LRF_StartMeasurement').split()[1])
+    assert control(control_port, 'drop 1.0') == 'ok'
+    ros.wait_for_diagnostic(NODE, 'connection', lambda s: s.level == b'\x02')
+    ros.wait_for_diagnostic(NODE, 'connection', lambda s: s.level == b'\x00', timeout=30)
+    wait_for(lambda: int(control(control_port, 'count LRF_StartMeasurement').split()[1])
+             > starts, 15.0, 'LRF_StartMeasurement after the reconnect')
+    ros.wait_for_message(f'/{NODE}/range', Range, timeout=15)
+    assert ros.call(SetBool, srv('set_ranging'), SetBool.Request(data=False)).success
