@@ -203,10 +203,12 @@ def test_level_action_drives_tilt_to_the_leveling_value(rig):
     result, _, feedback = ros.run_action(Home, srv('level'), Home.Goal(joint_names=['tilt']),
                                          timeout=60)
     assert result.success, result.message
-    assert feedback and 'from level' in feedback[0].state
+    # feedback travels on its own topic and may arrive after the result
+    wait_for(lambda: feedback, 10.0, 'levelling feedback')
+    assert 'from level' in feedback[0].state
     assert sim_state(control_port)['axes']['2']['position'] == pytest.approx(-3.0, abs=0.1)
     unknown, _, _ = ros.run_action(Home, srv('level'), Home.Goal(joint_names=['elbow']))
-    assert not unknown.success and 'unknown joint' in unknown.message
+    assert not unknown.success and 'unknown joint' in unknown.message, unknown.message
 
 
 def test_level_refused_while_scanning(rig):
@@ -247,7 +249,8 @@ def test_gyro_drift_compensation_action(rig):
                                          timeout=60)
     assert result.success, result.message
     assert '0.05000 deg/s' in result.message  # the simulator's gyro bias
-    assert feedback and 'measuring the gyro drift' in feedback[0].state
+    wait_for(lambda: feedback, 10.0, 'drift feedback')
+    assert 'measuring the gyro drift' in feedback[0].state
     assert sim_state(control_port)['gyro_drift']['2'] == pytest.approx(0.05)
     reset = ros.call(Trigger, srv('reset_gyro_drift'), Trigger.Request())
     assert reset.success, reset.message
