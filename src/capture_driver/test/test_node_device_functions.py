@@ -14,6 +14,7 @@ import pytest
 
 pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
+from action_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import Imu, JointState, Range
 from std_msgs.msg import UInt8MultiArray
@@ -209,6 +210,24 @@ def test_level_action_drives_tilt_to_the_leveling_value(rig):
     assert sim_state(control_port)['axes']['2']['position'] == pytest.approx(-3.0, abs=0.1)
     unknown, _, _ = ros.run_action(Home, srv('level'), Home.Goal(joint_names=['elbow']))
     assert not unknown.success and 'unknown joint' in unknown.message, unknown.message
+
+
+def test_level_cancel_stops_the_axis(rig):
+    ros, control_port = rig
+    wait_at_rest(ros, control_port)
+    assert control(control_port, 'pose 2 60') == 'ok'
+    assert command(ros, 'IMU_setLevelingValue', 2, ['0']).success
+    assert command(ros, 'CFG_SetGeneralSpd', 2, ['2']).success  # ~30 s of simulated travel
+    try:
+        result, status, _ = ros.run_action(Home, srv('level'), Home.Goal(joint_names=['tilt']),
+                                           timeout=60, cancel_after=1.5)
+        assert status == GoalStatus.STATUS_CANCELED
+        assert not result.success and 'cancelled' in result.message, result.message
+        wait_for(lambda: sim_state(control_port)['axes']['2']['velocity'] == 0.0, 20.0,
+                 'tilt stopped')
+        assert sim_state(control_port)['axes']['2']['position'] > 5.0  # not levelled
+    finally:
+        assert command(ros, 'CFG_SetGeneralSpd', 2, ['30']).success
 
 
 def test_level_refused_while_scanning(rig):
