@@ -9,6 +9,7 @@ serve the module; waits are "up to a timeout", never timing assertions.
 from __future__ import annotations
 
 import math
+import threading
 
 import pytest
 
@@ -274,6 +275,32 @@ def test_gyro_drift_compensation_action(rig):
     reset = ros.call(Trigger, srv('reset_gyro_drift'), Trigger.Request())
     assert reset.success, reset.message
     assert sim_state(control_port)['gyro_drift']['2'] == 0.0
+
+
+def test_gyro_drift_aborts_when_the_pedestal_moves(rig):
+    ros, control_port = rig
+    wait_at_rest(ros, control_port)
+    ros.publish('joint_command', JointState(name=['pan'], velocity=[0.0]))  # publisher ready
+
+    def count() -> int:
+        return int(control(control_port, 'count IMU_GyroDriftCompensation').split()[1])
+
+    before = count()
+
+    def jog_once_measuring() -> None:
+        wait_for(lambda: count() > before, 30.0, 'the drift measurement to start')
+        ros.publish('joint_command', JointState(name=['pan'], velocity=[0.2]))
+
+    jogger = threading.Thread(target=jog_once_measuring, daemon=True)
+    jogger.start()
+    try:
+        result, _, _ = ros.run_action(Home, srv('compensate_gyro_drift'), Home.Goal(),
+                                      timeout=60)
+    finally:
+        jogger.join(30.0)
+        assert ros.call(Trigger, srv('stop'), Trigger.Request()).success
+    assert not result.success
+    assert 'moved during the drift measurement' in result.message, result.message
 
 
 def test_enable_switches_drives_and_status_shows_it(rig):
