@@ -164,6 +164,7 @@ class CaptureDriverNode(GimbalDriverNode):
         self._ranging = False
         self._has_tracker = False
         self._tracker_problem = ''
+        self._has_digital_io = False
         self._next_extra: dict[str, float] = {}
         self._guarded = threading.Lock()  # one levelling/drift run at a time
         super().__init__('capture_driver', **kwargs)
@@ -953,6 +954,12 @@ class CaptureDriverNode(GimbalDriverNode):
                 self.get_logger().warning(f'ranging not restarted after reconnect: {exc}')
         self._target_looping = False
         self._next_extra = {}
+        # firmware before 2.22.0 has no digital I/O: polling it would latch protocol errors
+        try:
+            client.request('COM_getDigitalIO', 1)
+            self._has_digital_io = True
+        except (DeviceNack, DeviceTimeout):
+            self._has_digital_io = False
         try:
             client.request_in_group('VDT_isTrackingOn', self.tracker_camera)
             self._has_tracker, self._tracker_problem = True, ''
@@ -970,7 +977,8 @@ class CaptureDriverNode(GimbalDriverNode):
         jobs: list[tuple[str, bool, float, Callable[[CaptureClient], None]]] = [
             ('range', self._ranging, self.range_rate, self._publish_range),
             ('tracking', self._has_tracker, self.tracking_rate, self._publish_tracking),
-            ('digital_io', True, self.digital_io_rate, self._publish_digital_io),
+            ('digital_io', self._has_digital_io, self.digital_io_rate,
+             self._publish_digital_io),
             ('heading', self._has_gps, self.fix_rate, self._publish_heading),
         ]
         for key, available, rate, publish in jobs:

@@ -308,6 +308,7 @@ class PedestalModel:
         # video tracker per camera index (the group byte, 4.11), GPS target looping,
         # IMU gyro drift per sensor (4.5.28-30: 0 client, 1 base, 2 load, 3 middle)
         self.tracker_present = True
+        self.digital_io_present = True  # COM_set/getDigitalIO exist from firmware 2.22.0
         self.tracker_mode = dict.fromkeys(range(4), 0)  # 0 off, 1 manual, 2 auto
         self.target_detected = dict.fromkeys(range(4), False)
         self.target_looping: list[int] | None = None
@@ -1148,6 +1149,19 @@ class PedestalModel:
     def _do_IMU_GetGyroDrift(self, frame, arg, session):
         return self.gyro_drift[frame.axis]
 
+    # --- digital I/O (4.6.17-18); the console's 'dio' changes an input
+    def _require_digital_io(self) -> None:
+        if not self.digital_io_present:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Opcode not Recognized')
+
+    def _do_COM_setDigitalIO(self, frame, arg, session):
+        self._require_digital_io()
+        self.stored[('COM_digitalio', frame.axis)] = int(arg)
+
+    def _do_COM_getDigitalIO(self, frame, arg, session):
+        self._require_digital_io()
+        return self.stored.get(('COM_digitalio', frame.axis), 0)
+
     # --- video tracker (4.11): the camera index travels in the group byte
     def _camera(self, frame: Frame) -> int:
         if not self.tracker_present:
@@ -1371,6 +1385,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--axes', type=int, default=2, choices=(2, 3))
     parser.add_argument('--no-gps', action='store_true', help='simulate a system without GPS')
     parser.add_argument('--no-imu', action='store_true', help='simulate a manual system')
+    parser.add_argument('--no-digital-io', action='store_true',
+                        help='firmware before 2.22.0: no COM_set/getDigitalIO')
     parser.add_argument('--gear-ratio', type=float, default=1.0)
     parser.add_argument('--time-scale', type=float, default=1.0,
                         help='simulated seconds per real second (faster tests)')
@@ -1381,6 +1397,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=args.log_level.upper(), format='%(name)s: %(message)s')
     model = PedestalModel(axes=args.axes, gps=not args.no_gps, imu=not args.no_imu,
                           gear_ratio=args.gear_ratio, time_scale=args.time_scale)
+    model.digital_io_present = not args.no_digital_io
     sim = CaptureSimulator(model, tcp_port=None if args.port < 0 else args.port,
                            pty=args.pty, pty_link=args.pty_link)
     sim.start()

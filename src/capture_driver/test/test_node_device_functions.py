@@ -353,3 +353,33 @@ def test_ranging_restarts_after_a_reconnect(rig):
              > starts, 15.0, 'LRF_StartMeasurement after the reconnect')
     ros.wait_for_message(f'/{NODE}/range', Range, timeout=15)
     assert ros.call(SetBool, srv('set_ranging'), SetBool.Request(data=False)).success
+
+
+def test_controller_without_digital_io_is_not_polled_for_it():
+    """Firmware before 2.22.0: no ~/digital_io, and setting an output names the NACK."""
+    with DomainLease() as domain:
+        port, control_port = free_tcp_port(), free_tcp_port()
+        sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
+            '--port', str(port), '--control-port', str(control_port), '--no-digital-io'])
+        node = None
+        ros = None
+        try:
+            sim.wait_for_output('capture_sim ready')
+            node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
+                '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
+                '-p', 'digital_io_rate:=10.0', '-p', 'status_period:=0.2'])
+            ros = RosTestClient(domain)
+            dio = ros.subscribe(f'/{NODE}/digital_io', UInt8MultiArray)
+            statuses = ros.subscribe(f'/{NODE}/status', GimbalStatus)
+            wait_for(lambda: len(statuses) >= 20, 30.0, '~/status messages (2 s)')
+            assert dio == []
+            polled = int(control(control_port, 'count COM_getDigitalIO').split()[1])
+            assert polled == 1  # the probe at connect, nothing after
+            reply = ros.call(SetBool, srv('set_digital_output_1'), SetBool.Request(data=True))
+            assert not reply.success and 'NACK 0xA6' in reply.message
+        finally:
+            if ros is not None:
+                ros.close()
+            if node is not None:
+                node.stop()
+            sim.stop()
