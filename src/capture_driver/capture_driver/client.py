@@ -286,9 +286,10 @@ class CaptureClient:
             return self._request_locked(cmd.name, axis, value, timeout)
 
     def _request_locked(self, name: str, axis: int | None, value: Any,
-                        timeout: float | None = None) -> Any:
+                        timeout: float | None = None, group: int | None = None) -> Any:
         cmd = command(name)
-        frame = cmd.frame(axis, value, self.group)  # validates before anything is sent
+        # validates before anything is sent
+        frame = cmd.frame(axis, value, self.group if group is None else group)
         if self._stream is None:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
         for attempt in (1, 2):
@@ -523,13 +524,11 @@ class CaptureClient:
     def request_in_group(self, name: str, group: int, axis: int | None = None,
                          value: Any = None) -> Any:
         """:meth:`run` with another group byte (4.11: the video tracker's camera index)."""
-        saved = self.group
         with self._lock:
-            self.group = group
             try:
-                return self.run(name, axis, value)
-            finally:
-                self.group = saved
+                return self._request_locked(name, axis, value, group=group)
+            except DeviceNack as exc:
+                raise self.explain_nack(exc) from None
 
     def set_tracking(self, camera: int, mode: int) -> None:
         """VDT_setTrackingOn: 0 off, 1 manual, 2 automatic (4.11.1) for camera 0..3."""
