@@ -291,9 +291,10 @@ class CaptureClient:
             return self._request_locked(cmd.name, axis, value, timeout)
 
     def _request_locked(self, name: str, axis: int | None, value: Any,
-                        timeout: float | None = None) -> Any:
+                        timeout: float | None = None, group: int | None = None) -> Any:
         cmd = command(name)
-        frame = cmd.frame(axis, value, self.group)  # validates before anything is sent
+        # validates before anything is sent
+        frame = cmd.frame(axis, value, self.group if group is None else group)
         if self._stream is None:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
         for attempt in (1, 2):
@@ -561,6 +562,66 @@ class CaptureClient:
     def goto_lla(self, target: int, point: GeoPoint) -> None:
         self.run('GPS_SetTargetLLA', target, point)
         self.run('GPS_GoToTarget', target)
+
+    # ------------------------------------- issue 15: first-class device functions
+    def set_tracking(self, camera: int, mode: int) -> None:
+        """VDT_setTrackingOn: 0 off, 1 manual, 2 automatic (4.11.1) for camera 0..3."""
+        self.run('VDT_setTrackingOn', camera, mode)
+
+    def tracking_state(self, camera: int) -> TrackingState:
+        """Tracking active, automatic mode and target detection of one camera (4.11.2-4)."""
+        return TrackingState(
+            camera=camera,
+            active=bool(self.run('VDT_isTrackingOn', camera)),
+            automatic=bool(self.run('VDT_isAutoModeOn', camera)),
+            target_detected=bool(self.run('VDT_isTargetDetected', camera)),
+        )
+
+    def set_axis_power(self, axis: int, on: bool) -> None:
+        """MOT_AxisOn / MOT_AxisOff (4.2.11-12). Switching on also cancels the motion the
+        drive buffered while off (AxisOn would resume it) by stopping the axis."""
+        if on:
+            self.run('MOT_AxisOn', axis)
+            self.stop_axis(axis)
+        else:
+            self.run('MOT_AxisOff', axis)
+
+    def digital_io(self, numbers: list[int]) -> dict[int, bool]:
+        """State of digital I/O 1..6 (COM_getDigitalIO, the number in the axis byte)."""
+        return {n: bool(self.request('COM_getDigitalIO', n)) for n in numbers}
+
+    def set_digital_output(self, number: int, on: bool) -> None:
+        self.run('COM_setDigitalIO', number, int(on))
+
+    def gps_heading(self) -> tuple[bool, float]:
+        """(heading valid, system heading in compass degrees clockwise from north)."""
+        ready = bool(self.request('GPS_HeadingReady'))
+        return ready, self.request('GPS_GetHeading')
+
+    def stored_targets(self) -> dict[int, GeoPoint]:
+        """Targets 1..15 that hold a position (4.4.12: a cleared target reads all zero)."""
+        targets = {}
+        for number in range(1, 16):
+            point = self.request('GPS_GetTargetLLA', number)
+            if (point.longitude, point.latitude, point.altitude) != (0.0, 0.0, 0.0):
+                targets[number] = point
+        return targets
+
+
+@dataclass
+class TrackingState:
+    """One camera's video-tracker state as the device reports it."""
+
+    camera: int
+    active: bool
+    automatic: bool
+    target_detected: bool
+
+    @property
+    def mode(self) -> str:
+        if self.automatic:
+            return 'auto'
+        return 'manual' if self.active else 'off'
 
 
 def describe_command(cmd: Command) -> str:

@@ -15,8 +15,11 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
+from std_msgs.msg import MultiArrayDimension, UInt8MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from gimbal_driver_common.diagnostics import ActiveFlag, Level
@@ -32,8 +35,9 @@ from gimbal_driver_common.ros.diagnostics import StatusPart
 from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_driver_common.scan import ScanError, ScanRequest
 from gimbal_driver_common.transport import SerialStream, TcpStream
+from gimbal_msgs.action import Home
 from gimbal_msgs.msg import AxisState, Preset
-from gimbal_msgs.srv import DeviceCommand
+from gimbal_msgs.srv import DeviceCommand, SetMode
 
 from .client import (
     SCAN_COMMANDS,
@@ -58,14 +62,15 @@ DEDICATED = {
     'SCN_StartScanSquare': '~/start_scan',
     'PRST_GoToPreset': '~/goto_preset', 'PRST_StartPresetLooping': '~/start_preset_loop',
     'GPS_GoToTarget': '~/goto_lla',
-    'GPS_StartTargetLooping': 'nothing (target poses are not limit-checked); use ~/goto_lla',
-    'IMU_Leveling': 'nothing (the levelling pose is not limit-checked); use ~/move_to',
+    'GPS_StartTargetLooping': '~/start_target_loop',
+    'IMU_Leveling': '~/level',
+    'VDT_setTrackingOn': '~/set_tracking (the tracker drives pan and tilt)',
 }
-# Motion commands ~/command sends anyway: the auxiliary servo is not a joint; video
-# tracking and the dual-gimbal synchronisation move the axes under the controller's own
-# (software-limit) control with no driver-side target to check, so they get the axis-state
-# check (off/faulted axes refuse) but no limit check.
-ALLOWED_MOTION = {'SRV_MoveTo', 'VDT_setTrackingOn', 'DG_SetSyncMode', 'DG_GoToCamera'}
+# Motion commands ~/command sends anyway: the auxiliary servo is not a joint; the
+# dual-gimbal synchronisation moves the axes under the controller's own (software-limit)
+# control with no driver-side target to check, so it gets the axis-state check (off/faulted
+# axes refuse) but no limit check. Video tracking has its own service (~/set_tracking).
+ALLOWED_MOTION = {'SRV_MoveTo', 'DG_SetSyncMode', 'DG_GoToCamera'}
 JOINT_MOTION = ALLOWED_MOTION - {'SRV_MoveTo'}
 OPT_IN = {
     Safety.NV_WRITE: 'allow_nv_write',
@@ -73,6 +78,10 @@ OPT_IN = {
     Safety.NETWORK: 'allow_network_config',
 }
 MAX_PRESETS = 15
+DIGITAL_IO_COUNT = 6  # COM_get/setDigitalIO: I/O 1..6 in the axis byte (4.6.17-18)
+TRACKING_MODES = {'off': 0, 'manual': 1, 'auto': 2}  # VDT_setTrackingOn values (4.11.1)
+IMU_ANGLE_BY_AXIS = {1: 'yaw', 2: 'pitch', 3: 'roll'}  # what IMU_Leveling levels per axis
+UNKNOWN_VARIANCE = 1e6  # rad^2: covariance entries the device gives no estimate for
 
 
 def _axis_flags(registers: dict[str, int]) -> list[ActiveFlag]:
@@ -164,6 +173,13 @@ class CaptureDriverNode(GimbalDriverNode):
         self._has_gps = False
         self._device_scanning = False
         self._preset_looping = False
+        self._target_looping = False
+        self._ranging = False
+        self._has_tracker = False
+        self._tracker_problem = ''
+        self._has_digital_io = False
+        self._next_extra: dict[str, float] = {}
+        self._guarded = threading.Lock()  # one levelling/drift run at a time
         super().__init__('capture_driver', **kwargs)
         group = ReentrantCallbackGroup()  # own group: services may wait on device I/O
         self._imu_pub = self.create_publisher(Imu, '~/imu', 10)
@@ -179,6 +195,7 @@ class CaptureDriverNode(GimbalDriverNode):
         self.create_service(DeviceCommand, '~/command', self._on_command, callback_group=group)
         self.create_subscription(NavSatFix, '~/goto_lla', self._on_goto_lla, 1,
                                  callback_group=group)
+        self._create_device_function_interfaces(group)
 
     # ------------------------------------------------------------ parameters
     def declare_device_parameters(self) -> None:
@@ -240,6 +257,7 @@ class CaptureDriverNode(GimbalDriverNode):
         self._axis = dict(zip(self.joint_names, self.axis_ids, strict=True))
         self._direction = dict(zip(self.joint_names, self.joint_directions, strict=True))
         self._gear = dict(zip(self.joint_names, self.gear_ratios, strict=True))
+        self._declare_device_function_parameters()
 
     # ------------------------------------------------- run-time parameters
     def declare_runtime_parameters(self) -> None:
@@ -297,6 +315,7 @@ class CaptureDriverNode(GimbalDriverNode):
         self._has_gps = bool(client.optional('GPS_isConnectedGPS'))
         self._device_scanning = bool(client.optional('SCN_IsScanOn'))
         self._preset_looping = False
+        self._probe_device_functions(client)
         self._next_status = 0.0
         client.start()
         self.get_logger().info(
@@ -361,6 +380,8 @@ class CaptureDriverNode(GimbalDriverNode):
         if self.active and self._has_gps and self.fix_rate > 0 and now >= self._next_fix:
             self._next_fix = now + 1.0 / self.fix_rate
             self._publish_fix(client)
+        if self.active:
+            self._poll_device_functions(client, now)
         with self._status_lock:
             currents = self._status.get('current', {})
         return JointSample(
@@ -389,6 +410,7 @@ class CaptureDriverNode(GimbalDriverNode):
         sys_state = status.get('system', {}).get('SYS', 0)
         self._device_scanning = bool(sys_state & (1 << 2))
         self._preset_looping = bool(sys_state & (1 << 3))
+        self._target_looping = bool(sys_state & (1 << 4))
         with self._status_lock:
             self._status = status
 
@@ -427,7 +449,7 @@ class CaptureDriverNode(GimbalDriverNode):
         msg.status.status = NavSatStatus.STATUS_FIX if ready else NavSatStatus.STATUS_NO_FIX
         msg.status.service = NavSatStatus.SERVICE_GPS
         msg.latitude, msg.longitude = latitude, longitude
-        msg.altitude = math.nan  # GPS_GetAltitude's opcode is not established (README)
+        msg.altitude = self._gps_altitude(client)
         msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
         self._fix_pub.publish(msg)
 
@@ -441,6 +463,9 @@ class CaptureDriverNode(GimbalDriverNode):
         if self._preset_looping:
             client.request('PRST_StopPresetLooping')
             self._preset_looping = False
+        if self._target_looping:
+            client.request('GPS_StopTargetLooping')
+            self._target_looping = False
 
     def send_moves(self, moves: dict[str, tuple[float, float | None]]) -> None:
         def action(client: CaptureClient) -> None:
@@ -470,7 +495,7 @@ class CaptureDriverNode(GimbalDriverNode):
         def action(client: CaptureClient) -> None:
             if joints is None:
                 problems = client.stop_all([self._axis[j] for j in self.joint_names])
-                self._device_scanning = self._preset_looping = False
+                self._device_scanning = self._preset_looping = self._target_looping = False
             else:
                 problems = []
                 for joint in joints:
@@ -776,26 +801,30 @@ class CaptureDriverNode(GimbalDriverNode):
                 raise CommandError(f'{label} {value} outside +-{bound}')
 
         def action(client: CaptureClient) -> None:
-            if client.request('GPS_GetOvdPosGPS'):
-                origin = client.request('GPS_GetInsertedLLA')
-                heading = client.request('GPS_GetInsertedHeading')
-            else:
-                _, latitude, longitude = client.gps_fix()
-                origin = GeoPoint(longitude, latitude, target.altitude)
-                heading = client.request('GPS_GetHeading')
-            pan_deg, tilt_deg = aim_at(origin, heading, target)
-            pose = {}
-            for joint, degrees in zip(self.joint_names[:2], (pan_deg, tilt_deg), strict=False):
-                pose[joint] = self.from_device(joint, degrees)
+            pose = self._target_pose(client, target)
             validate_joint_command(list(pose), list(pose.values()), [], self.limits)
             self._leave_device_programs(client)
             client.goto_lla(self.gps_target_slot, target)
             self.commanded_targets.update(pose)
             self.get_logger().info(f'aiming at lat {target.latitude:.6f} lon '
-                                   f'{target.longitude:.6f}: pan {pan_deg:.2f} tilt '
-                                   f'{tilt_deg:.2f} deg')
+                                   f'{target.longitude:.6f}: '
+                                   + ', '.join(f'{j} {p:+.4f} rad' for j, p in pose.items()))
 
         self._device_call(action)
+
+    def _target_pose(self, client: CaptureClient, target: GeoPoint) -> dict[str, float]:
+        """Joint positions (rad) the device takes to look at ``target``, from the GPS or
+        the inserted position and heading (what GPS_GoToTarget uses)."""
+        if client.request('GPS_GetOvdPosGPS'):
+            origin = client.request('GPS_GetInsertedLLA')
+            heading = client.request('GPS_GetInsertedHeading')
+        else:
+            _, latitude, longitude = client.gps_fix()
+            origin = GeoPoint(longitude, latitude, target.altitude)
+            heading = client.request('GPS_GetHeading')
+        angles = aim_at(origin, heading, target)
+        return {joint: self.from_device(joint, degrees)
+                for joint, degrees in zip(self.joint_names[:2], angles, strict=False)}
 
     def _on_command(self, request, response):
         def action() -> str:
@@ -821,6 +850,7 @@ class CaptureDriverNode(GimbalDriverNode):
                 cmd.frame(axis, value, self.group_id)  # argument and axis checks, nothing sent
             except ProtocolError as exc:
                 raise CommandError(str(exc)) from None
+            # VDT_* take the camera index as `axis`; the codec puts it in the group byte (4.11)
             result = self._device_call(lambda c: c.run(cmd.name, axis, value))
             response.results = format_result(cmd.name, result) if cmd.replies_with_data else []
             self._next_status = 0.0
@@ -916,6 +946,470 @@ class CaptureDriverNode(GimbalDriverNode):
             errors = self._status.get('errors', {})
         flags = [a.key for a in CSR.decode(system.get('CSR', 0)) if a.flag.level > Level.OK]
         return flags + [text for text in errors.values() if text]
+
+    # ============================================ issue 15: first-class device functions
+    def _declare_device_function_parameters(self) -> None:
+        p = self.declare_param
+        self.range_rate = p('range_rate', 5.0, 'Hz for ~/range while ranging is on (0 disables)',
+                            value_range=(0.0, 50.0))
+        self.range_frame_id = p('range_frame_id', 'capture_lrf', 'frame_id of ~/range')
+        self.range_field_of_view = p(
+            'range_field_of_view', 0.002,
+            'rad, ~/range field_of_view: the beam divergence from your LRF datasheet',
+            value_range=(1e-6, math.pi))
+        self.range_min = p('range_min', 5.0, 'm, ~/range min_range: from your LRF datasheet',
+                           value_range=(0.0, 1e6))
+        self.range_max = p('range_max', 5000.0, 'm, ~/range max_range: from your LRF datasheet',
+                           value_range=(0.0, 1e6))
+        if self.range_min >= self.range_max:
+            raise ParameterError(f"parameters 'range_min' {self.range_min} and 'range_max' "
+                                 f'{self.range_max}: min must be below max')
+        self.tracker_camera = p('tracker_camera', 0,
+                                'video tracker camera index (sent in the group byte, 4.11)',
+                                value_range=(0, 3))
+        self.tracking_rate = p('tracking_rate', 2.0, 'Hz for ~/tracking_state (0 disables)',
+                               value_range=(0.0, 50.0))
+        self.digital_outputs = p('digital_outputs', list(range(1, DIGITAL_IO_COUNT + 1)),
+                                 'digital I/O numbers (1..6) ~/set_digital_output_<n> may set',
+                                 element_type=int, value_range=(1, DIGITAL_IO_COUNT))
+        self.digital_io_rate = p('digital_io_rate', 2.0, 'Hz for ~/digital_io (0 disables)',
+                                 value_range=(0.0, 50.0))
+        self.heading_accuracy = p('heading_accuracy', 0.0,
+                                  'rad, 1-sigma of the GPS heading for ~/heading covariance '
+                                  '(0 = unknown: a large variance)', value_range=(0.0, math.pi))
+        self.gyro_drift_sensor = p('gyro_drift_sensor', 2,
+                                   'IMU for drift compensation (0 client, 1 base, 2 load, '
+                                   '3 middle; 4.5.28)', value_range=(0, 3))
+        self.gyro_drift_time = p('gyro_drift_time', 10.0,
+                                 's the pedestal is held still while the controller measures '
+                                 'the gyro drift (the spec gives no duration)',
+                                 value_range=(0.5, 600.0))
+        if len(set(self.digital_outputs)) != len(self.digital_outputs):
+            raise ParameterError(f"parameter 'digital_outputs': duplicate numbers in "
+                                 f'{self.digital_outputs}')
+
+    def _create_device_function_interfaces(self, group: ReentrantCallbackGroup) -> None:
+        self._range_pub = self.create_publisher(Range, '~/range', 10)
+        self._tracking_pub = self.create_publisher(DiagnosticStatus, '~/tracking_state', 10)
+        self._dio_pub = self.create_publisher(UInt8MultiArray, '~/digital_io', 10)
+        self._heading_pub = self.create_publisher(Imu, '~/heading', 10)
+        services = (
+            (SetBool, '~/set_ranging', self._on_set_ranging),
+            (SetMode, '~/set_tracking', self._on_set_tracking),
+            (SetBool, '~/enable', self._on_enable),
+            (Trigger, '~/start_target_loop', self._on_start_target_loop),
+            (Trigger, '~/stop_target_loop', self._on_stop_target_loop),
+            (Trigger, '~/reset_gyro_drift', self._on_reset_gyro_drift),
+        )
+        for srv_type, name, callback in services:
+            self.create_service(srv_type, name, callback, callback_group=group)
+        for number in self.digital_outputs:
+            self.create_service(
+                SetBool, f'~/set_digital_output_{number}',
+                lambda request, response, n=number: self._on_set_output(n, request, response),
+                callback_group=group)
+        for name, callback in (('~/level', self._execute_level),
+                               ('~/compensate_gyro_drift', self._execute_gyro_drift)):
+            ActionServer(self, Home, name, execute_callback=callback,
+                         goal_callback=lambda _: GoalResponse.ACCEPT,
+                         cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=group)
+
+    def _probe_device_functions(self, client: CaptureClient) -> None:
+        """Which optional units answer (a missing video tracker NACKs with 0x76); ranging
+        that was on before a reconnect is started again (the controller may have rebooted)."""
+        if self._ranging:
+            try:
+                client.run('LRF_StartMeasurement')
+            except (DeviceNack, DeviceTimeout) as exc:
+                self._ranging = False
+                self.get_logger().warning(f'ranging not restarted after reconnect: {exc}')
+        self._target_looping = False
+        self._next_extra = {}
+        # firmware before 2.22.0 has no digital I/O: polling it would latch protocol errors
+        # optional(): a device without the function answers 0xA6 once and is not asked again
+        self._has_digital_io = client.optional('COM_getDigitalIO', 1) is not None
+        self._has_tracker = client.optional('VDT_isTrackingOn', self.tracker_camera) is not None
+        self._tracker_problem = '' if self._has_tracker else client.unsupported.get(
+            'VDT_isTrackingOn', 'VDT_isTrackingOn refused or unanswered (no video tracker)')
+
+    def _due(self, key: str, rate: float, now: float) -> bool:
+        if rate <= 0 or now < self._next_extra.get(key, 0.0):
+            return False
+        self._next_extra[key] = now + 1.0 / rate
+        return True
+
+    def _poll_device_functions(self, client: CaptureClient, now: float) -> None:
+        """Publish range, tracking state, digital I/O and GPS heading at their rates."""
+        jobs: list[tuple[str, bool, float, Callable[[CaptureClient], None]]] = [
+            ('range', self._ranging, self.range_rate, self._publish_range),
+            ('tracking', self._has_tracker, self.tracking_rate, self._publish_tracking),
+            ('digital_io', self._has_digital_io, self.digital_io_rate,
+             self._publish_digital_io),
+            ('heading', self._has_gps, self.fix_rate, self._publish_heading),
+        ]
+        for key, available, rate, publish in jobs:
+            if available and self._due(key, rate, now):
+                try:
+                    publish(client)
+                except (DeviceNack, DeviceTimeout, ProtocolError) as exc:
+                    self.get_logger().warning(f'{key} read failed: {exc}',
+                                              throttle_duration_sec=10.0)
+
+    def _publish_range(self, client: CaptureClient) -> None:
+        distance = client.request('LRF_GetLRFDistance', 1)  # 4.17.11: 1 = current/last
+        msg = Range()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.range_frame_id
+        msg.radiation_type = Range.INFRARED  # laser rangefinders are near/short-wave IR
+        msg.field_of_view = float(self.range_field_of_view)
+        msg.min_range, msg.max_range = float(self.range_min), float(self.range_max)
+        # REP-117: +inf = no return within range; the device reads 0 when it measured none
+        msg.range = float(distance) if distance > 0 else math.inf
+        self._range_pub.publish(msg)
+
+    def _publish_tracking(self, client: CaptureClient) -> None:
+        state = client.tracking_state(self.tracker_camera)
+        self._tracking_pub.publish(DiagnosticStatus(
+            level=DiagnosticStatus.OK, name=f'{self.get_name()}: video tracker',
+            hardware_id=self.device_info.hardware_id,
+            message=(f'camera {state.camera}: mode {state.mode}, tracking '
+                     f'{"active" if state.active else "inactive"}, target '
+                     f'{"detected" if state.target_detected else "not detected"}'),
+            values=[KeyValue(key='camera', value=str(state.camera)),
+                    KeyValue(key='mode', value=state.mode),
+                    KeyValue(key='tracking_active', value=str(state.active).lower()),
+                    KeyValue(key='target_detected', value=str(state.target_detected).lower())],
+        ))
+
+    def _publish_digital_io(self, client: CaptureClient) -> None:
+        states = client.digital_io(list(range(1, DIGITAL_IO_COUNT + 1)))
+        msg = UInt8MultiArray()
+        msg.layout.dim = [MultiArrayDimension(label='digital_io_1_to_6',
+                                              size=DIGITAL_IO_COUNT, stride=DIGITAL_IO_COUNT)]
+        msg.data = [int(states[n]) for n in sorted(states)]
+        self._dio_pub.publish(msg)
+
+    def _publish_heading(self, client: CaptureClient) -> None:
+        ready, heading = client.gps_heading()
+        if not ready:
+            self.get_logger().warning('GPS heading not valid (GPS_HeadingReady 0): ~/heading '
+                                      'not published', throttle_duration_sec=10.0)
+            return
+        msg = Imu()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.gps_frame_id
+        # compass heading (clockwise from north) -> ENU yaw (counter-clockwise from east)
+        yaw = math.atan2(math.sin(math.pi / 2 - math.radians(heading)),
+                         math.cos(math.pi / 2 - math.radians(heading)))
+        msg.orientation.z, msg.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+        yaw_variance = self.heading_accuracy ** 2 if self.heading_accuracy > 0 else (
+            UNKNOWN_VARIANCE)
+        msg.orientation_covariance[0] = msg.orientation_covariance[4] = UNKNOWN_VARIANCE
+        msg.orientation_covariance[8] = yaw_variance
+        msg.angular_velocity_covariance[0] = -1.0  # not provided (REP-145)
+        msg.linear_acceleration_covariance[0] = -1.0
+        self._heading_pub.publish(msg)
+
+    def _gps_altitude(self, client: CaptureClient) -> float:
+        """GPS altitude in m where GPS_GetAltitude's opcode is established, else NaN."""
+        if 'GPS_GetAltitude' not in COMMANDS:
+            return math.nan  # 4.4.4 prints no opcode: 0x0506..0x0509 all fit (README)
+        try:
+            return float(client.request('GPS_GetAltitude'))
+        except (DeviceNack, DeviceTimeout):
+            return math.nan
+
+    # ------------------------------------------------------------ guards
+    def _drive_refusal(self, joints: Sequence[str]) -> str | None:
+        """A joint whose drive is off or faulted (from the last register read), or None."""
+        for joint in joints:
+            state = self.axis_details(joint).get('state')
+            if state == AxisState.STATE_FAULT:
+                return f'{joint}: drive in fault; call ~/reset_faults first'
+            if state == AxisState.STATE_DISABLED:
+                return f'{joint}: drive is off; switch it on with ~/enable first'
+        return None
+
+    def _busy_reason(self) -> str | None:
+        """Why the pedestal is not at rest for a guarded operation, or None."""
+        if self._device_scanning or (self._scan_thread is not None
+                                     and self._scan_thread.is_alive()):
+            return 'a scan is running; stop it with ~/stop_scan first'
+        if self._preset_looping or self._target_looping:
+            return 'a preset or target loop is running; stop it first'
+        sample = self.latest_sample
+        moving = [j for j, m in (sample.moving.items() if sample else ()) if m]
+        if moving:
+            return f'{", ".join(moving)} moving; wait for the move to end or call ~/stop'
+        return None
+
+    def _refuse_motion(self, joints: Sequence[str]) -> None:
+        refusal = self.motion_refusal(joints) or self._drive_refusal(joints)
+        if refusal:
+            raise CommandError(refusal)
+
+    # ---------------------------------------------------------- services
+    def _on_set_ranging(self, request, response):
+        def action() -> str:
+            def run(client: CaptureClient) -> str:
+                if not request.data:
+                    client.run('LRF_StopMeasurement')
+                    self._ranging = False
+                    return 'ranging off (LRF_StopMeasurement)'
+                if not client.request('LRF_IsConnected'):
+                    raise CommandError('no rangefinder connected (LRF_IsConnected 0); nothing '
+                                       'sent')
+                client.run('LRF_StartMeasurement')
+                self._ranging = True
+                self._next_extra.pop('range', None)
+                return f'ranging on: ~/range at {self.range_rate:g} Hz'
+
+            return self._device_call(run)
+
+        return self.serve_request(response, action)
+
+    def _on_set_tracking(self, request, response):
+        def action() -> str:
+            mode = request.mode.strip().lower()
+            if mode not in TRACKING_MODES:
+                raise CommandError(f'tracking mode {request.mode!r} unknown; use one of '
+                                   f'{list(TRACKING_MODES)}')
+            if not self._has_tracker:
+                raise CommandError(f'no video tracker on camera {self.tracker_camera}: '
+                                   f'{self._tracker_problem}')
+            if mode != 'off':  # the tracker drives pan and tilt
+                self._refuse_motion(self.scan_joints())
+
+            def run(client: CaptureClient) -> str:
+                if mode != 'off':
+                    self._leave_device_programs(client)
+                client.set_tracking(self.tracker_camera, TRACKING_MODES[mode])
+                state = client.tracking_state(self.tracker_camera)
+                self._next_extra.pop('tracking', None)
+                if mode == 'manual' and not state.active:
+                    raise CommandError(f'camera {self.tracker_camera}: manual tracking did not '
+                                       'start: no target detected (VDT_isTargetDetected 0)')
+                return (f'camera {self.tracker_camera}: tracking {mode} (active: '
+                        f'{state.active}, target detected: {state.target_detected})')
+
+            return self._device_call(run)
+
+        return self.serve_request(response, action)
+
+    def _on_set_output(self, number: int, request, response):
+        def action() -> str:
+            self._device_call(lambda c: c.set_digital_output(number, request.data))
+            self._next_extra.pop('digital_io', None)
+            return f'digital output {number} {"set (on)" if request.data else "reset (off)"}'
+
+        return self.serve_request(response, action)
+
+    def _on_enable(self, request, response):
+        def action() -> str:
+            joints = list(self.joint_names)
+            if request.data:
+                faulted = [j for j in joints
+                           if self.axis_details(j).get('state') == AxisState.STATE_FAULT]
+                if faulted:
+                    raise CommandError(f'{", ".join(faulted)}: drive in fault; call '
+                                       '~/reset_faults (it switches the drives on)')
+
+            def run(client: CaptureClient) -> str:
+                if not request.data:  # stop first: MOT_AxisOff under motion would coast
+                    self._move_generation += 1  # ends running move goals
+                    self.jog_watchdog.cancel()
+                    self._stop_scan_silently()
+                    problems = client.stop_all([self._axis[j] for j in joints])
+                    self._device_scanning = self._preset_looping = False
+                    self._target_looping = False
+                    if problems:
+                        raise DeviceError('stop before switching off failed: '
+                                          + '; '.join(problems))
+                for joint in joints:
+                    client.set_axis_power(self._axis[joint], request.data)
+                self._next_status = 0.0
+                verb = 'on (MOT_AxisOn)' if request.data else 'off (MOT_AxisOff)'
+                return f'drives {verb}: {", ".join(joints)}'
+
+            return self._device_call(run)
+
+        return self.serve_request(response, action)
+
+    def _on_start_target_loop(self, request, response):
+        def action() -> str:
+            joints = self.joint_names[:2]
+            self._refuse_motion(joints)
+
+            def run(client: CaptureClient) -> str:
+                targets = client.stored_targets()
+                if not targets:
+                    raise CommandError('no GPS targets stored; set some with ~/command '
+                                       'GPS_SetTargetLLA')
+                for number, point in targets.items():
+                    pose = self._target_pose(client, point)
+                    try:
+                        validate_joint_command(list(pose), list(pose.values()), [],
+                                               self.limits)
+                    except CommandError as exc:
+                        raise CommandError(f'target {number} (lat {point.latitude:.6f} lon '
+                                           f'{point.longitude:.6f}) is outside the joint '
+                                           f'limits, not looping: {exc}') from None
+                self._leave_device_programs(client)
+                client.run('GPS_StartTargetLooping')
+                self._target_looping = True
+                return f'looping over GPS targets {sorted(targets)}'
+
+            return self._device_call(run)
+
+        return self.serve_request(response, action)
+
+    def _on_stop_target_loop(self, request, response):
+        def action() -> str:
+            self._device_call(lambda c: c.run('GPS_StopTargetLooping'))
+            self._target_looping = False
+            self.stop_axes(None)
+            return 'target looping stopped'
+
+        return self.serve_request(response, action)
+
+    def _on_reset_gyro_drift(self, request, response):
+        def action() -> str:
+            if not self._has_imu:
+                raise CommandError('the controller reports no IMU (IMU_IsReadyImu)')
+            self._device_call(lambda c: c.run('IMU_ResetGyroDriftCompensation',
+                                              self.gyro_drift_sensor))
+            return f'gyro drift compensation of IMU sensor {self.gyro_drift_sensor} reset to 0'
+
+        return self.serve_request(response, action)
+
+    # ----------------------------------------------------------- actions
+    def _run_guarded(self, goal_handle, work: Callable[[Callable[[str], None]], str]):
+        """Run a levelling/drift goal: refused while the pedestal is busy or another runs;
+        feedback through ``report``; cancel, ~/stop and link loss end it."""
+        result = Home.Result()
+        feedback = Home.Feedback()
+
+        def report(state: str) -> None:
+            feedback.state = state
+            goal_handle.publish_feedback(feedback)
+
+        if not self._guarded.acquire(blocking=False):
+            goal_handle.abort()
+            result.message = 'refused: a levelling or drift compensation is already running'
+            return result
+        try:
+            refusal = self.command_refusal() or self._busy_reason()
+            if refusal:
+                raise CommandError(refusal)
+            result.message = work(report)
+            result.success = True
+        except (CommandError, DeviceError, DeviceNack, DeviceTimeout, NotConnected,
+                ProtocolError) as exc:
+            result.success, result.message = False, str(exc)
+        finally:
+            self._guarded.release()
+        if goal_handle.is_cancel_requested:
+            goal_handle.canceled()
+            result.success = False
+        elif result.success:
+            goal_handle.succeed()
+        else:
+            goal_handle.abort()
+        return result
+
+    def _execute_level(self, goal_handle):
+        joints = list(goal_handle.request.joint_names) or list(self.joint_names)
+
+        def work(report: Callable[[str], None]) -> str:
+            unknown = [j for j in joints if j not in self._axis]
+            if unknown:
+                raise CommandError(f'unknown joint(s) {unknown}; this device has '
+                                   f'{list(self.joint_names)}')
+            if not self._has_imu:
+                raise CommandError('levelling needs an IMU on the load; the controller '
+                                   'reports none (IMU_IsReadyImu)')
+            self._refuse_motion(joints)
+            client = self._client()
+            errors = self._level_errors(client, joints)
+            targets = {j: self.from_device(j, client.request('MOT_GetLoadPosition',
+                                                             self._axis[j]) + errors[j])
+                       for j in joints}
+            validate_joint_command(list(targets), list(targets.values()), [], self.limits)
+            self._leave_device_programs(client)
+            for joint in joints:
+                client.run('IMU_Leveling', self._axis[joint])
+            self.commanded_targets.update(targets)
+            return self._wait_level(client, joints, report, goal_handle)
+
+        return self._run_guarded(goal_handle, work)
+
+    def _level_errors(self, client: CaptureClient, joints: Sequence[str]) -> dict[str, float]:
+        """Per joint: device degrees between the IMU angle and its levelling value."""
+        imu = client.imu()
+        errors = {}
+        for joint in joints:
+            axis = self._axis[joint]
+            level = client.request('IMU_getLevelingValue', axis)
+            error = level - imu[IMU_ANGLE_BY_AXIS[axis]]
+            errors[joint] = (error + 180.0) % 360.0 - 180.0  # yaw is 0..360
+        return errors
+
+    def _wait_level(self, client: CaptureClient, joints: Sequence[str],
+                    report: Callable[[str], None], goal_handle) -> str:
+        """Feedback until every IMU angle is at its levelling value and the axes rest."""
+        generation = self._move_generation
+        deadline = time.monotonic() + self.move_timeout
+        tolerance = math.degrees(self.goal_tolerance)
+        while True:
+            errors = self._level_errors(client, joints)
+            sample = self.latest_sample
+            moving = any(sample.moving.get(j, False) for j in joints) if sample else True
+            report(', '.join(f'{j}: {abs(e):.3f} deg from level' for j, e in errors.items())
+                   + (' (moving)' if moving else ''))
+            if all(abs(e) <= tolerance for e in errors.values()) and not moving:
+                return 'levelled ' + ', '.join(f'{j} ({abs(e):.3f} deg)'
+                                               for j, e in errors.items())
+            if goal_handle.is_cancel_requested or generation != self._move_generation:
+                self._stop_quietly(joints)
+                raise CommandError('levelling cancelled; axes stopped')
+            if not self.connected:
+                raise DeviceError('device link lost during levelling')
+            if time.monotonic() > deadline:
+                self._stop_quietly(joints)
+                raise CommandError(f'not level within move_timeout {self.move_timeout:g} s')
+            time.sleep(0.1)
+
+    def _execute_gyro_drift(self, goal_handle):
+        def work(report: Callable[[str], None]) -> str:
+            if goal_handle.request.joint_names:
+                raise CommandError('the drift compensation takes no joint names (it measures '
+                                   f'IMU sensor {self.gyro_drift_sensor}, gyro_drift_sensor)')
+            if not self._has_imu:
+                raise CommandError('the controller reports no IMU (IMU_IsReadyImu)')
+            self._refuse_motion(self.joint_names)
+            client = self._client()
+            sensor = self.gyro_drift_sensor
+            client.run('IMU_GyroDriftCompensation', sensor)
+            generation = self._move_generation
+            start = time.monotonic()
+            while (elapsed := time.monotonic() - start) < self.gyro_drift_time:
+                if goal_handle.is_cancel_requested or generation != self._move_generation:
+                    raise CommandError('drift measurement cancelled (the controller may still '
+                                       'finish it; ~/reset_gyro_drift clears it)')
+                if not self.connected:
+                    raise DeviceError('device link lost during the drift measurement')
+                reason = self._busy_reason()
+                if reason:
+                    raise CommandError(f'the pedestal moved during the drift measurement '
+                                       f'({reason}); the result is not trusted')
+                report(f'holding still while measuring the gyro drift: {elapsed:.1f} of '
+                       f'{self.gyro_drift_time:g} s')
+                time.sleep(0.2)
+            drift = client.request('IMU_GetGyroDrift', sensor)
+            return (f'gyro drift of IMU sensor {sensor}: {drift:.5f} deg/s '
+                    f'({math.radians(drift):.6f} rad/s), compensated by the controller')
+
+        return self._run_guarded(goal_handle, work)
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -62,6 +62,8 @@ SYSTEM_FAULTS = {flag.name: flag.bit for flag in reg.CSR.flags}
 HOMING_SPEED = 30.0  # deg/s, sim: the stored homing profile
 GENERAL_SPEED = 30.0  # deg/s, default CFG_SetGeneralSpd
 TILT_HARD_LIMIT = 95.0  # deg, sim: mechanical limit switches of the tilt axis
+GYRO_BIAS = 0.05  # deg/s, sim: the yaw gyro drift IMU_GyroDriftCompensation measures
+DRIFT_MEASURE_TIME = 2.0  # s (simulated), sim: how long the drift calculation takes
 
 
 @dataclass
@@ -309,10 +311,17 @@ class PedestalModel:
         self.csr_latched = 0
         self.protocol_error = ''
         self.stored: dict[tuple[str, int], object] = {}
-        # video tracker (4.11), per camera index 0..3: mode 0 off/1 manual/2 auto, and the
-        # targets the camera detects (5.1.5 width x height); tests set the latter
-        self.tracking_mode: dict[int, int] = {}
-        self.detected_targets: dict[int, list[tuple[int, int]]] = {}
+        # video tracker per camera index (the group byte, 4.11), GPS target looping,
+        # IMU gyro drift per sensor (4.5.28-30: 0 client, 1 base, 2 load, 3 middle)
+        self.tracker_present = True
+        self.digital_io_present = True  # COM_set/getDigitalIO exist from firmware 2.22.0
+        self.tracker_mode = dict.fromkeys(range(4), 0)  # 0 off, 1 manual, 2 auto
+        # targets each camera detects (5.1.5 width x height, up to 5); none = no detection
+        self.detected_targets: dict[int, list[tuple[int, int]]] = {c: [] for c in range(4)}
+        self.target_looping: list[int] | None = None
+        self.gyro_bias = dict.fromkeys(range(4), GYRO_BIAS)
+        self.gyro_drift = dict.fromkeys(range(4), 0.0)
+        self.drift_measuring: dict[int, float] = {}  # sensor -> simulated seconds left
         # fault injection
         self.nack_queue: deque[tuple[ReplyCode, int | None]] = deque()
         self.drop_replies = 0
@@ -346,6 +355,8 @@ class PedestalModel:
             self._check_keepalive()
             self._advance_scan()
             self._advance_looping()
+            self._advance_target_looping()
+            self._advance_drift_measurement(dt)
             for axis in self.axes.values():
                 axis.step(dt)
 
@@ -359,6 +370,7 @@ class PedestalModel:
             self.keepalive_on = False
             self.scan = None
             self.preset_looping = None
+            self.target_looping = None
             for axis in self.axes.values():
                 axis.halt()
                 axis.axis_on = False
@@ -417,19 +429,55 @@ class PedestalModel:
             nxt = scan.index + scan.direction
         scan.index = nxt
 
-    def _advance_looping(self) -> None:
-        if not self.preset_looping:
-            return
+    def _loop_point_due(self) -> bool:
+        """Preset/target looping: the next point is due once the axes arrived and the
+        looping delay (4.9.9) has passed since."""
         if any(a.target is not None for a in self.axes.values()):
             self._loop_wait_until = time.monotonic() + self.looping_delay_ms / 1000.0 / max(
                 self.time_scale, 1e-6
             )
-            return
-        if time.monotonic() < self._loop_wait_until:
+            return False
+        return time.monotonic() >= self._loop_wait_until
+
+    def _advance_looping(self) -> None:
+        if not self.preset_looping or not self._loop_point_due():
             return
         index = self.preset_looping.pop(0)
         self.preset_looping.append(index)
         self._goto_preset(index)
+
+    def _advance_target_looping(self) -> None:
+        """4.4.14: visit the stored targets in turn, dwelling the looping delay (4.9.9)."""
+        if not self.target_looping or not self._loop_point_due():
+            return
+        number = self.target_looping.pop(0)
+        self.target_looping.append(number)
+        target = self.targets.get(number)
+        if target is not None:
+            azimuth, elevation = aim_at(*self._system_position(), target)
+            self._move_to(self.axes[1], azimuth, self.axes[1].general_speed)
+            self._move_to(self.axes[2], elevation, self.axes[2].general_speed)
+
+    def _advance_drift_measurement(self, dt: float) -> None:
+        for sensor in list(self.drift_measuring):
+            self.drift_measuring[sensor] -= dt
+            if self.drift_measuring[sensor] <= 0.0:
+                del self.drift_measuring[sensor]
+                self.gyro_drift[sensor] = self.gyro_bias[sensor]
+
+    def _tracking_active(self, camera: int) -> bool:
+        """4.11.1: manual and automatic tracking run only while a target is detected."""
+        return self.tracker_mode[camera] in (1, 2) and bool(self.detected_targets[camera])
+
+    def set_target_detected(self, camera: int, detected: bool) -> None:
+        """What the camera sees; losing the target ends manual tracking (4.11.1)."""
+        with self.lock:
+            if not detected:
+                self.detected_targets[camera] = []
+            elif not self.detected_targets[camera]:
+                self.detected_targets[camera] = [(64, 48)]  # one target, 64 x 48 px
+            if not detected and self.tracker_mode[camera] == 1:
+                self.tracker_mode[camera] = 0
 
     def _goto_preset(self, index: int) -> None:
         record = self.presets.get(index, PresetRecord(''))
@@ -575,24 +623,8 @@ class PedestalModel:
         return None
 
     # --- video tracker (4.11): the camera index is the group byte
-    def _do_VDT_setTrackingOn(self, frame, arg, session):
-        if arg not in (0, 1, 2):
-            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
-        self.tracking_mode[frame.group] = arg
-
-    def _do_VDT_isTrackingOn(self, frame, arg, session):
-        # manual and automatic modes both track only while a target is detected (4.11.1)
-        return bool(self.tracking_mode.get(frame.group)) and bool(
-            self.detected_targets.get(frame.group))
-
-    def _do_VDT_isAutoModeOn(self, frame, arg, session):
-        return self.tracking_mode.get(frame.group) == 2
-
-    def _do_VDT_isTargetDetected(self, frame, arg, session):
-        return bool(self.detected_targets.get(frame.group))
-
     def _do_VDT_GetTargetsList(self, frame, arg, session):
-        return self.detected_targets.get(frame.group, [])[:5]
+        return self.detected_targets[self._camera(frame)][:5]
 
     # --- COM
     def _do_COM_Connect(self, frame, arg, session):
@@ -639,6 +671,10 @@ class PedestalModel:
             value |= reg.SYS_SCANNING
         if self.preset_looping:
             value |= reg.SYS_PRESET_LOOPING
+        if any(self._tracking_active(camera) for camera in self.tracker_mode):
+            value |= 1 << 1  # SYS bit 1: tracking active
+        if self.target_looping:
+            value |= 1 << 4  # SYS bit 4: target looping active
         return value
 
     def _do_COM_GetSn(self, frame, arg, session):
@@ -781,6 +817,7 @@ class PedestalModel:
         if not axis.axis_on:
             raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Axis is off')
         self.preset_looping = None
+        self.target_looping = None
         if axis.speed_mode:
             axis.target, axis.jog_velocity = None, axis.speed
             return
@@ -828,6 +865,7 @@ class PedestalModel:
         if self.emergency_stop:
             self.scan = None
             self.preset_looping = None
+            self.target_looping = None
             for axis in self.axes.values():
                 axis.halt()
         else:  # 4.2.20: profiles reset to relative position mode
@@ -905,6 +943,7 @@ class PedestalModel:
             axis.stop()
             axis.speed_mode = False
         self.preset_looping = None
+        self.target_looping = None
         self.scan = ScanState(self._scan_waypoints(pattern))
 
     def _do_SCN_StartScanZigZag(self, frame, arg, session):
@@ -931,6 +970,7 @@ class PedestalModel:
             self._motion_allowed(axis)
         self.scan = None
         self.preset_looping = None
+        self.target_looping = None
         self._goto_preset(frame.axis)
 
     def _do_PRST_ClearAll(self, frame, arg, session):
@@ -1094,6 +1134,79 @@ class PedestalModel:
         self._move_to(self.axes[1], azimuth, self.axes[1].general_speed)
         self._move_to(self.axes[2], elevation, self.axes[2].general_speed)
 
+    def _do_GPS_StartTargetLooping(self, frame, arg, session):
+        self._motion_allowed()
+        if not self.targets:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'No targets stored')
+        self.scan = None
+        self.preset_looping = None
+        self.target_looping = sorted(self.targets)
+        self._loop_wait_until = 0.0
+
+    def _do_GPS_StopTargetLooping(self, frame, arg, session):
+        self.target_looping = None
+
+    # --- IMU levelling and gyro drift (sim: the IMU sits on the load)
+    def _do_IMU_Leveling(self, frame, arg, session):
+        axis = self._axis(frame)
+        self._motion_allowed(axis)
+        if not axis.axis_on:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Axis is off')
+        level = float(self.stored.get(('IMU_levelingvalue', frame.axis), 0.0))
+        # 4.5.11: the axis turns until the IMU angle reads the levelling value; the sim's
+        # IMU yaw is heading + axis 1, pitch is axis 2 and roll is axis 3
+        target = level - self.gps_heading if frame.axis == 1 else level
+        self.scan = None
+        self.preset_looping = self.target_looping = None
+        self._move_to(axis, target, axis.general_speed)
+
+    def _do_IMU_GyroDriftCompensation(self, frame, arg, session):
+        self.drift_measuring[frame.axis] = DRIFT_MEASURE_TIME
+
+    def _do_IMU_ResetGyroDriftCompensation(self, frame, arg, session):
+        self.drift_measuring.pop(frame.axis, None)
+        self.gyro_drift[frame.axis] = 0.0
+
+    def _do_IMU_GetGyroDrift(self, frame, arg, session):
+        return self.gyro_drift[frame.axis]
+
+    # --- digital I/O (4.6.17-18); the console's 'dio' changes an input
+    def _require_digital_io(self) -> None:
+        if not self.digital_io_present:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Opcode not Recognized')
+
+    def _do_COM_setDigitalIO(self, frame, arg, session):
+        self._require_digital_io()
+        self.stored[('COM_digitalio', frame.axis)] = int(arg)
+
+    def _do_COM_getDigitalIO(self, frame, arg, session):
+        self._require_digital_io()
+        return self.stored.get(('COM_digitalio', frame.axis), 0)
+
+    # --- video tracker (4.11): the camera index travels in the group byte
+    def _camera(self, frame: Frame) -> int:
+        if not self.tracker_present:
+            raise RequestRejected(ReplyCode.VIDEO_TRACKER_UNAVAILABLE, 'No video tracker')
+        if frame.group not in self.tracker_mode:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid camera index')
+        return frame.group
+
+    def _do_VDT_setTrackingOn(self, frame, arg, session):
+        camera = self._camera(frame)
+        if arg not in (0, 1, 2):
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
+        # 4.11.1: manual tracking starts only if a target is detected right now
+        self.tracker_mode[camera] = 0 if arg == 1 and not self.detected_targets[camera] else arg
+
+    def _do_VDT_isTrackingOn(self, frame, arg, session):
+        return self._tracking_active(self._camera(frame))
+
+    def _do_VDT_isAutoModeOn(self, frame, arg, session):
+        return self.tracker_mode[self._camera(frame)] == 2
+
+    def _do_VDT_isTargetDetected(self, frame, arg, session):
+        return bool(self.detected_targets[self._camera(frame)])
+
 
 class CaptureSession:
     """One connection: byte parsing, the TCP greeting and reply generation."""
@@ -1202,6 +1315,16 @@ class CaptureSimulator:
                         model.unknown_opcodes.add(opcode)
             elif verb == 'pose':
                 model.set_pose(int(args[0]), float(args[1]))
+            elif verb == 'count':
+                opcode = COMMANDS[args[0]].opcode
+                with model.lock:
+                    return f'ok {sum(1 for f in model.requests if f.opcode == opcode)}'
+            elif verb == 'detect':
+                model.set_target_detected(int(args[0]), args[1].lower() in ('1', 'on', 'true'))
+            elif verb == 'dio':
+                with model.lock:
+                    model.stored[('COM_digitalio', int(args[0]))] = int(
+                        args[1].lower() in ('1', 'on', 'true'))
             elif verb == 'state':
                 with model.lock:
                     return 'ok ' + json.dumps({
@@ -1212,6 +1335,12 @@ class CaptureSimulator:
                         'preset_looping': bool(model.preset_looping),
                         'emergency_stop': model.emergency_stop,
                         'presets': sorted(model.presets),
+                        'target_looping': bool(model.target_looping),
+                        'tracker_mode': model.tracker_mode,
+                        'gyro_drift': model.gyro_drift,
+                        'digital_io': {n: model.stored.get(('COM_digitalio', n), 0)
+                                       for n in range(1, 7)},
+                        'lrf_measuring': bool(model.stored.get(('LRF_measuring', 0))),
                         'keepalive': model.keepalive_on,
                         'requests': len(model.requests),
                         'requests_by_command': dict(Counter(
@@ -1231,7 +1360,8 @@ class CaptureSimulator:
 CONTROL_HELP = (
     'fault AXIS NAME (NAME in ' + ','.join(FAULTS) + ') | system_fault CSR_FLAG | '
     'nack HEXCODE [COMMAND|*] [COUNT] | lose [COUNT] | garbage [HEX] | drop [OFFLINE_S] | '
-    'silent on|off | unknown COMMAND [on|off] | pose AXIS DEG | state | help'
+    'silent on|off | unknown COMMAND [on|off] | pose AXIS DEG | detect CAMERA on|off | '
+    'dio N 0|1 | count COMMAND | state | help'
 )
 
 
@@ -1257,6 +1387,23 @@ def serve_control(sim: CaptureSimulator, port: int, ready: Callable[[int], None]
         threading.Thread(target=serve, args=(conn,), daemon=True).start()
 
 
+def control(port: int, line: str, timeout: float = 5.0) -> str:
+    """Send one console command to a running simulator; its answer line (tests, users)."""
+    with socket.create_connection((LOOPBACK, port), timeout=timeout) as sock:
+        stream = sock.makefile('rw')
+        stream.write(line + '\n')
+        stream.flush()
+        return stream.readline().strip()
+
+
+def console_state(port: int) -> dict:
+    """The console's ``state`` answer as a dict (raises if the simulator refuses)."""
+    answer = control(port, 'state')
+    if not answer.startswith('ok '):
+        raise RuntimeError(f'capture_sim state: {answer}')
+    return json.loads(answer[3:])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog='capture_sim',
@@ -1269,6 +1416,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--axes', type=int, default=2, choices=(2, 3))
     parser.add_argument('--no-gps', action='store_true', help='simulate a system without GPS')
     parser.add_argument('--no-imu', action='store_true', help='simulate a manual system')
+    parser.add_argument('--no-digital-io', action='store_true',
+                        help='firmware before 2.22.0: no COM_set/getDigitalIO')
     parser.add_argument('--gear-ratio', type=float, default=1.0)
     parser.add_argument('--time-scale', type=float, default=1.0,
                         help='simulated seconds per real second (faster tests)')
@@ -1286,6 +1435,7 @@ def main(argv: list[str] | None = None) -> int:
     model = PedestalModel(axes=args.axes, gps=not args.no_gps, imu=not args.no_imu,
                           gear_ratio=args.gear_ratio, time_scale=args.time_scale,
                           unknown_commands=args.unknown)
+    model.digital_io_present = not args.no_digital_io
     sim = CaptureSimulator(model, tcp_port=None if args.port < 0 else args.port,
                            pty=args.pty, pty_link=args.pty_link)
     sim.start()

@@ -7,9 +7,7 @@ and one node serve the whole module; tests run in file order (link drop last). W
 
 from __future__ import annotations
 
-import json
 import math
-import socket
 
 import pytest
 
@@ -19,6 +17,8 @@ from rcl_interfaces.msg import Log
 from sensor_msgs.msg import Imu, JointState, NavSatFix
 from std_srvs.srv import SetBool, Trigger
 
+from capture_driver.sim import console_state as sim_state
+from capture_driver.sim import control
 from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
@@ -28,6 +28,7 @@ from gimbal_msgs.srv import (
     DeviceCommand,
     GotoPreset,
     ListPresets,
+    SetMode,
     SetPreset,
     StartScan,
 )
@@ -40,20 +41,6 @@ NODE = 'capture_driver'
 
 def srv(name: str) -> str:
     return f'/{NODE}/{name}'
-
-
-def control(port: int, line: str) -> str:
-    with socket.create_connection(('127.0.0.1', port), timeout=5.0) as sock:
-        stream = sock.makefile('rw')
-        stream.write(line + '\n')
-        stream.flush()
-        return stream.readline().strip()
-
-
-def sim_state(port: int) -> dict:
-    answer = control(port, 'state')
-    assert answer.startswith('ok '), answer
-    return json.loads(answer[3:])
 
 
 @pytest.fixture(scope='module')
@@ -259,10 +246,10 @@ def test_command_service(rig):
     assert run('STB_GetSpdKp', 2).results == ['1.5 factor']
     assert run('PELCOD_SetMaxSpd', 1, ['40']).success
     assert run('PELCOD_GetMaxSpd', 1).results == ['40 deg/s']
-    assert run('VDT_setTrackingOn', 1, ['2']).success  # camera 1, automatic
-    assert run('VDT_isAutoModeOn', 1).results == ['True flag']
+    refused = run('VDT_setTrackingOn', 1, ['2'])  # moves the axes: ~/set_tracking checks
+    assert not refused.success and '~/set_tracking' in refused.message, refused.message
+    assert run('VDT_isAutoModeOn', 1).results == ['False flag']  # camera 1, group byte
     assert run('VDT_GetTargetsList', 1).results == [f'target{i}=0x0' for i in range(1, 6)]
-    assert run('VDT_setTrackingOn', 1, ['0']).success
     assert run('DG_GetBoresightOffset', 3).message.count('1, 2, 4, 5') == 1
     for name, args, opt_in in (('PELCOD_SetAddress', ['5'], 'allow_network_config'),
                                ('STB_SaveStabilizationCfg', [], 'allow_nv_write')):
@@ -358,8 +345,7 @@ def test_motion_on_faulted_or_off_axis_is_refused_and_reset_quotes_device(rig):
     status = ros.wait_for_diagnostic(NODE, 'pan', lambda s: s.level == b'\x02')
     assert 'SRH.fault' in {kv.key for kv in status.values}
     assert_motion_refused(ros, control_port, 'pan is faulted')
-    stop_tracking = ros.call(DeviceCommand, srv('command'), DeviceCommand.Request(
-        command='VDT_setTrackingOn', axis=0, arguments=['0']))
+    stop_tracking = ros.call(SetMode, srv('set_tracking'), SetMode.Request(mode='off'))
     assert stop_tracking.success, stop_tracking.message  # switching off is never refused
     # A device that does not know MOT_ResetFaults: the reply quotes its answer.
     assert control(control_port, 'unknown MOT_ResetFaults') == 'ok'
@@ -414,6 +400,10 @@ def test_dropped_link_reconnects_and_diagnostics_report_it(rig):
     ('axis_ids:=[1,1]', 'axis_ids'),
     ('joint_directions:=[1.0,0.5]', 'joint_directions'),
     ('transport:=udp', 'transport'),
+    ('range_min:=6000.0', 'range_min'),  # range_max defaults to 5000 m
+    ('digital_outputs:=[2,7]', 'digital_outputs'),
+    ('digital_outputs:=[3,3]', 'digital_outputs'),
+    ('tracker_camera:=4', 'tracker_camera'),
 ])
 def test_invalid_parameters_are_refused_naming_them(override, name):
     with DomainLease() as domain:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import socket
 
 import pytest
 
@@ -12,6 +11,7 @@ pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
+from capture_driver.sim import control
 from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
 from gimbal_msgs.action import MoveTo
@@ -19,14 +19,6 @@ from gimbal_msgs.action import MoveTo
 pytestmark = pytest.mark.ros
 
 PKG = 'capture_driver'
-
-
-def control(port: int, line: str) -> str:
-    with socket.create_connection(('127.0.0.1', port), timeout=5.0) as sock:
-        stream = sock.makefile('rw')
-        stream.write(line + '\n')
-        stream.flush()
-        return stream.readline().strip()
 
 
 def connection_level(array: DiagnosticArray) -> bytes | None:

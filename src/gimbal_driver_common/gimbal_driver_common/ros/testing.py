@@ -197,6 +197,7 @@ class RosTestClient:
     ) -> tuple[Any, int, list[Any]]:
         """Send a goal and wait for its result: (result, status, feedback messages)."""
         client = self._clients.get((action_type, name))
+        new_client = client is None
         if client is None:
             with _TYPE_SUPPORT_LOCK:
                 client = ActionClient(self.node, action_type, name)
@@ -204,6 +205,11 @@ class RosTestClient:
         feedback: list[Any] = []
         if not client.wait_for_server(timeout_sec=timeout):
             raise TimeoutError(f'action {name} not available after {timeout:g} s')
+        if new_client:
+            # As in publish(): discovery is not symmetric. The server can be visible here
+            # before it has matched this client's reply readers, and its goal-accept reply
+            # sent then is lost (seen under load: a first goal never accepted).
+            time.sleep(0.5)
         send = client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(
             f.feedback))
         wait_for(send.done, timeout, f'{name} to accept the goal')
