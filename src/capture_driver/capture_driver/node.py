@@ -550,10 +550,11 @@ class CaptureDriverNode(GimbalDriverNode):
             if 'fault' in names or faults:
                 reasons.append(f'{joint} is faulted ({", ".join(faults) or "fault"})')
             elif 'axis_off' in names:
-                reasons.append(f'{joint} drive is off (SRL axis_off)')
+                reasons.append(f'{joint} drive is off (SRL axis_off); switch it on with '
+                               '~/enable')
         if not reasons:
             return None
-        return '; '.join(reasons) + '; call ~/reset_faults (MOT_ResetFaults + MOT_AxisOn)'
+        return '; '.join(reasons) + '; ~/reset_faults clears faults (MOT_ResetFaults + MOT_AxisOn)'
 
     def home(self, joints: Sequence[str], report: Callable[[str], None],
              cancelled: threading.Event) -> str:
@@ -1120,16 +1121,6 @@ class CaptureDriverNode(GimbalDriverNode):
             return math.nan
 
     # ------------------------------------------------------------ guards
-    def _drive_refusal(self, joints: Sequence[str]) -> str | None:
-        """A joint whose drive is off or faulted (from the last register read), or None."""
-        for joint in joints:
-            state = self.axis_details(joint).get('state')
-            if state == AxisState.STATE_FAULT:
-                return f'{joint}: drive in fault; call ~/reset_faults first'
-            if state == AxisState.STATE_DISABLED:
-                return f'{joint}: drive is off; switch it on with ~/enable first'
-        return None
-
     def _busy_reason(self) -> str | None:
         """Why the pedestal is not at rest for a guarded operation, or None."""
         if self._device_scanning or (self._scan_thread is not None
@@ -1144,7 +1135,7 @@ class CaptureDriverNode(GimbalDriverNode):
         return None
 
     def _refuse_motion(self, joints: Sequence[str]) -> None:
-        refusal = self.motion_refusal(joints) or self._drive_refusal(joints)
+        refusal = self.motion_refusal(joints)
         if refusal:
             raise CommandError(refusal)
 
