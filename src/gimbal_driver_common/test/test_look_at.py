@@ -7,6 +7,7 @@ import math
 import pytest
 
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
+from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.ros.look_at_testing import LookAtCheck, installed_description
@@ -87,3 +88,18 @@ def test_look_at_with_an_empty_frame_and_a_speed(rig):
     result, _, _ = check.look_at(check.point_for(-0.3, 0.2), frame='', speed=0.5)
     assert result.success, result.message
     assert list(result.positions) == pytest.approx([-0.3, 0.2], abs=0.02)
+
+
+def test_look_at_asks_the_motion_refusal_first(rig):
+    check, port = rig
+    point = check.point_for(0.4, 0.0)  # joint_states stop while inactive
+    assert check.ros.lifecycle_transition(NODE, Transition.TRANSITION_DEACTIVATE)
+    try:
+        before = device_state(port)
+        result, _, _ = check.look_at(point)
+        assert not result.success
+        assert 'nothing sent' in result.message and 'not active' in result.message
+        assert device_state(port) == before
+    finally:
+        assert check.ros.lifecycle_transition(NODE, Transition.TRANSITION_ACTIVATE)
+    check.look_and_reach(0.4, 0.0)
