@@ -91,3 +91,11 @@ def test_look_at_beyond_the_tilt_limit_is_refused_and_sends_nothing(rig):
 def test_look_at_in_another_frame_is_refused(rig):
     check, _ = rig
     check.refused(check.point_for(0.0, 0.0), 'transform the point first', frame='world')
+
+
+def test_look_at_outside_the_calibrated_range_is_refused_by_the_client_check(rig):
+    check, control_port = rig
+    before = motor_rotations(control_port)
+    # pan -90 deg is inside the node's limits but below the pan motor's begin mark (0 rot)
+    check.refused(check.point_for(-math.pi / 2, 0.0), 'calibrated range')
+    assert motor_rotations(control_port) == before
