@@ -244,7 +244,8 @@ class AimingChain:
 
 
 def nearest_in_limits(angle: float, lower: float, upper: float, current: float) -> float | None:
-    """The ``angle + 2*pi*k`` inside [lower, upper] closest to ``current``, or None."""
+    """The ``angle + 2*pi*k`` inside [lower, upper] closest to ``current`` (on a tie, the
+    one nearer zero), or None."""
     if not math.isfinite(current):
         current = 0.0
     turns = round((current - angle) / (2.0 * math.pi))
@@ -256,4 +257,4 @@ def nearest_in_limits(angle: float, lower: float, upper: float, current: float) 
     inside = [c for c in candidates if lower - 1e-9 <= c <= upper + 1e-9]
     if not inside:
         return None
-    return min(inside, key=lambda c: abs(c - current))
+    return min(inside, key=lambda c: (round(abs(c - current), 9), abs(c)))

@@ -148,3 +148,4 @@ def test_nearest_in_limits_picks_the_turn_closest_to_now() -> None:
     assert nearest_in_limits(3.0, -10.0, 10.0, 8.0) == pytest.approx(3.0 + 2 * math.pi)
     assert nearest_in_limits(-3.0, -1.0, 1.0, 0.0) is None
     assert nearest_in_limits(2.5, 3.0, 9.0, 0.0) == pytest.approx(2.5 + 2 * math.pi)
+    assert nearest_in_limits(-math.pi / 2, -10.0, 10.0, math.pi / 2) == pytest.approx(-math.pi / 2)

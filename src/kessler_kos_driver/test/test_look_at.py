@@ -15,17 +15,20 @@ import pytest
 
 pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
-from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.ros.look_at_testing import LookAtCheck, installed_description
-from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.ros.look_at_testing import (
+    LookAtCheck,
+    LookAtRig,
+    LookAtSuite,
+    installed_description,
+    node_against_sim,
+)
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
 from kessler_kos_driver.sim import control
 
 pytestmark = pytest.mark.ros
 
 PKG = 'kessler_kos_driver'
-NODE = 'kessler_kos_driver'
 PASSWORD = 'Zq8-kos-secret'
 TWO_PI = 2 * math.pi
 
@@ -37,65 +40,41 @@ def motor_rotations(control_port: int) -> dict[str, float]:
 
 
 @pytest.fixture(scope='module')
-def rig():
+def look_at_rig():
     with DomainLease() as domain:
         port, control_port = free_tcp_port(), free_tcp_port()
         sim = ManagedProcess.ros(PKG, 'kessler_kos_sim', domain, [
             '--port', str(port), '--control-port', str(control_port), '--discovery-port', '0',
             '--password', PASSWORD, '--precalibrated', '--time-scale', '2'])
-        node = None
-        try:
+
+        def start_node() -> ManagedProcess:
             sim.wait_for_output('listening')
-            node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain, [
+            return ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain, [
                 '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
                 '-p', f'password:={PASSWORD}', '-p', 'reconnect_period:=0.2',
                 '-p', 'publish_rate:=20.0',
                 '-p', f'joint_scales:=[{TWO_PI}, {TWO_PI}, {-TWO_PI}]',
                 '-p', 'position_min:=[-1000.0, -1000.0, -0.8]'])
-            with RosTestClient(domain) as ros:
-                ros.wait_for_message('joint_states', JointState, timeout=30)
-                yield LookAtCheck(ros, NODE, installed_description(PKG)), control_port
-        finally:
-            if node is not None:
-                node.stop()
-            sim.stop()
+
+        with node_against_sim(domain, sim, start_node) as ros:
+            check = LookAtCheck(ros, PKG, installed_description(PKG))
+            yield LookAtRig(check, lambda: motor_rotations(control_port))
 
 
-def test_look_at_straight_ahead(rig):
-    check, _ = rig
-    check.look_and_reach(0.0, 0.0)
+class TestLookAt(LookAtSuite):
+    def test_look_at_moves_pan_and_tilt_and_holds_the_slider(
+            self, look_at_rig: LookAtRig) -> None:
+        slider = look_at_rig.device_state()['slider']
+        look_at_rig.check.look_and_reach(math.pi / 2, LookAtSuite.UP)
+        rotations = look_at_rig.device_state()
+        assert rotations['pan'] == pytest.approx(0.25, abs=0.01)
+        assert rotations['tilt'] == pytest.approx(-LookAtSuite.UP / TWO_PI, abs=0.01)
+        assert rotations['slider'] == pytest.approx(slider, abs=1e-3)
 
-
-def test_look_at_to_the_left(rig):
-    check, control_port = rig
-    check.look_and_reach(math.pi / 2, 0.0)
-    assert motor_rotations(control_port)['pan'] == pytest.approx(0.25, abs=0.01)
-
-
-def test_look_at_up_holds_the_slider(rig):
-    check, control_port = rig
-    slider = motor_rotations(control_port)['slider']
-    check.look_and_reach(0.0, 0.5)
-    rotations = motor_rotations(control_port)
-    assert rotations['tilt'] == pytest.approx(-0.5 / TWO_PI, abs=0.01)  # negative joint scale
-    assert rotations['slider'] == pytest.approx(slider, abs=1e-3)
-
-
-def test_look_at_beyond_the_tilt_limit_is_refused_and_sends_nothing(rig):
-    check, control_port = rig
-    before = motor_rotations(control_port)
-    check.refused(check.point_for(0.0, -1.2), 'position_min')
-    assert motor_rotations(control_port) == before
-
-
-def test_look_at_in_another_frame_is_refused(rig):
-    check, _ = rig
-    check.refused(check.point_for(0.0, 0.0), 'transform the point first', frame='world')
-
-
-def test_look_at_outside_the_calibrated_range_is_refused_by_the_client_check(rig):
-    check, control_port = rig
-    before = motor_rotations(control_port)
-    # pan -90 deg is inside the node's limits but below the pan motor's begin mark (0 rot)
-    check.refused(check.point_for(-math.pi / 2, 0.0), 'calibrated range')
-    assert motor_rotations(control_port) == before
+    def test_look_at_outside_the_calibrated_range_is_refused_by_the_client_check(
+            self, look_at_rig: LookAtRig) -> None:
+        check = look_at_rig.check
+        check.look_and_reach(0.0, 0.0)  # from pan 0, -90 deg is nearer than +270 deg
+        # pan -90 deg is inside the node's limits but below the pan motor's begin mark (0 rot)
+        check.refused(check.point_for(-math.pi / 2, 0.0), 'calibrated range',
+                      device_commands=look_at_rig.device_state)

@@ -1,5 +1,9 @@
 """The ~/look_at checks every driver's process-level tests run against its simulator.
 
+A driver's tests subclass :class:`LookAtSuite` as ``TestLookAt`` and give a
+``look_at_rig`` fixture (simulator and node processes, see :func:`node_against_sim`)
+that yields a :class:`LookAtRig`.
+
 Target points are made from the package's URDF by forward kinematics (the point 5 m
 along the camera's line of sight at a chosen pan and tilt), so the expected joint
 positions are exact whatever the mounting offsets; the description tests check the
@@ -8,8 +12,10 @@ forward kinematics and the REP-103 signs on their own.
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -18,6 +24,7 @@ from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.kinematics import AimingChain
 from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
+from gimbal_driver_common.testing import ManagedProcess
 from gimbal_msgs.action import LookAt
 from gimbal_msgs.msg import GimbalStatus
 
@@ -84,7 +91,8 @@ class LookAtCheck:
     def refused(self, point: Sequence[float], expected: str, frame: str = 'base_link',
                 speed: float = 0.0,
                 device_commands: Callable[[], object] | None = None) -> object:
-        """look_at must answer success=false naming ``expected`` and send nothing."""
+        """look_at must answer success=false naming ``expected`` and send nothing
+        (``device_commands()``, e.g. the simulator's state, must not change)."""
         targets = self.commanded_targets()
         commands = device_commands() if device_commands else None
         result, status, _ = self.look_at(point, frame=frame, speed=speed)
@@ -103,3 +111,62 @@ def _same(a: Sequence[float], b: Sequence[float]) -> bool:
     return len(a) == len(b) and all(
         (math.isnan(x) and math.isnan(y)) or x == y for x, y in zip(a, b, strict=True))
 
+
+
+@contextlib.contextmanager
+def node_against_sim(domain: int, sim: ManagedProcess, start_node: Callable[[], ManagedProcess],
+                     timeout: float = 40.0) -> Iterator[RosTestClient]:
+    """``start_node()`` (which waits for the simulator first), then a test client once
+    joint_states flow; both processes are stopped afterwards, whatever happened."""
+    node = None
+    try:
+        node = start_node()
+        with RosTestClient(domain) as ros:
+            ros.wait_for_message('joint_states', JointState, timeout=timeout, fresh=False)
+            yield ros
+    finally:
+        if node is not None:
+            node.stop()
+        sim.stop()
+
+
+@dataclass
+class LookAtRig:
+    """What the suite needs from a driver: the check, and the device's state as the
+    simulator reports it (any comparable value that changes when a command arrives)."""
+
+    check: LookAtCheck
+    device_state: Callable[[], object]
+    simulator: object = None  # the simulator's control handle, for the driver's own checks
+
+
+class LookAtSuite:
+    """The look_at cases every driver passes: ahead, left, up, beyond the limits, other
+    frames. The node must run with a tilt lower limit above ``BELOW_LIMIT``."""
+
+    UP = 0.5  # rad of tilt for the "up" case
+    BELOW_LIMIT = -1.2  # rad of tilt: beyond every rig's lower tilt limit
+
+    def test_look_at_straight_ahead(self, look_at_rig: LookAtRig) -> None:
+        look_at_rig.check.look_and_reach(0.0, 0.0)
+
+    def test_look_at_to_the_left(self, look_at_rig: LookAtRig) -> None:
+        check = look_at_rig.check
+        assert check.point_for(math.pi / 2, 0.0)[1] > 0.0  # REP-103: left is +y
+        check.look_and_reach(math.pi / 2, 0.0)
+
+    def test_look_at_up(self, look_at_rig: LookAtRig) -> None:
+        check = look_at_rig.check
+        assert check.point_for(0.0, self.UP)[2] > check.point_for(0.0, 0.0)[2]  # up is +z
+        check.look_and_reach(0.0, self.UP)
+
+    def test_look_at_beyond_the_tilt_limit_is_refused_and_sends_nothing(
+            self, look_at_rig: LookAtRig) -> None:
+        check = look_at_rig.check
+        check.refused(check.point_for(0.0, self.BELOW_LIMIT), 'position_min',
+                      device_commands=look_at_rig.device_state)
+
+    def test_look_at_in_another_frame_is_refused(self, look_at_rig: LookAtRig) -> None:
+        check = look_at_rig.check
+        check.refused(check.point_for(0.0, 0.0), 'transform the point first', frame='map',
+                      device_commands=look_at_rig.device_state)
