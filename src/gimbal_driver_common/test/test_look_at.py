@@ -18,11 +18,13 @@ from gimbal_driver_common.ros.look_at_testing import (
 )
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
 from gimbal_driver_common.virtual_gimbal import VirtualGimbalClient
+from gimbal_msgs.action import LookAt
 
 pytestmark = pytest.mark.ros
 
 PKG = 'gimbal_driver_common'
 NODE = 'virtual_gimbal'
+GOAL_CANCELED = 5
 
 
 def device_state(port: int) -> str:
@@ -79,3 +81,15 @@ class TestLookAt(LookAtSuite):
         finally:
             assert check.ros.lifecycle_transition(NODE, Transition.TRANSITION_ACTIVATE)
         check.look_and_reach(0.4, 0.0)
+
+    def test_look_at_cancel_stops_the_axes(self, look_at_rig: LookAtRig) -> None:
+        check = look_at_rig.check
+        goal_point = check.point_for(-2.0, 0.3)  # 2+ rad away at 0.2 rad/s: 10 s or more
+        goal = LookAt.Goal(speed=0.2)
+        goal.target.header.frame_id = 'base_link'
+        goal.target.point.x, goal.target.point.y, goal.target.point.z = goal_point
+        result, status, _ = check.ros.run_action(
+            LookAt, f'/{NODE}/look_at', goal, timeout=60, cancel_after=1.0)
+        assert status == GOAL_CANCELED
+        assert not result.success and result.message == 'cancelled'
+        assert result.positions[0] > -2.0 + 0.1  # stopped on the way
