@@ -11,7 +11,6 @@ drivers' sign conversions (Capture joint_directions, U-Camera pan) stay in the d
 from __future__ import annotations
 
 import math
-import threading
 from pathlib import Path
 
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
@@ -73,7 +72,6 @@ class LookAtMixin:
             'look_at_frame', DEFAULT_AIM_FRAME,
             'link of the description whose +x axis ~/look_at points at the target',
         )
-        self._aiming_lock = threading.Lock()
         self.aiming_chain: AimingChain | None = None
         self.aiming_error = ''
         try:
@@ -149,27 +147,33 @@ class LookAtMixin:
         if not current:
             raise LookAtRefused('no joint position received yet')
         point = goal.target.point
-        with self._aiming_lock:
-            try:
-                angles = chain.solve((point.x, point.y, point.z), current)
-            except KinematicsError as exc:
-                raise LookAtRefused(str(exc)) from exc
-        positions = []
-        for joint in joints:
+        try:
+            angles = chain.solve((point.x, point.y, point.z), current)
+        except KinematicsError as exc:
+            raise LookAtRefused(str(exc)) from exc
+        # Pan: the turn of the solution inside the limits nearest to where pan is now (a
+        # pan range wider than one turn has several); tilt has one solution.
+        pan_limits = self.limits[chain.pan_joint]
+        reachable = {
+            chain.pan_joint: nearest_in_limits(
+                angles[chain.pan_joint], pan_limits.position_min, pan_limits.position_max,
+                current.get(chain.pan_joint, 0.0)),
+            chain.tilt_joint: angles[chain.tilt_joint],
+        }
+        for joint, position in reachable.items():
             limits = self.limits[joint]
-            reachable = nearest_in_limits(
-                angles[joint], limits.position_min, limits.position_max,
-                current.get(joint, 0.0),
-            ) if joint == chain.pan_joint else angles[joint]
-            if reachable is None or not (
-                    limits.position_min - 1e-9 <= reachable <= limits.position_max + 1e-9):
+            if position is None or not (
+                    limits.position_min - 1e-9 <= position <= limits.position_max + 1e-9):
                 raise LookAtRefused(
                     f'point ({point.x:.3f}, {point.y:.3f}, {point.z:.3f}) m needs {joint} '
                     f'{angles[joint]:.4f} rad ({math.degrees(angles[joint]):.1f} deg), '
                     f'outside position_min {limits.position_min:.4f} .. position_max '
                     f'{limits.position_max:.4f}'
                 )
-            positions.append(min(max(reachable, limits.position_min), limits.position_max))
+        positions = [
+            min(max(reachable[j], self.limits[j].position_min), self.limits[j].position_max)
+            for j in joints
+        ]
         return joints, positions
 
     def _execute_look_at(self, goal_handle) -> LookAt.Result:
