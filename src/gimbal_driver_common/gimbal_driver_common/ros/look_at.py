@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
 
 from gimbal_driver_common.kinematics import (
     DEFAULT_AIM_FRAME,
@@ -32,7 +33,7 @@ class LookAtRefused(Exception):
 class _MoveGoalView:
     """A LookAt goal handle seen as a MoveTo goal handle by the base node's move path."""
 
-    def __init__(self, handle, request: MoveTo.Goal) -> None:
+    def __init__(self, handle: ServerGoalHandle, request: MoveTo.Goal) -> None:
         self._handle = handle
         self.request = request
 
@@ -176,7 +177,7 @@ class LookAtMixin:
         ]
         return joints, positions
 
-    def _execute_look_at(self, goal_handle) -> LookAt.Result:
+    def _execute_look_at(self, goal_handle: ServerGoalHandle) -> LookAt.Result:
         result = LookAt.Result()
         try:
             joints, positions = self.plan_look_at(goal_handle.request)
