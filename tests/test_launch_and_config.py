@@ -92,11 +92,13 @@ def launch_stubs(monkeypatch):
     yield
 
 
-def run_launch_file(path: Path) -> list[Recorded]:
+def run_launch_file(path: Path, arguments: dict[str, str] | None = None) -> list[Recorded]:
+    """Run a launch file as `ros2 launch` would with ``arguments`` (name:=value)."""
     spec = importlib.util.spec_from_file_location(f'launch_under_test_{path.stem}', path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     module.generate_launch_description()
+    LAUNCH_DEFAULTS.update(arguments or {})
     for action in list(Recorded.instances):
         if type(action).__name__ == 'OpaqueFunction':
             action.kwargs['function'](object(), *action.kwargs.get('args', ()))
@@ -135,6 +137,31 @@ def test_launch_file_runs_and_starts_the_driver(launch_stubs, pkg: str, path: Pa
             if isinstance(entry, dict):
                 unknown = set(entry) - declared_parameters(pkg)
                 assert not unknown, f'{path.name} sets undeclared parameters {unknown}'
+
+
+@pytest.mark.parametrize('pkg', list(DRIVERS))
+def test_use_description_starts_robot_state_publisher_with_the_urdf(launch_stubs, pkg: str) -> None:
+    from gimbal_driver_common.kinematics import AimingChain
+
+    path = SRC / pkg / 'launch' / f'{pkg}.launch.py'
+    by_default = run_launch_file(path)
+    assert not [n for n in by_default if n.kwargs['executable'] == 'robot_state_publisher']
+    Recorded.instances = []
+    LAUNCH_DEFAULTS.clear()
+    nodes = run_launch_file(path, {'use_description': 'true'})
+    publishers = [n for n in nodes if n.kwargs['executable'] == 'robot_state_publisher']
+    assert len(publishers) == 1, f'{path.name} with use_description:=true'
+    assert publishers[0].kwargs['package'] == 'robot_state_publisher'
+    description = publishers[0].kwargs['parameters'][0]['robot_description']
+    chain = AimingChain.from_xml(description)  # the installed URDF of this package
+    assert chain.base_frame == 'base_link'
+    driver = next(n for n in nodes if n.kwargs['executable'] == DRIVERS[pkg])
+    given = [p for p in driver.kwargs['parameters'] if isinstance(p, dict)]
+    # the node aims ~/look_at with the same file robot_state_publisher publishes
+    sources = [p['description_file'] for p in given if 'description_file' in p]
+    assert len(sources) == 1
+    assert sources[0].perform(None) == LAUNCH_DEFAULTS['description_file']
+    assert LAUNCH_DEFAULTS['description_file'].endswith(f'share/{pkg}/urdf/{pkg}.urdf')
 
 
 @pytest.mark.parametrize(('pkg', 'path'), config_files(), ids=lambda v: getattr(v, 'name', v))

@@ -2,6 +2,8 @@
 
 ros2 launch capture_driver capture_driver.launch.py [params_file:=...] [autostart:=true]
 With autostart false (the default here) a lifecycle manager configures and activates it.
+use_description:=true also starts robot_state_publisher with urdf/capture_driver.urdf
+(or description_file:=...), which the node uses for ~/look_at too.
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """
 
@@ -13,6 +15,8 @@ from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode
 
+from gimbal_driver_common.ros.description_launch import description_actions, description_parameter
+
 
 def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory('capture_driver')
@@ -23,6 +27,7 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument('autostart', default_value='false',
                               description='true: the node walks itself to active'),
         DeclareLaunchArgument('namespace', default_value=''),
+        *description_actions('capture_driver', LaunchConfiguration('namespace')),
         LifecycleNode(
             package='capture_driver',
             executable='capture_driver_node',
@@ -30,6 +35,7 @@ def generate_launch_description() -> LaunchDescription:
             namespace=LaunchConfiguration('namespace'),
             output='screen',
             parameters=[LaunchConfiguration('params_file'),
-                        {'autostart': LaunchConfiguration('autostart')}],
+                        {'autostart': LaunchConfiguration('autostart')},
+                        description_parameter()],
         ),
     ])

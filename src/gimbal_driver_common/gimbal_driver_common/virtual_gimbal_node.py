@@ -23,6 +23,7 @@ FAULT_FLAGS = [RegisterFlag(0, 'overtemperature', Level.ERROR, 'motor over tempe
 class VirtualGimbalNode(GimbalDriverNode):
     DEFAULT_JOINT_NAMES = JOINTS
     DEFAULT_VELOCITY_MAX = (1.5, 1.5)
+    DESCRIPTION_NAME = 'virtual_gimbal.urdf'  # share/gimbal_driver_common/urdf/
 
     def __init__(self) -> None:
         super().__init__('virtual_gimbal')

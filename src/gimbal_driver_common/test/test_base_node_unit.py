@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
 
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
+from gimbal_driver_common.ros.look_at import LookAtRefused
 from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_driver_common.testing import DomainLease
+from gimbal_msgs.action import LookAt
 
 pytestmark = pytest.mark.ros
 
@@ -64,3 +68,45 @@ def test_scan_uses_first_two_joints_without_pan_tilt_names(context) -> None:
 def test_invalid_parameters_name_the_parameter(context, overrides, message) -> None:
     with pytest.raises(ParameterError, match=message):
         make(context, **overrides)
+
+
+# ~/look_at set-up (ros/look_at.py): which description, and clear refusals. ThreeAxisNode's
+# package (this test module) installs no description.
+VIRTUAL_GIMBAL = Path(__file__).parents[1] / 'urdf' / 'virtual_gimbal.urdf'
+
+
+def look_at_refusal(context, **overrides) -> str:
+    node = make(context, **overrides)
+    try:
+        with pytest.raises(LookAtRefused) as refused:
+            node.plan_look_at(LookAt.Goal())
+        return str(refused.value)
+    finally:
+        node.destroy_node()
+
+
+def test_look_at_without_an_installed_description_asks_for_description_file(context) -> None:
+    message = look_at_refusal(context)
+    assert 'look_at is unavailable' in message and 'description_file' in message
+
+
+def test_look_at_names_an_unreadable_description(context) -> None:
+    message = look_at_refusal(context, description_file='/nonexistent/rig.urdf')
+    assert 'cannot read the description /nonexistent/rig.urdf' in message
+
+
+def test_look_at_refuses_a_description_whose_joints_the_node_lacks(context) -> None:
+    message = look_at_refusal(context, description_file=str(VIRTUAL_GIMBAL),
+                              joint_names=['slider', 'yaw', 'pitch'])
+    assert "joint 'pan' is not one of the node's joints ['slider', 'yaw', 'pitch']" in message
+
+
+def test_look_at_refuses_an_unknown_aim_frame(context) -> None:
+    message = look_at_refusal(context, description_file=str(VIRTUAL_GIMBAL),
+                              look_at_frame='lens')
+    assert "no link 'lens'" in message
+
+
+def test_look_at_with_a_usable_description_still_waits_for_an_active_node(context) -> None:
+    message = look_at_refusal(context, description_file=str(VIRTUAL_GIMBAL))
+    assert 'not active' in message

@@ -14,7 +14,7 @@ MESSAGES = ['AxisState', 'GimbalStatus', 'Preset', 'PlaybackStatus', 'BezierSegm
             'AxisTrajectory']
 SERVICES = ['SetPreset', 'GotoPreset', 'ListPresets', 'ClearPreset', 'StartScan',
             'LoadTrajectory', 'SetMode', 'DeviceCommand', 'Calibrate']
-ACTIONS = ['MoveTo', 'Home']
+ACTIONS = ['MoveTo', 'Home', 'LookAt']
 
 
 def main() -> int:
@@ -46,8 +46,11 @@ def main() -> int:
             result.message = f'{kind.__name__} done'
             feedback = kind.Feedback()
             goal_handle.publish_feedback(feedback)
-            if hasattr(result, 'positions'):
+            if hasattr(goal_handle.request, 'positions'):
                 result.positions = list(goal_handle.request.positions)
+            if hasattr(goal_handle.request, 'target'):  # LookAt: echo the point back
+                point = goal_handle.request.target.point
+                result.positions = [point.x, point.y, point.z]
             goal_handle.succeed()
             return result
 

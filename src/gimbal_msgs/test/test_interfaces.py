@@ -104,8 +104,14 @@ def test_service_crosses_process_boundary(peer: RosTestClient, name: str) -> Non
 @pytest.mark.parametrize('name', ACTIONS)
 def test_action_crosses_process_boundary(peer: RosTestClient, name: str) -> None:
     kind = getattr(importlib.import_module('gimbal_msgs.action'), name)
-    result, status, _feedback = peer.run_action(kind, f'action/{name}', sample(kind.Goal))
+    goal = sample(kind.Goal)
+    if name == 'LookAt':  # the nested PointStamped crosses too
+        goal.target.header.frame_id = 'base_link'
+        goal.target.point.x, goal.target.point.y, goal.target.point.z = 1.5, -0.5, 2.0
+    result, status, _feedback = peer.run_action(kind, f'action/{name}', goal)
     assert result.success and result.message == f'{name} done'
     assert status == 4  # GoalStatus.STATUS_SUCCEEDED
     if name == 'MoveTo':
         assert list(result.positions) == [0.5, -0.5]
+    if name == 'LookAt':
+        assert list(result.positions) == [1.5, -0.5, 2.0]

@@ -1,6 +1,8 @@
 """Launch the Kessler kOS driver as a managed (lifecycle) node.
 
 ros2 launch kessler_kos_driver kessler_kos_driver.launch.py [params_file:=...] [autostart:=true]
+use_description:=true also starts robot_state_publisher with urdf/kessler_kos_driver.urdf
+(or description_file:=...), which the node uses for ~/look_at too.
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """
 
@@ -12,6 +14,8 @@ from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode
 
+from gimbal_driver_common.ros.description_launch import description_actions, description_parameter
+
 
 def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory('kessler_kos_driver')
@@ -22,6 +26,7 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument('autostart', default_value='false',
                               description='true: the node walks itself to active'),
         DeclareLaunchArgument('namespace', default_value=''),
+        *description_actions('kessler_kos_driver', LaunchConfiguration('namespace')),
         LifecycleNode(
             package='kessler_kos_driver',
             executable='kessler_kos_driver_node',
@@ -29,6 +34,7 @@ def generate_launch_description() -> LaunchDescription:
             namespace=LaunchConfiguration('namespace'),
             output='screen',
             parameters=[LaunchConfiguration('params_file'),
-                        {'autostart': LaunchConfiguration('autostart')}],
+                        {'autostart': LaunchConfiguration('autostart')},
+                        description_parameter()],
         ),
     ])

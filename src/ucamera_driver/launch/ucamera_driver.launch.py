@@ -3,6 +3,7 @@
     ros2 launch ucamera_driver ucamera_driver.launch.py serial_port:=/dev/ttyUSB0
     ros2 launch ucamera_driver ucamera_driver.launch.py sim:=true
     ros2 launch ucamera_driver ucamera_driver.launch.py params_file:=/path/robot.yaml
+    ros2 launch ucamera_driver ucamera_driver.launch.py use_description:=true  # TF from URDF
 
 Managed bring-up: pass autostart:=false and drive the lifecycle yourself
 (configure opens the port and reads the version; activate starts publishing).
@@ -15,6 +16,8 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, Node
+
+from gimbal_driver_common.ros.description_launch import description_actions, description_parameter
 
 SIM_LINK = "/tmp/ucamera_sim_tty"
 
@@ -36,7 +39,8 @@ def _nodes(context):
                             output="screen"))
     actions.append(LifecycleNode(
         package="ucamera_driver", executable="ucamera_driver_node", name="ucamera_driver",
-        namespace="", output="screen", parameters=[params_file, overrides],
+        namespace="", output="screen",
+        parameters=[params_file, overrides, description_parameter()],
     ))
     return actions
 
@@ -52,4 +56,5 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument("autostart", default_value="true",
                               description="false for managed lifecycle bring-up"),
         OpaqueFunction(function=_nodes),
+        *description_actions("ucamera_driver"),
     ])

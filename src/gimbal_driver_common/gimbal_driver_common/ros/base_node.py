@@ -50,6 +50,7 @@ from gimbal_driver_common.joint_command import (
 )
 from gimbal_driver_common.presets import PresetError, PresetStore
 from gimbal_driver_common.ros.diagnostics import StatusPart, to_message
+from gimbal_driver_common.ros.look_at import LookAtMixin
 from gimbal_driver_common.ros.parameters import (
     ParameterError,
     ParameterRegistry,
@@ -101,7 +102,7 @@ class JointSample:
     moving: dict[str, bool] = field(default_factory=dict)
 
 
-class GimbalDriverNode(LifecycleNode):
+class GimbalDriverNode(LookAtMixin, LifecycleNode):
     """Common behaviour of the pan-tilt drivers; subclasses implement the device hooks."""
 
     #: joint names when the ``joint_names`` parameter is not set
@@ -475,6 +476,7 @@ class GimbalDriverNode(LifecycleNode):
             goal_callback=self._accept_goal, cancel_callback=lambda _: CancelResponse.ACCEPT,
             callback_group=group,
         )
+        self._setup_look_at()  # ~/look_at (ros/look_at.py) runs through _execute_move
         self.add_periodic(self.diagnostics_period, self._publish_diagnostics)
         self.add_periodic(self._status_period(), self._publish_status)
         self.add_periodic(self._watchdog_period(), self.jog_watchdog.check)

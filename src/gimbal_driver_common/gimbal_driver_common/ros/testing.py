@@ -210,20 +210,33 @@ class RosTestClient:
             # before it has matched this client's reply readers, and its goal-accept reply
             # sent then is lost (seen under load: a first goal never accepted).
             time.sleep(0.5)
-        send = client.send_goal_async(goal, feedback_callback=lambda f: feedback.append(
-            f.feedback))
+        send = self._on_spin_thread(
+            lambda: client.send_goal_async(
+                goal, feedback_callback=lambda f: feedback.append(f.feedback)),
+            timeout, f'{name} to send the goal')
         wait_for(send.done, timeout, f'{name} to accept the goal')
         handle = send.result()
         if not handle.accepted:
             raise AssertionError(f'{name} rejected the goal')
         if cancel_after is not None:
             time.sleep(cancel_after)
-            cancel = handle.cancel_goal_async()
+            cancel = self._on_spin_thread(handle.cancel_goal_async, timeout, 'the cancel')
             wait_for(cancel.done, timeout, f'{name} to answer the cancel')
-        result_future = handle.get_result_async()
+        result_future = self._on_spin_thread(handle.get_result_async, timeout, 'the request')
         wait_for(result_future.done, timeout, f'the result of {name}')
         response = result_future.result()
         return response.result, response.status, feedback
+
+    def _on_spin_thread(self, request: Callable[[], Any], timeout: float, what: str) -> Any:
+        """Call ``request`` (an ActionClient ``*_async``) on the executor's thread.
+
+        rclpy#1123: an answer that the spin thread takes before ``*_async`` has stored
+        its future is dropped ("Ignoring unexpected goal response"), and the future never
+        completes. Called from the (single) spin thread, the answer waits until it has.
+        """
+        task = self.executor.create_task(request)
+        wait_for(task.done, timeout, f'the executor to send {what}')
+        return task.result()
 
     # lifecycle
     def lifecycle_state(self, node_name: str, timeout: float = 15.0) -> str:

@@ -1,0 +1,68 @@
+"""~/look_at of capture_driver_node (process) against capture_sim (process) over TCP.
+
+Capture counts yaw clockwise, so joint_directions [-1, 1] negates pan: look_at works in
+REP-103 joint space and the device sees the negated angle.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import socket
+
+import pytest
+
+pytest.importorskip('rclpy', reason='node tests need the ROS environment')
+pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
+
+from gimbal_driver_common.ros.look_at_testing import (
+    LookAtCheck,
+    LookAtRig,
+    LookAtSuite,
+    installed_description,
+    node_against_sim,
+)
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
+
+pytestmark = pytest.mark.ros
+
+PKG = 'capture_driver'
+
+
+def sim_axes(port: int) -> dict:
+    """Axis number -> position (deg, device sign) and velocity, from the control port."""
+    with socket.create_connection(('127.0.0.1', port), timeout=5.0) as sock:
+        stream = sock.makefile('rw')
+        stream.write('state\n')
+        stream.flush()
+        answer = stream.readline().strip()
+    assert answer.startswith('ok '), answer
+    return json.loads(answer[3:])['axes']
+
+
+@pytest.fixture(scope='module')
+def look_at_rig():
+    with DomainLease() as domain:
+        port, control_port = free_tcp_port(), free_tcp_port()
+        sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
+            '--port', str(port), '--control-port', str(control_port), '--time-scale', '4'])
+
+        def start_node() -> ManagedProcess:
+            sim.wait_for_output('capture_sim ready')
+            return ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
+                '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
+                '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',
+                '-p', 'default_speed:=1.0', '-p', 'acceleration:=6.0',
+                '-p', f'position_min:=[{-math.pi}, -0.8]'])
+
+        with node_against_sim(domain, sim, start_node) as ros:
+            check = LookAtCheck(ros, PKG, installed_description(PKG))
+            yield LookAtRig(check, lambda: sim_axes(control_port))
+
+
+class TestLookAt(LookAtSuite):
+    def test_look_at_left_is_a_negative_device_pan(self, look_at_rig: LookAtRig) -> None:
+        look_at_rig.check.look_and_reach(math.pi / 2, LookAtSuite.UP)
+        axes = look_at_rig.device_state()
+        assert axes['1']['position'] == pytest.approx(-90.0, abs=1.0)
+        assert axes['2']['position'] == pytest.approx(math.degrees(LookAtSuite.UP), abs=1.0)

@@ -1,0 +1,202 @@
+"""``~/look_at``: point the device's camera/tool frame at a geometry_msgs/PointStamped.
+
+A mixin of the base node. Pan and tilt come from the device's URDF chain
+(:mod:`gimbal_driver_common.kinematics`, offsets included); the limits and the motion
+refusal are checked before anything is sent, and the move then runs through the base
+node's own ``~/move_to`` execution path (feedback, goal tolerance, move timeout, cancel),
+so look_at and move_to behave alike. Everything here is in REP-103 joint space: the
+drivers' sign conversions (Capture joint_directions, U-Camera pan) stay in the drivers.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
+
+from gimbal_driver_common.kinematics import (
+    DEFAULT_AIM_FRAME,
+    AimingChain,
+    KinematicsError,
+    nearest_in_limits,
+)
+from gimbal_msgs.action import LookAt, MoveTo
+
+
+class LookAtRefused(Exception):
+    """The look_at goal cannot be served; nothing was sent."""
+
+
+class _MoveGoalView:
+    """A LookAt goal handle seen as a MoveTo goal handle by the base node's move path."""
+
+    def __init__(self, handle: ServerGoalHandle, request: MoveTo.Goal) -> None:
+        self._handle = handle
+        self.request = request
+
+    @property
+    def is_cancel_requested(self) -> bool:
+        return self._handle.is_cancel_requested
+
+    def publish_feedback(self, feedback: MoveTo.Feedback) -> None:
+        self._handle.publish_feedback(LookAt.Feedback(positions=list(feedback.positions)))
+
+    def succeed(self) -> None:
+        self._handle.succeed()
+
+    def abort(self) -> None:
+        self._handle.abort()
+
+    def canceled(self) -> None:
+        self._handle.canceled()
+
+
+class LookAtMixin:
+    """Declares ``description_file``/``look_at_frame``, loads the chain, serves ~/look_at.
+
+    The default description is ``share/<package>/urdf/<DESCRIPTION_NAME>`` of the
+    package the node class lives in (``<package>.urdf`` unless the class names another).
+    """
+
+    #: file name under share/<package>/urdf/; None: <package>.urdf
+    DESCRIPTION_NAME: str | None = None
+
+    def _setup_look_at(self) -> None:
+        self.description_file: str = self.declare_param(
+            'description_file', '',
+            'URDF used by ~/look_at ("" = the package\'s installed urdf/ description)',
+        )
+        self.look_at_frame: str = self.declare_param(
+            'look_at_frame', DEFAULT_AIM_FRAME,
+            'link of the description whose +x axis ~/look_at points at the target',
+        )
+        self.aiming_chain: AimingChain | None = None
+        self.aiming_error = ''
+        try:
+            self.aiming_chain = self._load_aiming_chain()
+            self.get_logger().info(
+                f'~/look_at: {self.aiming_chain.base_frame} -> {self.look_at_frame} from '
+                f'{self.description_path()} (pan {self.aiming_chain.pan_joint!r}, '
+                f'tilt {self.aiming_chain.tilt_joint!r})'
+            )
+        except KinematicsError as exc:
+            self.aiming_error = str(exc)
+            self.get_logger().warning(f'~/look_at unavailable: {exc}')
+        self._look_at_server = ActionServer(
+            self, LookAt, '~/look_at', execute_callback=self._execute_look_at,
+            goal_callback=lambda _goal: GoalResponse.ACCEPT,
+            cancel_callback=lambda _goal: CancelResponse.ACCEPT,
+            callback_group=self.service_group,
+        )
+
+    def description_path(self) -> str:
+        """The URDF file look_at uses: the parameter, else the package's installed one."""
+        if self.description_file:
+            return self.description_file
+        package = type(self).__module__.split('.')[0]
+        name = self.DESCRIPTION_NAME or f'{package}.urdf'
+        try:
+            share = get_package_share_directory(package)
+        except PackageNotFoundError as exc:
+            raise KinematicsError(
+                f'package {package!r} is not installed, so it has no description; '
+                'set the description_file parameter'
+            ) from exc
+        return str(Path(share) / 'urdf' / name)
+
+    def _load_aiming_chain(self) -> AimingChain:
+        chain = AimingChain.from_file(self.description_path(), self.look_at_frame)
+        for joint in (chain.pan_joint, chain.tilt_joint):
+            if joint not in self.joint_names:
+                raise KinematicsError(
+                    f'the description\'s joint {joint!r} is not one of the node\'s joints '
+                    f'{list(self.joint_names)}; give a description_file that names them'
+                )
+        return chain
+
+    def plan_look_at(self, goal: LookAt.Goal) -> tuple[list[str], list[float]]:
+        """Joint names and REP-103 positions that point the aim frame at the goal's target.
+
+        Raises LookAtRefused with a message naming the frame, point or limit.
+        """
+        chain = self.aiming_chain
+        if chain is None:
+            raise LookAtRefused(f'look_at is unavailable: {self.aiming_error}')
+        joints = [chain.pan_joint, chain.tilt_joint]
+        refusal = self.motion_refusal(joints)
+        if refusal:
+            raise LookAtRefused(refusal)
+        frame = goal.target.header.frame_id.lstrip('/')
+        if frame not in ('', chain.base_frame):
+            raise LookAtRefused(
+                f'target frame {goal.target.header.frame_id!r} is not the device\'s base frame '
+                f'{chain.base_frame!r}: transform the point first (tf2 Buffer.transform)'
+            )
+        speed = goal.speed
+        if not math.isfinite(speed) or speed < 0:
+            raise LookAtRefused(f'speed {speed} must be >= 0 rad/s (0 = default)')
+        for joint in joints:
+            if speed > self.limits[joint].velocity_max:
+                raise LookAtRefused(
+                    f'speed {speed:.4f} rad/s exceeds velocity_max '
+                    f'{self.limits[joint].velocity_max:.4f} of joint {joint!r}'
+                )
+        current = self.current_positions()
+        if not current:
+            raise LookAtRefused('no joint position received yet')
+        point = goal.target.point
+        try:
+            angles = chain.solve((point.x, point.y, point.z), current)
+        except KinematicsError as exc:
+            raise LookAtRefused(str(exc)) from exc
+        # Pan: the turn of the solution inside the limits nearest to where pan is now (a
+        # pan range wider than one turn has several); tilt has one solution.
+        pan_limits = self.limits[chain.pan_joint]
+        reachable = {
+            chain.pan_joint: nearest_in_limits(
+                angles[chain.pan_joint], pan_limits.position_min, pan_limits.position_max,
+                current.get(chain.pan_joint, 0.0)),
+            chain.tilt_joint: angles[chain.tilt_joint],
+        }
+        for joint, position in reachable.items():
+            limits = self.limits[joint]
+            if position is None or not (
+                    limits.position_min - 1e-9 <= position <= limits.position_max + 1e-9):
+                raise LookAtRefused(
+                    f'point ({point.x:.3f}, {point.y:.3f}, {point.z:.3f}) m needs {joint} '
+                    f'{angles[joint]:.4f} rad ({math.degrees(angles[joint]):.1f} deg), '
+                    f'outside position_min {limits.position_min:.4f} .. position_max '
+                    f'{limits.position_max:.4f}'
+                )
+        positions = [
+            min(max(reachable[j], self.limits[j].position_min), self.limits[j].position_max)
+            for j in joints
+        ]
+        return joints, positions
+
+    def _execute_look_at(self, goal_handle: ServerGoalHandle) -> LookAt.Result:
+        result = LookAt.Result()
+        try:
+            joints, positions = self.plan_look_at(goal_handle.request)
+        except LookAtRefused as exc:
+            goal_handle.abort()
+            chain = self.aiming_chain
+            result.joint_names = [chain.pan_joint, chain.tilt_joint] if chain else []
+            current = self.current_positions()
+            result.positions = [current.get(j, math.nan) for j in result.joint_names]
+            result.success, result.message = False, f'look_at refused, nothing sent: {exc}'
+            return result
+        speed = goal_handle.request.speed
+        move = MoveTo.Goal(
+            joint_names=joints, positions=positions,
+            velocities=[speed] * len(joints) if speed > 0 else [], relative=False,
+        )
+        moved = self._execute_move(_MoveGoalView(goal_handle, move))
+        result.success = moved.success
+        result.message = moved.message
+        result.positions = list(moved.positions)
+        result.joint_names = joints
+        return result
