@@ -305,6 +305,13 @@ class KosDriverNode(GimbalDriverNode):
                      'playback_timeout'):
             self.runtime_parameter(name, name)
 
+        def set_poll_period(period: float) -> None:
+            self.poll_period = period
+            if self.client is not None:  # the client reads it on every poll tick
+                self.client.poll_period = period
+
+        self.runtime_parameter('poll_period', set_poll_period)
+
     # ------------------------------------------------------------------ hooks
     def open_device(self) -> DeviceInfo:
         self.close_device()

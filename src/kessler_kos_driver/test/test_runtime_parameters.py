@@ -96,3 +96,19 @@ def test_other_kos_parameters(rig) -> None:
     assert 'guess' not in refused.reason
     refused = ros.set_parameter(NODE, 'motor_addresses', [3, 2, 1])
     assert not refused.successful and 'needs reconfigure' in refused.reason
+
+
+def test_poll_period_sets_the_joint_states_rate(rig) -> None:
+    ros, _ = rig
+    result = ros.set_parameter(NODE, 'poll_period', 0.25)
+    assert result.successful, result.reason
+    try:
+        ros.mean_stamp_gap('joint_states', JointState, 1)  # let a sample of the old rate pass
+        assert ros.mean_stamp_gap('joint_states', JointState, 4) >= 0.2  # 4 Hz polls
+    finally:
+        result = ros.set_parameter(NODE, 'poll_period', 0.02)
+        assert result.successful, result.reason
+    ros.mean_stamp_gap('joint_states', JointState, 1)
+    assert ros.mean_stamp_gap('joint_states', JointState, 20) < 0.15  # 50 Hz polls
+    refused = ros.set_parameter(NODE, 'poll_period', -1.0)
+    assert not refused.successful and 'poll_period' in refused.reason
