@@ -20,6 +20,7 @@ printed in the report); waits are for conditions, never fixed sleeps for a resul
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import math
 import os
@@ -30,6 +31,7 @@ import sys
 import tempfile
 import threading
 import time
+import traceback
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -41,7 +43,6 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.action import ActionClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rosidl_runtime_py.utilities import get_service
 from sensor_msgs.msg import JointState
 from soak_targets import TARGETS, Fault, SimHandle, joint_range
 from std_srvs.srv import Trigger
@@ -69,9 +70,11 @@ def proc_figures(pid: int) -> dict[str, float]:
         text = Path(f'/proc/{pid}/status').read_text()
     except OSError:
         return {'rss_mb': -1.0, 'threads': -1}
-    rss = int(re.search(r'VmRSS:\s+(\d+)', text).group(1)) / 1024.0
-    threads = int(re.search(r'Threads:\s+(\d+)', text).group(1))
-    return {'rss_mb': round(rss, 1), 'threads': threads}
+    rss = re.search(r'VmRSS:\s+(\d+)', text)
+    threads = re.search(r'Threads:\s+(\d+)', text)
+    if rss is None or threads is None:  # exited (a zombie has neither)
+        return {'rss_mb': -1.0, 'threads': -1}
+    return {'rss_mb': round(int(rss.group(1)) / 1024.0, 1), 'threads': int(threads.group(1))}
 
 
 class Counters:
@@ -309,7 +312,7 @@ class Soak:
             self.random_common_service(rng)
             return
         name, type_name = rng.choice(sorted(self.handle.extra_services.items()))
-        srv_type = get_service(type_name)
+        srv_type = service_type(type_name)
         request = srv_type.Request()
         fill_randomly(request, rng)
         self.call(srv_type, self.service(name), request)
@@ -546,6 +549,12 @@ def level_name(level: bytes | int) -> str:
                 value, str(value))
 
 
+def service_type(name: str) -> type:
+    """``pkg/srv/Name`` -> the generated service class."""
+    package, kind, type_name = name.split('/')
+    return getattr(importlib.import_module(f'{package}.{kind}'), type_name)
+
+
 def format_parameter(value: object) -> str:
     if isinstance(value, bool):
         return 'true' if value else 'false'
@@ -595,7 +604,8 @@ def run_soak(drivers: list[str], seconds: float, seed: int) -> list[dict[str, ob
                     report = Soak(handle, domain, seconds, seed).run()
                 except Exception as exc:  # noqa: BLE001 - report the failure, soak the others
                     report = {'driver': handle.node_name, 'pass': False,
-                              'error': f'{type(exc).__name__}: {exc}'}
+                              'error': f'{type(exc).__name__}: {exc}',
+                              'traceback': traceback.format_exc().splitlines()[-8:]}
                 report = {'target': name, 'seed': seed, **report}
         finally:
             shutil.rmtree(workdir, ignore_errors=True)

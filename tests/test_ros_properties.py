@@ -20,6 +20,8 @@ import threading
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.ros.testing import RosTestClient
@@ -262,4 +264,27 @@ def test_invalid_preset_requests_are_refused_with_a_reason_and_send_nothing(rig,
     reply = rig.ros.call(srv_type, f'/{NODE}/{name}', request, timeout=20)
     assert not reply.success, request
     assert reply.message
+    assert rig.device.changes_since(mark) == []
+
+
+#: the transitions the active state has (lifecycle_msgs/Transition ids and labels)
+ACTIVE_TRANSITIONS = {Transition.TRANSITION_DEACTIVATE, Transition.TRANSITION_ACTIVE_SHUTDOWN}
+ACTIVE_LABELS = {'deactivate', 'shutdown'}
+
+
+@PROPERTY_SETTINGS
+@given(transition_id=st.integers(0, 255).filter(lambda i: i not in ACTIVE_TRANSITIONS),
+       label=st.one_of(st.just(''), st.text(max_size=12).filter(
+           lambda s: s not in ACTIVE_LABELS)))
+def test_impossible_lifecycle_transitions_are_refused_and_the_node_lives_on(
+        rig, transition_id, label) -> None:
+    """rclpy's own ~/change_state raised out of the executor here and ended the node
+    (ros2/rclpy#1209, fixed upstream in #1319 after the pinned Jazzy wheel); the base node
+    answers success=false instead."""
+    mark = rig.device.mark()
+    request = ChangeState.Request(transition=Transition(id=transition_id, label=label))
+    reply = rig.ros.call(ChangeState, f'/{NODE}/change_state', request, timeout=20)
+    assert not reply.success
+    assert rig.node.running
+    assert rig.ros.lifecycle_state(NODE) == 'active'
     assert rig.device.changes_since(mark) == []

@@ -31,9 +31,11 @@ from dataclasses import dataclass, field
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from lifecycle_msgs.srv import ChangeState
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -145,6 +147,32 @@ class GimbalDriverNode(LifecycleNode):
         self.preset_store: PresetStore | None = None
         self.service_group = ReentrantCallbackGroup()
         self._create_ros_interfaces()
+        self._guard_change_state_service()
+
+    def _guard_change_state_service(self) -> None:
+        """Answer an impossible lifecycle transition with success=false instead of dying.
+
+        rclpy's ``~/change_state`` handler lets the RCLError of a transition the current
+        state does not have (``configure`` while active, an unknown id) escape into the
+        executor, which ends the spin and with it the node (found by `make soak`).
+        """
+        service = getattr(self, '_service_change_state', None)
+        if service is None:
+            return
+        handler = service.callback
+
+        def guarded(request: ChangeState.Request, response: ChangeState.Response):
+            try:
+                return handler(request, response)
+            except _rclpy.RCLError as exc:
+                transition = request.transition.label or request.transition.id
+                self.get_logger().warning(
+                    f'lifecycle transition {transition!r} refused in state '
+                    f'{self._state_machine.current_state[1]!r}: {exc}')
+                response.success = False
+                return response
+
+        service.callback = guarded
 
     # ------------------------------------------------------------------ hooks
     def declare_device_parameters(self) -> None:
