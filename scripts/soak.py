@@ -622,6 +622,8 @@ def main(argv: list[str] | None = None) -> int:
                         help='soak time per driver (env SOAK_S, default 40)')
     parser.add_argument('--seed', type=int, default=int(os.environ.get('SOAK_SEED', 14)),
                         help='random seed (env SOAK_SEED, default 14)')
+    parser.add_argument('--report', type=Path, default=None,
+                        help='also write the reports (a JSON list) to this file')
     args = parser.parse_args(argv)
     unknown = [d for d in args.drivers if d not in TARGETS]
     if unknown:
@@ -629,6 +631,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f'soak: seed {args.seed}, {args.seconds:g} s per driver: {", ".join(args.drivers)}',
           file=sys.stderr, flush=True)
     reports = run_soak(args.drivers, args.seconds, args.seed)
+    if args.report is not None:
+        args.report.write_text(json.dumps(reports, indent=2, default=str), encoding='utf-8')
     failed = [r['target'] for r in reports if not r.get('pass')]
     summary = {'seed': args.seed, 'seconds_per_driver': args.seconds,
                'passed': [r['target'] for r in reports if r.get('pass')], 'failed': failed}

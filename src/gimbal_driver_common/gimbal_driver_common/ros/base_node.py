@@ -54,6 +54,7 @@ from gimbal_driver_common.presets import PresetError, PresetStore
 from gimbal_driver_common.ros.diagnostics import StatusPart, to_message
 from gimbal_driver_common.ros.parameters import ParameterError, declare
 from gimbal_driver_common.scan import ScanError, ScanRequest, plan_scan
+from gimbal_driver_common.transport import TransportError
 from gimbal_driver_common.watchdog import JogWatchdog
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import AxisState, GimbalStatus, Preset
@@ -720,6 +721,10 @@ class GimbalDriverNode(LifecycleNode):
             response.success = True
         except (DeviceError, CommandError, ScanError, PresetError) as exc:
             response.success, response.message = False, str(exc)
+        except (TransportError, TimeoutError) as exc:
+            # the link dropped or the device went silent during the request: expected under
+            # faults (the device loop reconnects), so an answer and no traceback in the log
+            response.success, response.message = False, f'device link: {exc}'
         except Exception as exc:  # noqa: BLE001 - services answer, never raise
             response.success, response.message = False, f'{type(exc).__name__}: {exc}'
             self.get_logger().error(traceback.format_exc())
