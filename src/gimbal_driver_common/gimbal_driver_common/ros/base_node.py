@@ -727,8 +727,19 @@ class GimbalDriverNode(LifecycleNode):
             response.success, response.message = False, f'device link: {exc}'
         except Exception as exc:  # noqa: BLE001 - services answer, never raise
             response.success, response.message = False, f'{type(exc).__name__}: {exc}'
-            self.get_logger().error(traceback.format_exc())
+            if self._link_down():
+                # a driver's own link exception while the link dropped: expected under
+                # faults, the device loop reconnects; the answer says it, no traceback
+                response.message = f'device link lost during the request: {exc}'
+            else:
+                self.get_logger().error(traceback.format_exc())
         return response
+
+    def _link_down(self) -> bool:
+        try:
+            return not self._connected or not self.link_healthy()
+        except Exception:  # noqa: BLE001 - a broken client counts as a link that is down
+            return True
 
     # ------------------------------------------------------------- move / home
     def _accept_goal(self, goal: object) -> GoalResponse:
