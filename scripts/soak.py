@@ -170,8 +170,17 @@ class Soak:
             return None
 
     # ------------------------------------------------------------------ calls
+    def answered(self, future: Any, what: str) -> bool:
+        """Wait for ``future``; one not done within ANSWER_TIMEOUT_S counts as unanswered."""
+        try:
+            wait_for(future.done, ANSWER_TIMEOUT_S, what, interval=0.005)
+            return True
+        except TimeoutError:
+            self.counters.missed(f'{what}: no answer within {ANSWER_TIMEOUT_S:g} s')
+            return False
+
     def call(self, srv_type: type, name: str, request: Any) -> Any | None:
-        """Call a service; a reply later than ANSWER_TIMEOUT_S counts as unanswered."""
+        """Call a service; None (and counted) when it is not answered in time."""
         client = self._service_clients.get(name)
         if client is None:
             with _TYPE_SUPPORT_LOCK:
@@ -182,11 +191,8 @@ class Soak:
             self.counters.missed(f'{name}: service not available')
             return None
         future = client.call_async(request)
-        try:
-            wait_for(future.done, ANSWER_TIMEOUT_S, name, interval=0.005)
-        except TimeoutError:
+        if not self.answered(future, name):
             client.remove_pending_request(future)
-            self.counters.missed(f'{name}: no reply within {ANSWER_TIMEOUT_S:g} s')
             return None
         return future.result()
 
@@ -204,10 +210,7 @@ class Soak:
             self.counters.missed(f'{name}: action server not available')
             return None
         sent = client.send_goal_async(goal)
-        try:
-            wait_for(sent.done, ANSWER_TIMEOUT_S, f'{name} goal response', interval=0.005)
-        except TimeoutError:
-            self.counters.missed(f'{name}: no goal response within {ANSWER_TIMEOUT_S:g} s')
+        if not self.answered(sent, f'{name} goal response'):
             return None
         handle = sent.result()
         if not handle.accepted:
@@ -219,19 +222,10 @@ class Soak:
             while time.monotonic() < deadline and not result.done():
                 time.sleep(0.02)
             if not result.done():
-                cancel = handle.cancel_goal_async()
                 self.counters.add('cancels')
-                try:
-                    wait_for(cancel.done, ANSWER_TIMEOUT_S, 'cancel', interval=0.005)
-                except TimeoutError:
-                    self.counters.missed(f'{name}: no cancel answer within '
-                                         f'{ANSWER_TIMEOUT_S:g} s')
+                if not self.answered(handle.cancel_goal_async(), f'{name} cancel'):
                     return None
-        try:
-            wait_for(result.done, ANSWER_TIMEOUT_S, f'{name} result', interval=0.01)
-        except TimeoutError:
-            self.counters.missed(f'{name}: no result within {ANSWER_TIMEOUT_S:g} s'
-                                 + (' of the cancel' if cancel_after is not None else ''))
+        if not self.answered(result, f'{name} result'):
             return None
         return result.result().result
 

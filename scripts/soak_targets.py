@@ -22,6 +22,11 @@ LINK_DOWN_S = 2.0
 SILENCE_S = 3.0
 
 
+#: fault name (= the method that injects it) -> needs ~/reset_faults afterwards
+OPTIONAL_FAULTS = {'lost_frames': False, 'malformed_frames': False, 'nack': False,
+                   'fault_bits': True}
+
+
 @dataclass
 class Fault:
     name: str
@@ -50,13 +55,17 @@ class SimHandle:
     def __init__(self, workdir: Path) -> None:
         self.workdir = workdir
         self._hooks: list[Callable[[], None]] = []
+        self._server = None
+        self._running = None
 
     # lifecycle of the simulator
     def start(self) -> None:
+        """Build and start the simulator: set ``_server`` (its TCP/pty server, where the
+        receive hooks go) and ``_running`` (what :meth:`stop` stops)."""
         raise NotImplementedError
 
     def stop(self) -> None:
-        raise NotImplementedError
+        self._running.stop()
 
     def restart(self, rng: random.Random) -> None:
         """Power-cycle: the old simulator goes away, a new one serves the same address."""
@@ -66,16 +75,18 @@ class SimHandle:
 
     @property
     def server(self):  # TcpSimServer | PtySimServer
-        raise NotImplementedError
+        return self._server
 
     def add_receive_hook(self, hook: Callable[[], None]) -> None:
         """A hook on this and every later (restarted) server."""
         self._hooks.append(hook)
         self.server.add_receive_hook(hook)
 
-    def _rehook(self) -> None:
+    def _started(self, server, running) -> None:
+        """Record a (re)started simulator; the receive hooks move to its new server."""
+        self._server, self._running = server, running
         for hook in self._hooks:
-            self.server.add_receive_hook(hook)
+            server.add_receive_hook(hook)
 
     def node_parameters(self) -> dict[str, object]:
         raise NotImplementedError
@@ -94,10 +105,17 @@ class SimHandle:
         self.server.inject(bytes(rng.randrange(256) for _ in range(rng.randrange(16, 200))))
 
     def faults(self) -> list[Fault]:
-        return [Fault('link_drop', self.drop_link, link=True),
-                Fault('silence', self.silence, link=True),
-                Fault('garbage', self.garbage),
-                Fault('sim_restart', self.restart, link=True)]
+        """The faults every server has, plus those the subclass implements (a method named
+        in OPTIONAL_FAULTS)."""
+        faults = [Fault('link_drop', self.drop_link, link=True),
+                  Fault('silence', self.silence, link=True),
+                  Fault('garbage', self.garbage),
+                  Fault('sim_restart', self.restart, link=True)]
+        for name, needs_reset in OPTIONAL_FAULTS.items():
+            inject = getattr(self, name, None)
+            if inject is not None:
+                faults.append(Fault(name, inject, reset_faults=needs_reset))
+        return faults
 
 
 # ----------------------------------------------------------------------------- virtual gimbal
@@ -116,27 +134,21 @@ class VirtualGimbalSim(SimHandle):
     def __init__(self, workdir: Path) -> None:
         super().__init__(workdir)
         self.port = 0
-        self._server = None
         self.device = None
 
     def start(self) -> None:
         from gimbal_driver_common.virtual_gimbal import make_server
 
-        self._server, self.device = make_server(self.port)
-        self.port = self._server.port
-        self._rehook()
+        server, self.device = make_server(self.port)
+        self.port = server.port
+        self._started(server, server)
 
-    def stop(self) -> None:
-        self._server.stop()
 
-    @property
-    def server(self):
-        return self._server
 
     def node_parameters(self) -> dict[str, object]:
         return {'host': '127.0.0.1', 'port': self.port}
 
-    def malformed(self, rng: random.Random) -> None:
+    def malformed_frames(self, rng: random.Random) -> None:
         # a reply line that does not parse (no newline: it prefixes the next real reply)
         self.server.inject(b'POS nan x')
 
@@ -144,9 +156,6 @@ class VirtualGimbalSim(SimHandle):
         with self.device.lock:
             self.device.faults = 1  # FAULT_OVERTEMP
 
-    def faults(self) -> list[Fault]:
-        return [*super().faults(), Fault('malformed_frames', self.malformed),
-                Fault('fault_bits', self.fault_bits, reset_faults=True)]
 
 
 # ----------------------------------------------------------------------------- Capture
@@ -169,23 +178,18 @@ class CaptureSim(SimHandle):
 
         self.sim = CaptureSimulator(PedestalModel(), tcp_port=self.port).start()
         self.port = self.sim.tcp.port
-        self._rehook()
+        self._started(self.sim.tcp, self.sim)
 
-    def stop(self) -> None:
-        self.sim.stop()
 
-    @property
-    def server(self):
-        return self.sim.tcp
 
     def node_parameters(self) -> dict[str, object]:
         return {'transport': 'tcp', 'host': '127.0.0.1', 'port': self.port,
                 'status_period': 0.2, 'default_speed': 1.0, 'acceleration': 6.0}
 
-    def lost(self, rng: random.Random) -> None:
+    def lost_frames(self, rng: random.Random) -> None:
         self.sim.model.lose_replies(rng.randrange(1, 4))
 
-    def malformed(self, rng: random.Random) -> None:
+    def malformed_frames(self, rng: random.Random) -> None:
         from capture_driver.protocol import COMMANDS, DataType, Frame, encode_value
 
         opcode = COMMANDS['MOT_GetLoadPosition'].opcode
@@ -199,10 +203,6 @@ class CaptureSim(SimHandle):
     def fault_bits(self, rng: random.Random) -> None:
         self.sim.model.inject_fault(rng.choice((1, 2)), 'over_current')
 
-    def faults(self) -> list[Fault]:
-        return [*super().faults(), Fault('lost_frames', self.lost),
-                Fault('malformed_frames', self.malformed), Fault('nack', self.nack),
-                Fault('fault_bits', self.fault_bits, reset_faults=True)]
 
 
 # ----------------------------------------------------------------------------- CANaerospace
@@ -223,7 +223,6 @@ class CanaeroSim(SimHandle):
         super().__init__(workdir)
         self.link = str(workdir / 'canaero_tty')
         self.simulator = None
-        self._server = None
 
     def start(self) -> None:
         from canaero_turret_driver.sim import SimConfig, SlcanSession, TurretSimulator
@@ -231,15 +230,10 @@ class CanaeroSim(SimHandle):
 
         self.simulator = TurretSimulator(SimConfig())
         simulator = self.simulator
-        self._server = PtySimServer(lambda: SlcanSession(simulator), link_path=self.link).start()
-        self._rehook()
+        server = PtySimServer(lambda: SlcanSession(simulator), link_path=self.link).start()
+        self._started(server, server)
 
-    def stop(self) -> None:
-        self._server.stop()
 
-    @property
-    def server(self):
-        return self._server
 
     def node_parameters(self) -> dict[str, object]:
         return {'can_interface': 'slcan', 'can_channel': self.link,
@@ -251,11 +245,11 @@ class CanaeroSim(SimHandle):
         self.simulator.silence_all(SILENCE_S)
         time.sleep(SILENCE_S)
 
-    def lost(self, rng: random.Random) -> None:
+    def lost_frames(self, rng: random.Random) -> None:
         self.simulator.lose_frames(rng.choice(('yaw_position', 'pitch_position')),
                                    rng.randrange(1, 6))
 
-    def malformed(self, rng: random.Random) -> None:
+    def malformed_frames(self, rng: random.Random) -> None:
         self.simulator.send_malformed(rng.randrange(1, 5))
 
     def fault_bits(self, rng: random.Random) -> None:
@@ -264,10 +258,6 @@ class CanaeroSim(SimHandle):
         time.sleep(0.5)
         self.simulator.set_axis_fault(axis, False)  # the cause goes away; reset_faults follows
 
-    def faults(self) -> list[Fault]:
-        return [*super().faults(), Fault('lost_frames', self.lost),
-                Fault('malformed_frames', self.malformed),
-                Fault('fault_bits', self.fault_bits, reset_faults=True)]
 
 
 # ----------------------------------------------------------------------------- Kessler
@@ -298,14 +288,9 @@ class KesslerSim(SimHandle):
         self.sim = KosSimulator(SimSettings(password=self.password, precalibrated=True),
                                 port=self.port, discovery_port=0).start()
         self.port = self.sim.port
-        self._rehook()
+        self._started(self.sim.server, self.sim)
 
-    def stop(self) -> None:
-        self.sim.stop()
 
-    @property
-    def server(self):
-        return self.sim.server
 
     def node_parameters(self) -> dict[str, object]:
         password_file = self.workdir / 'kessler_password'
@@ -317,7 +302,7 @@ class KesslerSim(SimHandle):
                 'motor_addresses': [2, 3, 1], 'joint_scales': [scale, scale, scale],
                 'poll_period': 0.05}
 
-    def malformed(self, rng: random.Random) -> None:
+    def malformed_frames(self, rng: random.Random) -> None:
         from kessler_kos_driver.protocol import MotorInfo, MotorInfoEntry
 
         frame = bytearray(MotorInfo([MotorInfoEntry(2, 1.0, 0.0, 100.0, 5.0, 5.0, 10.0)],
@@ -325,7 +310,7 @@ class KesslerSim(SimHandle):
         frame[len(frame) // 2] ^= 0xFF
         self.server.inject(bytes(frame))
 
-    def lost(self, rng: random.Random) -> None:
+    def lost_frames(self, rng: random.Random) -> None:
         # replies lost for a moment, shorter than the driver's link watchdog
         self.server.set_silent(True)
         time.sleep(0.3)
@@ -337,10 +322,6 @@ class KesslerSim(SimHandle):
         with self.sim.device.lock:
             self.sim.device.broadcast(ErrorStatus(16, 1))  # axis fault reported on the slider
 
-    def faults(self) -> list[Fault]:
-        return [*super().faults(), Fault('lost_frames', self.lost),
-                Fault('malformed_frames', self.malformed),
-                Fault('fault_bits', self.fault_bits, reset_faults=True)]
 
 
 # ----------------------------------------------------------------------------- U-Camera
@@ -367,14 +348,9 @@ class UCameraSoakSim(SimHandle):
         from ucamera_driver.sim import SimConfig, UCameraSim
 
         self.sim = UCameraSim(SimConfig(), link_path=self.link).start()
-        self._rehook()
+        self._started(self.sim.server, self.sim)
 
-    def stop(self) -> None:
-        self.sim.stop()
 
-    @property
-    def server(self):
-        return self.sim.server
 
     def node_parameters(self) -> dict[str, object]:
         return {'serial_port': self.link, 'telemetry_rate': 50, 'gps_feed': 'external'}
@@ -382,17 +358,14 @@ class UCameraSoakSim(SimHandle):
     def garbage(self, rng: random.Random) -> None:
         self.sim.inject_noise(rng.randrange(16, 200))
 
-    def lost(self, rng: random.Random) -> None:
+    def lost_frames(self, rng: random.Random) -> None:
         self.sim.drop_frames(0.3)
         time.sleep(1.0)
         self.sim.drop_frames(0.0)
 
-    def malformed(self, rng: random.Random) -> None:
+    def malformed_frames(self, rng: random.Random) -> None:
         self.sim.corrupt(next_frames=rng.randrange(1, 8))
 
-    def faults(self) -> list[Fault]:
-        return [*super().faults(), Fault('lost_frames', self.lost),
-                Fault('malformed_frames', self.malformed)]
 
 
 TARGETS: dict[str, type[SimHandle]] = {
