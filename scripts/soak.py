@@ -23,6 +23,7 @@ import argparse
 import contextlib
 import importlib
 import json
+import logging
 import math
 import os
 import random
@@ -663,10 +664,26 @@ def fill_randomly(message: Any, rng: random.Random) -> None:
         setattr(message, field, value)
 
 
+def log_simulator_to(path: Path) -> logging.Handler:
+    """The in-process simulators log (keep-alive expiries, malformed frames, ...) to a file
+    of their own instead of cluttering the report on stderr."""
+    handler = logging.FileHandler(path, encoding='utf-8')
+    handler.setFormatter(logging.Formatter('%(asctime)s %(name)s %(levelname)s %(message)s'))
+    root = logging.getLogger()
+    for old in [h for h in root.handlers if isinstance(h, logging.FileHandler)]:
+        root.removeHandler(old)
+        old.close()
+    root.addHandler(handler)
+    root.setLevel(logging.INFO)
+    return handler
+
+
 def run_soak(drivers: list[str], seconds: float, seed: int) -> list[dict[str, object]]:
     reports = []
     for name in drivers:
         workdir = Path(tempfile.mkdtemp(prefix=f'gimbal-soak-{name}-'))
+        sim_log = Path(tempfile.gettempdir()) / f'{workdir.name}-sim.log'
+        log_simulator_to(sim_log)
         try:
             with DomainLease() as domain:
                 handle = TARGETS[name](workdir)
@@ -676,7 +693,7 @@ def run_soak(drivers: list[str], seconds: float, seed: int) -> list[dict[str, ob
                     report = {'driver': handle.node_name, 'pass': False,
                               'error': f'{type(exc).__name__}: {exc}',
                               'traceback': traceback.format_exc().splitlines()[-8:]}
-                report = {'target': name, 'seed': seed, **report}
+                report = {'target': name, 'seed': seed, **report, 'sim_log': str(sim_log)}
         finally:
             shutil.rmtree(workdir, ignore_errors=True)
         print(json.dumps(report, indent=2, default=str), flush=True)
