@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
@@ -33,7 +34,6 @@ from gimbal_msgs.srv import ClearPreset, GotoPreset, SetPreset, StartScan
 pytestmark = pytest.mark.ros
 
 PKG = 'gimbal_driver_common'
-NODE = 'virtual_gimbal'
 JOINTS = ('pan', 'tilt')
 LIMITS = {'pan': (-math.pi, math.pi), 'tilt': (-math.pi / 2, math.pi / 2)}
 VELOCITY_MAX = 1.5  # virtual_gimbal_node's default velocity_max
@@ -46,63 +46,119 @@ PROPERTY_SETTINGS = settings(max_examples=25, deadline=None, derandomize=True,
 
 
 class DeviceSide:
-    """What reached the simulated device: every request line, plus a receive-hook count."""
+    """What reached the simulated device: every request (a line of the virtual gimbal, a
+    command name of the Capture controller), plus a receive-hook count of the server."""
 
-    def __init__(self, server, device) -> None:
+    def __init__(self, server, changing: Callable[[str], bool]) -> None:
         self._lock = threading.Lock()
-        self.lines: list[str] = []
+        self._changing = changing
+        self.requests: list[str] = []
         self.receptions = 0
-        handle = device.handle
-
-        def recorded(line: str) -> str:
-            with self._lock:
-                self.lines.append(line.strip())
-            return handle(line)
 
         def received() -> None:
             with self._lock:
                 self.receptions += 1
 
-        device.handle = recorded
         server.add_receive_hook(received)
+
+    def record(self, request: str) -> None:
+        with self._lock:
+            self.requests.append(request)
 
     def mark(self) -> int:
         with self._lock:
-            return len(self.lines)
+            return len(self.requests)
 
     def changes_since(self, mark: int) -> list[str]:
         with self._lock:
-            return [line for line in self.lines[mark:]
-                    if line.split()[:1] and line.split()[0].upper() in DEVICE_CHANGING]
+            return [r for r in self.requests[mark:] if self._changing(r)]
+
+
+def virtual_gimbal_device():
+    """The reference simulator; changing = MOVE/JOG/STOP/HOME/RESET/FAULT lines."""
+    server, device = make_server(0)
+    side = DeviceSide(server, lambda line: line.split()[:1] != [] and
+                      line.split()[0].upper() in DEVICE_CHANGING)
+    handle = device.handle
+
+    def recorded(line: str) -> str:
+        side.record(line.strip())
+        return handle(line)
+
+    device.handle = recorded
+    return side, ['port:=' + str(server.port)], server.stop
+
+
+def capture_reads(name: str) -> bool:
+    """Capture commands that only read: no argument and a returned value (queries such as
+    MOT_GetLoadPosition, COM_SysState), and the COM_Connect handshake."""
+    from capture_driver.protocol import COMMANDS, DataType
+
+    command = COMMANDS.get(name)
+    return name == 'COM_Connect' or (command is not None and command.arg is DataType.NONE
+                                      and command.ret is not DataType.NONE)
+
+
+def capture_device():
+    """The Capture simulator over TCP; changing = any command that is not a query."""
+    from capture_driver.protocol import BY_OPCODE
+    from capture_driver.sim import CaptureSimulator, PedestalModel
+
+    sim = CaptureSimulator(PedestalModel(), tcp_port=0).start()
+    side = DeviceSide(sim.tcp, lambda name: not capture_reads(name))
+    handle = sim.model.handle
+
+    def recorded(frame, session):
+        known = BY_OPCODE.get(frame.opcode)
+        side.record(known.name if known is not None else f'0x{frame.opcode:04X}')
+        return handle(frame, session)
+
+    sim.model.handle = recorded
+    return side, ['transport:=tcp', 'host:=127.0.0.1', f'port:={sim.tcp.port}',
+                           'status_period:=0.5'], sim.stop
+
+
+#: rig name -> (package, executable, node name, simulator factory)
+RIGS = {
+    'virtual_gimbal': (PKG, 'virtual_gimbal_node', 'virtual_gimbal', virtual_gimbal_device),
+    'capture': ('capture_driver', 'capture_driver_node', 'capture_driver', capture_device),
+}
 
 
 class Rig:
-    def __init__(self, ros: RosTestClient, node: ManagedProcess, device: DeviceSide) -> None:
-        self.ros, self.node, self.device = ros, node, device
+    def __init__(self, name: str, ros: RosTestClient, node: ManagedProcess,
+                 device: DeviceSide) -> None:
+        self.name, self.ros, self.node, self.device = name, ros, node, device
+
+    def service(self, name: str) -> str:
+        return f'/{self.name}/{name}'
 
     def rejections(self) -> int:
         return self.node.output().count(REJECTED)
 
 
-@pytest.fixture(scope='module')
-def rig(tmp_path_factory):
-    server, device = make_server(0)
-    side = DeviceSide(server, device)
+@pytest.fixture(scope='module', params=sorted(RIGS))
+def rig(request, tmp_path_factory):
+    package, executable, name, make_device = RIGS[request.param]
+    side, device_params, stop_device = make_device()
     presets = tmp_path_factory.mktemp('presets') / 'presets.yaml'
     lease = DomainLease()
     domain = lease.acquire()
-    node = ManagedProcess.ros(PKG, 'virtual_gimbal_node', domain, [
-        '--ros-args', '-p', f'port:={server.port}', '-p', f'presets_file:={presets}',
-        '-p', 'publish_rate:=10.0', '-p', f'velocity_max:=[{VELOCITY_MAX}, {VELOCITY_MAX}]'])
+    low, high = zip(*(LIMITS[j] for j in JOINTS), strict=True)
+    params = [*device_params, f'presets_file:={presets}', 'publish_rate:=10.0',
+              f'position_min:={list(low)}', f'position_max:={list(high)}',
+              f'velocity_max:=[{VELOCITY_MAX}, {VELOCITY_MAX}]']
+    node = ManagedProcess.ros(package, executable, domain,
+                              ['--ros-args', *[x for p in params for x in ('-p', p)]])
     ros = RosTestClient(domain, 'property_client')
     try:
         ros.wait_for_message('/joint_states', JointState, timeout=60)
         assert side.receptions > 0  # the hook sees the node's polls
-        yield Rig(ros, node, side)
+        yield Rig(name, ros, node, side)
     finally:
         ros.close()
         node.stop()
-        server.stop()
+        stop_device()
         lease.release()
     assert 'Traceback' not in node.output(), node.output()[-3000:]
 
@@ -237,7 +293,7 @@ def test_invalid_joint_commands_are_rejected_and_send_nothing(rig, msg) -> None:
 def test_invalid_move_goals_fail_with_a_reason_and_send_nothing(rig, goal) -> None:
     mark = rig.device.mark()
     try:
-        result, _, _ = rig.ros.run_action(MoveTo, f'/{NODE}/move_to', goal, timeout=20)
+        result, _, _ = rig.ros.run_action(MoveTo, rig.service('move_to'), goal, timeout=20)
     except AssertionError:
         result = None  # rejected at goal time: an answer as well
     if result is not None:
@@ -250,7 +306,7 @@ def test_invalid_move_goals_fail_with_a_reason_and_send_nothing(rig, goal) -> No
 @given(request=invalid_scan())
 def test_invalid_scans_are_refused_with_a_reason_and_send_nothing(rig, request) -> None:
     mark = rig.device.mark()
-    reply = rig.ros.call(StartScan, f'/{NODE}/start_scan', request, timeout=20)
+    reply = rig.ros.call(StartScan, rig.service('start_scan'), request, timeout=20)
     assert not reply.success, request
     assert reply.message
     assert rig.device.changes_since(mark) == []
@@ -260,8 +316,10 @@ def test_invalid_scans_are_refused_with_a_reason_and_send_nothing(rig, request) 
 @given(call=invalid_preset_request())
 def test_invalid_preset_requests_are_refused_with_a_reason_and_send_nothing(rig, call) -> None:
     srv_type, name, request = call
+    # the Capture controller stores presets itself: clearing an empty slot is a valid no-op
+    assume(not (rig.name == 'capture_driver' and name == 'clear_preset'))
     mark = rig.device.mark()
-    reply = rig.ros.call(srv_type, f'/{NODE}/{name}', request, timeout=20)
+    reply = rig.ros.call(srv_type, rig.service(name), request, timeout=20)
     assert not reply.success, request
     assert reply.message
     assert rig.device.changes_since(mark) == []
@@ -283,8 +341,8 @@ def test_impossible_lifecycle_transitions_are_refused_and_the_node_lives_on(
     answers success=false instead."""
     mark = rig.device.mark()
     request = ChangeState.Request(transition=Transition(id=transition_id, label=label))
-    reply = rig.ros.call(ChangeState, f'/{NODE}/change_state', request, timeout=20)
+    reply = rig.ros.call(ChangeState, rig.service('change_state'), request, timeout=20)
     assert not reply.success
     assert rig.node.running
-    assert rig.ros.lifecycle_state(NODE) == 'active'
+    assert rig.ros.lifecycle_state(rig.name) == 'active'
     assert rig.device.changes_since(mark) == []
