@@ -148,32 +148,6 @@ class GimbalDriverNode(LifecycleNode):
         self.preset_store: PresetStore | None = None
         self.service_group = ReentrantCallbackGroup()
         self._create_ros_interfaces()
-        self._guard_change_state_service()
-
-    def _guard_change_state_service(self) -> None:
-        """Answer an impossible lifecycle transition with success=false instead of dying.
-
-        rclpy's ``~/change_state`` handler lets the RCLError of a transition the current
-        state does not have (``configure`` while active, an unknown id) escape into the
-        executor, which ends the spin and with it the node (found by `make soak`).
-        """
-        service = getattr(self, '_service_change_state', None)
-        if service is None:
-            return
-        handler = service.callback
-
-        def guarded(request: ChangeState.Request, response: ChangeState.Response):
-            try:
-                return handler(request, response)
-            except _rclpy.RCLError as exc:
-                transition = request.transition.label or request.transition.id
-                self.get_logger().warning(
-                    f'lifecycle transition {transition!r} refused in state '
-                    f'{self._state_machine.current_state[1]!r}: {exc}')
-                response.success = False
-                return response
-
-        service.callback = guarded
 
     # ------------------------------------------------------------------ hooks
     def declare_device_parameters(self) -> None:
@@ -349,6 +323,7 @@ class GimbalDriverNode(LifecycleNode):
 
     # --------------------------------------------------------- ROS interfaces
     def _create_ros_interfaces(self) -> None:
+        self._guard_change_state_service()
         state_qos = QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
         )
@@ -734,6 +709,31 @@ class GimbalDriverNode(LifecycleNode):
             else:
                 self.get_logger().error(traceback.format_exc())
         return response
+
+    def _guard_change_state_service(self) -> None:
+        """Answer an impossible lifecycle transition with success=false instead of dying.
+
+        rclpy's ``~/change_state`` handler lets the RCLError of a transition the current
+        state does not have (``configure`` while active, an unknown id) escape into the
+        executor, which ends the spin and with it the node (found by `make soak`).
+        """
+        service = getattr(self, '_service_change_state', None)
+        if service is None:
+            return
+        handler = service.callback
+
+        def guarded(request: ChangeState.Request, response: ChangeState.Response):
+            try:
+                return handler(request, response)
+            except _rclpy.RCLError as exc:
+                transition = request.transition.label or request.transition.id
+                self.get_logger().warning(
+                    f'lifecycle transition {transition!r} refused in state '
+                    f'{self._state_machine.current_state[1]!r}: {exc}')
+                response.success = False
+                return response
+
+        service.callback = guarded
 
     def _link_down(self) -> bool:
         try:
