@@ -2,7 +2,7 @@
 # Every ROS process started here runs with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
-.PHONY: setup build test lint demo bench clean
+.PHONY: setup build test lint demo bench soak clean
 
 setup:
 	scripts/setup_env.sh --no-build
@@ -21,6 +21,10 @@ demo:
 
 bench:
 	scripts/bench.sh
+
+# SOAK_S: seconds per driver (default 40, so about 5 min for all five); SOAK_SEED: seed.
+soak:
+	scripts/soak.sh
 
 clean:
 	rm -rf build install log

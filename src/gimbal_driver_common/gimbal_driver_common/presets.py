@@ -16,6 +16,20 @@ from dataclasses import dataclass, field
 import yaml
 
 
+def _fsync_directory(directory: str) -> None:
+    """Make a rename in ``directory`` durable (no-op where directories cannot be opened)."""
+    try:
+        fd = os.open(directory, os.O_RDONLY | getattr(os, 'O_DIRECTORY', 0))
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 class PresetError(Exception):
     """A preset request that cannot be served (unknown index, bad file, ...)."""
 
@@ -67,11 +81,17 @@ class PresetStore:
         }
         directory = os.path.dirname(os.path.abspath(self.path))
         os.makedirs(directory, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=directory, prefix='.presets-')
+        # Write a temporary file in the same directory, flush it to the disk, then rename it
+        # over the old file: a reader (or the driver after a crash or power cut) sees either
+        # the complete old set or the complete new one, never a half-written file.
+        fd, tmp = tempfile.mkstemp(dir=directory, prefix='.presets-', suffix='.tmp')
         try:
             with os.fdopen(fd, 'w', encoding='utf-8') as stream:
                 yaml.safe_dump(data, stream, sort_keys=False)
+                stream.flush()
+                os.fsync(stream.fileno())
             os.replace(tmp, self.path)
+            _fsync_directory(directory)  # the rename itself survives a power cut
         except OSError as exc:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(tmp)

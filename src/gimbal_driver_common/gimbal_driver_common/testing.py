@@ -187,10 +187,35 @@ def wait_for(
         time.sleep(interval)
 
 
+def _ephemeral_port_floor() -> int:
+    try:
+        return int(Path('/proc/sys/net/ipv4/ip_local_port_range').read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
+
+
 def free_tcp_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago (for a simulator started elsewhere)."""
+    """A TCP port on 127.0.0.1 that was free a moment ago (for a simulator started elsewhere).
+
+    Picked at random *below* the kernel's ephemeral range: a port from ``bind(0)`` is an
+    ephemeral one, and the kernel may hand it out again at once as the local port of any
+    outgoing connection on the machine (a node connecting to its simulator, another test
+    run) before the simulator binds it, which failed the simulator's start at random on a
+    busy machine. Below that range only an explicit bind takes a port.
+    """
+    import random
     import socket
 
+    floor = _ephemeral_port_floor()
+    chooser = random.SystemRandom()
+    for _ in range(200):
+        port = chooser.randrange(10000, floor) if floor > 10001 else 0
+        with socket.socket() as sock:
+            try:
+                sock.bind(('127.0.0.1', port))
+            except OSError:
+                continue
+            return sock.getsockname()[1]
     with socket.socket() as sock:
         sock.bind(('127.0.0.1', 0))
         return sock.getsockname()[1]

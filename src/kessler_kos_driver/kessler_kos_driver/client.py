@@ -442,11 +442,16 @@ class KosClient:
             with self._cond:
                 while self._seq.get(message_id, 0) == seq0:
                     remaining = deadline - time.monotonic()
+                    what = type(message).__name__
                     if remaining <= 0 or self._stream is None:
-                        what = type(message).__name__
                         raise DeviceTimeout(f'no reply to {what} from {self.description} '
                                             f'within {timeout:.1f} s')
-                    self._cond.wait(remaining)
+                    if self._reader is not None and not self._reader.is_alive():
+                        # the peer closed the link during the handshake (before `connected`,
+                        # so no link-lost teardown): fail now, not after the reply timeout
+                        raise NotConnected(f'link to {self.description} closed while '
+                                           f'waiting for the reply to {what}')
+                    self._cond.wait(min(remaining, 0.05))
                 return self._latest[message_id]
 
     def barrier(self) -> None:

@@ -31,9 +31,11 @@ from dataclasses import dataclass, field
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from lifecycle_msgs.srv import ChangeState
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -58,6 +60,7 @@ from gimbal_driver_common.ros.parameters import (
     declare,
 )
 from gimbal_driver_common.scan import ScanError, ScanRequest, plan_scan
+from gimbal_driver_common.transport import TransportError
 from gimbal_driver_common.watchdog import JogWatchdog
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import AxisState, GimbalStatus, Preset
@@ -439,6 +442,7 @@ class GimbalDriverNode(LookAtMixin, LifecycleNode):
 
     # --------------------------------------------------------- ROS interfaces
     def _create_ros_interfaces(self) -> None:
+        self._guard_change_state_service()
         state_qos = QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
         )
@@ -842,10 +846,50 @@ class GimbalDriverNode(LookAtMixin, LifecycleNode):
             response.success = True
         except (DeviceError, CommandError, ScanError, PresetError) as exc:
             response.success, response.message = False, str(exc)
+        except (TransportError, TimeoutError) as exc:
+            # the link dropped or the device went silent during the request: expected under
+            # faults (the device loop reconnects), so an answer and no traceback in the log
+            response.success, response.message = False, f'device link: {exc}'
         except Exception as exc:  # noqa: BLE001 - services answer, never raise
             response.success, response.message = False, f'{type(exc).__name__}: {exc}'
-            self.get_logger().error(traceback.format_exc())
+            if self._link_down():
+                # a driver's own link exception while the link dropped: expected under
+                # faults, the device loop reconnects; the answer says it, no traceback
+                response.message = f'device link lost during the request: {exc}'
+            else:
+                self.get_logger().error(traceback.format_exc())
         return response
+
+    def _guard_change_state_service(self) -> None:
+        """Answer an impossible lifecycle transition with success=false instead of dying.
+
+        rclpy's ``~/change_state`` handler lets the RCLError of a transition the current
+        state does not have (``configure`` while active, an unknown id) escape into the
+        executor, which ends the spin and with it the node (found by `make soak`).
+        """
+        service = getattr(self, '_service_change_state', None)
+        if service is None:
+            return
+        handler = service.callback
+
+        def guarded(request: ChangeState.Request, response: ChangeState.Response):
+            try:
+                return handler(request, response)
+            except _rclpy.RCLError as exc:
+                transition = request.transition.label or request.transition.id
+                self.get_logger().warning(
+                    f'lifecycle transition {transition!r} refused in state '
+                    f'{self._state_machine.current_state[1]!r}: {exc}')
+                response.success = False
+                return response
+
+        service.callback = guarded
+
+    def _link_down(self) -> bool:
+        try:
+            return not self._connected or not self.link_healthy()
+        except Exception:  # noqa: BLE001 - a broken client counts as a link that is down
+            return True
 
     # ------------------------------------------------------------- move / home
     def _accept_goal(self, goal: object) -> GoalResponse:
