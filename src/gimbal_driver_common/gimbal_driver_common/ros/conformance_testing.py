@@ -515,7 +515,11 @@ class DriverConformance:
         ros.wait_for_diagnostic(self.node_name, self.joints[0], lambda s: s.level[0] == STALE)
         ros.wait_for_message(self.srv('status'), GimbalStatus,
                              lambda m: m.connection != GimbalStatus.CONNECTION_CONNECTED)
-        self.wait_connection(ros, OK, timeout=40)
+        status = self.wait_connection(ros, OK, timeout=40)
+        assert int({kv.key: kv.value for kv in status.values}['reconnects']) >= 1
+        ros.wait_for_message(self.srv('status'), GimbalStatus,
+                             lambda m: m.connection == GimbalStatus.CONNECTION_CONNECTED
+                             and m.reconnects >= 1)
         rig.node.wait_for_output('reconnected')
         ros.wait_for_message('joint_states', JointState, timeout=20)
         away = {j: p + (0.1 if p <= 0 else -0.1) for j, p in self.small_move.items()}
