@@ -269,7 +269,9 @@ class DriverConformance:
             self, rig: ConformanceRig) -> None:
         def all_ok(array: DiagnosticArray) -> bool:
             statuses = self.node_statuses(array)
-            return bool(statuses) and all(s.level[0] == OK for s in statuses)
+            measured = any(s.name.endswith('joint_states frequency') and
+                           s.message != 'measuring' for s in statuses)
+            return measured and all(s.level[0] == OK for s in statuses)
 
         try:
             rig.ros.wait_for_message('/diagnostics', DiagnosticArray, all_ok, timeout=40)
@@ -312,6 +314,7 @@ class DriverConformance:
         ('inf position', 'not a finite number'),
         ('inf velocity', 'not a finite number'),
         ('velocity above velocity_max', 'exceeds velocity_max'),
+        ('position outside the limits', 'outside'),
         ('names and positions differ in length', 'joint names but'),
         ('names and velocities differ in length', 'joint names but'),
     ])
@@ -323,6 +326,7 @@ class DriverConformance:
             'nan position': JointState(name=[first], position=[math.nan]),
             'inf position': JointState(name=[first], position=[math.inf]),
             'inf velocity': JointState(name=[first], velocity=[-math.inf]),
+            'position outside the limits': JointState(name=[first], position=[1e6]),
             'velocity above velocity_max': JointState(name=[first], position=[math.nan],
                                                       velocity=[1e3]),
             'names and positions differ in length': JointState(
@@ -358,7 +362,12 @@ class DriverConformance:
 
     @pytest.mark.ros
     def test_move_to_reaches_its_target(self, rig: ConformanceRig) -> None:
+        away = {j: p + (0.1 if p <= 0 else -0.1) for j, p in self.small_move.items()}
+        assert self.move_to(rig.ros, away)[0].success
+        before = rig.sim.motion_received()
         result, status, feedback = self.move_to(rig.ros, self.small_move)
+        # the device-side observer sees a move (so its "nothing sent" checks mean something)
+        assert rig.sim.motion_received() != before
         assert result.success, result.message
         assert status == GoalStatus.STATUS_SUCCEEDED
         assert result.positions == pytest.approx(list(self.small_move.values()),
