@@ -11,7 +11,12 @@ import pytest
 
 pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (make build)")
 
-from gimbal_driver_common.ros.conformance_testing import DriverConformance, SimulatorHandle
+from gimbal_driver_common.ros.conformance_testing import (
+    ConformanceRig,
+    DriverConformance,
+    SimulatorHandle,
+)
+from gimbal_msgs.msg import GimbalStatus
 from ucamera_driver.sim import SimConfig, UCameraSim
 
 
@@ -66,3 +71,8 @@ class TestUCameraConformance(DriverConformance):
 
     def start_simulator(self, workdir: Path, domain: int) -> SimulatorHandle:
         return InProcessUCamera(workdir)
+
+    def check_jog_running(self, rig: ConformanceRig) -> None:
+        # a jog runs in the gimbal's rates mode
+        rig.ros.wait_for_message(f"/{self.node_name}/status", GimbalStatus,
+                                 lambda s: s.mode == "rates", timeout=15)

@@ -179,14 +179,6 @@ def test_joint_states_and_rep103_signs(rig: Rig) -> None:
     rig.status(lambda s: s.mode == "angles" and s.connection == GimbalStatus.CONNECTION_CONNECTED)
 
 
-def test_jog_runs_in_rates_mode_and_expires(rig: Rig) -> None:
-    rig.command(["tilt"], velocities=[0.4], until=lambda m: m.velocity[1] > 0.3)
-    rig.status(lambda s: s.mode == "rates")
-    # no further joint_command: the dead-man watchdog (0.5 s) zeroes the rate
-    rig.joints(lambda m: abs(m.velocity[1]) < 1e-3 and abs(m.velocity[0]) < 1e-3)
-    assert "expired" in rig.node.output()
-
-
 
 
 def test_move_to_with_speed_and_limits(rig: Rig) -> None:

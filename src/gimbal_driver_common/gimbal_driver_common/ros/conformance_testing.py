@@ -177,6 +177,9 @@ class DriverConformance:
     def start_simulator(self, workdir: Path, domain: int) -> SimulatorHandle:
         raise NotImplementedError
 
+    def check_jog_running(self, rig: ConformanceRig) -> None:
+        """Device-specific checks while a jog runs (e.g. the mode the device reports)."""
+
     def node_parameters(self) -> list[str]:
         """Test-speed parameters of the shared node (publish_rate stays at its default)."""
         return ['reconnect_period:=0.3', 'diagnostics_period:=0.25', 'command_timeout:=0.5']
@@ -293,6 +296,7 @@ class DriverConformance:
         index = list(self.joints).index(joint)
         rig.ros.publish('joint_command', JointState(name=[joint], velocity=[velocity]))
         wait_for(lambda: rig.sim.moving(joint), 20.0, f'the {joint} jog to start')
+        self.check_jog_running(rig)
         # no further joint_command: the watchdog (command_timeout) stops the axis
         self.wait_stopped(rig, joint, 'the watchdog to stop the jog')
         rig.ros.wait_for_message('joint_states', JointState,
