@@ -8,7 +8,6 @@ and read the device state.
 from __future__ import annotations
 
 import math
-import signal
 
 import pytest
 
@@ -133,32 +132,6 @@ def test_motion_refused_on_a_faulted_axis_before_sending(rig):
     assert move(ros, ["yaw"], [0.3])[0].success
 
 
-def test_move_refused_out_of_limits_and_unknown_joint(rig):
-    ros, control, _, _ = rig
-    before = control.state()["commands_received"]
-    result, _, _ = move(ros, ["pitch"], [1.5])
-    assert not result.success and "outside" in result.message
-    result, _, _ = move(ros, ["roll"], [0.0])
-    assert not result.success and "unknown joint" in result.message
-    assert control.state()["commands_received"] == before
-
-
-def test_jog_stops_by_watchdog(rig):
-    ros, control, _, node = rig
-    ros.publish("joint_command", JointState(name=["pitch"], velocity=[0.2]))
-    wait_for(lambda: abs(sim_axis(control, "pitch")["velocity"]) > 5.0, 10, "the jog")
-    wait_for(lambda: sim_axis(control, "pitch")["velocity"] == 0.0, 10, "the watchdog stop")
-    node.wait_for_output("expired")
-
-
-def test_stop_service_halts_a_move(rig):
-    ros, control, _, _ = rig
-    ros.publish("joint_command", JointState(name=["yaw"], position=[-2.5]))
-    wait_for(lambda: abs(sim_axis(control, "yaw")["velocity"]) > 10.0, 10, "the move")
-    reply = ros.call(Trigger, f"/{NODE}/stop", Trigger.Request())
-    assert reply.success, reply.message
-    wait_for(lambda: sim_axis(control, "yaw")["velocity"] == 0.0, 10, "the axis to stop")
-    assert sim_axis(control, "yaw")["position"] > math.degrees(-2.4)
 
 
 def test_presets_device_zero_and_driver_side(rig):
@@ -309,20 +282,3 @@ def test_turret_silence_is_an_error_and_recovers(rig):
     wait_diag(ros, "connection", 0, timeout=20)
     ros.wait_for_message("joint_states", JointState, timeout=20)
     assert move(ros, ["yaw"], [0.1])[0].success
-
-
-def test_link_drop_recovers(rig):
-    ros, control, _, _ = rig
-    assert control.command("drop_link 0.5") == "ok"
-    wait_diag(ros, "connection", 2)
-    wait_diag(ros, "connection", 0, timeout=30)
-    ros.wait_for_message("joint_states", JointState, timeout=20)
-
-
-def test_shutdown_stops_moving_axes(rig):
-    ros, control, _, node = rig
-    ros.publish("joint_command", JointState(name=["yaw"], position=[-2.8]))
-    wait_for(lambda: abs(sim_axis(control, "yaw")["velocity"]) > 10.0, 10, "the move")
-    node.send_signal(signal.SIGINT)
-    wait_for(lambda: sim_axis(control, "yaw")["velocity"] == 0.0, 10, "the shutdown stop")
-    assert sim_axis(control, "yaw")["position"] > math.degrees(-2.7)

@@ -8,12 +8,10 @@ import pytest
 
 pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (make build)")
 
-from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
-from gimbal_msgs.action import MoveTo
 from gimbal_msgs.srv import DeviceCommand
 
 pytestmark = pytest.mark.ros
@@ -48,7 +46,7 @@ def test_invalid_parameters_are_refused_at_start(param, expected):
 
 @pytest.fixture(scope="module")
 def managed(tmp_path_factory, sim_and_node):
-    params = ["can_options:=['sleep_after_open=0']", "autostart:=false",
+    params = ["can_options:=['sleep_after_open=0']",
               "service_timeout:=0.3", "reconnect_period:=0.3", "command_timeout:=5.0",
               "allow_node_id_change:=true", "allow_flash_programming:=true",
               "allow_data_download:=true", "can_interface:=slcan",
@@ -59,22 +57,6 @@ def managed(tmp_path_factory, sim_and_node):
         yield rig
 
 
-def test_managed_lifecycle_and_deactivate_stops_axes(managed):
-    ros, control, _ = managed
-    ros.wait_for_lifecycle_state(NODE, "unconfigured")
-    assert ros.lifecycle_transition(NODE, Transition.TRANSITION_CONFIGURE)
-    assert ros.lifecycle_state(NODE) == "inactive"
-    goal = MoveTo.Goal(joint_names=["yaw"], positions=[0.2])
-    result, _, _ = ros.run_action(MoveTo, f"/{NODE}/move_to", goal)
-    assert not result.success and "not active" in result.message
-    assert ros.lifecycle_transition(NODE, Transition.TRANSITION_ACTIVATE)
-    ros.wait_for_message("joint_states", JointState, timeout=20)
-    ros.publish("joint_command", JointState(name=["pitch"], velocity=[0.3]))
-    wait_for(lambda: control.state()["axes"]["pitch"]["velocity"] > 5.0, 10, "the jog")
-    assert ros.lifecycle_transition(NODE, Transition.TRANSITION_DEACTIVATE)
-    wait_for(lambda: control.state()["axes"]["pitch"]["velocity"] == 0.0, 10,
-             "deactivate to stop the axis")
-    assert ros.lifecycle_transition(NODE, Transition.TRANSITION_ACTIVATE)
 
 
 def call(ros, command, *arguments):

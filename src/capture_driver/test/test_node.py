@@ -107,33 +107,8 @@ def test_move_to_reaches_target_and_joint_states_show_it(rig):
     assert state['axes']['1']['position'] == pytest.approx(-math.degrees(0.4), abs=0.05)
 
 
-def test_joint_command_absolute_move(rig):
-    ros, *_ = rig
-    ros.publish('joint_command', JointState(name=['tilt'], position=[0.3]))
-    wait_position(ros, {'tilt': 0.3})
 
 
-def test_joint_command_unknown_joint_is_rejected(rig):
-    ros, control_port, _, logs = rig
-    before = sim_state(control_port)['requests']
-    ros.publish('joint_command', JointState(name=['elbow'], position=[0.1]))
-    wait_for(lambda: any('unknown joint' in m.msg for m in list(logs)), 10.0, 'warning')
-    after = sim_state(control_port)
-    assert after['axes']['1']['velocity'] == 0.0  # nothing moved
-    assert after['requests'] >= before  # polling continues
-
-
-def test_jog_stops_after_command_timeout(rig):
-    ros, control_port, *_ = rig
-    ros.publish('joint_command', JointState(name=['pan'], velocity=[0.3]))
-    ros.wait_for_message('joint_states', JointState,
-                         lambda m: abs(dict(zip(m.name, m.velocity, strict=True))['pan']) > 0.05,
-                         timeout=10)
-    # No further joint_command: the dead-man stops the jog.
-    ros.wait_for_message('joint_states', JointState,
-                         lambda m: dict(zip(m.name, m.velocity, strict=True))['pan'] == 0.0,
-                         timeout=10)
-    wait_for(lambda: sim_state(control_port)['axes']['1']['velocity'] == 0.0, 5.0, 'stopped')
 
 
 def test_home_action_uses_device_homing(rig):
@@ -375,25 +350,8 @@ def test_motion_on_faulted_or_off_axis_is_refused_and_reset_quotes_device(rig):
     assert result.success, result.message
 
 
-def test_stop_service(rig):
-    ros, control_port, *_ = rig
-    ros.publish('joint_command', JointState(name=['pan'], velocity=[0.5]))
-    wait_for(lambda: sim_state(control_port)['axes']['1']['velocity'] != 0.0, 10.0, 'moving')
-    reply = ros.call(Trigger, srv('stop'), Trigger.Request())
-    assert reply.success, reply.message
-    wait_for(lambda: sim_state(control_port)['axes']['1']['velocity'] == 0.0, 10.0, 'stopped')
 
 
-def test_dropped_link_reconnects_and_diagnostics_report_it(rig):
-    ros, control_port, *_ = rig
-    assert control(control_port, 'drop 2.0') == 'ok'
-    ros.wait_for_diagnostic(
-        NODE, 'connection', lambda s: s.level == b'\x02' and 'disconnected' in s.message)
-    ros.wait_for_diagnostic(NODE, 'pan', lambda s: s.level == b'\x03')
-    status = ros.wait_for_diagnostic(NODE, 'connection', lambda s: s.level == b'\x00', timeout=30)
-    values = {kv.key: kv.value for kv in status.values}
-    assert int(values['reconnects']) >= 1
-    ros.wait_for_message('joint_states', JointState, timeout=15)
 
 
 @pytest.mark.parametrize(('override', 'name'), [

@@ -1,0 +1,573 @@
+"""One conformance suite for the common driver contract, subclassed once per driver.
+
+Like python-can's ``test/back2back_test.py``: the tests live here once; each driver's
+``test/test_conformance.py`` subclasses :class:`DriverConformance`, names its package,
+node, joints and a few safe motions, and says how to start its simulator
+(:meth:`DriverConformance.start_simulator`, returning a :class:`SimulatorHandle` that also
+observes what reached the device). The subclass sets ``__test__ = True``; this base is
+not collected.
+
+One simulator serves a whole class. The shared node runs with the test-speed parameters
+of :meth:`DriverConformance.node_parameters` (``publish_rate`` stays at its default, so
+the diagnostics check is "at default parameters"); tests that must restart or kill the
+node (preset persistence, lifecycle, signals) start their own node against the same
+simulator, and the next test that needs the shared node starts it again. Every wait is
+"until a condition holds, up to a generous timeout"; nothing asserts timings.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+import signal
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from lifecycle_msgs.msg import Transition
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_msgs.action import Home, MoveTo
+from gimbal_msgs.msg import GimbalStatus
+from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
+
+REJECTED = 'joint_command rejected, nothing sent'
+OK = 0
+ERROR = 2
+STALE = 3
+
+
+class GoalStatus:
+    """action_msgs/GoalStatus codes (kept here: the package does not depend on action_msgs)."""
+
+    STATUS_SUCCEEDED = 4
+    STATUS_CANCELED = 5
+    STATUS_ABORTED = 6
+
+
+class SimulatorHandle(abc.ABC):
+    """A running simulator as the suite sees it: link parameters, faults and the device side."""
+
+    @abc.abstractmethod
+    def link_parameters(self) -> list[str]:
+        """``name:=value`` node parameters that point the driver at this simulator."""
+
+    @abc.abstractmethod
+    def motion_received(self) -> object:
+        """A snapshot of the motion commands the device has received so far; two equal
+        snapshots mean nothing that moves an axis reached the device in between."""
+
+    @abc.abstractmethod
+    def moving(self, joint: str) -> bool:
+        """Whether the device itself (not the driver's view) has ``joint`` in motion."""
+
+    @abc.abstractmethod
+    def drop_link(self, seconds: float) -> None:
+        """Cut the link to the driver and refuse a new one for ``seconds``."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Stop the simulator."""
+
+
+class ConformanceRig:
+    """One simulator, a leased domain, a test client and the node currently under test."""
+
+    def __init__(self, suite: DriverConformance, workdir: Path) -> None:
+        self.suite = suite
+        self.workdir = workdir
+        self.presets_file = workdir / 'presets.yaml'
+        self._lease = DomainLease()
+        self.domain = self._lease.acquire()
+        self.node: ManagedProcess | None = None
+        self._node_extra: tuple[str, ...] | None = None
+        self.sim: SimulatorHandle | None = None
+        self.ros: RosTestClient | None = None
+        try:
+            self.sim = suite.start_simulator(workdir, self.domain)
+            self.ros = RosTestClient(self.domain, 'conformance_client')
+        except BaseException:
+            self.close()
+            raise
+
+    def node_parameters(self, extra: Sequence[str] = ()) -> list[str]:
+        assert self.sim is not None
+        return [*self.sim.link_parameters(), f'presets_file:={self.presets_file}',
+                *self.suite.node_parameters(), *extra]
+
+    def start_node(self, *extra: str, wait_active: bool = True) -> ManagedProcess:
+        """(Re)start the node with the suite's parameters plus ``extra``."""
+        self.stop_node()
+        args = ['--ros-args', *[x for p in self.node_parameters(extra) for x in ('-p', p)]]
+        assert self.ros is not None
+        states = self.ros.subscribe('joint_states', JointState)
+        seen = len(states)
+        self.node = ManagedProcess.ros(self.suite.package, self.suite.node_executable,
+                                       self.domain, args)
+        self._node_extra = tuple(extra)
+        if wait_active:
+            wait_for(lambda: len(states) > seen or not self.node.running, 60.0,
+                     f'joint_states from {self.suite.node_executable}')
+            assert self.node.running, self.node.output()[-3000:]
+        return self.node
+
+    def shared_node(self) -> ManagedProcess:
+        """The node with the suite's own parameters, restarted if a test changed it."""
+        if self.node is None or not self.node.running or self._node_extra != ():
+            self.start_node()
+        assert self.node is not None
+        return self.node
+
+    def stop_node(self) -> None:
+        if self.node is not None:
+            self.node.stop()
+            self.node = None
+            self._node_extra = None
+
+    def close(self) -> None:
+        if self.ros is not None:
+            self.ros.close()
+        tail = self.node.output()[-3000:] if self.node is not None else ''
+        self.stop_node()
+        if self.sim is not None:
+            self.sim.close()
+        self._lease.release()
+        if tail:
+            print(f'--- {self.suite.node_executable} log (tail) ---\n{tail}')
+
+
+class DriverConformance:
+    """The common contract of every gimbal driver node, tested through the real transport.
+
+    Subclasses set the attributes below and implement :meth:`start_simulator`.
+    """
+
+    __test__ = False  # a subclass per driver sets True
+
+    package: str = ''
+    node_executable: str = ''
+    node_name: str = ''
+    joints: Sequence[str] = ()
+    #: absolute joint positions every axis reaches quickly from anywhere (rad / m)
+    small_move: dict[str, float] = {}
+    #: (joint, far position, slow speed): a move that lasts several seconds
+    far_move: tuple[str, float, float] = ('', 0.0, 0.0)
+    #: (joint, velocity) of a jog that the device shows as motion
+    jog: tuple[str, float] = ('', 0.0)
+    #: position tolerance for "reached" (rad / m)
+    tolerance: float = 0.02
+    #: whether ~/home exists; if not, ``home_refusal`` is a text its clear failure names
+    has_home: bool = True
+    home_refusal: str = ''
+    #: a preset index the driver stores positions under, and whether it survives a node
+    #: restart (driver-side presets in presets_file, or presets kept by the device)
+    preset_index: int = 4
+    #: fields of a StartScan request the driver accepts (pattern included)
+    scan: dict[str, object] = {}
+    #: the scan status the device shows while scanning is checked through ``moving``
+    scan_joint: str = 'pan'
+    #: a word the connection diagnostic's ERROR message uses for a dropped link
+    link_lost_text: str = 'disconnected'
+
+    # ------------------------------------------------------------------ hooks
+    def start_simulator(self, workdir: Path, domain: int) -> SimulatorHandle:
+        raise NotImplementedError
+
+    def check_jog_running(self, rig: ConformanceRig) -> None:
+        """Device-specific checks while a jog runs (e.g. the mode the device reports)."""
+
+    def node_parameters(self) -> list[str]:
+        """Test-speed parameters of the shared node (publish_rate stays at its default)."""
+        return ['reconnect_period:=0.3', 'diagnostics_period:=0.25', 'command_timeout:=0.5']
+
+    # ---------------------------------------------------------------- fixtures
+    @pytest.fixture(scope='class')
+    @classmethod
+    def conformance_rig(cls, tmp_path_factory) -> Iterator[ConformanceRig]:
+        rig = ConformanceRig(cls(), tmp_path_factory.mktemp(f'{cls.package}-conformance'))
+        try:
+            yield rig
+        finally:
+            rig.close()
+
+    @pytest.fixture
+    def rig(self, conformance_rig: ConformanceRig) -> ConformanceRig:
+        """The class rig with its shared node running."""
+        conformance_rig.shared_node()
+        return conformance_rig
+
+    # ---------------------------------------------------------------- helpers
+    def srv(self, name: str) -> str:
+        return f'/{self.node_name}/{name}'
+
+    def move_to(self, ros: RosTestClient, targets: dict[str, float],
+                velocities: Sequence[float] = (), timeout: float = 60.0,
+                cancel_after: float | None = None):
+        goal = MoveTo.Goal(joint_names=list(targets), positions=list(targets.values()),
+                           velocities=list(velocities))
+        return ros.run_action(MoveTo, self.srv('move_to'), goal, timeout=timeout,
+                              cancel_after=cancel_after)
+
+    def wait_positions(self, ros: RosTestClient, targets: dict[str, float],
+                       timeout: float = 30.0) -> JointState:
+        return ros.wait_for_message(
+            'joint_states', JointState,
+            lambda m: all(abs(joint_positions(m).get(j, math.inf) - p) <= self.tolerance
+                          for j, p in targets.items()), timeout=timeout)
+
+    def wait_stopped(self, rig: ConformanceRig, joint: str, what: str) -> None:
+        assert rig.sim is not None
+        wait_for(lambda: not rig.sim.moving(joint), 20.0, what)
+
+    def start_far_move(self, rig: ConformanceRig) -> None:
+        """A slow joint_command move toward ``far_move`` that the device shows as motion."""
+        joint, position, speed = self.far_move
+        assert rig.ros is not None and rig.sim is not None
+        rig.ros.publish('joint_command', JointState(name=[joint], position=[position],
+                                                    velocity=[speed]))
+        wait_for(lambda: rig.sim.moving(joint), 20.0, f'{joint} to start its slow move')
+
+    def assert_short_of_far_target(self, rig: ConformanceRig) -> None:
+        joint, position, _ = self.far_move
+        assert rig.ros is not None
+        msg = rig.ros.wait_for_message('joint_states', JointState, timeout=20)
+        assert abs(joint_positions(msg)[joint] - position) > 0.1, 'stopped short of target'
+
+    def node_statuses(self, array: DiagnosticArray) -> list[DiagnosticStatus]:
+        prefix = f'{self.node_name}: '
+        return [s for s in array.status if s.name.startswith(prefix)]
+
+    def wait_connection(self, ros: RosTestClient, level: int, timeout: float = 30.0
+                        ) -> DiagnosticStatus:
+        return ros.wait_for_diagnostic(self.node_name, 'connection',
+                                       lambda s: s.level[0] == level, timeout=timeout)
+
+    # ------------------------------------------------------------------ tests
+    @pytest.mark.ros
+    def test_joint_states_names_units_and_rate(self, rig: ConformanceRig) -> None:
+        ros = rig.ros
+        msg = ros.wait_for_message('joint_states', JointState)
+        assert list(msg.name) == list(self.joints)
+        assert len(msg.position) == len(msg.velocity) == len(self.joints)
+        assert msg.header.stamp.sec > 0
+        # SI units: every position lies within the joint limits the node declares (rad/m).
+        low = ros.get_parameter(self.node_name, 'position_min')
+        high = ros.get_parameter(self.node_name, 'position_max')
+        for name, position, lo, hi in zip(msg.name, msg.position, low, high, strict=True):
+            assert math.isfinite(position) and lo - 1e-6 <= position <= hi + 1e-6, name
+        # rate: the node's own frequency check (stamps where the data arrived) is OK
+        status = ros.wait_for_diagnostic(
+            self.node_name, 'joint_states frequency',
+            lambda s: s.level[0] == OK and s.message != 'measuring', timeout=40)
+        values = {kv.key: kv.value for kv in status.values}
+        rate = ros.get_parameter(self.node_name, 'publish_rate')
+        assert float(values['expected_hz']) <= rate + 1e-6
+
+    @pytest.mark.ros
+    def test_every_diagnostic_is_ok_against_a_healthy_simulator(
+            self, rig: ConformanceRig) -> None:
+        def all_ok(array: DiagnosticArray) -> bool:
+            statuses = self.node_statuses(array)
+            measured = any(s.name.endswith('joint_states frequency') and
+                           s.message != 'measuring' for s in statuses)
+            return measured and all(s.level[0] == OK for s in statuses)
+
+        try:
+            rig.ros.wait_for_message('/diagnostics', DiagnosticArray, all_ok, timeout=40)
+        except TimeoutError:
+            last = rig.ros.wait_for_message('/diagnostics', DiagnosticArray)
+            bad = [(s.name, s.level[0], s.message) for s in self.node_statuses(last)
+                   if s.level[0] != OK]
+            raise AssertionError(f'diagnostics not all OK: {bad}') from None
+
+    @pytest.mark.ros
+    def test_joint_command_absolute_move(self, rig: ConformanceRig) -> None:
+        rig.ros.publish('joint_command', JointState(name=list(self.small_move),
+                                                    position=list(self.small_move.values())))
+        self.wait_positions(rig.ros, self.small_move)
+
+    @pytest.mark.ros
+    def test_jog_is_stopped_by_the_dead_man_watchdog(self, rig: ConformanceRig) -> None:
+        joint, velocity = self.jog
+        index = list(self.joints).index(joint)
+        rig.ros.publish('joint_command', JointState(name=[joint], velocity=[velocity]))
+        wait_for(lambda: rig.sim.moving(joint), 20.0, f'the {joint} jog to start')
+        self.check_jog_running(rig)
+        # no further joint_command: the watchdog (command_timeout) stops the axis
+        self.wait_stopped(rig, joint, 'the watchdog to stop the jog')
+        rig.ros.wait_for_message('joint_states', JointState,
+                                 lambda m: abs(m.velocity[index]) < 1e-3, timeout=20)
+        rig.node.wait_for_output('expired')
+
+    @pytest.mark.ros
+    def test_stop_service_halts_a_move(self, rig: ConformanceRig) -> None:
+        self.start_far_move(rig)
+        reply = rig.ros.call(Trigger, self.srv('stop'), Trigger.Request())
+        assert reply.success, reply.message
+        self.wait_stopped(rig, self.far_move[0], 'the axis to stop')
+        self.assert_short_of_far_target(rig)
+
+    @pytest.mark.ros
+    @pytest.mark.parametrize(('case', 'reason'), [
+        ('unknown joint', 'unknown joint'),
+        ('nan position', 'neither a position nor a velocity'),  # NaN = "not given"
+        ('inf position', 'not a finite number'),
+        ('inf velocity', 'not a finite number'),
+        ('velocity above velocity_max', 'exceeds velocity_max'),
+        ('position outside the limits', 'outside'),
+        ('names and positions differ in length', 'joint names but'),
+        ('names and velocities differ in length', 'joint names but'),
+    ])
+    def test_bad_joint_command_is_rejected_and_nothing_sent(
+            self, rig: ConformanceRig, case: str, reason: str) -> None:
+        first, second = list(self.joints)[:2]
+        msg = {
+            'unknown joint': JointState(name=['elbow'], position=[0.1]),
+            'nan position': JointState(name=[first], position=[math.nan]),
+            'inf position': JointState(name=[first], position=[math.inf]),
+            'inf velocity': JointState(name=[first], velocity=[-math.inf]),
+            'position outside the limits': JointState(name=[first], position=[1e6]),
+            'velocity above velocity_max': JointState(name=[first], position=[math.nan],
+                                                      velocity=[1e3]),
+            'names and positions differ in length': JointState(
+                name=[first, second], position=[0.1]),
+            'names and velocities differ in length': JointState(
+                name=[first], velocity=[0.1, 0.1]),
+        }[case]
+        before_log = rig.node.output().count(REJECTED)
+        before = rig.sim.motion_received()
+        rig.ros.publish('joint_command', msg)
+        wait_for(lambda: rig.node.output().count(REJECTED) > before_log, 20.0,
+                 f'the node to reject a joint_command with {case}')
+        assert reason in rig.node.output().split(REJECTED)[-1].splitlines()[0]
+        assert rig.sim.motion_received() == before
+
+    @pytest.mark.ros
+    def test_bad_move_to_goals_are_refused_and_nothing_sent(self, rig: ConformanceRig) -> None:
+        first = self.joints[0]
+        before = rig.sim.motion_received()
+        for targets, reason in (({'elbow': 0.0}, 'unknown joint'),
+                                ({first: math.nan}, 'neither a position'),
+                                ({first: math.inf}, 'not a finite number'),
+                                ({first: 1e6}, 'outside')):
+            result, status, _ = self.move_to(rig.ros, targets)
+            assert not result.success and reason in result.message, (targets, result.message)
+            assert status == GoalStatus.STATUS_ABORTED
+        result, _, _ = self.move_to(rig.ros, {first: self.small_move.get(first, 0.0)}, [1e3])
+        assert not result.success and 'velocity_max' in result.message, result.message
+        goal = MoveTo.Goal(joint_names=[first, self.joints[1]], positions=[0.0])
+        result, _, _ = rig.ros.run_action(MoveTo, self.srv('move_to'), goal)
+        assert not result.success and 'positions' in result.message, result.message
+        assert rig.sim.motion_received() == before
+
+    @pytest.mark.ros
+    def test_move_to_reaches_its_target(self, rig: ConformanceRig) -> None:
+        away = {j: p + (0.1 if p <= 0 else -0.1) for j, p in self.small_move.items()}
+        assert self.move_to(rig.ros, away)[0].success
+        before = rig.sim.motion_received()
+        result, status, feedback = self.move_to(rig.ros, self.small_move)
+        # the device-side observer sees a move (so its "nothing sent" checks mean something)
+        assert rig.sim.motion_received() != before
+        assert result.success, result.message
+        assert status == GoalStatus.STATUS_SUCCEEDED
+        assert result.positions == pytest.approx(list(self.small_move.values()),
+                                                 abs=self.tolerance)
+        assert feedback, 'MoveTo publishes feedback while moving'
+        self.wait_positions(rig.ros, self.small_move)
+
+    @pytest.mark.ros
+    def test_move_to_cancel_stops_the_axis(self, rig: ConformanceRig) -> None:
+        joint, position, speed = self.far_move
+        result, status, _ = self.move_to(rig.ros, {joint: position}, [speed],
+                                         cancel_after=1.0)
+        assert status == GoalStatus.STATUS_CANCELED and not result.success, result.message
+        self.wait_stopped(rig, joint, 'the cancelled move to stop')
+        self.assert_short_of_far_target(rig)
+
+    @pytest.mark.ros
+    def test_move_to_times_out_and_stops(self, rig: ConformanceRig) -> None:
+        joint, position, speed = self.far_move
+        default = rig.ros.get_parameter(self.node_name, 'move_timeout')
+        assert rig.ros.set_parameter(self.node_name, 'move_timeout', 0.5).successful
+        try:
+            result, status, _ = self.move_to(rig.ros, {joint: position}, [speed])
+        finally:
+            assert rig.ros.set_parameter(self.node_name, 'move_timeout', default).successful
+        assert status == GoalStatus.STATUS_ABORTED and not result.success
+        assert 'move_timeout' in result.message, result.message
+        self.wait_stopped(rig, joint, 'the timed-out move to stop')
+        self.assert_short_of_far_target(rig)
+
+    @pytest.mark.ros
+    def test_home_or_its_clear_failure(self, rig: ConformanceRig) -> None:
+        result, status, feedback = rig.ros.run_action(Home, self.srv('home'), Home.Goal(),
+                                                      timeout=90)
+        if self.has_home:
+            assert result.success, result.message
+            assert status == GoalStatus.STATUS_SUCCEEDED and feedback and feedback[0].state
+        else:
+            assert not result.success and self.home_refusal in result.message, result.message
+        bad, _, _ = rig.ros.run_action(Home, self.srv('home'), Home.Goal(joint_names=['elbow']))
+        assert not bad.success and 'unknown joint' in bad.message
+
+    @pytest.mark.ros
+    def test_presets_set_list_goto_clear(self, rig: ConformanceRig) -> None:
+        ros, index = rig.ros, self.preset_index
+        reply = ros.call(SetPreset, self.srv('set_preset'), SetPreset.Request(
+            index=index, name='conformance', joint_names=list(self.small_move),
+            positions=list(self.small_move.values())))
+        assert reply.success, reply.message
+        first = self.joints[0]
+        before = rig.sim.motion_received()
+        bad = ros.call(SetPreset, self.srv('set_preset'), SetPreset.Request(
+            index=index + 1, name='bad', joint_names=[first], positions=[1e6]))
+        assert not bad.success and 'outside' in bad.message, bad.message
+        assert rig.sim.motion_received() == before
+        listed = ros.call(ListPresets, self.srv('list_presets'), ListPresets.Request())
+        assert listed.success
+        preset = {p.index: p for p in listed.presets}[index]
+        stored = dict(zip(preset.joint_names, preset.positions, strict=True))
+        for joint, position in self.small_move.items():
+            assert stored[joint] == pytest.approx(position, abs=1e-3)
+        # away, then back to the preset
+        away = {j: p + (0.1 if p <= 0 else -0.1) for j, p in self.small_move.items()}
+        assert self.move_to(ros, away)[0].success
+        go = ros.call(GotoPreset, self.srv('goto_preset'), GotoPreset.Request(index=index))
+        assert go.success, go.message
+        self.wait_positions(ros, self.small_move)
+        missing = ros.call(GotoPreset, self.srv('goto_preset'), GotoPreset.Request(index=99))
+        assert not missing.success and '99' in missing.message, missing.message
+        cleared = ros.call(ClearPreset, self.srv('clear_preset'), ClearPreset.Request(index=index))
+        assert cleared.success, cleared.message
+        listed = ros.call(ListPresets, self.srv('list_presets'), ListPresets.Request())
+        assert index not in [p.index for p in listed.presets]
+        cleared = ros.call(ClearPreset, self.srv('clear_preset'), ClearPreset.Request(all=True))
+        assert cleared.success, cleared.message
+
+    @pytest.mark.ros
+    def test_scan_start_stop_and_unknown_pattern(self, rig: ConformanceRig) -> None:
+        ros = rig.ros
+        before = rig.sim.motion_received()
+        unknown = ros.call(StartScan, self.srv('start_scan'), StartScan.Request(
+            **{**self.scan, 'pattern': 'lissajous'}))
+        assert not unknown.success and 'lissajous' in unknown.message, unknown.message
+        assert rig.sim.motion_received() == before
+        reply = ros.call(StartScan, self.srv('start_scan'), StartScan.Request(**self.scan))
+        assert reply.success, reply.message
+        wait_for(lambda: rig.sim.moving(self.scan_joint), 20.0, 'the scan to move the axis')
+        stop = ros.call(Trigger, self.srv('stop_scan'), Trigger.Request())
+        assert stop.success, stop.message
+        self.wait_stopped(rig, self.scan_joint, 'the scan to stop')
+        # the driver left scan mode: a move works
+        result, _, _ = self.move_to(ros, self.small_move)
+        assert result.success, result.message
+
+    # ------------------------------------------------- tests that restart the node
+    @pytest.mark.ros
+    def test_presets_persist_across_a_node_restart(self, rig: ConformanceRig) -> None:
+        index = self.preset_index + 2
+        reply = rig.ros.call(SetPreset, self.srv('set_preset'), SetPreset.Request(
+            index=index, name='kept', joint_names=list(self.small_move),
+            positions=list(self.small_move.values())))
+        assert reply.success, reply.message
+        rig.start_node()
+        try:
+            listed = rig.ros.call(ListPresets, self.srv('list_presets'), ListPresets.Request())
+            assert listed.success, listed.message
+            kept = {p.index: p for p in listed.presets}
+            assert index in kept, listed.presets
+            assert list(kept[index].positions) == pytest.approx(
+                list(self.small_move.values()), abs=1e-3)
+            go = rig.ros.call(GotoPreset, self.srv('goto_preset'),
+                              GotoPreset.Request(index=index))
+            assert go.success, go.message
+            self.wait_positions(rig.ros, self.small_move)
+        finally:
+            rig.ros.call(ClearPreset, self.srv('clear_preset'), ClearPreset.Request(index=index))
+
+    @pytest.mark.ros
+    def test_lifecycle_configure_activate_deactivate_cleanup(
+            self, conformance_rig: ConformanceRig) -> None:
+        rig, name = conformance_rig, self.node_name
+        rig.start_node('autostart:=false', wait_active=False)
+        ros = rig.ros
+        ros.wait_for_lifecycle_state(name, 'unconfigured')
+        assert ros.lifecycle_transition(name, Transition.TRANSITION_CONFIGURE)
+        assert ros.lifecycle_state(name) == 'inactive'
+        reply = ros.call(Trigger, self.srv('reset_faults'), Trigger.Request())
+        assert not reply.success and 'not active' in reply.message, reply.message
+        before = rig.sim.motion_received()
+        result, _, _ = self.move_to(ros, self.small_move)
+        assert not result.success and 'not active' in result.message, result.message
+        assert rig.sim.motion_received() == before
+        assert ros.lifecycle_transition(name, Transition.TRANSITION_ACTIVATE)
+        assert ros.lifecycle_state(name) == 'active'
+        ros.wait_for_message('joint_states', JointState, timeout=30)
+        self.start_far_move(rig)
+        assert ros.lifecycle_transition(name, Transition.TRANSITION_DEACTIVATE)
+        self.wait_stopped(rig, self.far_move[0], 'deactivate to stop the axis')
+        assert ros.lifecycle_state(name) == 'inactive'
+        assert ros.lifecycle_transition(name, Transition.TRANSITION_CLEANUP)
+        assert ros.lifecycle_state(name) == 'unconfigured'
+        assert ros.lifecycle_transition(name, Transition.TRANSITION_CONFIGURE)
+        assert ros.lifecycle_transition(name, Transition.TRANSITION_ACTIVATE)
+        assert self.move_to(ros, self.small_move)[0].success
+
+    @pytest.mark.ros
+    def test_link_drop_is_an_error_then_reconnects_and_obeys(self, rig: ConformanceRig) -> None:
+        ros = rig.ros
+        self.wait_connection(ros, OK)
+        rig.sim.drop_link(1.0)
+        status = self.wait_connection(ros, ERROR)
+        assert self.link_lost_text in status.message, status.message
+        # the axes' last values are stale, and ~/status says the link is down
+        ros.wait_for_diagnostic(self.node_name, self.joints[0], lambda s: s.level[0] == STALE)
+        ros.wait_for_message(self.srv('status'), GimbalStatus,
+                             lambda m: m.connection != GimbalStatus.CONNECTION_CONNECTED)
+        status = self.wait_connection(ros, OK, timeout=40)
+        assert int({kv.key: kv.value for kv in status.values}['reconnects']) >= 1
+        ros.wait_for_message(self.srv('status'), GimbalStatus,
+                             lambda m: m.connection == GimbalStatus.CONNECTION_CONNECTED
+                             and m.reconnects >= 1)
+        rig.node.wait_for_output('reconnected')
+        ros.wait_for_message('joint_states', JointState, timeout=20)
+        away = {j: p + (0.1 if p <= 0 else -0.1) for j, p in self.small_move.items()}
+        result, _, _ = self.move_to(ros, away)
+        assert result.success, result.message
+        self.wait_positions(ros, away)
+
+    @pytest.mark.ros
+    @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+    def test_axes_stop_when_the_node_gets_a_signal(
+            self, conformance_rig: ConformanceRig, sig: int) -> None:
+        rig = conformance_rig
+        # no dead-man watchdog: only the shutdown may stop the axis
+        node = rig.start_node('command_timeout:=0.0')
+        self.start_far_move(rig)
+        node.send_signal(sig)
+        node.process.wait(30)
+        self.wait_stopped(rig, self.far_move[0], f'the axis to stop on {sig!r}')
+        rig.stop_node()
+
+    @pytest.mark.ros
+    @pytest.mark.parametrize('case', ['position_min count', 'publish_rate zero'])
+    def test_invalid_parameters_are_refused_at_startup(self, case: str) -> None:
+        count = len(self.joints) + 1
+        parameter, expected = {
+            'position_min count': (f'position_min:={[-1.0] * count}',
+                                   f'position_min has {count} values'),
+            'publish_rate zero': ('publish_rate:=0.0', 'publish_rate'),
+        }[case]
+        with DomainLease() as domain:
+            node = ManagedProcess.ros(self.package, self.node_executable, domain,
+                                      ['--ros-args', '-p', parameter])
+            try:
+                node.process.wait(60)
+            finally:
+                node.stop()
+        assert node.process.returncode == 2, node.output()[-2000:]
+        assert expected in node.output()
