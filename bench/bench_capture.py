@@ -13,16 +13,16 @@ import math
 import threading
 import time
 
+from command_stream import DeviceRecorder, StreamSpec
 from driver_bench import (
     add_note,
     check_targets,
     codec_figures,
     explain_latency,
-    joint_command,
     node_figures,
 )
 from driver_bench import tcp_wire_limit_frames_per_s as tcp_limit
-from harness import CommandProbe, percentiles, wire_limit_frames_per_s
+from harness import percentiles, wire_limit_frames_per_s
 
 from capture_driver.protocol import (
     BY_OPCODE,
@@ -122,21 +122,44 @@ class TransactionLog:
         }}
 
 
+class MotionLog:
+    """The tilt axis' motion packets as the simulated controller handles them (wraps
+    ``PedestalModel.handle``): the last MOT_SendPosition value (the command bytes) and the
+    position the last MOT_Update executed (the device acting), in load degrees."""
+
+    def __init__(self, model: PedestalModel, axis: int) -> None:
+        self.sent: float | None = None
+        self.updated: float | None = None
+        handle = model.handle
+        send_position = COMMANDS['MOT_SendPosition'].opcode
+        update = COMMANDS['MOT_Update'].opcode
+        target = model.axes[axis]
+
+        def logged(frame: Frame, session: object) -> bytes:
+            if frame.axis == axis and frame.opcode == update:
+                pending = target.pending_position
+                reply = handle(frame, session)
+                if pending is not None and not target.relative:
+                    self.updated = pending
+                return reply
+            if frame.axis == axis and frame.opcode == send_position:
+                self.sent = COMMANDS['MOT_SendPosition'].decode_request(frame)
+            return handle(frame, session)
+
+        model.handle = logged
+
+
 def run(domain: int) -> dict:
     results: dict = {'transport': 'tcp loopback, polled (4 transactions per sample)',
                      'codec': codec(), 'rate_target': f'≥ {RATE_TARGET_HZ:g} Hz (2 axes, TCP)'}
     sim = CaptureSimulator(PedestalModel(), tcp_port=0)
-    probe = CommandProbe(sim.tcp)
     transactions = TransactionLog(sim.model)
+    motion = MotionLog(sim.model, TILT_AXIS)
+    recorder = DeviceRecorder(sim.tcp, {'received': lambda: motion.sent,
+                                        'acting': lambda: motion.updated})
     sim.start()
-    tilt = sim.model.axes[TILT_AXIS]
-
-    def command(index: int):
-        # alternate sides so every move is long (tilt limit +-90 deg); target in deg on axis 2
-        target = (0.2 + 0.01 * (index % 10)) * (1 if index % 2 else -1)
-        degrees = math.degrees(target)
-        return (joint_command(['tilt'], [target]),
-                lambda: tilt.target is not None and abs(tilt.target - degrees) < 1e-3)
+    # joint 'tilt' = axis 2, direction +1, load degrees (capture_driver_sim.yaml)
+    stream = StreamSpec('tilt', -0.25, math.degrees, 0.01, node_name=PACKAGE)
 
     base = {'transport': 'tcp', 'host': '127.0.0.1', 'port': sim.tcp.port}
     try:
@@ -149,7 +172,7 @@ def run(domain: int) -> dict:
         results['at_100hz'] = fast
         # then at the node's default rate: CPU, latency and command latency
         default = node_figures(domain, PACKAGE, {**base, 'publish_rate': DEFAULT_PUBLISH_RATE},
-                               probe, command, observe=transactions.figures)
+                               stream, recorder, observe=transactions.figures)
         results['default_rate'] = {'publish_rate': DEFAULT_PUBLISH_RATE,
                                    'joint_states_hz': default.pop('joint_states_hz')}
         default.pop('publish_rate')
