@@ -25,6 +25,7 @@ import itertools
 import json
 import os
 import socket
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -333,3 +334,32 @@ def move_and_stop_figures(ros: ProbeClient, spec: StreamSpec, recorder: DeviceRe
     if failures:
         figures['failures'] = failures[:5]
     return figures
+
+
+def trace_figures(directory: Path, pid: int) -> dict:
+    """The node's own view of the stream commands (bench/node_hook, ``BENCH_TRACE_DIR``):
+    rclpy delivery (publish -> callback entry), the driver's work before its first device
+    write, the writes of one command (first to last) and the whole callback."""
+    path = directory / f'trace_{pid}.json'
+    if not path.exists():
+        return {'error': f'no trace {path} (the node did not exit cleanly?)'}
+    data = json.loads(path.read_text())
+    records = [r for r in data['records'] if r['index'].isdigit()]
+    written = [r for r in records if r['writes']]
+    threads: dict[str, int] = {}
+    for record in records:
+        name = record['thread'].rsplit('_', 1)[0]
+        threads[name] = threads.get(name, 0) + 1
+    return {
+        'executor': data['executor'],
+        'commands_handled': len(records),
+        'callback_threads': threads,
+        'publish_to_callback': percentiles([r['entry'] - r['published'] for r in records]),
+        'callback_to_first_write': percentiles([r['writes'][0] - r['entry']
+                                                for r in written]),
+        'first_to_last_write': percentiles([r['writes'][-1] - r['writes'][0]
+                                            for r in written]),
+        'writes_per_command_median': statistics.median(len(r['writes']) for r in written)
+        if written else 0,
+        'callback_duration': percentiles([r['returned'] - r['entry'] for r in records]),
+    }

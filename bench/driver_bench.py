@@ -18,12 +18,19 @@ While the node runs, this process' GIL switch interval is lowered (see
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from command_stream import DeviceRecorder, StreamSpec, move_and_stop_figures, stream_figures
+from command_stream import (
+    DeviceRecorder,
+    StreamSpec,
+    move_and_stop_figures,
+    stream_figures,
+    trace_figures,
+)
 from harness import (
     ROOT,
     JointStateProbe,
@@ -122,7 +129,19 @@ def start_node(domain: int, package: str, parameters: dict[str, object],
     if params_file and Path(config).is_file():
         args += ['--params-file', str(config)]
     return ManagedProcess.ros(package, executable or f'{package}_node', domain,
-                              args + ros_parameters(parameters))
+                              args + ros_parameters(parameters), extra_env=node_hook_env())
+
+
+#: bench/node_hook/sitecustomize.py instruments the node process when one of these is set
+NODE_HOOK_VARIABLES = ('BENCH_TRACE_DIR', 'BENCH_EXECUTOR', 'BENCH_SWITCH_INTERVAL_S')
+
+
+def node_hook_env() -> dict[str, str] | None:
+    """PYTHONPATH with bench/node_hook first, when a node hook variable asks for it."""
+    if not any(os.environ.get(name) for name in NODE_HOOK_VARIABLES):
+        return None
+    paths = [str(ROOT / 'bench' / 'node_hook'), os.environ.get('PYTHONPATH', '')]
+    return {'PYTHONPATH': os.pathsep.join(p for p in paths if p)}
 
 
 def node_figures(
@@ -170,9 +189,14 @@ def node_figures(
                 results['command_stream'] = stream_figures(domain, stream, recorder,
                                                            node_pid=node.process.pid)
                 results['move_and_stop'] = move_and_stop_figures(ros, stream, recorder)
+                results['stream_variant'] = {name: os.environ[name] for name in
+                                             NODE_HOOK_VARIABLES if os.environ.get(name)}
     finally:
         sys.setswitchinterval(switch_interval)
         code = node.stop(timeout=5.0)   # a clean shutdown takes ~1 s; bound the bench time
+        if os.environ.get('BENCH_TRACE_DIR') and stream is not None:
+            results['node_trace'] = trace_figures(Path(os.environ['BENCH_TRACE_DIR']),
+                                                  node.process.pid)
         if code not in (0, -2, 130):
             add_note(results, f'node exited with code {code} (-9: still running 5 s after '
                      'SIGINT and 3 s after SIGTERM, killed)')
