@@ -317,10 +317,13 @@ def move_and_stop_figures(ros: ProbeClient, spec: StreamSpec, recorder: DeviceRe
         handle = send.result()
         result = handle.get_result_async()
         still_running = not result.done()
+        answered: list[float] = []
         call_start = time.time()
         answer = stop.call_async(Trigger.Request())
-        wait_for(answer.done, timeout, 'the ~/stop reply')
-        stop_round_trip.append(time.time() - call_start)
+        # timed by the future's callback (the executor thread), not by wait_for's 20 ms polls
+        answer.add_done_callback(lambda _future, times=answered: times.append(time.time()))
+        wait_for(lambda times=answered: times, timeout, 'the ~/stop reply')
+        stop_round_trip.append(answered[0] - call_start)
         if not answer.result().success:
             failures.append(f'~/stop: {answer.result().message}')
         running_at_stop += still_running

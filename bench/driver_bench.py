@@ -186,8 +186,11 @@ def node_figures(
             results['sim_to_subscriber'] = percentiles(states.stamp_latencies())
             results.update(report_freshness(states))
             if stream is not None and recorder is not None:
-                results['command_stream'] = stream_figures(domain, stream, recorder,
-                                                           node_pid=node.process.pid)
+                try:
+                    results['command_stream'] = stream_figures(domain, stream, recorder,
+                                                               node_pid=node.process.pid)
+                except (RuntimeError, TimeoutError) as exc:
+                    raise RuntimeError(f'{exc}; node output:\n{node.output()[-3000:]}') from exc
                 results['move_and_stop'] = move_and_stop_figures(ros, stream, recorder)
                 results['stream_variant'] = {name: os.environ[name] for name in
                                              NODE_HOOK_VARIABLES if os.environ.get(name)}

@@ -34,8 +34,10 @@ def main() -> int:
     deadline = time.monotonic() + 30.0
     while publisher.get_subscription_count() < subscribers:
         if time.monotonic() > deadline:
+            graph = [f'{info.node_namespace}/{info.node_name}'
+                     for info in node.get_subscriptions_info_by_topic('/joint_command')]
             print(f'stream_publisher: {publisher.get_subscription_count()} of {subscribers} '
-                  'subscribers after 30 s', file=sys.stderr)
+                  f'subscribers matched after 30 s (graph: {graph})', file=sys.stderr)
             return 1
         time.sleep(0.05)
     time.sleep(DISCOVERY_SETTLE_S)

@@ -6,7 +6,7 @@ one of these variables is set, and Python imports this module at start-up:
 * ``BENCH_TRACE_DIR``: for every joint_command the node handles, the publish time (the
   stream publisher's ``header.stamp``), the callback's entry and return and the time of
   each device write made inside it (``gimbal_driver_common.transport`` streams and
-  python-can ``send``); written as JSON to ``<dir>/trace_<pid>.json`` when the node exits.
+  python-can's slcan ``send``); written as JSON to ``<dir>/trace_<pid>.json`` when the node exits.
   Splits the command path into rclpy delivery, the driver's work before its first byte
   (validation, the client lock) and the protocol's own round trips.
 * ``BENCH_EXECUTOR=events``: ``run_driver`` spins ``rclpy.experimental.EventsExecutor``
@@ -54,13 +54,10 @@ def _install() -> None:
 
     for stream in (transport.TcpStream, transport.SerialStream):
         stream.write = traced_write(stream.write)
-    try:
-        import can
+    try:   # the turret's CAN link: python-can loads interfaces lazily, slcan on the bench
+        from can.interfaces.slcan import slcanBus
 
-        can.BusABC.send = traced_write(can.BusABC.send)
-        for bus in can.BusABC.__subclasses__():
-            if 'send' in vars(bus):
-                bus.send = traced_write(bus.send)
+        slcanBus.send = traced_write(slcanBus.send)
     except ImportError:
         pass
 
