@@ -281,6 +281,18 @@ def profile_node(pid: int, seconds: float, directory: Path, name: str) -> dict:
     return {'profile': files}
 
 
+def in_executor(ros: ProbeClient, call: Callable[[], object], timeout: float) -> object:
+    """Run ``call`` in the client's executor thread and return what it returned.
+
+    rclpy's ActionClient registers a request only after sending it; called from another
+    thread, the response can be taken first and is dropped ("Ignoring unexpected goal
+    response"), and the goal is never accepted. In the executor thread that cannot happen.
+    """
+    task = ros.executor.create_task(call)
+    wait_for(task.done, timeout, 'the client executor')
+    return task.result()
+
+
 def move_and_stop_figures(ros: ProbeClient, spec: StreamSpec, recorder: DeviceRecorder,
                           trials: int = 10, timeout: float = 10.0) -> dict:
     """~/move_to goal -> its first device bytes; ~/stop round trip while the move runs."""
@@ -299,8 +311,8 @@ def move_and_stop_figures(ros: ProbeClient, spec: StreamSpec, recorder: DeviceRe
         target = spec.move_targets[trial % 2]
         device_target = spec.to_device(target)
         start = time.time()
-        send = action.send_goal_async(MoveTo.Goal(joint_names=[spec.joint],
-                                                  positions=[target]))
+        goal = MoveTo.Goal(joint_names=[spec.joint], positions=[target])
+        send = in_executor(ros, lambda g=goal: action.send_goal_async(g), timeout)
 
         def reached(since: float = start, value: float = device_target) -> float | None:
             events = recorder.events['received']
@@ -315,7 +327,7 @@ def move_and_stop_figures(ros: ProbeClient, spec: StreamSpec, recorder: DeviceRe
             continue
         goal_to_bytes.append(reached() - start)
         handle = send.result()
-        result = handle.get_result_async()
+        result = in_executor(ros, handle.get_result_async, timeout)
         still_running = not result.done()
         answered: list[float] = []
         call_start = time.time()
