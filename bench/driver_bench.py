@@ -190,7 +190,8 @@ def node_figures(
                     results['command_stream'] = stream_figures(domain, stream, recorder,
                                                                node_pid=node.process.pid)
                 except (RuntimeError, TimeoutError) as exc:
-                    raise RuntimeError(f'{exc}; node output:\n{node.output()[-3000:]}') from exc
+                    raise RuntimeError(f'{exc}; node exit code {node.process.poll()}, output:\n'
+                                       f'{node.output()[-3000:]}') from exc
                 results['move_and_stop'] = move_and_stop_figures(ros, stream, recorder)
                 results['stream_variant'] = {name: os.environ[name] for name in
                                              NODE_HOOK_VARIABLES if os.environ.get(name)}

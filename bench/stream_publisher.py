@@ -36,6 +36,7 @@ def main() -> int:
         if time.monotonic() > deadline:
             graph = [f'{info.node_namespace}/{info.node_name}'
                      for info in node.get_subscriptions_info_by_topic('/joint_command')]
+            graph.append(f'nodes: {node.get_node_names()}')
             print(f'stream_publisher: {publisher.get_subscription_count()} of {subscribers} '
                   f'subscribers matched after 30 s (graph: {graph})', file=sys.stderr)
             return 1
