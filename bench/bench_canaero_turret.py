@@ -18,15 +18,15 @@ import time
 from pathlib import Path
 
 import can
+from command_stream import DeviceRecorder, StreamSpec
 from driver_bench import (
     add_note,
     check_targets,
     codec_figures,
     explain_latency,
-    joint_command,
     node_figures,
 )
-from harness import CommandProbe, can_frame_bits, rclpy_reference, wire_limit_frames_per_s
+from harness import can_frame_bits, rclpy_reference, wire_limit_frames_per_s
 
 from canaero_turret_driver.protocol import CanAerospaceMessage, DataType
 from canaero_turret_driver.sim import (
@@ -127,22 +127,20 @@ def run(domain: int) -> dict:
     simulator = TurretSimulator(SimConfig())
     broadcasts = BroadcastCounter(simulator)
     server = PtySimServer(lambda: SlcanSession(simulator), link_path=str(Path(tmp.name, 'tty')))
-    probe = CommandProbe(server)
-    server.start()
     pitch = simulator.axes[PITCH]
-
-    def command(index: int):
-        target = (0.2 + 0.01 * (index % 10)) * (1 if index % 2 else -1)   # pitch, rad
-        degrees = math.degrees(target)   # pitch_direction +1
-        return (joint_command(['pitch'], [target]),
-                lambda: pitch.mode == 'position' and abs(pitch.target_position - degrees) < 1e-3)
+    # one frame carries the whole command: the drive holds the target once it is handled
+    recorder = DeviceRecorder(server, {
+        'received': lambda: pitch.target_position if pitch.mode == 'position' else None})
+    server.start()
+    # joint 'pitch' in rad, pitch_direction +1, the drive in degrees (FLOAT)
+    stream = StreamSpec('pitch', -0.25, math.degrees, 0.01, node_name=PACKAGE)
 
     try:
         results.update(node_figures(domain, PACKAGE, {
             'can_channel': server.port_name,
             'presets_file': str(Path(tmp.name, 'presets.yaml')),
             'publish_rate': DEFAULT_PUBLISH_RATE,
-        }, probe, command, observe=broadcasts.figures))
+        }, stream, recorder, observe=broadcasts.figures))
     finally:
         server.stop()
         tmp.cleanup()

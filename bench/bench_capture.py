@@ -10,19 +10,21 @@ from __future__ import annotations
 
 import itertools
 import math
+import tempfile
 import threading
 import time
+from pathlib import Path
 
+from command_stream import DeviceRecorder, StreamSpec
 from driver_bench import (
     add_note,
     check_targets,
     codec_figures,
     explain_latency,
-    joint_command,
     node_figures,
 )
 from driver_bench import tcp_wire_limit_frames_per_s as tcp_limit
-from harness import CommandProbe, percentiles, wire_limit_frames_per_s
+from harness import loopback_rtt_us, percentiles, wire_limit_frames_per_s
 
 from capture_driver.protocol import (
     BY_OPCODE,
@@ -39,6 +41,7 @@ DEFAULT_PUBLISH_RATE = 50.0   # the node's declared default (GimbalDriverNode)
 RATE_TARGET_HZ = 100.0
 TILT_AXIS = 2                 # joint 'tilt': axis 2, direction +1 (capture_driver_sim.yaml)
 POLL_COMMANDS = ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')
+LIMIT_PUBLISH_RATE = 1000.0   # publish_rate's upper bound: the poll loop runs flat out
 
 
 def codec() -> dict:
@@ -122,21 +125,44 @@ class TransactionLog:
         }}
 
 
+class MotionLog:
+    """The tilt axis' motion packets as the simulated controller handles them (wraps
+    ``PedestalModel.handle``): the last MOT_SendPosition value (the command bytes) and the
+    position the last MOT_Update executed (the device acting), in load degrees."""
+
+    def __init__(self, model: PedestalModel, axis: int) -> None:
+        self.sent: float | None = None
+        self.updated: float | None = None
+        handle = model.handle
+        send_position = COMMANDS['MOT_SendPosition'].opcode
+        update = COMMANDS['MOT_Update'].opcode
+        target = model.axes[axis]
+
+        def logged(frame: Frame, session: object) -> bytes:
+            if frame.axis == axis and frame.opcode == update:
+                pending = target.pending_position
+                reply = handle(frame, session)
+                if pending is not None and not target.relative:
+                    self.updated = pending
+                return reply
+            if frame.axis == axis and frame.opcode == send_position:
+                self.sent = COMMANDS['MOT_SendPosition'].decode_request(frame)
+            return handle(frame, session)
+
+        model.handle = logged
+
+
 def run(domain: int) -> dict:
     results: dict = {'transport': 'tcp loopback, polled (4 transactions per sample)',
                      'codec': codec(), 'rate_target': f'≥ {RATE_TARGET_HZ:g} Hz (2 axes, TCP)'}
     sim = CaptureSimulator(PedestalModel(), tcp_port=0)
-    probe = CommandProbe(sim.tcp)
     transactions = TransactionLog(sim.model)
+    motion = MotionLog(sim.model, TILT_AXIS)
+    recorder = DeviceRecorder(sim.tcp, {'received': lambda: motion.sent,
+                                        'acting': lambda: motion.updated})
     sim.start()
-    tilt = sim.model.axes[TILT_AXIS]
-
-    def command(index: int):
-        # alternate sides so every move is long (tilt limit +-90 deg); target in deg on axis 2
-        target = (0.2 + 0.01 * (index % 10)) * (1 if index % 2 else -1)
-        degrees = math.degrees(target)
-        return (joint_command(['tilt'], [target]),
-                lambda: tilt.target is not None and abs(tilt.target - degrees) < 1e-3)
+    # joint 'tilt' = axis 2, direction +1, load degrees (capture_driver_sim.yaml)
+    stream = StreamSpec('tilt', -0.25, math.degrees, 0.01, node_name=PACKAGE)
 
     base = {'transport': 'tcp', 'host': '127.0.0.1', 'port': sim.tcp.port}
     try:
@@ -149,16 +175,85 @@ def run(domain: int) -> dict:
         results['at_100hz'] = fast
         # then at the node's default rate: CPU, latency and command latency
         default = node_figures(domain, PACKAGE, {**base, 'publish_rate': DEFAULT_PUBLISH_RATE},
-                               probe, command, observe=transactions.figures)
+                               stream, recorder, observe=transactions.figures)
         results['default_rate'] = {'publish_rate': DEFAULT_PUBLISH_RATE,
                                    'joint_states_hz': default.pop('joint_states_hz')}
         default.pop('publish_rate')
         results.update(default)
+        results['limits'] = {'tcp': tcp_limit_figures(domain, base, transactions)}
     finally:
         sim.stop()
+    results['limits']['serial_115200'] = serial_limit_figures(domain)
     explain(results)
     check_targets(results, RATE_TARGET_HZ)
     return results
+
+
+def poll_cycle_bytes() -> dict[str, int]:
+    """Bytes of one joint_states sample's transactions (2 axes x position + speed)."""
+    request = reply = 0
+    for axis in (1, 2):
+        for name in POLL_COMMANDS:
+            command = COMMANDS[name]
+            request += len(command.encode(axis))
+            reply += len(Frame(0, axis, command.opcode, encode_value(DataType.F32, 0.0))
+                         .encode())
+    return {'request_bytes': request, 'reply_bytes': reply, 'transactions': 2 * len(
+        POLL_COMMANDS)}
+
+
+def sustained_rate(domain: int, parameters: dict, transactions: TransactionLog) -> dict:
+    """The node polling flat out (publish_rate at its upper bound): joint_states rate,
+    node CPU and the device-side poll cycle, in one window."""
+    figures = node_figures(domain, PACKAGE, {**parameters, 'publish_rate': LIMIT_PUBLISH_RATE},
+                           window_seconds=4.0, observe=transactions.figures)
+    device = figures.get('device_side', {})
+    return {'publish_rate': LIMIT_PUBLISH_RATE,
+            'joint_states_hz': figures.get('joint_states_hz'),
+            'node_cpu_percent': figures.get('cpu_percent'),
+            'device_poll_cycle_first_to_last_request': device.get(
+                'poll_cycle_first_to_last_request'),
+            'device_poll_cycle_interval': device.get('poll_cycle_interval'),
+            'device_transactions_per_s': device.get('transactions_per_s')}
+
+
+def tcp_limit_figures(domain: int, parameters: dict, transactions: TransactionLog) -> dict:
+    """Highest sustained joint_states rate over TCP next to the request/reply limit: one
+    request in flight, so a sample costs (requests per cycle) loopback round trips."""
+    rtt_us = loopback_rtt_us()
+    requests = poll_cycle_bytes()['transactions']
+    return {
+        'loopback_tcp_rtt_us': rtt_us,
+        'requests_per_cycle': requests,
+        'request_reply_limit_hz': round(1e6 / (rtt_us * requests), 1),
+        'measured': sustained_rate(domain, parameters, transactions),
+    }
+
+
+def serial_limit_figures(domain: int, baud: int = 115200) -> dict:
+    """The same over serial: the 8N1 line limit from the bytes per cycle, and the node
+    measured against the simulator on a pty (a pty has no baud-rate pacing, so the measured
+    rate is the software's limit; a real line adds the computed transfer time per cycle)."""
+    cycle = poll_cycle_bytes()
+    line_bytes = cycle['request_bytes'] + cycle['reply_bytes']
+    with tempfile.TemporaryDirectory(prefix='bench-capture-pty-') as tmp:
+        sim = CaptureSimulator(PedestalModel(), tcp_port=None, pty=True,
+                               pty_link=str(Path(tmp, 'tty')))
+        transactions = TransactionLog(sim.model)
+        sim.start()
+        try:
+            measured = sustained_rate(domain, {'transport': 'serial',
+                                               'serial_port': sim.pty.port_name,
+                                               'baudrate': baud}, transactions)
+        finally:
+            sim.stop()
+    transfer_s = line_bytes * 10 / baud
+    return {
+        **cycle,
+        'line_transfer_ms_per_cycle': round(transfer_s * 1e3, 3),
+        'line_limit_hz': round(1.0 / transfer_s, 1),
+        'measured_over_pty': measured,
+    }
 
 
 def explain(results: dict) -> None:

@@ -9,16 +9,15 @@ from __future__ import annotations
 
 import math
 
+from command_stream import DeviceRecorder, StreamSpec
 from driver_bench import (
     check_targets,
     codec_figures,
     explain_latency,
     explain_streamed_rate,
-    joint_command,
     node_figures,
 )
 from driver_bench import tcp_wire_limit_frames_per_s as tcp_limit
-from harness import CommandProbe
 
 from kessler_kos_driver.protocol import FrameParser, MotorInfo, MotorInfoEntry, decode
 from kessler_kos_driver.sim import KosSimulator, SimSettings
@@ -48,22 +47,18 @@ def run(domain: int) -> dict:
     results: dict = {'transport': 'tcp loopback; GetMotorInfo polled at publish_rate',
                      'codec': codec()}
     sim = KosSimulator(SimSettings(precalibrated=True), port=0, discovery_port=0)
-    probe = CommandProbe(sim.server)
-    sim.start()
     pan = sim.device.motors[PAN_ADDRESS]
-
-    def command(index: int):
-        # rad on joint 'pan' (scale 2*pi rad per rotation), inside the calibrated 0..100 rot
-        target = 20.0 + 0.5 * (index % 20) + (0.25 if index % 2 else 0.0)
-        rotations = target / TWO_PI
-        return (joint_command(['pan'], [target]),
-                lambda: abs(pan.target - rotations) < 1e-5)
+    recorder = DeviceRecorder(sim.server, {'received': lambda: pan.target})
+    sim.start()
+    # rad on joint 'pan' (scale 2*pi rad per rotation), inside the calibrated 0..100 rot
+    stream = StreamSpec('pan', 20.0, lambda rad: rad / TWO_PI, 2e-5, move_targets=(10.0, 40.0),
+                        node_name=PACKAGE)
 
     try:
         results.update(node_figures(domain, PACKAGE, {
             'host': '127.0.0.1', 'port': sim.port, 'publish_rate': DEFAULT_PUBLISH_RATE,
             'reconnect_period': 0.5,
-        }, probe, command))
+        }, stream, recorder))
     finally:
         sim.stop()
     explain_latency(results, (

@@ -10,16 +10,16 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
+from command_stream import DeviceRecorder, StreamSpec
 from driver_bench import (
     add_note,
     check_targets,
     codec_figures,
     explain_latency,
     explain_streamed_rate,
-    joint_command,
     node_figures,
 )
-from harness import CommandProbe, wire_limit_frames_per_s
+from harness import wire_limit_frames_per_s
 
 from ucamera_driver.protocol import FrameParser
 from ucamera_driver.protocol.packets import AnglesReport, decode_packet, expected_payload_length
@@ -56,20 +56,16 @@ def run(domain: int) -> dict:
                                   f'{TELEMETRY_RATE} Hz', 'codec': codec()}
     tmp = tempfile.TemporaryDirectory(prefix='bench-ucamera-')
     sim = UCameraSim(SimConfig(init_time=0.1), link_path=str(Path(tmp.name, 'tty')))
-    probe = CommandProbe(sim.server)
-    sim.start()
     model = sim.model
-
-    def command(index: int):
-        target = (0.2 + 0.01 * (index % 10)) * (1 if index % 2 else -1)   # tilt, rad
-        return (joint_command(['tilt'], [target]),
-                lambda: abs(model.commanded_angles[1] - target) < ANGLE_TOLERANCE)
+    recorder = DeviceRecorder(sim.server, {'received': lambda: model.commanded_angles[1]})
+    sim.start()
+    stream = StreamSpec('tilt', -0.25, float, ANGLE_TOLERANCE, node_name=PACKAGE)   # rad
 
     try:
         results.update(node_figures(domain, PACKAGE, {
             'serial_port': sim.port_name, 'presets_file': str(Path(tmp.name, 'presets.yaml')),
             'publish_rate': DEFAULT_PUBLISH_RATE, 'telemetry_rate': TELEMETRY_RATE,
-        }, probe, command))
+        }, stream, recorder))
     finally:
         sim.stop()
         tmp.cleanup()

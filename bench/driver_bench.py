@@ -1,14 +1,16 @@
 """Shared steps of the per-driver benchmarks (bench_<driver>.py): codec rates and node figures.
 
 Every driver benchmark runs its simulator inside the bench process (so a
-:class:`~harness.CommandProbe` can watch the device model) and the driver node
+:class:`~command_stream.DeviceRecorder` can watch the device model) and the driver node
 as a separate process, then measures, in this order and on one node process:
 
 1. ``cpu_percent`` of the node while it publishes at ``publish_rate``, the
    ``sim_to_subscriber`` latency of the joint_states received meanwhile
    and the ``joint_states_hz`` achieved in the same window;
-2. ``command_latency``: ``joint_command`` publish -> the simulator's device
-   model holding the commanded target.
+2. ``command_stream``: a steady joint_command stream at 50 and 100 Hz against the
+   simulator, next to a bare rclpy reference fed by the same stream
+   (:mod:`command_stream`), then ``move_and_stop``: a ~/move_to goal to its first device
+   bytes and ~/stop answered while the move runs.
 
 While the node runs, this process' GIL switch interval is lowered (see
 ``BENCH_SWITCH_INTERVAL_S``) so the in-process simulator answers like a device would.
@@ -16,21 +18,27 @@ While the node runs, this process' GIL switch interval is lowered (see
 
 from __future__ import annotations
 
+import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 
+from command_stream import (
+    DeviceRecorder,
+    StreamSpec,
+    move_and_stop_figures,
+    stream_figures,
+    trace_figures,
+)
 from harness import (
     ROOT,
-    CommandProbe,
     JointStateProbe,
     ProbeClient,
     cpu_percent,
     percentiles,
     wire_limit_frames_per_s,
 )
-from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.testing import ManagedProcess, wait_for
 
@@ -49,10 +57,6 @@ MAC_HEADER_AND_FCS = 14 + 4
 # polled driver's request/reply round trips could pick up a bench-made delay. The node process
 # is not affected by this setting.
 BENCH_SWITCH_INTERVAL_S = 0.0002
-
-#: one command sample: the JointState to publish and the device-side predicate of its arrival
-CommandSample = tuple[JointState, Callable[[], bool]]
-
 
 def tcp_wire_limit_frames_per_s(frame_bytes: int, bits_per_second: float = 100e6) -> float:
     """Frames per second a TCP link carries, one protocol frame per Ethernet frame."""
@@ -117,28 +121,40 @@ def ros_parameters(values: dict[str, object]) -> list[str]:
 
 
 def start_node(domain: int, package: str, parameters: dict[str, object],
-               params_file: bool = True) -> ManagedProcess:
-    """``<package>_node`` with its simulator YAML (if any) and ``parameters`` on top."""
+               params_file: bool = True, executable: str = '') -> ManagedProcess:
+    """``<package>_node`` (or ``executable``) with its simulator YAML (if any) and
+    ``parameters`` on top."""
     args = ['--ros-args']
     config = ROOT / 'src' / package / 'config' / f'{package}_sim.yaml'
     if params_file and Path(config).is_file():
         args += ['--params-file', str(config)]
-    return ManagedProcess.ros(package, f'{package}_node', domain,
-                              args + ros_parameters(parameters))
+    return ManagedProcess.ros(package, executable or f'{package}_node', domain,
+                              args + ros_parameters(parameters), extra_env=node_hook_env())
+
+
+#: bench/node_hook/sitecustomize.py instruments the node process when one of these is set
+NODE_HOOK_VARIABLES = ('BENCH_TRACE_DIR', 'BENCH_EXECUTOR', 'BENCH_SWITCH_INTERVAL_S')
+
+
+def node_hook_env() -> dict[str, str] | None:
+    """PYTHONPATH with bench/node_hook first, when a node hook variable asks for it."""
+    if not any(os.environ.get(name) for name in NODE_HOOK_VARIABLES):
+        return None
+    paths = [str(ROOT / 'bench' / 'node_hook'), os.environ.get('PYTHONPATH', '')]
+    return {'PYTHONPATH': os.pathsep.join(p for p in paths if p)}
 
 
 def node_figures(
     domain: int,
     package: str,
     parameters: dict[str, object],
-    probe: CommandProbe | None,
-    commands: Callable[[int], CommandSample] | None,
-    samples: int = 30,
+    stream: StreamSpec | None = None,
+    recorder: DeviceRecorder | None = None,
     window_seconds: float = 5.0,
     settle_seconds: float = 2.0,
-    command_gap: float = 0.05,
     startup_timeout: float = 40.0,
     observe: Callable[[float, float], dict] | None = None,
+    executable: str = '',
 ) -> dict:
     """Start the node; in one window CPU, joint_states rate and latency; then commands.
 
@@ -148,7 +164,7 @@ def node_figures(
                      'bench_gil_switch_interval_ms': BENCH_SWITCH_INTERVAL_S * 1e3}
     switch_interval = sys.getswitchinterval()
     sys.setswitchinterval(BENCH_SWITCH_INTERVAL_S)
-    node = start_node(domain, package, parameters)
+    node = start_node(domain, package, parameters, executable=executable)
     try:
         with ProbeClient(domain, f'bench_{package}') as ros:
             states = JointStateProbe(ros)
@@ -169,12 +185,22 @@ def node_figures(
             results['joint_states_hz'] = received_rate(states)
             results['sim_to_subscriber'] = percentiles(states.stamp_latencies())
             results.update(report_freshness(states))
-            if probe is not None and commands is not None:
-                results['command_latency'] = command_latencies(ros, probe, commands, samples,
-                                                               command_gap)
+            if stream is not None and recorder is not None:
+                try:
+                    results['command_stream'] = stream_figures(domain, stream, recorder,
+                                                               node_pid=node.process.pid)
+                except (RuntimeError, TimeoutError) as exc:
+                    raise RuntimeError(f'{exc}; node exit code {node.process.poll()}, output:\n'
+                                       f'{node.output()[-3000:]}') from exc
+                results['move_and_stop'] = move_and_stop_figures(ros, stream, recorder)
+                results['stream_variant'] = {name: os.environ[name] for name in
+                                             NODE_HOOK_VARIABLES if os.environ.get(name)}
     finally:
         sys.setswitchinterval(switch_interval)
         code = node.stop(timeout=5.0)   # a clean shutdown takes ~1 s; bound the bench time
+        if os.environ.get('BENCH_TRACE_DIR') and stream is not None:
+            results['node_trace'] = trace_figures(Path(os.environ['BENCH_TRACE_DIR']),
+                                                  node.process.pid)
         if code not in (0, -2, 130):
             add_note(results, f'node exited with code {code} (-9: still running 5 s after '
                      'SIGINT and 3 s after SIGTERM, killed)')
@@ -207,34 +233,6 @@ def report_freshness(states: JointStateProbe) -> dict:
         'sim_to_subscriber_first_publication': percentiles(
             [first[s] - s for s in stamps]),
     }
-
-
-def command_latencies(ros: ProbeClient, probe: CommandProbe,
-                      commands: Callable[[int], CommandSample], samples: int,
-                      gap: float) -> dict:
-    """``samples`` joint_command publishes, each timed until its target reaches the model."""
-    warm_up, _ = commands(-1)
-    ros.publish('joint_command', warm_up)   # creates the publisher and waits for discovery
-    time.sleep(0.3)
-    latencies: list[float] = []
-    lost = 0
-    for index in range(samples):
-        message, arrived = commands(index)
-        latency = probe.measure(lambda m=message: ros.publish('joint_command', m), arrived,
-                                timeout=2.0)
-        if latency is None:
-            lost += 1
-        else:
-            latencies.append(latency)
-        time.sleep(gap)
-    figures = percentiles(latencies)
-    if lost:
-        figures['timed_out'] = lost
-    return figures
-
-
-def joint_command(names: Sequence[str], positions: Sequence[float]) -> JointState:
-    return JointState(name=list(names), position=[float(p) for p in positions])
 
 
 def add_note(results: dict, note: str) -> None:

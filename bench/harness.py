@@ -13,8 +13,8 @@ Latency definitions (wall clock, one machine):
   ``header.stamp`` the driver puts on joint_states, taken as the frame is read
   from the simulator) to the JointState arriving at a subscriber; loopback
   transfer from the simulator adds microseconds (``loopback_rtt_us``).
-* ``command``: from a ``joint_command`` publish to the simulator's device model
-  receiving the command bytes (observed inside the simulator's session).
+* ``command_stream`` (``command_stream.py``): from a ``joint_command`` publish, in a
+  steady stream, to the simulator receiving the command bytes and the device acting.
 """
 
 from __future__ import annotations
@@ -231,37 +231,3 @@ def git_revision() -> str:
 
 __all__ = ['rclpy', 'wait_for']
 
-
-class CommandProbe:
-    """Times joint_command publish -> command bytes handled by the in-process simulator.
-
-    A receive hook on the simulator server checks the device-side predicate
-    ``arrived()`` after every ``on_bytes``; the first time it holds after :meth:`arm`,
-    the arrival time is recorded.
-    """
-
-    def __init__(self, server: object) -> None:
-        self._armed: Callable[[], bool] | None = None
-        self._arrived_at: float | None = None
-        self._event = threading.Event()
-        server.add_receive_hook(self._check)
-
-    def _check(self) -> None:
-        check = self._armed
-        if check is not None and check():
-            self._arrived_at = time.time()
-            self._armed = None
-            self._event.set()
-
-    def measure(self, send: Callable[[], None], arrived: Callable[[], bool],
-                timeout: float = 5.0) -> float | None:
-        """Run ``send`` (publishes the command) and return the latency in s, or None."""
-        self._event.clear()
-        self._arrived_at = None
-        self._armed = arrived
-        start = time.time()
-        send()
-        if not self._event.wait(timeout):
-            self._armed = None
-            return None
-        return self._arrived_at - start

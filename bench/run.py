@@ -72,7 +72,7 @@ def markdown(results: dict) -> str:
         if not isinstance(data, dict) or name == 'reference':
             continue
         if 'error' in data:
-            rows.append(f'| {name} | error | {data["error"]} | | |')
+            rows.append(f'| {name} | error | {data["error"].splitlines()[0]} | | |')
             continue
         codec = data.get('codec', {})
         for key, value in codec.items():
@@ -85,11 +85,7 @@ def markdown(results: dict) -> str:
             rows.append(f'| {name} | sim→subscriber latency p50/p99 | {latency["p50_ms"]} / '
                         f'{latency["p99_ms"]} ms | rclpy pub/sub {ref["latency"]["p50_ms"]} / '
                         f'{ref["latency"]["p99_ms"]} ms | p99 < 5 ms |')
-        command = data.get('command_latency')
-        if command and command.get('n'):
-            rows.append(f'| {name} | joint_command→simulator p50/p99 | {command["p50_ms"]} / '
-                        f'{command["p99_ms"]} ms | rclpy pub/sub {ref["latency"]["p50_ms"]} / '
-                        f'{ref["latency"]["p99_ms"]} ms | |')
+        rows += stream_rows(name, data)
         if 'joint_states_hz' in data:
             rows.append(f'| {name} | joint_states rate at publish_rate '
                         f'{data.get("publish_rate")} Hz | {data["joint_states_hz"]} Hz | rclpy '
@@ -99,6 +95,51 @@ def markdown(results: dict) -> str:
             rows.append(f'| {name} | node CPU at default rate | {data["cpu_percent"]} % | rclpy '
                         f'publisher {ref["cpu_percent"]} % at {ref["rate_hz"]:g} Hz | < 10 % |')
     return '\n'.join(rows)
+
+
+def stream_rows(name: str, data: dict) -> list[str]:
+    """joint_command stream rows: each device point next to the reference of the same stream,
+    the ratios and the three targets; then move_to and ~/stop; then Capture's limits."""
+    rows = []
+    for rate, stream in data.get('command_stream', {}).items():
+        ref = stream['reference_byte_on_socket']
+        for point in ('device_received', 'device_acting'):
+            figures = stream.get(point)
+            if not figures or not figures.get('n'):
+                continue
+            missed = [target for target, met in figures.get('targets', {}).items() if not met]
+            rows.append(
+                f'| {name} | joint_command stream {rate.replace("_hz", " Hz")} → '
+                f'{point.removeprefix("device_")} p50/p99/max | {figures["p50_ms"]} / '
+                f'{figures["p99_ms"]} / {figures["max_ms"]} ms; {figures["lost"]} lost, '
+                f'{figures["superseded"]} superseded of {figures["commands"]} | rclpy byte on '
+                f'socket {ref.get("p50_ms")} / {ref.get("p99_ms")} / {ref.get("max_ms")} ms '
+                f'({ref.get("lost")} lost, {ref.get("superseded")} superseded); ratio p50 '
+                f'{figures.get("p50_ratio")}, p99 {figures.get("p99_ratio")} | '
+                f'{"met" if not missed else "missed: " + "; ".join(missed)} |')
+    move = data.get('move_and_stop', {})
+    for key, label in (('move_to_goal_to_first_device_bytes', 'move_to goal → first device '
+                        'bytes'), ('stop_round_trip_during_move', '~/stop round trip during '
+                                   'a move')):
+        figures = move.get(key)
+        if figures and figures.get('n'):
+            rows.append(f'| {name} | {label} p50/p99/max | {figures["p50_ms"]} / '
+                        f'{figures["p99_ms"]} / {figures["max_ms"]} ms (n={figures["n"]}) | | |')
+    limits = data.get('limits', {})
+    if 'tcp' in limits:
+        tcp = limits['tcp']
+        rows.append(f'| {name} | highest sustained joint_states, 2 axes, TCP | '
+                    f'{tcp["measured"]["joint_states_hz"]} Hz at publish_rate '
+                    f'{tcp["measured"]["publish_rate"]:g} | request/reply limit '
+                    f'{tcp["request_reply_limit_hz"]:,.0f} Hz ({tcp["requests_per_cycle"]} x '
+                    f'loopback RTT {tcp["loopback_tcp_rtt_us"]} µs) | |')
+    if 'serial_115200' in limits:
+        serial = limits['serial_115200']
+        rows.append(f'| {name} | highest sustained joint_states, 2 axes, pty | '
+                    f'{serial["measured_over_pty"]["joint_states_hz"]} Hz (no baud pacing) | '
+                    f'115200 8N1 line limit {serial["line_limit_hz"]} Hz '
+                    f'({serial["request_bytes"] + serial["reply_bytes"]} B per cycle) | |')
+    return rows
 
 
 if __name__ == '__main__':

@@ -1,0 +1,91 @@
+"""Bench-only instrumentation of a driver node process; never installed, never in a driver.
+
+``bench/driver_bench.start_node`` puts this directory first on the node's PYTHONPATH when
+one of these variables is set, and Python imports this module at start-up:
+
+* ``BENCH_TRACE_DIR``: for every joint_command the node handles, the publish time (the
+  stream publisher's ``header.stamp``), the callback's entry and return and the time of
+  each device write made inside it (``gimbal_driver_common.transport`` streams and
+  python-can's slcan ``send``); written as JSON to ``<dir>/trace_<pid>.json`` when the node exits.
+  Splits the command path into rclpy delivery, the driver's work before its first byte
+  (validation, the client lock) and the protocol's own round trips.
+* ``BENCH_EXECUTOR=events``: ``run_driver`` spins ``rclpy.experimental.EventsExecutor``
+  instead of ``MultiThreadedExecutor(num_threads=4)`` (an experiment; see bench/README.md).
+* ``BENCH_SWITCH_INTERVAL_S``: the GIL switch interval instead of the driver's 1 ms.
+"""
+
+from __future__ import annotations
+
+import os
+
+
+def _install() -> None:
+    import atexit
+    import json
+    import threading
+    import time
+    from pathlib import Path
+
+    from gimbal_driver_common import transport
+    from gimbal_driver_common.ros import base_node
+
+    executor = os.environ.get('BENCH_EXECUTOR', '')
+    if executor == 'events':
+        from rclpy.experimental import EventsExecutor
+
+        base_node.MultiThreadedExecutor = lambda num_threads=None: EventsExecutor()
+    interval = os.environ.get('BENCH_SWITCH_INTERVAL_S')
+    if interval:
+        base_node.GIL_SWITCH_INTERVAL_S = float(interval)   # run_driver applies it
+
+    trace_dir = os.environ.get('BENCH_TRACE_DIR')
+    if not trace_dir:
+        return
+    local = threading.local()
+    records: list[dict] = []
+
+    def traced_write(write):
+        def wrapper(self, *args, **kwargs):
+            writes = getattr(local, 'writes', None)
+            if writes is not None:
+                writes.append(time.time())
+            return write(self, *args, **kwargs)
+        return wrapper
+
+    for stream in (transport.TcpStream, transport.SerialStream):
+        stream.write = traced_write(stream.write)
+    try:   # the turret's CAN link: python-can loads interfaces lazily, slcan on the bench
+        from can.interfaces.slcan import slcanBus
+
+        slcanBus.send = traced_write(slcanBus.send)
+    except ImportError:
+        pass
+
+    on_joint_command = base_node.GimbalDriverNode._on_joint_command
+
+    def traced_on_joint_command(self, msg):
+        entry = time.time()
+        local.writes = []
+        try:
+            return on_joint_command(self, msg)
+        finally:
+            records.append({
+                'index': msg.header.frame_id,
+                'published': msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9,
+                'entry': entry, 'writes': local.writes, 'returned': time.time(),
+                'thread': threading.current_thread().name})
+            local.writes = None
+
+    base_node.GimbalDriverNode._on_joint_command = traced_on_joint_command
+
+    def dump() -> None:
+        path = Path(trace_dir, f'trace_{os.getpid()}.json')
+        path.write_text(json.dumps({'executor': executor or 'MultiThreadedExecutor(4)',
+                                    'records': records}))
+
+    atexit.register(dump)
+
+
+if os.environ.get('BENCH_TRACE_DIR') or os.environ.get('BENCH_EXECUTOR') or os.environ.get(
+        'BENCH_SWITCH_INTERVAL_S'):
+    _install()
