@@ -6,15 +6,14 @@ REP-103 joint space and the device sees the negated angle.
 
 from __future__ import annotations
 
-import json
 import math
-import socket
 
 import pytest
 
 pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
 
+from capture_driver.sim import console_state
 from gimbal_driver_common.ros.look_at_testing import (
     LookAtCheck,
     LookAtRig,
@@ -27,17 +26,6 @@ from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_p
 pytestmark = pytest.mark.ros
 
 PKG = 'capture_driver'
-
-
-def sim_axes(port: int) -> dict:
-    """Axis number -> position (deg, device sign) and velocity, from the control port."""
-    with socket.create_connection(('127.0.0.1', port), timeout=5.0) as sock:
-        stream = sock.makefile('rw')
-        stream.write('state\n')
-        stream.flush()
-        answer = stream.readline().strip()
-    assert answer.startswith('ok '), answer
-    return json.loads(answer[3:])['axes']
 
 
 @pytest.fixture(scope='module')
@@ -57,7 +45,7 @@ def look_at_rig():
 
         with node_against_sim(domain, sim, start_node) as ros:
             check = LookAtCheck(ros, PKG, installed_description(PKG))
-            yield LookAtRig(check, lambda: sim_axes(control_port))
+            yield LookAtRig(check, lambda: console_state(control_port)['axes'])
 
 
 class TestLookAt(LookAtSuite):
