@@ -41,6 +41,7 @@ from gimbal_driver_common.ros.base_node import (
     run_driver,
 )
 from gimbal_driver_common.ros.diagnostics import StatusPart
+from gimbal_driver_common.ros.heading import heading_imu
 from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_msgs.msg import AxisState, Preset
 from gimbal_msgs.srv import DeviceCommand, SetMode
@@ -110,29 +111,6 @@ def _parse_intervals(items: Sequence[str]) -> dict[str, int]:
 
 
 POSITION_KEYS = frozenset(f"{axis}_position" for axis in AXES)
-# Imu orientation covariance for the axes a heading does not measure (roll, pitch), and
-# the REP-145 marker for "not provided" (as ublox_gps publishes its navheading).
-UNMEASURED_ANGLE_VARIANCE = 1e6
-NOT_PROVIDED = -1.0
-
-
-def heading_imu(heading_rad: float, accuracy_rad: float | None) -> Imu:
-    """A yaw-only sensor_msgs/Imu in ENU from a compass heading (clockwise from north).
-
-    REP-103: yaw counts counter-clockwise from east, so yaw = pi/2 - heading. The heading
-    accuracy (1 sigma) squared goes to orientation_covariance[8]; 0 there = unknown.
-    """
-    yaw = math.remainder(math.pi / 2.0 - heading_rad, math.tau)
-    msg = Imu()
-    msg.orientation.z = math.sin(yaw / 2.0)
-    msg.orientation.w = math.cos(yaw / 2.0)
-    yaw_variance = accuracy_rad ** 2 if accuracy_rad is not None else 0.0
-    msg.orientation_covariance = [UNMEASURED_ANGLE_VARIANCE, 0.0, 0.0,
-                                  0.0, UNMEASURED_ANGLE_VARIANCE, 0.0,
-                                  0.0, 0.0, yaw_variance]
-    msg.angular_velocity_covariance[0] = NOT_PROVIDED
-    msg.linear_acceleration_covariance[0] = NOT_PROVIDED
-    return msg
 MIN_TIS_INTERVAL_MS = 1  # TIS counts whole milliseconds
 
 

@@ -32,6 +32,7 @@ from gimbal_driver_common.ros.base_node import (
     run_driver,
 )
 from gimbal_driver_common.ros.diagnostics import StatusPart
+from gimbal_driver_common.ros.heading import heading_imu
 from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_driver_common.scan import ScanError, ScanRequest
 from gimbal_driver_common.transport import SerialStream, TcpStream
@@ -81,7 +82,6 @@ MAX_PRESETS = 15
 DIGITAL_IO_COUNT = 6  # COM_get/setDigitalIO: I/O 1..6 in the axis byte (4.6.17-18)
 TRACKING_MODES = {'off': 0, 'manual': 1, 'auto': 2}  # VDT_setTrackingOn values (4.11.1)
 IMU_ANGLE_BY_AXIS = {1: 'yaw', 2: 'pitch', 3: 'roll'}  # what IMU_Leveling levels per axis
-UNKNOWN_VARIANCE = 1e6  # rad^2: covariance entries the device gives no estimate for
 
 
 def _axis_flags(registers: dict[str, int]) -> list[ActiveFlag]:
@@ -1096,19 +1096,9 @@ class CaptureDriverNode(GimbalDriverNode):
             self.get_logger().warning('GPS heading not valid (GPS_HeadingReady 0): ~/heading '
                                       'not published', throttle_duration_sec=10.0)
             return
-        msg = Imu()
+        msg = heading_imu(math.radians(heading), self.heading_accuracy)
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.header.frame_id = self.gps_frame_id
-        # compass heading (clockwise from north) -> ENU yaw (counter-clockwise from east)
-        yaw = math.atan2(math.sin(math.pi / 2 - math.radians(heading)),
-                         math.cos(math.pi / 2 - math.radians(heading)))
-        msg.orientation.z, msg.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
-        yaw_variance = self.heading_accuracy ** 2 if self.heading_accuracy > 0 else (
-            UNKNOWN_VARIANCE)
-        msg.orientation_covariance[0] = msg.orientation_covariance[4] = UNKNOWN_VARIANCE
-        msg.orientation_covariance[8] = yaw_variance
-        msg.angular_velocity_covariance[0] = -1.0  # not provided (REP-145)
-        msg.linear_acceleration_covariance[0] = -1.0
         self._heading_pub.publish(msg)
 
     def _gps_altitude(self, client: CaptureClient) -> float:
