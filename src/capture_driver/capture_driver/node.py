@@ -22,18 +22,15 @@ from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
 from std_msgs.msg import MultiArrayDimension, UInt8MultiArray
 from std_srvs.srv import SetBool, Trigger
 
+from gimbal_driver_common.device import DeviceInfo, JointSample
 from gimbal_driver_common.diagnostics import ActiveFlag, Level
 from gimbal_driver_common.joint_command import CommandError, validate_joint_command
-from gimbal_driver_common.ros.base_node import (
-    DeviceError,
-    DeviceInfo,
-    GimbalDriverNode,
-    JointSample,
-    run_driver,
-)
 from gimbal_driver_common.ros.diagnostics import StatusPart
 from gimbal_driver_common.ros.heading import heading_imu
+from gimbal_driver_common.ros.legacy import DeviceError
+from gimbal_driver_common.ros.legacy import HookedDriverNode as GimbalDriverNode
 from gimbal_driver_common.ros.parameters import ParameterError
+from gimbal_driver_common.ros.run import run_driver
 from gimbal_driver_common.scan import ScanError, ScanRequest
 from gimbal_driver_common.transport import SerialStream, TcpStream
 from gimbal_msgs.action import Home

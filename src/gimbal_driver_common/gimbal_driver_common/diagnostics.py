@@ -9,7 +9,7 @@ Levels use DiagnosticStatus numbering so no ROS import is needed here.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 
 
@@ -132,3 +132,26 @@ class FrequencyMonitor:
         if rate > high:
             return Level.WARN, f'frequency too high ({rate:.1f} Hz, expected {self.expected_hz:g})'
         return Level.OK, f'{rate:.1f} Hz'
+
+
+@dataclass
+class StatusPart:
+    """One DiagnosticStatus before naming: ``part`` becomes ``<node name>: <part>``."""
+
+    part: str
+    level: Level = Level.OK
+    message: str = 'OK'
+    values: list[tuple[str, str]] = field(default_factory=list)
+
+    @classmethod
+    def from_flags(
+        cls,
+        part: str,
+        active: Iterable[ActiveFlag],
+        extra_values: Iterable[tuple[str, str]] = (),
+        ok_message: str = 'OK',
+    ) -> StatusPart:
+        """A status whose level and message come from decoded register flags."""
+        active = list(active)
+        level, message = summarize(active, ok_message)
+        return cls(part, level, message, [*extra_values, *flags_to_key_values(active)])

@@ -13,8 +13,10 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+from gimbal_driver_common.errors import InvalidRequest
 
-class CommandError(ValueError):
+
+class CommandError(InvalidRequest):
     """A command was rejected; the message says which joint and value and why."""
 
 

@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 import yaml
 
+from gimbal_driver_common.errors import InvalidRequest
+
 
 def _fsync_directory(directory: str) -> None:
     """Make a rename in ``directory`` durable (no-op where directories cannot be opened)."""
@@ -30,7 +32,7 @@ def _fsync_directory(directory: str) -> None:
         os.close(fd)
 
 
-class PresetError(Exception):
+class PresetError(InvalidRequest):
     """A preset request that cannot be served (unknown index, bad file, ...)."""
 
 

@@ -12,12 +12,13 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+from gimbal_driver_common.errors import InvalidRequest
 from gimbal_driver_common.joint_command import JointLimits
 
 MAX_WAYPOINTS = 10000
 
 
-class ScanError(ValueError):
+class ScanError(InvalidRequest):
     """The scan request cannot be run; the message says which value and why."""
 
 

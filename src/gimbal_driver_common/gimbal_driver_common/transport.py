@@ -18,8 +18,10 @@ from urllib.parse import parse_qs, urlparse
 
 import serial
 
+from gimbal_driver_common.errors import LinkError
 
-class TransportError(Exception):
+
+class TransportError(LinkError):
     """A link could not be opened, or failed while in use."""
 
 

@@ -25,6 +25,7 @@ import threading
 import time
 from dataclasses import dataclass
 
+from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout
 from gimbal_driver_common.sim_server import TcpSimServer
 from gimbal_driver_common.transport import LinkClosed, TcpStream, TransportError
 
@@ -159,12 +160,12 @@ class VirtualGimbalClient:
             while b'\n' not in self._buffer:
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
-                    raise TimeoutError(f'no reply to {line.split()[0]} within {self.timeout} s')
+                    raise DeviceTimeout(f'no reply to {line.split()[0]} within {self.timeout} s')
                 self._buffer += self.stream.read(4096, remaining)
             reply, self._buffer = self._buffer.split(b'\n', 1)
         text = reply.decode('ascii', 'replace')
         if text.startswith('ERR'):
-            raise ValueError(f'device refused {line!r}: {text[4:]}')
+            raise DeviceRefused(f'device refused {line!r}: {text[4:]}')
         return text
 
 

@@ -8,6 +8,7 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 
+from gimbal_driver_common.policies import scan_joints
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.look_at import LookAtRefused
 from gimbal_driver_common.ros.parameters import ParameterError
@@ -42,7 +43,7 @@ def test_scan_sweeps_pan_and_tilt_by_name_whatever_their_order(context) -> None:
     node = make(context)
     try:
         assert node.joint_names == ['slider', 'pan', 'tilt']
-        assert node.scan_joints() == ['pan', 'tilt']
+        assert scan_joints(node.config) == ['pan', 'tilt']
         assert node.limits['slider'].position_max == 1.0
     finally:
         node.destroy_node()
@@ -51,7 +52,7 @@ def test_scan_sweeps_pan_and_tilt_by_name_whatever_their_order(context) -> None:
 def test_scan_uses_first_two_joints_without_pan_tilt_names(context) -> None:
     node = make(context, joint_names=['yaw', 'pitch', 'roll'])
     try:
-        assert node.scan_joints() == ['yaw', 'pitch']
+        assert scan_joints(node.config) == ['yaw', 'pitch']
     finally:
         node.destroy_node()
 

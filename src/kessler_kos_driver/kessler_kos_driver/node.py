@@ -32,17 +32,14 @@ from sensor_msgs.msg import Joy
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
+from gimbal_driver_common.device import DeviceInfo, JointSample
 from gimbal_driver_common.diagnostics import Level
 from gimbal_driver_common.joint_command import CommandError
-from gimbal_driver_common.ros.base_node import (
-    DeviceError,
-    DeviceInfo,
-    GimbalDriverNode,
-    JointSample,
-    run_driver,
-)
 from gimbal_driver_common.ros.diagnostics import StatusPart
+from gimbal_driver_common.ros.legacy import DeviceError
+from gimbal_driver_common.ros.legacy import HookedDriverNode as GimbalDriverNode
 from gimbal_driver_common.ros.parameters import ParameterError
+from gimbal_driver_common.ros.run import run_driver
 from gimbal_msgs.msg import AxisState
 from gimbal_msgs.msg import PlaybackStatus as PlaybackStatusMsg
 from gimbal_msgs.srv import Calibrate, DeviceCommand, LoadTrajectory

@@ -1,0 +1,414 @@
+"""The controller: everything every driver does the same way, with no ROS in it.
+
+It owns the device thread (poll or stream, then hand each sample to the node),
+the one connection supervisor (open, identity, reconnect every
+``reconnect_period``, link state with reason and count), the command thread
+(newest command per joint wins, sent before the next poll), the jog dead-man
+watchdog, ``stop`` and the refusal rules. Moves, homing, scans and presets are
+policies in :mod:`gimbal_driver_common.policies` built on this class.
+
+The ROS node is an adapter around one controller (see ``ros/base_node.py``),
+like ros2_canopen's node around its driver object; the controller is
+unit-tested against a fake device in ``test/test_controller.py``.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol, TypeVar
+
+from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
+from gimbal_driver_common.errors import DeviceRefused, GimbalError, LinkError, device_boundary
+from gimbal_driver_common.joint_command import JointLimits, validate_joint_command
+from gimbal_driver_common.periodic import Periodic
+from gimbal_driver_common.watchdog import JogWatchdog
+
+T = TypeVar('T')
+
+#: a joint without a device "moving" bit is moving when faster than this (rad/s or m/s)
+MOVING_SPEED = 1e-3
+#: longest a streamed device's thread waits for data before checking the link again
+STREAM_WAIT_S = 0.05
+
+
+class Logger(Protocol):
+    """The part of a logger the controller uses (rclpy's and :mod:`logging`'s both fit)."""
+
+    def info(self, msg: str) -> object: ...
+    def warning(self, msg: str) -> object: ...
+    def error(self, msg: str) -> object: ...
+
+
+@dataclass
+class ControllerConfig:
+    """The common parameters of interfaces.md, as the controller uses them (all runtime)."""
+
+    joint_names: list[str]
+    limits: dict[str, JointLimits]
+    publish_rate: float = 50.0
+    command_timeout: float = 0.5
+    reconnect_period: float = 1.0
+    goal_tolerance: float = 0.01
+    move_timeout: float = 60.0
+    #: the (pan, tilt) joints a scan sweeps; empty: pan/tilt if named so, else the first two
+    scan_joints: Sequence[str] = field(default_factory=tuple)
+
+
+def is_moving(sample: JointSample | None, joint: str) -> bool:
+    """The one "moving" rule: the device's own bit where it has one, else the speed."""
+    if sample is None:
+        return False
+    if joint in sample.moving:
+        return bool(sample.moving[joint])
+    return abs(sample.velocities.get(joint, 0.0)) > MOVING_SPEED
+
+
+class GimbalController:
+    """Runs one :class:`Device`; thread-safe; every public method answers or raises GimbalError."""
+
+    def __init__(
+        self, device: Device, config: ControllerConfig, log: Logger,
+        on_sample: Callable[[JointSample], None] | None = None,
+        on_link_change: Callable[[], None] | None = None, periodic: Periodic | None = None,
+    ) -> None:
+        self.device = device
+        self.config = config
+        self.log = log
+        self.on_sample = on_sample or (lambda sample: None)
+        self.on_link_change = on_link_change or (lambda: None)
+        self.device_info = DeviceInfo()
+        self.connected = False
+        self.active = False
+        self.link_error = 'not configured'
+        self.reconnects = 0
+        self.latest: JointSample | None = None
+        #: last position target sent per joint (AxisState.target_position)
+        self.commanded_targets: dict[str, float] = {}
+        #: bumped by every stop and halt: a running move or scan sees it and ends
+        self.motion_generation = 0
+        self.watchdog = JogWatchdog(config.command_timeout, self._on_jog_expired)
+        self.periodic = periodic or Periodic(on_error=log.error)
+        self.periodic.add(self._watchdog_period(), self.watchdog.check)
+        self.halt_hooks: list[Callable[[], None]] = []  # e.g. stop a scan (policies)
+        self._send_lock = threading.Lock()  # one motion set-up at a time; stop goes last
+        self._pending: dict[str, tuple[str, float, float | None]] = {}  # joint -> kind, value, v
+        self._pending_lock = threading.Lock()
+        self._command_ready = threading.Event()
+        self._stopping = threading.Event()
+        self._wake = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._warned: dict[str, float] = {}
+
+    # ----------------------------------------------------------- lifecycle
+    def open(self) -> None:
+        """Open the link and start the device and command threads (lifecycle configure)."""
+        self._connect()
+        self._stopping.clear()
+        self._threads = [
+            threading.Thread(target=self._device_loop, name='device', daemon=True),
+            threading.Thread(target=self._command_loop, name='commands', daemon=True),
+        ]
+        for thread in self._threads:
+            thread.start()
+
+    def activate(self) -> None:
+        self.active = True
+
+    def deactivate(self, why: str = 'deactivating') -> None:
+        self.halt(why)
+        self.active = False
+
+    def close(self) -> None:
+        """Stop the threads and close the link (cleanup, shutdown)."""
+        self._stopping.set()
+        self._wake.set()
+        self._command_ready.set()
+        for thread in self._threads:
+            if thread is not threading.current_thread():
+                thread.join(timeout=5.0)
+        self._threads = []
+        self._close_device()
+        self.periodic.remove(self.watchdog.check)
+
+    def shutdown(self, why: str = 'shutting down') -> None:
+        """Stop what this driver was moving, then close."""
+        if self.active:
+            self.halt(why)
+        self.active = False
+        self.close()
+
+    def halt(self, why: str) -> None:
+        """Stop every axis and everything that would move it again."""
+        self._cancel_motion()
+        if not self.connected:
+            return
+        try:
+            self._stop_device(None)
+            self.log.info(f'{why}: axes stopped')
+        except GimbalError as exc:
+            self.log.error(f'{why}: stopping the axes failed: {exc}')
+
+    # ---------------------------------------------------------- parameters
+    def set_publish_rate(self, rate: float) -> None:
+        self.config.publish_rate = rate
+        self._wake.set()  # the device thread picks up the new period now
+
+    def set_command_timeout(self, timeout: float) -> None:
+        self.config.command_timeout = timeout
+        self.watchdog.timeout_s = timeout
+        self.periodic.set_period(self.watchdog.check, self._watchdog_period())
+
+    def _watchdog_period(self) -> float:
+        """Check jogs 4 times per timeout (at least every 50 ms); slowly while disabled."""
+        timeout = self.config.command_timeout
+        return min(0.05, timeout / 4) if timeout > 0 else 0.5
+
+    # ------------------------------------------------------------- refusals
+    def refusal(self, joints: Sequence[str] | None = None) -> str | None:
+        """Why a command cannot be served now, or None; with ``joints``: why they cannot move."""
+        if not self.active:
+            return 'node is not active (lifecycle); activate it first'
+        if not self.connected:
+            return f'device not connected ({self.link_error})'
+        if joints:
+            return self.device.refusal(list(joints))
+        return None
+
+    def require(self, joints: Sequence[str] | None = None) -> None:
+        """Raise :class:`DeviceRefused` with :meth:`refusal`'s reason, if there is one."""
+        reason = self.refusal(joints)
+        if reason:
+            raise DeviceRefused(reason)
+
+    def call(self, request: Callable[[], T], joints: Sequence[str] | None = None) -> T:
+        """Run a device request from a service: refused while it cannot be served, and
+        every failure comes out as a GimbalError (the one boundary for driver extras)."""
+        self.require(joints)
+        with device_boundary():
+            return request()
+
+    def moving(self, joint: str) -> bool:
+        return is_moving(self.latest, joint)
+
+    def busy(self) -> str | None:
+        """Why the axes are not idle (jogging, moving), or None: for parameters that may
+        only change while nothing moves, such as unit scales."""
+        jogging = self.watchdog.jogging
+        if jogging:
+            return f'jogging {jogging}'
+        moving = [n for n in self.config.joint_names if self.moving(n)]
+        return f'moving {moving}' if moving else None
+
+    def positions(self) -> dict[str, float]:
+        sample = self.latest
+        return dict(sample.positions) if sample else {}
+
+    # ------------------------------------------------------------- commands
+    def command(
+        self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float]
+    ) -> None:
+        """A joint_command: validated, then queued for the command thread; returns at once.
+
+        Newest wins: a queued command for a joint is replaced by a newer one for the
+        same joint before it is sent. Raises (nothing queued) when the command is
+        invalid or the axes cannot move.
+        """
+        self.require()
+        plan = validate_joint_command(names, positions, velocities, self.config.limits)
+        movers = list(plan.moves) + [j for j, v in plan.jogs.items() if v != 0.0]
+        if movers:
+            self.require(movers)
+        with self._pending_lock:
+            for joint, (target, speed) in plan.moves.items():
+                self._pending[joint] = ('move', target, speed)
+            for joint, velocity in plan.jogs.items():
+                self._pending[joint] = ('jog', velocity, None)
+        self.watchdog.cancel(list(plan.moves) + [j for j, v in plan.jogs.items() if v == 0.0])
+        self.watchdog.feed([j for j, v in plan.jogs.items() if v != 0.0])
+        self._command_ready.set()
+
+    def send_moves(self, moves: Moves, offsets: dict[str, float] | None = None) -> None:
+        """Send absolute moves now (move_to, presets, scans), after the queued commands."""
+        self.watchdog.cancel(list(moves))
+        with self._send_lock, device_boundary():
+            self._drop_pending(moves)
+            if not (offsets and self.device.move_relative(offsets, moves)):
+                self.device.move(moves)
+        self.commanded_targets.update({joint: move[0] for joint, move in moves.items()})
+
+    def stop(self) -> str:
+        """~/stop: cancel jogs, moves, scans and queued commands, then stop every axis."""
+        self._cancel_motion()
+        self.require_connected('nothing to stop')
+        self._stop_device(None)
+        return 'all axes stopped; scans, moves and jogs cancelled'
+
+    def stop_joints(self, joints: Sequence[str] | None) -> None:
+        """Stop some joints (a cancelled move or homing); logs instead of raising."""
+        try:
+            self._stop_device(joints)
+        except GimbalError as exc:
+            self.log.error(f'stop failed: {exc}')
+
+    def require_connected(self, what: str) -> None:
+        if not self.connected:
+            raise LinkError(f'device not connected ({self.link_error}); {what}')
+
+    def reset_faults(self) -> str:
+        return self.call(self.device.reset_faults)
+
+    def _cancel_motion(self) -> None:
+        self.watchdog.cancel()
+        self.motion_generation += 1
+        with self._pending_lock:
+            self._pending.clear()
+        for hook in self.halt_hooks:
+            hook()
+
+    def _stop_device(self, joints: Sequence[str] | None) -> None:
+        with self._send_lock, device_boundary():
+            self._drop_pending(joints)
+            scans = self.device.capabilities.scans
+            if scans is not None and joints is None:
+                scans.stop()
+            self.device.stop(None if joints is None else list(joints))
+
+    def _drop_pending(self, joints: Sequence[str] | None) -> None:
+        with self._pending_lock:
+            if joints is None:
+                self._pending.clear()
+            for joint in joints or ():
+                self._pending.pop(joint, None)
+
+    def _on_jog_expired(self, joints: list[str]) -> None:
+        self.log.warning(
+            f'jog of {joints} expired (no joint_command for '
+            f'{self.config.command_timeout:g} s): stopping')
+        if self.connected:
+            self.stop_joints(joints)
+
+    def _command_loop(self) -> None:
+        """Send queued joint_commands as soon as they arrive (moves first, then jogs)."""
+        while not self._stopping.is_set():
+            self._command_ready.wait()
+            self._command_ready.clear()
+            with self._send_lock:
+                with self._pending_lock:
+                    pending, self._pending = self._pending, {}
+                if not pending or not self.connected:
+                    continue
+                moves = {j: (v, s) for j, (kind, v, s) in pending.items() if kind == 'move'}
+                jogs = {j: v for j, (kind, v, _) in pending.items() if kind == 'jog'}
+                try:
+                    with device_boundary():
+                        if moves:
+                            self.device.move(moves)
+                        if jogs:
+                            self.device.jog(jogs)
+                except GimbalError as exc:
+                    self.log.error(f'joint_command failed on the device: {exc}')
+                    continue
+            self.commanded_targets.update({joint: move[0] for joint, move in moves.items()})
+
+    # ------------------------------------------------------ device thread
+    def _device_loop(self) -> None:
+        """Supervise the link; poll at publish_rate (or publish each streamed sample)."""
+        next_tick = time.monotonic()
+        last_publish = -math.inf
+        last_stamp: float | None = None
+        while not self._stopping.is_set():
+            period = 1.0 / self.config.publish_rate
+            if not self.connected:
+                self._reconnect()
+                next_tick = time.monotonic()
+                continue
+            if self.device.streamed:
+                # each new sample as it arrives, at most publish_rate (10 % slack for jitter)
+                hold = last_publish + 0.9 * period - time.monotonic()
+                if hold > 0 and self._sleep(hold):
+                    continue
+                self.device.wait_for_data(STREAM_WAIT_S)
+            try:
+                with device_boundary():
+                    if not self.device.link_healthy():
+                        raise LinkError('the client reports its link is down')
+                    sample = self.device.read()
+            except GimbalError as exc:
+                self._on_link_lost(exc)
+                continue
+            if sample is not None and not (self.device.streamed and sample.stamp == last_stamp):
+                self.latest, last_stamp = sample, sample.stamp
+                if self.active:
+                    self.on_sample(sample)
+                    last_publish = time.monotonic()
+            if self.device.streamed:
+                continue
+            next_tick += period
+            delay = next_tick - time.monotonic()
+            if delay < -period:  # fell behind (slow device): do not burst to catch up
+                next_tick, delay = time.monotonic(), 0.0
+            self._sleep(max(delay, 0.0))
+
+    def _sleep(self, timeout: float) -> bool:
+        """Sleep up to ``timeout``; True when woken early (stopping or publish_rate changed)."""
+        woken = self._wake.wait(timeout)
+        if woken and not self._stopping.is_set():
+            self._wake.clear()
+        return woken
+
+    def _connect(self) -> None:
+        try:
+            with device_boundary():
+                info = self.device.open()
+        except GimbalError as exc:
+            self.link_error = str(exc)
+            self._close_device()
+            raise
+        self.device_info = info if isinstance(info, DeviceInfo) else DeviceInfo()
+        self.connected, self.link_error = True, ''
+        self.log.info(
+            f'connected to {self.device_info.model or "device"} '
+            f'(serial {self.device_info.serial_number or "?"}, '
+            f'firmware {self.device_info.firmware_version or "?"})')
+
+    def _close_device(self) -> None:
+        self.connected = False
+        try:
+            self.device.close()
+        except Exception as exc:  # noqa: BLE001 - closing must never raise out
+            self.log.warning(f'closing the device link: {exc}')
+
+    def _on_link_lost(self, exc: BaseException) -> None:
+        self.connected = False
+        self.link_error = f'link lost: {exc}'
+        self.watchdog.cancel()
+        self.log.error(
+            f'device link lost ({exc}); reconnecting every {self.config.reconnect_period:g} s')
+        self.on_link_change()
+        self._close_device()
+
+    def _reconnect(self) -> None:
+        if self._stopping.wait(self.config.reconnect_period):
+            return
+        try:
+            self._connect()
+        except GimbalError as exc:
+            self.link_error = f'reconnecting: {exc}'
+            if self._throttle('reconnect', 10.0):
+                self.log.warning(f'reconnect failed: {exc}')
+            return
+        self.reconnects += 1
+        self.log.info(f'reconnected (reconnect #{self.reconnects})')
+        self.on_link_change()
+
+    def _throttle(self, key: str, period: float) -> bool:
+        """True at most once per ``period`` s per key (for repeated log lines)."""
+        now = time.monotonic()
+        if now - self._warned.get(key, -math.inf) < period:
+            return False
+        self._warned[key] = now
+        return True

@@ -1,0 +1,208 @@
+"""The device contract: what a driver implements so the controller can run it.
+
+A device adapter wraps one client (the protocol code) and speaks in SI units
+and REP-103 signs: every scale, sign and unit conversion happens here, never in
+the node. Like python-can's ``BusABC`` the required surface is small (open,
+read, move, jog, stop); everything a device may or may not have is a small
+capability object in :class:`Capabilities` instead of a switch.
+
+The controller calls a device from more than one thread (the device thread
+polls while the command thread sends), so a device must be thread-safe; the
+clients serialise requests on their own link lock.
+"""
+
+from __future__ import annotations
+
+import abc
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from gimbal_driver_common.diagnostics import StatusPart
+from gimbal_driver_common.errors import Unsupported
+from gimbal_driver_common.scan import ScanRequest
+
+#: joint -> (target position, max speed or None for the device default)
+Moves = dict[str, tuple[float, float | None]]
+
+
+@dataclass
+class DeviceInfo:
+    """Identity read when the link opens; feeds hardware_id and ~/status."""
+
+    model: str = ''
+    serial_number: str = ''
+    firmware_version: str = ''
+    hardware_id: str = ''
+
+    def __post_init__(self) -> None:
+        if not self.hardware_id:
+            self.hardware_id = self.serial_number or self.model or 'unknown'
+
+
+@dataclass
+class JointSample:
+    """One reading of the joints, in SI units, keyed by joint name.
+
+    ``stamp`` is the wall-clock time (``time.time()``) the data arrived.
+    ``moving`` holds the device's own in-motion bits where it has them; the
+    controller's one "moving" rule falls back to the velocity otherwise.
+    """
+
+    positions: dict[str, float]
+    velocities: dict[str, float] = field(default_factory=dict)
+    efforts: dict[str, float] = field(default_factory=dict)
+    stamp: float = field(default_factory=time.time)
+    moving: dict[str, bool] = field(default_factory=dict)
+
+
+class Homing(abc.ABC):
+    """The device has a homing (index search) routine."""
+
+    @abc.abstractmethod
+    def home(
+        self, joints: Sequence[str], report: Callable[[str], None], cancelled: threading.Event
+    ) -> str:
+        """Run it for ``joints``; report progress; return a message or raise GimbalError."""
+
+
+class DevicePresets(abc.ABC):
+    """Preset slots stored in the device. Slots it does not handle fall back to the YAML store."""
+
+    def handles(self, index: int) -> bool:
+        """True for the slot indexes the device stores (default: all)."""
+        return True
+
+    @abc.abstractmethod
+    def set(self, index: int, name: str, positions: dict[str, float] | None) -> str:
+        """Store a slot: ``positions`` None means the device's current position."""
+
+    @abc.abstractmethod
+    def goto(self, index: int, speed: float) -> str:
+        """Move to a stored slot (speed 0: the device default)."""
+
+    @abc.abstractmethod
+    def list(self) -> list[tuple[int, str, dict[str, float]]]:
+        """The stored slots as (index, name, joint positions)."""
+
+    @abc.abstractmethod
+    def clear(self, index: int | None) -> str:
+        """Clear one slot (None: every slot the device holds)."""
+
+
+class DeviceScans(abc.ABC):
+    """Scans the device runs itself; patterns it does not know run driver-side."""
+
+    patterns: Sequence[str] = ()
+
+    @abc.abstractmethod
+    def start(self, request: ScanRequest) -> str:
+        """Start a device scan; return a message."""
+
+    @abc.abstractmethod
+    def stop(self) -> None:
+        """Stop it (called by ~/stop_scan, ~/stop and every new motion command)."""
+
+
+class StatusReport(abc.ABC):
+    """Decoded device registers for /diagnostics and ~/status."""
+
+    @abc.abstractmethod
+    def parts(self) -> list[StatusPart]:
+        """Diagnostics parts: one per axis plus the device; OK on a healthy device."""
+
+    def mode(self) -> str:
+        return ''
+
+    def errors(self) -> list[str]:
+        return []
+
+    def axis_details(self, joint: str) -> dict[str, object]:
+        """Extra AxisState fields for ``joint`` (state, calibrated, homed, active_errors)."""
+        return {}
+
+
+@dataclass
+class Capabilities:
+    """What the device offers beyond the contract; None means "not on this device"."""
+
+    homing: Homing | None = None
+    presets: DevicePresets | None = None
+    scans: DeviceScans | None = None
+    status: StatusReport | None = None
+    #: device-specific objects the driver's node exposes (name -> object)
+    extras: dict[str, object] = field(default_factory=dict)
+
+
+class Device(abc.ABC):
+    """One device, in SI units and REP-103 signs."""
+
+    #: True when :meth:`read` returns data a receive thread streams in: the controller
+    #: then publishes on :meth:`wait_for_data` instead of on a fixed polling tick.
+    streamed: bool = False
+
+    def __init__(self) -> None:
+        self.capabilities = Capabilities()
+        self._data_arrived = threading.Event()
+
+    @abc.abstractmethod
+    def open(self) -> DeviceInfo:
+        """Open the link and read the identity; raise GimbalError when the device is not there."""
+
+    def close(self) -> None:
+        """Close the link; must never raise, called before every reconnect."""
+        return None
+
+    @abc.abstractmethod
+    def read(self) -> JointSample | None:
+        """The latest joint sample (poll, or read the receive cache); None: nothing new yet.
+
+        Raise :class:`~gimbal_driver_common.errors.LinkError` when the link is lost.
+        """
+
+    @abc.abstractmethod
+    def move(self, moves: Moves) -> None:
+        """Absolute position moves (targets already checked against the limits)."""
+
+    def move_relative(self, offsets: dict[str, float], moves: Moves) -> bool:
+        """Send a relative move as the device's own relative set-points; False: use move()."""
+        return False
+
+    @abc.abstractmethod
+    def jog(self, velocities: dict[str, float]) -> None:
+        """Velocity commands in rad/s (0 stops that joint)."""
+
+    @abc.abstractmethod
+    def stop(self, joints: Sequence[str] | None = None) -> None:
+        """Stop the named joints now (None: all); must work in any device state."""
+
+    def reset_faults(self) -> str:
+        raise Unsupported('this device has no fault-reset command')
+
+    def refusal(self, joints: Sequence[str]) -> str | None:
+        """Why these joints cannot move now (drive off, faulted), or None."""
+        return None
+
+    def link_healthy(self) -> bool:
+        """For clients that watch their own link: False (or raise with the reason) when down."""
+        return True
+
+    def notify_data(self) -> None:
+        """A streamed device's receive thread calls this on each new sample."""
+        self._data_arrived.set()
+
+    def wait_for_data(self, timeout: float) -> bool:
+        """Block until :meth:`notify_data` was called (True) or ``timeout`` passed."""
+        arrived = self._data_arrived.wait(timeout)
+        self._data_arrived.clear()
+        return arrived
+
+    def expected_rate(self, publish_rate: float) -> float:
+        """The joint_states rate the frequency check expects; a device that streams slower
+        than ``publish_rate`` (and says so) overrides it, so a healthy device reads OK."""
+        return publish_rate
+
+    def description(self) -> str:
+        """The endpoint shown in ~/status (never a password)."""
+        return ''

@@ -1,0 +1,79 @@
+"""One error hierarchy for every driver, and the boundary that converts foreign errors into it.
+
+Clients raise these (their own exception classes subclass them), the controller
+turns anything else that escapes a device call into one with :func:`device_boundary`,
+and the ROS node answers ``success=false`` with ``str(error)``. Modelled on
+python-can's ``can/exceptions.py``: the class says what happened, the message
+carries the device's own reason.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+
+class GimbalError(Exception):
+    """Anything a device request or a command can fail with; the message is for people."""
+
+
+class LinkError(GimbalError):
+    """The link is down or dropped during the request (the supervisor reconnects)."""
+
+
+class DeviceTimeout(GimbalError, TimeoutError):
+    """The device did not answer in time."""
+
+
+class DeviceRefused(GimbalError):
+    """The device, or the driver on its behalf, refused: NACK, off/faulted axis, busy."""
+
+
+class Unsupported(DeviceRefused):
+    """The device (or this driver for it) does not know the command."""
+
+
+class InvalidRequest(GimbalError, ValueError):
+    """The request itself is wrong (out of range, unknown joint); nothing was sent."""
+
+
+#: exceptions that mean "the link is gone", whatever library raised them
+_LINK_TYPES: tuple[type[BaseException], ...] = (OSError, EOFError)
+
+
+def _optional_link_types() -> tuple[type[BaseException], ...]:
+    """python-can's error class, when python-can is installed (only the turret needs it)."""
+    found: list[type[BaseException]] = []  # pyserial's SerialException is an OSError
+    try:
+        import can
+        found.append(can.CanError)
+    except ImportError:  # pragma: no cover
+        pass
+    return tuple(found)
+
+
+def as_gimbal_error(exc: BaseException) -> GimbalError:
+    """The :class:`GimbalError` that ``exc`` means (itself when it already is one)."""
+    if isinstance(exc, GimbalError):
+        return exc
+    if isinstance(exc, TimeoutError):
+        error: GimbalError = DeviceTimeout(str(exc) or 'no answer from the device')
+    elif isinstance(exc, _LINK_TYPES + _optional_link_types()):
+        error = LinkError(f'link: {exc}')
+    elif isinstance(exc, ValueError):
+        error = InvalidRequest(str(exc))
+    else:
+        error = GimbalError(f'{type(exc).__name__}: {exc}')
+    error.__cause__ = exc
+    return error
+
+
+@contextmanager
+def device_boundary() -> Iterator[None]:
+    """Re-raise whatever escapes the block as a :class:`GimbalError` (the one conversion point)."""
+    try:
+        yield
+    except GimbalError:
+        raise
+    except Exception as exc:
+        raise as_gimbal_error(exc) from exc

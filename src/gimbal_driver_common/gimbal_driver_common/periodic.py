@@ -1,0 +1,72 @@
+"""Periodic jobs on one plain thread instead of executor timers.
+
+Every wake-up of rclpy's MultiThreadedExecutor rebuilds its wait set in Python
+and competes for the GIL with the device thread; measured as CPU and
+joint_states latency. So the jog watchdog, diagnostics and ~/status run here.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+
+class Periodic:
+    """Runs callbacks every ``period`` s; callbacks must be thread-safe and quick."""
+
+    def __init__(
+        self, on_error: Callable[[str], object] = print, name: str = 'housekeeping'
+    ) -> None:
+        self._on_error = on_error
+        self._name = name
+        self._jobs: list[list] = []  # [period, next due, callback]
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._stopped = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def add(self, period: float, callback: Callable[[], object]) -> None:
+        with self._lock:
+            self._jobs.append([period, time.monotonic() + period, callback])
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name=self._name, daemon=True)
+                self._thread.start()
+        self._wake.set()
+
+    def set_period(self, callback: Callable[[], object], period: float) -> None:
+        """Change a job's period; it next runs ``period`` s from now."""
+        with self._lock:
+            for job in self._jobs:
+                if job[2] == callback:
+                    job[0], job[1] = period, time.monotonic() + period
+        self._wake.set()
+
+    def remove(self, callback: Callable[[], object]) -> None:
+        with self._lock:
+            self._jobs = [job for job in self._jobs if job[2] != callback]
+
+    def stop(self) -> None:
+        self._stopped.set()
+        self._wake.set()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
+
+    def _run(self) -> None:
+        while not self._stopped.is_set():
+            now = time.monotonic()
+            with self._lock:
+                due = [job for job in self._jobs if job[1] <= now]
+                for job in due:
+                    job[1] = max(job[1] + job[0], now)
+                next_due = min((job[1] for job in self._jobs), default=now + 1.0)
+            for _, _, callback in due:
+                if self._stopped.is_set():
+                    return
+                try:
+                    callback()
+                except Exception as exc:  # noqa: BLE001 - one failing job must not stop others
+                    self._on_error(f'periodic {getattr(callback, "__name__", callback)}: {exc!r}')
+            if self._wake.wait(max(0.0, next_due - time.monotonic())):
+                self._wake.clear()

@@ -1,0 +1,275 @@
+"""Move, home, scan and preset policies on top of a :class:`GimbalController` (no ROS).
+
+One :class:`Motion` object per controller gives the node everything its
+actions and services need: a move that ends reached, cancelled, stopped, timed
+out or with the link lost; homing; a driver-side scan for devices without their
+own; and presets where device slots and the YAML store compose.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from gimbal_driver_common.controller import ControllerConfig, GimbalController, is_moving
+from gimbal_driver_common.device import Moves
+from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, Unsupported
+from gimbal_driver_common.joint_command import resolve_targets, validate_joint_command
+from gimbal_driver_common.presets import PresetStore
+from gimbal_driver_common.scan import ScanRequest, plan_scan
+
+#: the patterns a driver-side scan offers
+DRIVER_SCAN_PATTERNS = ('sector', 'zigzag', 'square')
+#: how often a running move checks its joints
+MOVE_CHECK_S = 0.02
+
+
+@dataclass
+class MoveOutcome:
+    """How a move ended: ``state`` is reached, cancelled, stopped, failed."""
+
+    state: str
+    message: str
+    positions: list[float] = field(default_factory=list)
+
+    @property
+    def success(self) -> bool:
+        return self.state == 'reached'
+
+
+@dataclass
+class Preset:
+    index: int
+    name: str
+    positions: dict[str, float]
+
+
+def scan_joints(config: ControllerConfig) -> list[str]:
+    """The (pan, tilt) a scan sweeps: configured, else `pan`/`tilt` by name, else the first two."""
+    names = config.joint_names
+    if config.scan_joints:
+        return list(config.scan_joints)
+    if 'pan' in names and 'tilt' in names:
+        return ['pan', 'tilt']
+    return list(names[:2])
+
+
+class Motion:
+    """The policies: every method answers or raises a GimbalError with the reason."""
+
+    def __init__(
+        self, controller: GimbalController, store: PresetStore | None = None,
+        scan_patterns: Sequence[str] = DRIVER_SCAN_PATTERNS,
+    ) -> None:
+        self.controller = controller
+        self.store = store or PresetStore('')
+        #: patterns the driver-side scan offers for this device
+        self.scan_patterns = tuple(scan_patterns)
+        self._scan_stop = threading.Event()
+        self._scan_thread: threading.Thread | None = None
+        controller.halt_hooks.append(self.preempt)
+
+    # ---------------------------------------------------------------- moves
+    def start_move(
+        self, names: Sequence[str], positions: Sequence[float],
+        velocities: Sequence[float] = (), relative: bool = False,
+    ) -> dict[str, float]:
+        """Check and send a MoveTo; returns the absolute targets. Nothing is sent on error."""
+        ctl = self.controller
+        names = list(names)
+        ctl.require(names)
+        limits = ctl.config.limits
+        targets = resolve_targets(names, list(positions), ctl.positions(), limits,
+                                  relative=relative)
+        speeds = list(velocities)
+        if speeds and len(speeds) != len(names):
+            raise InvalidRequest(f'{len(names)} joints but {len(speeds)} velocities')
+        moves: Moves = {}
+        for i, name in enumerate(names):
+            speed = abs(speeds[i]) if speeds and speeds[i] else None
+            if speed is not None and speed > limits[name].velocity_max:
+                raise InvalidRequest(
+                    f'joint {name!r}: speed {speed:.4f} exceeds velocity_max '
+                    f'{limits[name].velocity_max:.4f}')
+            moves[name] = (targets[name], speed)
+        self.preempt()
+        offsets = dict(zip(names, map(float, positions), strict=True)) if relative else None
+        ctl.send_moves(moves, offsets)
+        return targets
+
+    def wait_move(
+        self, targets: dict[str, float], tolerance: float = 0.0,
+        cancelled: Callable[[], bool] = lambda: False,
+        feedback: Callable[[list[float]], None] = lambda positions: None,
+    ) -> MoveOutcome:
+        """Wait until every joint is within tolerance and settled, or the move ends otherwise."""
+        ctl = self.controller
+        names = list(targets)
+        tolerance = tolerance if tolerance > 0 else ctl.config.goal_tolerance
+        generation = ctl.motion_generation
+        deadline = time.monotonic() + ctl.config.move_timeout
+        while True:
+            time.sleep(MOVE_CHECK_S)
+            current = ctl.positions()
+            positions = [current.get(n, math.nan) for n in names]
+            feedback(positions)
+            if cancelled():
+                ctl.stop_joints(names)
+                return MoveOutcome('cancelled', 'cancelled', positions)
+            if generation != ctl.motion_generation:
+                return MoveOutcome('stopped', 'stopped (~/stop or a new command)', positions)
+            if not ctl.connected:
+                return MoveOutcome('failed', f'device link lost ({ctl.link_error})', positions)
+            reached = all(abs(current.get(n, math.inf) - targets[n]) <= tolerance for n in names)
+            if reached and not any(is_moving(ctl.latest, n) for n in names):
+                return MoveOutcome('reached', 'reached', positions)
+            if time.monotonic() > deadline:
+                ctl.stop_joints(names)
+                return MoveOutcome(
+                    'failed', f'not reached within move_timeout {ctl.config.move_timeout:g} s',
+                    positions)
+
+    def preempt(self) -> None:
+        """A new motion command ends a driver-side scan (a device scan ends with the move)."""
+        self._scan_stop.set()
+
+    # ---------------------------------------------------------------- homing
+    def home(
+        self, joints: Sequence[str], report: Callable[[str], None], cancelled: threading.Event
+    ) -> str:
+        ctl = self.controller
+        joints = list(joints) or list(ctl.config.joint_names)
+        unknown = [j for j in joints if j not in ctl.config.limits]
+        if unknown:
+            raise InvalidRequest(
+                f'unknown joint(s) {unknown}; this device has {ctl.config.joint_names}')
+        homing = ctl.device.capabilities.homing
+        if homing is None:
+            ctl.require()
+            raise Unsupported('this device has no homing routine')
+        self.preempt()
+        ctl.watchdog.cancel(joints)
+        return ctl.call(lambda: homing.home(joints, report, cancelled)) or 'homed'
+
+    # ----------------------------------------------------------------- scans
+    def scan_joints(self) -> list[str]:
+        return scan_joints(self.controller.config)
+
+    def start_scan(self, request: ScanRequest) -> str:
+        ctl = self.controller
+        ctl.require(self.scan_joints())
+        scans = ctl.device.capabilities.scans
+        if scans is not None and request.pattern in scans.patterns:
+            self.preempt()
+            return ctl.call(lambda: scans.start(request))
+        waypoints = plan_scan(request, self.scan_joints(), ctl.positions(), ctl.config.limits,
+                              self.scan_patterns)
+        self.preempt()
+        self._scan_stop = stop = threading.Event()
+        self._scan_thread = threading.Thread(
+            target=self._run_scan, args=(waypoints, request, stop), name='scan', daemon=True)
+        self._scan_thread.start()
+        return f'{request.pattern} scan started over {len(waypoints)} waypoints (driver-side)'
+
+    def stop_scan(self) -> str:
+        self.preempt()
+        self.controller.require()
+        self.controller.stop()
+        return 'scan stopped'
+
+    @property
+    def scanning(self) -> bool:
+        return self._scan_thread is not None and self._scan_thread.is_alive()
+
+    def _run_scan(
+        self, waypoints: list[dict[str, float]], scan: ScanRequest, stop: threading.Event
+    ) -> None:
+        ctl = self.controller
+        pan = self.scan_joints()[0]
+        index = 0
+        while not stop.is_set() and ctl.connected:
+            target = waypoints[index % len(waypoints)]
+            try:
+                ctl.send_moves({n: (p, scan.speed if n == pan else None)
+                                for n, p in target.items()})
+            except Exception as exc:  # noqa: BLE001 - the scan thread reports and ends
+                ctl.log.error(f'scan aborted: {exc}')
+                return
+            deadline = time.monotonic() + ctl.config.move_timeout
+            while not stop.is_set() and time.monotonic() < deadline:
+                current = ctl.positions()
+                if all(abs(current.get(n, math.inf) - p) <= ctl.config.goal_tolerance * 2
+                       for n, p in target.items()):
+                    break
+                stop.wait(MOVE_CHECK_S)
+            stop.wait(scan.dwell)
+            index += 1
+
+    # --------------------------------------------------------------- presets
+    def _device_slot(self, index: int):
+        presets = self.controller.device.capabilities.presets
+        return presets if presets is not None and presets.handles(index) else None
+
+    def set_preset(
+        self, index: int, name: str, positions: dict[str, float] | None
+    ) -> str:
+        """Store a preset; ``positions`` None: the current position."""
+        ctl = self.controller
+        if positions is not None:
+            validate_joint_command(list(positions), list(positions.values()), [],
+                                   ctl.config.limits)
+        device = self._device_slot(index)
+        if device is not None:
+            return ctl.call(lambda: device.set(index, name, positions))
+        if positions is None:
+            current = ctl.positions()
+            if not current:
+                raise DeviceRefused('no joint position received yet')
+            positions = {n: current[n] for n in ctl.config.joint_names if n in current}
+        self.store.set(index, name, positions)
+        return f'preset {index} stored: ' + ', '.join(
+            f'{k}={v:.4f}' for k, v in positions.items())
+
+    def goto_preset(self, index: int, speed: float) -> str:
+        ctl = self.controller
+        if speed < 0 or not math.isfinite(speed):
+            raise InvalidRequest(f'speed {speed} must be >= 0 rad/s')
+        device = self._device_slot(index)
+        if device is not None:
+            ctl.require(ctl.config.joint_names)
+            self.preempt()
+            return ctl.call(lambda: device.goto(index, speed))
+        preset = self.store.get(index)
+        names = [n for n in preset.positions if n in ctl.config.limits]
+        ctl.require(names)
+        speeds = [speed] * len(names) if speed > 0 else []
+        plan = validate_joint_command(names, [preset.positions[n] for n in names], speeds,
+                                      ctl.config.limits)
+        self.preempt()
+        ctl.send_moves(plan.moves)
+        return f'moving to preset {index} ({preset.name})'
+
+    def list_presets(self) -> list[Preset]:
+        """Device slots (when the device is connected) and YAML slots, by index."""
+        found = {p.index: Preset(p.index, p.name, dict(p.positions)) for p in self.store.list()}
+        presets = self.controller.device.capabilities.presets
+        if presets is not None:
+            for index, name, positions in self.controller.call(presets.list):
+                found[index] = Preset(index, name, positions)
+        return [found[i] for i in sorted(found)]
+
+    def clear_preset(self, index: int | None) -> str:
+        presets = self.controller.device.capabilities.presets
+        if index is None:
+            if presets is not None:
+                self.controller.call(lambda: presets.clear(None))
+            self.store.clear(None)
+            return 'all presets cleared'
+        device = self._device_slot(index)
+        if device is not None:
+            return self.controller.call(lambda: device.clear(index))
+        self.store.clear(index)
+        return f'preset {index} cleared'

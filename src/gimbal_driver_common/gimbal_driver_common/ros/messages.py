@@ -1,0 +1,124 @@
+"""ROS messages built from the controller's state: joint_states, /diagnostics, ~/status."""
+
+from __future__ import annotations
+
+import math
+
+from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import JointState
+
+from gimbal_driver_common.controller import GimbalController
+from gimbal_driver_common.device import DeviceInfo, JointSample
+from gimbal_driver_common.diagnostics import FrequencyMonitor, Level, StatusPart
+from gimbal_driver_common.ros.diagnostics import to_message
+from gimbal_msgs.msg import AxisState, GimbalStatus
+
+
+def joint_state(sample: JointSample, joint_names: list[str]) -> JointState:
+    """joint_states in the configured joint order, stamped when the data arrived."""
+    msg = JointState()
+    sec = math.floor(sample.stamp)
+    msg.header.stamp.sec = int(sec)
+    msg.header.stamp.nanosec = int((sample.stamp - sec) * 1e9)
+    names = [n for n in joint_names if n in sample.positions]
+    msg.name = names
+    msg.position = [float(sample.positions[n]) for n in names]
+    msg.velocity = [float(sample.velocities.get(n, math.nan)) for n in names]
+    if sample.efforts:
+        msg.effort = [float(sample.efforts.get(n, math.nan)) for n in names]
+    return msg
+
+
+def diagnostic_parts(
+    ctl: GimbalController | None, joint_names: list[str], rate: FrequencyMonitor,
+    active: bool,
+) -> list[StatusPart]:
+    """connection, joint_states frequency, then the device's own parts (or STALE per joint)."""
+    info = ctl.device_info if ctl else DeviceInfo()
+    connected = bool(ctl and ctl.connected)
+    connection = StatusPart('connection', values=[
+        ('connected', str(connected)),
+        ('lifecycle', 'active' if active else 'inactive'),
+        ('reconnects', str(ctl.reconnects if ctl else 0)),
+        ('model', info.model), ('serial_number', info.serial_number),
+        ('firmware', info.firmware_version),
+    ])
+    if connected:
+        connection.message = 'connected'
+    else:
+        connection.level = Level.ERROR
+        connection.message = f'disconnected: {ctl.link_error if ctl else "not configured"}'
+    parts = [connection]
+    if ctl is None or not connected:
+        return parts + [StatusPart(n, Level.STALE, 'no data: device disconnected')
+                        for n in joint_names]
+    if active:
+        rate.expected_hz = ctl.device.expected_rate(ctl.config.publish_rate)
+        level, message = rate.status()
+        parts.append(StatusPart('joint_states frequency', level, message, [
+            ('expected_hz', f'{rate.expected_hz:g}'), ('measured_hz', f'{rate.rate_hz:.2f}')]))
+    report = ctl.device.capabilities.status
+    if report is not None:
+        try:
+            parts.extend(report.parts())
+        except Exception as exc:  # noqa: BLE001 - a status read may fail while the link drops
+            parts.append(StatusPart('device', Level.WARN, f'status unavailable: {exc}'))
+    return parts
+
+
+def diagnostic_array(
+    node_name: str, stamp: object, hardware_id: str, parts: list[StatusPart]
+) -> DiagnosticArray:
+    array = DiagnosticArray()
+    array.header.stamp = stamp
+    array.status = [to_message(node_name, hardware_id, part) for part in parts]
+    return array
+
+
+def gimbal_status(ctl: GimbalController | None, joint_names: list[str]) -> GimbalStatus:
+    """~/status: link, identity, mode, errors and one AxisState per joint."""
+    msg = GimbalStatus()
+    connected = bool(ctl and ctl.connected)
+    if connected:
+        msg.connection = GimbalStatus.CONNECTION_CONNECTED
+    elif ctl and (ctl.reconnects or ctl.link_error.startswith(('link lost', 'reconnecting'))):
+        msg.connection = GimbalStatus.CONNECTION_CONNECTING
+    else:
+        msg.connection = GimbalStatus.CONNECTION_DISCONNECTED
+    if ctl is None:
+        msg.axes = [AxisState(name=n, position=math.nan, velocity=math.nan, effort=math.nan,
+                              target_position=math.nan) for n in joint_names]
+        return msg
+    info = ctl.device_info
+    msg.link = ctl.device.description()
+    msg.device_model, msg.serial_number = info.model, info.serial_number
+    msg.firmware_version, msg.reconnects = info.firmware_version, ctl.reconnects
+    report = ctl.device.capabilities.status
+    try:
+        if connected and report is not None:
+            msg.mode, msg.active_errors = report.mode(), report.errors()
+    except Exception as exc:  # noqa: BLE001
+        msg.active_errors = [f'status unavailable: {exc}']
+    sample = ctl.latest
+    jogging = set(ctl.watchdog.jogging)
+    for name in joint_names:
+        axis = AxisState(name=name)
+        axis.position = sample.positions.get(name, math.nan) if sample else math.nan
+        axis.velocity = sample.velocities.get(name, math.nan) if sample else math.nan
+        axis.effort = sample.efforts.get(name, math.nan) if sample else math.nan
+        axis.target_position = ctl.commanded_targets.get(name, math.nan)
+        if not connected:
+            axis.state = AxisState.STATE_UNKNOWN
+        elif name in jogging:
+            axis.state = AxisState.STATE_JOGGING
+        elif ctl.moving(name):
+            axis.state = AxisState.STATE_MOVING
+        else:
+            axis.state = AxisState.STATE_IDLE
+        try:
+            for key, value in (report.axis_details(name) if report else {}).items():
+                setattr(axis, key, value)
+        except Exception as exc:  # noqa: BLE001
+            axis.active_errors = [f'status unavailable: {exc}']
+        msg.axes.append(axis)
+    return msg

@@ -1,0 +1,426 @@
+"""The ROS-free controller and policies against an in-memory fake device, in milliseconds."""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections.abc import Sequence
+
+import pytest
+
+from gimbal_driver_common.controller import ControllerConfig, GimbalController, is_moving
+from gimbal_driver_common.device import (
+    Device,
+    DeviceInfo,
+    DevicePresets,
+    DeviceScans,
+    Homing,
+    JointSample,
+    Moves,
+)
+from gimbal_driver_common.errors import (
+    DeviceRefused,
+    DeviceTimeout,
+    GimbalError,
+    InvalidRequest,
+    LinkError,
+    Unsupported,
+    as_gimbal_error,
+    device_boundary,
+)
+from gimbal_driver_common.joint_command import JointLimits
+from gimbal_driver_common.policies import Motion
+from gimbal_driver_common.presets import PresetStore
+from gimbal_driver_common.scan import ScanRequest
+from gimbal_driver_common.testing import wait_for
+
+JOINTS = ['pan', 'tilt']
+
+
+class FakeDevice(Device):
+    """Two axes that move a fixed step per read toward their target; records what it got."""
+
+    def __init__(self, step: float = 0.05) -> None:
+        super().__init__()
+        self.step = step
+        self.positions = dict.fromkeys(JOINTS, 0.0)
+        self.targets: dict[str, float] = {}
+        self.jogs: dict[str, float] = {}
+        self.sent: list[tuple[str, object]] = []
+        self.lock = threading.Lock()
+        self.open_failures = 0  # opens that fail before one succeeds
+        self.opens = 0
+        self.broken = False  # read() raises: the link dropped
+        self.refuse: str | None = None
+        self.nack_moves = False
+
+    def open(self) -> DeviceInfo:
+        self.opens += 1
+        if self.open_failures > 0:
+            self.open_failures -= 1
+            raise ConnectionRefusedError('nobody listening')
+        self.broken = False
+        return DeviceInfo('fake', 'SN1', '1.0')
+
+    def read(self) -> JointSample:
+        if self.broken:
+            raise ConnectionResetError('peer reset')
+        with self.lock:
+            velocities = {}
+            for joint in JOINTS:
+                if joint in self.targets:
+                    error = self.targets[joint] - self.positions[joint]
+                    delta = math.copysign(min(abs(error), self.step), error)
+                    if abs(error) <= self.step:
+                        del self.targets[joint]
+                else:
+                    delta = self.jogs.get(joint, 0.0) * 0.01
+                self.positions[joint] += delta
+                velocities[joint] = delta / 0.01
+            return JointSample(dict(self.positions), velocities)
+
+    def move(self, moves: Moves) -> None:
+        if self.nack_moves:
+            raise DeviceRefused('device NACK: axis disabled')
+        with self.lock:
+            self.sent.append(('move', dict(moves)))
+            for joint, (target, _) in moves.items():
+                self.targets[joint] = target
+                self.jogs.pop(joint, None)
+
+    def jog(self, velocities: dict[str, float]) -> None:
+        with self.lock:
+            self.sent.append(('jog', dict(velocities)))
+            self.jogs.update(velocities)
+
+    def stop(self, joints: Sequence[str] | None = None) -> None:
+        with self.lock:
+            self.sent.append(('stop', None if joints is None else list(joints)))
+            for joint in joints or JOINTS:
+                self.targets.pop(joint, None)
+                self.jogs.pop(joint, None)
+
+    def refusal(self, joints: Sequence[str]) -> str | None:
+        return self.refuse
+
+    def kinds(self) -> list[str]:
+        with self.lock:
+            return [kind for kind, _ in self.sent]
+
+
+class FakeHoming(Homing):
+    def __init__(self, device: FakeDevice) -> None:
+        self.device = device
+
+    def home(self, joints, report, cancelled) -> str:
+        self.device.move({j: (0.0, None) for j in joints})
+        while self.device.targets and not cancelled.is_set():
+            report('seeking index')
+            cancelled.wait(0.005)
+        return 'homed'
+
+
+class SlotZeroPresets(DevicePresets):
+    """The device stores slot 0 only; the other slots belong to the YAML store."""
+
+    def __init__(self) -> None:
+        self.slot: tuple[str, dict[str, float]] | None = None
+
+    def handles(self, index: int) -> bool:
+        return index == 0
+
+    def set(self, index, name, positions) -> str:
+        self.slot = (name, positions or {})
+        return 'stored on the device'
+
+    def goto(self, index, speed) -> str:
+        if self.slot is None:
+            raise DeviceRefused('device slot 0 is empty')
+        return 'device moving to slot 0'
+
+    def list(self):
+        return [(0, self.slot[0], self.slot[1])] if self.slot else []
+
+    def clear(self, index) -> str:
+        self.slot = None
+        return 'device slot cleared'
+
+
+class FakeScans(DeviceScans):
+    patterns = ('spiral',)
+
+    def __init__(self) -> None:
+        self.running = False
+
+    def start(self, request: ScanRequest) -> str:
+        self.running = True
+        return 'device spiral'
+
+    def stop(self) -> None:
+        self.running = False
+
+
+def config(**overrides) -> ControllerConfig:
+    limits = {j: JointLimits(-1.0, 1.0, 2.0) for j in JOINTS}
+    values = dict(joint_names=list(JOINTS), limits=limits, publish_rate=500.0,
+                  command_timeout=0.05, reconnect_period=0.01, goal_tolerance=0.01,
+                  move_timeout=2.0)
+    values.update(overrides)
+    return ControllerConfig(**values)
+
+
+@pytest.fixture
+def device() -> FakeDevice:
+    return FakeDevice()
+
+
+@pytest.fixture
+def controller(device):
+    ctl = GimbalController(device, config(), logging.getLogger('test'))
+    ctl.open()
+    ctl.activate()
+    wait_for(lambda: ctl.latest is not None, 2.0, 'a first sample')
+    yield ctl
+    ctl.shutdown()
+    ctl.periodic.stop()
+
+
+@pytest.fixture
+def motion(controller, tmp_path):
+    return Motion(controller, PresetStore(str(tmp_path / 'presets.yaml')))
+
+
+# ------------------------------------------------------------------- errors
+def test_boundary_converts_foreign_errors_into_the_hierarchy() -> None:
+    assert isinstance(as_gimbal_error(TimeoutError('late')), DeviceTimeout)
+    assert isinstance(as_gimbal_error(ConnectionResetError('reset')), LinkError)
+    assert isinstance(as_gimbal_error(ValueError('bad')), InvalidRequest)
+    error = as_gimbal_error(KeyError('x'))
+    assert type(error) is GimbalError and 'KeyError' in str(error)
+    with pytest.raises(LinkError), device_boundary():
+        raise BrokenPipeError('gone')
+    refused = DeviceRefused('NACK 0x2')
+    assert as_gimbal_error(refused) is refused
+
+
+# ------------------------------------------------------- link supervision
+def test_open_failure_raises_with_the_reason_and_leaves_it_disconnected(device) -> None:
+    device.open_failures = 1
+    ctl = GimbalController(device, config(), logging.getLogger('test'))
+    with pytest.raises(LinkError, match='nobody listening'):
+        ctl.open()
+    assert not ctl.connected and 'nobody listening' in ctl.link_error
+
+
+def test_link_loss_is_reported_then_reconnected_with_a_count(controller, device) -> None:
+    changes = []
+    controller.on_link_change = lambda: changes.append(controller.connected)
+    device.open_failures = 2
+    device.broken = True
+    wait_for(lambda: controller.reconnects == 1, 2.0, 'the reconnect')
+    assert changes[0] is False and changes[-1] is True
+    assert controller.connected and controller.link_error == ''
+    assert device.opens == 4  # first open, two refused, one accepted
+    controller.command(['pan'], [0.5], [])
+    wait_for(lambda: abs(controller.positions()['pan'] - 0.5) < 1e-9, 2.0, 'the move')
+
+
+def test_commands_are_refused_while_disconnected_or_inactive(controller, device) -> None:
+    controller.active = False
+    with pytest.raises(DeviceRefused, match='not active'):
+        controller.command(['pan'], [0.1], [])
+    controller.active = True
+    device.open_failures = 10**6
+    device.broken = True
+    wait_for(lambda: not controller.connected, 2.0, 'the link loss')
+    with pytest.raises(DeviceRefused, match='not connected'):
+        controller.command(['pan'], [0.1], [])
+    with pytest.raises(LinkError, match='nothing to stop'):
+        controller.stop()
+
+
+# ------------------------------------------------------------- commands
+def test_invalid_commands_send_nothing(controller, device) -> None:
+    for names, positions, velocities in [
+        (['roll'], [0.1], []), (['pan'], [math.nan], []), (['pan'], [math.inf], []),
+        (['pan', 'tilt'], [0.1], []), (['pan'], [5.0], []), (['pan'], [], [9.0]),
+    ]:
+        with pytest.raises(InvalidRequest):
+            controller.command(names, positions, velocities)
+    assert device.kinds() == []
+
+
+def test_device_refusal_sends_nothing(controller, device) -> None:
+    device.refuse = 'pan drive is off'
+    with pytest.raises(DeviceRefused, match='pan drive is off'):
+        controller.command(['pan'], [0.1], [])
+    controller.command(['pan'], [], [0.0])  # a zero jog (a stop) is never refused
+    wait_for(lambda: device.kinds() == ['jog'], 2.0, 'the zero jog')
+
+
+def test_newest_command_per_joint_wins(controller, device) -> None:
+    with controller._send_lock:  # hold the command thread while three commands queue
+        controller.command(['pan'], [0.1], [])
+        controller.command(['pan'], [0.2], [])
+        controller.command(['tilt'], [-0.3], [])
+    wait_for(lambda: device.kinds() == ['move'], 2.0, 'one move')
+    assert device.sent[0][1] == {'pan': (0.2, None), 'tilt': (-0.3, None)}
+    assert controller.commanded_targets == {'pan': 0.2, 'tilt': -0.3}
+
+
+def test_jog_stops_when_the_watchdog_expires(controller, device) -> None:
+    controller.command(['pan'], [], [0.5])
+    wait_for(lambda: controller.moving('pan'), 2.0, 'the jog')
+    wait_for(lambda: ('stop', ['pan']) in device.sent, 2.0, 'the dead-man stop')
+    assert controller.watchdog.jogging == []
+
+
+def test_stop_drops_queued_commands_and_stops_everything(controller, device) -> None:
+    with controller._send_lock:
+        controller.command(['pan'], [0.9], [])
+        controller._cancel_motion()  # what stop() does first
+    assert controller.stop().startswith('all axes stopped')
+    assert 'move' not in device.kinds() and device.sent[-1] == ('stop', None)
+
+
+def test_moving_rule_prefers_the_device_bit() -> None:
+    sample = JointSample({'pan': 0.0}, {'pan': 0.5}, moving={'pan': False})
+    assert not is_moving(sample, 'pan')
+    assert is_moving(JointSample({'pan': 0.0}, {'pan': 0.01}), 'pan')
+    assert not is_moving(JointSample({'pan': 0.0}, {'pan': 1e-4}), 'pan')
+
+
+def test_device_nack_becomes_the_error_with_the_devices_reason(controller, device) -> None:
+    device.nack_moves = True
+    with pytest.raises(DeviceRefused, match='axis disabled'):
+        controller.send_moves({'pan': (0.1, None)})
+
+
+# ----------------------------------------------------------------- moves
+def test_move_reaches_its_target(motion, controller) -> None:
+    targets = motion.start_move(['pan', 'tilt'], [0.3, -0.2])
+    outcome = motion.wait_move(targets)
+    assert outcome.success and outcome.positions == pytest.approx([0.3, -0.2], abs=0.01)
+
+
+def test_relative_move_resolves_against_the_current_position(motion, controller) -> None:
+    motion.wait_move(motion.start_move(['pan'], [0.2]))
+    targets = motion.start_move(['pan'], [0.3], relative=True)
+    assert targets['pan'] == pytest.approx(0.5, abs=0.02)
+
+
+def test_move_times_out_and_stops(motion, controller, device) -> None:
+    device.step = 0.0001
+    controller.config.move_timeout = 0.05
+    outcome = motion.wait_move(motion.start_move(['pan'], [0.9]))
+    assert outcome.state == 'failed' and 'move_timeout' in outcome.message
+    assert device.sent[-1] == ('stop', ['pan'])
+
+
+def test_move_cancel_stops_the_joints(motion, device) -> None:
+    device.step = 0.0001
+    outcome = motion.wait_move(motion.start_move(['tilt'], [0.9]), cancelled=lambda: True)
+    assert outcome.state == 'cancelled' and device.sent[-1] == ('stop', ['tilt'])
+
+
+def test_stop_ends_a_running_move(motion, controller, device) -> None:
+    device.step = 0.0001
+    targets = motion.start_move(['pan'], [0.9])
+    threading.Timer(0.05, controller.stop).start()
+    assert motion.wait_move(targets).state == 'stopped'
+
+
+def test_move_refusals_send_nothing(motion, device) -> None:
+    with pytest.raises(InvalidRequest, match='velocity_max'):
+        motion.start_move(['pan'], [0.1], [5.0])
+    with pytest.raises(InvalidRequest):
+        motion.start_move(['pan'], [0.1], [0.1, 0.2])
+    device.refuse = 'tilt faulted'
+    with pytest.raises(DeviceRefused, match='tilt faulted'):
+        motion.start_move(['tilt'], [0.1])
+    assert device.kinds() == []
+
+
+# ----------------------------------------------------------------- homing
+def test_home_without_the_capability_says_so(motion) -> None:
+    with pytest.raises(Unsupported, match='no homing'):
+        motion.home([], lambda state: None, threading.Event())
+
+
+def test_home_runs_the_device_routine(motion, device) -> None:
+    device.capabilities.homing = FakeHoming(device)
+    device.positions['pan'] = 0.3
+    states = []
+    assert motion.home(['pan'], states.append, threading.Event()) == 'homed'
+    with pytest.raises(InvalidRequest, match='unknown joint'):
+        motion.home(['roll'], states.append, threading.Event())
+
+
+# ------------------------------------------------------------------ scans
+def test_driver_side_scan_moves_then_stops(motion, controller, device) -> None:
+    message = motion.start_scan(ScanRequest('sector', -0.2, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0))
+    assert 'driver-side' in message
+    wait_for(lambda: device.kinds().count('move') >= 2, 2.0, 'two scan waypoints')
+    assert motion.stop_scan() == 'scan stopped'
+    wait_for(lambda: not motion.scanning, 2.0, 'the scan thread to end')
+
+
+def test_unknown_scan_pattern_is_refused(motion, device) -> None:
+    with pytest.raises(InvalidRequest, match='pattern'):
+        motion.start_scan(ScanRequest('spiral', -0.2, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0))
+    assert device.kinds() == []
+
+
+def test_device_scan_is_used_for_its_patterns_and_stopped_by_stop(motion, controller,
+                                                                   device) -> None:
+    scans = device.capabilities.scans = FakeScans()
+    assert motion.start_scan(ScanRequest('spiral', -0.2, 0.2, 0, 0, 1.0, 0, 0)) == 'device spiral'
+    controller.stop()
+    assert not scans.running
+
+
+# ---------------------------------------------------------------- presets
+def test_yaml_presets_set_goto_list_clear(motion, controller) -> None:
+    motion.set_preset(3, 'door', {'pan': 0.4, 'tilt': 0.1})
+    assert [p.name for p in motion.list_presets()] == ['door']
+    assert 'preset 3' in motion.goto_preset(3, 0.0)
+    wait_for(lambda: abs(controller.positions()['pan'] - 0.4) < 1e-9, 2.0, 'the preset move')
+    motion.clear_preset(3)
+    with pytest.raises(InvalidRequest):
+        motion.goto_preset(3, 0.0)
+
+
+def test_device_slot_composes_with_the_yaml_store(motion, device) -> None:
+    device.capabilities.presets = SlotZeroPresets()
+    assert motion.set_preset(0, 'home', {'pan': 0.0, 'tilt': 0.0}) == 'stored on the device'
+    assert motion.set_preset(1, 'gate', {'pan': 0.5, 'tilt': 0.0}).startswith('preset 1 stored')
+    assert [(p.index, p.name) for p in motion.list_presets()] == [(0, 'home'), (1, 'gate')]
+    assert motion.goto_preset(0, 0.0) == 'device moving to slot 0'
+    assert motion.clear_preset(None) == 'all presets cleared'
+    assert motion.list_presets() == []
+
+
+def test_preset_refusals(motion, device) -> None:
+    with pytest.raises(InvalidRequest):
+        motion.set_preset(1, 'x', {'pan': 9.0})
+    with pytest.raises(InvalidRequest, match='speed'):
+        motion.goto_preset(1, -1.0)
+    motion.set_preset(1, 'x', {'pan': 0.1})
+    device.refuse = 'pan is off'
+    with pytest.raises(DeviceRefused, match='pan is off'):
+        motion.goto_preset(1, 0.0)
+    assert device.kinds() == []
+
+
+def test_set_preset_from_the_current_position(motion, controller) -> None:
+    motion.wait_move(motion.start_move(['pan'], [0.25]))
+    motion.set_preset(2, 'here', None)
+    assert motion.list_presets()[0].positions['pan'] == pytest.approx(0.25, abs=0.01)
+
+
+# --------------------------------------------------------------- lifecycle
+def test_deactivate_stops_the_axes_and_refuses_commands(controller, device) -> None:
+    controller.deactivate()
+    assert device.sent[-1] == ('stop', None)
+    assert controller.refusal() is not None
