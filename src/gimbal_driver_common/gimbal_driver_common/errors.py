@@ -37,19 +37,9 @@ class InvalidRequest(GimbalError, ValueError):
     """The request itself is wrong (out of range, unknown joint); nothing was sent."""
 
 
-#: exceptions that mean "the link is gone", whatever library raised them
+#: exceptions that mean "the link is gone" (pyserial's SerialException is an OSError;
+#: python-can's errors are converted by the turret's client, so this package needs no can)
 _LINK_TYPES: tuple[type[BaseException], ...] = (OSError, EOFError)
-
-
-def _optional_link_types() -> tuple[type[BaseException], ...]:
-    """python-can's error class, when python-can is installed (only the turret needs it)."""
-    found: list[type[BaseException]] = []  # pyserial's SerialException is an OSError
-    try:
-        import can
-        found.append(can.CanError)
-    except ImportError:  # pragma: no cover
-        pass
-    return tuple(found)
 
 
 def as_gimbal_error(exc: BaseException) -> GimbalError:
@@ -58,7 +48,7 @@ def as_gimbal_error(exc: BaseException) -> GimbalError:
         return exc
     if isinstance(exc, TimeoutError):
         error: GimbalError = DeviceTimeout(str(exc) or 'no answer from the device')
-    elif isinstance(exc, _LINK_TYPES + _optional_link_types()):
+    elif isinstance(exc, _LINK_TYPES):
         error = LinkError(f'link: {exc}')
     elif isinstance(exc, ValueError):
         error = InvalidRequest(str(exc))

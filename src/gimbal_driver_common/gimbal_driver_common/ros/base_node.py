@@ -16,16 +16,13 @@ reentrant group on a MultiThreadedExecutor, so ``~/stop`` answers while a
 from __future__ import annotations
 
 import math
-import threading
 import time
 import traceback
 from collections.abc import Callable, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
-from lifecycle_msgs.srv import ChangeState
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -40,6 +37,7 @@ from gimbal_driver_common.periodic import Periodic
 from gimbal_driver_common.policies import DRIVER_SCAN_PATTERNS, Motion
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.ros import messages
+from gimbal_driver_common.ros.actions import MotionActions, guard_change_state_service
 from gimbal_driver_common.ros.common_parameters import declare_common_parameters, limits_from
 from gimbal_driver_common.ros.look_at import LookAtMixin
 from gimbal_driver_common.ros.parameters import ParameterRegistry, declare
@@ -54,7 +52,7 @@ DeviceError = DeviceRefused
 __all__ = ['DeviceError', 'DeviceInfo', 'GimbalDriverNode', 'JointSample', 'run_driver']
 
 
-class GimbalDriverNode(LookAtMixin, LifecycleNode):
+class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
     """Common ROS interface of the pan-tilt drivers; a driver adds :meth:`make_device`."""
 
     #: joint names when the ``joint_names`` parameter is not set
@@ -235,7 +233,7 @@ class GimbalDriverNode(LookAtMixin, LifecycleNode):
 
     # --------------------------------------------------------- ROS interfaces
     def _create_ros_interfaces(self) -> None:
-        self._guard_change_state_service()
+        guard_change_state_service(self)
         state_qos = QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
         self._joint_pub = self.create_publisher(JointState, 'joint_states', state_qos)
@@ -265,29 +263,6 @@ class GimbalDriverNode(LookAtMixin, LifecycleNode):
         self._setup_look_at()  # ~/look_at (ros/look_at.py) runs through _execute_move
         self.periodic.add(self.diagnostics_period, self._publish_diagnostics)
         self.periodic.add(self._status_period(), self._publish_status)
-
-    def _guard_change_state_service(self) -> None:
-        """Answer an impossible lifecycle transition with success=false instead of dying.
-
-        rclpy's ``~/change_state`` lets the RCLError of a transition the current state
-        lacks escape into the executor, which ends the spin (found by `make soak`).
-        """
-        service = getattr(self, '_service_change_state', None)
-        if service is None:
-            return
-        handler = service.callback
-
-        def guarded(request: ChangeState.Request, response: ChangeState.Response):
-            try:
-                return handler(request, response)
-            except _rclpy.RCLError as exc:
-                self.get_logger().warning(
-                    f'lifecycle transition {request.transition.label or request.transition.id!r}'
-                    f' refused in state {self._state_machine.current_state[1]!r}: {exc}')
-                response.success = False
-                return response
-
-        service.callback = guarded
 
     def destroy_node(self) -> None:
         self.periodic.stop()
@@ -419,68 +394,6 @@ class GimbalDriverNode(LookAtMixin, LifecycleNode):
 
     def _on_stop_scan(self, request: Trigger.Request, response: Trigger.Response):
         return self.serve_request(response, lambda: self.motion.stop_scan())
-
-    # ------------------------------------------------------------- move / home
-    def _execute_move(self, goal_handle):
-        goal = goal_handle.request
-        result = MoveTo.Result()
-        try:
-            if self.motion is None:
-                raise DeviceRefused(self.command_refusal())
-            targets = self.motion.start_move(goal.joint_names, goal.positions, goal.velocities,
-                                             goal.relative)
-        except GimbalError as exc:
-            goal_handle.abort()
-            result.success, result.message = False, f'move refused, nothing sent: {exc}'
-            current = self.current_positions()
-            result.positions = [current.get(n, math.nan) for n in goal.joint_names]
-            return result
-        feedback = MoveTo.Feedback()
-
-        def publish(positions: list[float]) -> None:
-            feedback.positions = positions
-            goal_handle.publish_feedback(feedback)
-
-        outcome = self.motion.wait_move(
-            targets, goal.tolerance, lambda: goal_handle.is_cancel_requested, publish)
-        result.positions, result.success, result.message = (
-            outcome.positions, outcome.success, outcome.message)
-        if outcome.state == 'cancelled':
-            goal_handle.canceled()
-        elif outcome.success:
-            goal_handle.succeed()
-        else:
-            goal_handle.abort()
-        return result
-
-    def _execute_home(self, goal_handle):
-        joints = list(goal_handle.request.joint_names) or list(self.joint_names)
-        result = Home.Result()
-        cancelled = threading.Event()
-        feedback = Home.Feedback()
-
-        def report(state: str) -> None:
-            if goal_handle.is_cancel_requested:
-                cancelled.set()
-            feedback.state = state
-            goal_handle.publish_feedback(feedback)
-
-        try:
-            if self.motion is None:
-                raise DeviceRefused(self.command_refusal())
-            self.controller.require()
-            result.message, result.success = self.motion.home(joints, report, cancelled), True
-        except GimbalError as exc:
-            result.success, result.message = False, str(exc)
-        if goal_handle.is_cancel_requested or cancelled.is_set():
-            self.controller.stop_joints(joints)
-            goal_handle.canceled()
-            result.success, result.message = False, 'homing cancelled'
-        elif result.success:
-            goal_handle.succeed()
-        else:
-            goal_handle.abort()
-        return result
 
     def _limits_from(self, value_of: Callable[[str], object]) -> dict[str, JointLimits]:
         return limits_from(self.joint_names, value_of)

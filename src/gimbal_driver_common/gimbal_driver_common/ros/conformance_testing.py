@@ -17,130 +17,36 @@ simulator, and the next test that needs the shared node starts it again. Every w
 
 from __future__ import annotations
 
-import abc
 import math
 import signal
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
+from gimbal_driver_common.ros.conformance_rig import (
+    ERROR,
+    OK,
+    REJECTED,
+    STALE,
+    ConformanceHelpers,
+    ConformanceRig,
+    GoalStatus,
+    SimulatorHandle,
+)
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import GimbalStatus
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
 
-REJECTED = 'joint_command rejected, nothing sent'
-OK = 0
-ERROR = 2
-STALE = 3
+__all__ = ['ConformanceRig', 'DriverConformance', 'GoalStatus', 'SimulatorHandle']
 
 
-class GoalStatus:
-    """action_msgs/GoalStatus codes (kept here: the package does not depend on action_msgs)."""
-
-    STATUS_SUCCEEDED = 4
-    STATUS_CANCELED = 5
-    STATUS_ABORTED = 6
-
-
-class SimulatorHandle(abc.ABC):
-    """A running simulator as the suite sees it: link parameters, faults and the device side."""
-
-    @abc.abstractmethod
-    def link_parameters(self) -> list[str]:
-        """``name:=value`` node parameters that point the driver at this simulator."""
-
-    @abc.abstractmethod
-    def motion_received(self) -> object:
-        """A snapshot of the motion commands the device has received so far; two equal
-        snapshots mean nothing that moves an axis reached the device in between."""
-
-    @abc.abstractmethod
-    def moving(self, joint: str) -> bool:
-        """Whether the device itself (not the driver's view) has ``joint`` in motion."""
-
-    @abc.abstractmethod
-    def drop_link(self, seconds: float) -> None:
-        """Cut the link to the driver and refuse a new one for ``seconds``."""
-
-    @abc.abstractmethod
-    def close(self) -> None:
-        """Stop the simulator."""
-
-
-class ConformanceRig:
-    """One simulator, a leased domain, a test client and the node currently under test."""
-
-    def __init__(self, suite: DriverConformance, workdir: Path) -> None:
-        self.suite = suite
-        self.workdir = workdir
-        self.presets_file = workdir / 'presets.yaml'
-        self._lease = DomainLease()
-        self.domain = self._lease.acquire()
-        self.node: ManagedProcess | None = None
-        self._node_extra: tuple[str, ...] | None = None
-        self.sim: SimulatorHandle | None = None
-        self.ros: RosTestClient | None = None
-        try:
-            self.sim = suite.start_simulator(workdir, self.domain)
-            self.ros = RosTestClient(self.domain, 'conformance_client')
-        except BaseException:
-            self.close()
-            raise
-
-    def node_parameters(self, extra: Sequence[str] = ()) -> list[str]:
-        assert self.sim is not None
-        return [*self.sim.link_parameters(), f'presets_file:={self.presets_file}',
-                *self.suite.node_parameters(), *extra]
-
-    def start_node(self, *extra: str, wait_active: bool = True) -> ManagedProcess:
-        """(Re)start the node with the suite's parameters plus ``extra``."""
-        self.stop_node()
-        args = ['--ros-args', *[x for p in self.node_parameters(extra) for x in ('-p', p)]]
-        assert self.ros is not None
-        states = self.ros.subscribe('joint_states', JointState)
-        seen = len(states)
-        self.node = ManagedProcess.ros(self.suite.package, self.suite.node_executable,
-                                       self.domain, args)
-        self._node_extra = tuple(extra)
-        if wait_active:
-            wait_for(lambda: len(states) > seen or not self.node.running, 60.0,
-                     f'joint_states from {self.suite.node_executable}')
-            assert self.node.running, self.node.output()[-3000:]
-        return self.node
-
-    def shared_node(self) -> ManagedProcess:
-        """The node with the suite's own parameters, restarted if a test changed it."""
-        if self.node is None or not self.node.running or self._node_extra != ():
-            self.start_node()
-        assert self.node is not None
-        return self.node
-
-    def stop_node(self) -> None:
-        if self.node is not None:
-            self.node.stop()
-            self.node = None
-            self._node_extra = None
-
-    def close(self) -> None:
-        if self.ros is not None:
-            self.ros.close()
-        tail = self.node.output()[-3000:] if self.node is not None else ''
-        self.stop_node()
-        if self.sim is not None:
-            self.sim.close()
-        self._lease.release()
-        if tail:
-            print(f'--- {self.suite.node_executable} log (tail) ---\n{tail}')
-
-
-class DriverConformance:
+class DriverConformance(ConformanceHelpers):
     """The common contract of every gimbal driver node, tested through the real transport.
 
     Subclasses set the attributes below and implement :meth:`start_simulator`.
@@ -199,52 +105,6 @@ class DriverConformance:
         """The class rig with its shared node running."""
         conformance_rig.shared_node()
         return conformance_rig
-
-    # ---------------------------------------------------------------- helpers
-    def srv(self, name: str) -> str:
-        return f'/{self.node_name}/{name}'
-
-    def move_to(self, ros: RosTestClient, targets: dict[str, float],
-                velocities: Sequence[float] = (), timeout: float = 60.0,
-                cancel_after: float | None = None):
-        goal = MoveTo.Goal(joint_names=list(targets), positions=list(targets.values()),
-                           velocities=list(velocities))
-        return ros.run_action(MoveTo, self.srv('move_to'), goal, timeout=timeout,
-                              cancel_after=cancel_after)
-
-    def wait_positions(self, ros: RosTestClient, targets: dict[str, float],
-                       timeout: float = 30.0) -> JointState:
-        return ros.wait_for_message(
-            'joint_states', JointState,
-            lambda m: all(abs(joint_positions(m).get(j, math.inf) - p) <= self.tolerance
-                          for j, p in targets.items()), timeout=timeout)
-
-    def wait_stopped(self, rig: ConformanceRig, joint: str, what: str) -> None:
-        assert rig.sim is not None
-        wait_for(lambda: not rig.sim.moving(joint), 20.0, what)
-
-    def start_far_move(self, rig: ConformanceRig) -> None:
-        """A slow joint_command move toward ``far_move`` that the device shows as motion."""
-        joint, position, speed = self.far_move
-        assert rig.ros is not None and rig.sim is not None
-        rig.ros.publish('joint_command', JointState(name=[joint], position=[position],
-                                                    velocity=[speed]))
-        wait_for(lambda: rig.sim.moving(joint), 20.0, f'{joint} to start its slow move')
-
-    def assert_short_of_far_target(self, rig: ConformanceRig) -> None:
-        joint, position, _ = self.far_move
-        assert rig.ros is not None
-        msg = rig.ros.wait_for_message('joint_states', JointState, timeout=20)
-        assert abs(joint_positions(msg)[joint] - position) > 0.1, 'stopped short of target'
-
-    def node_statuses(self, array: DiagnosticArray) -> list[DiagnosticStatus]:
-        prefix = f'{self.node_name}: '
-        return [s for s in array.status if s.name.startswith(prefix)]
-
-    def wait_connection(self, ros: RosTestClient, level: int, timeout: float = 30.0
-                        ) -> DiagnosticStatus:
-        return ros.wait_for_diagnostic(self.node_name, 'connection',
-                                       lambda s: s.level[0] == level, timeout=timeout)
 
     # ------------------------------------------------------------------ tests
     @pytest.mark.ros

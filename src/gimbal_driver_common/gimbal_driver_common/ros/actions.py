@@ -1,0 +1,102 @@
+"""The MoveTo and Home actions on the policies, and a lifecycle guard; mixed into the node."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+from lifecycle_msgs.srv import ChangeState
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.lifecycle import LifecycleNode
+
+from gimbal_driver_common.errors import DeviceRefused, GimbalError
+from gimbal_msgs.action import Home, MoveTo
+
+
+class MotionActions:
+    """``~/move_to`` and ``~/home`` execute callbacks (the node provides controller/motion)."""
+
+    def _execute_move(self, goal_handle):
+        goal = goal_handle.request
+        result = MoveTo.Result()
+        try:
+            if self.motion is None:
+                raise DeviceRefused(self.command_refusal())
+            targets = self.motion.start_move(goal.joint_names, goal.positions, goal.velocities,
+                                             goal.relative)
+        except GimbalError as exc:
+            goal_handle.abort()
+            result.success, result.message = False, f'move refused, nothing sent: {exc}'
+            current = self.current_positions()
+            result.positions = [current.get(n, math.nan) for n in goal.joint_names]
+            return result
+        feedback = MoveTo.Feedback()
+
+        def publish(positions: list[float]) -> None:
+            feedback.positions = positions
+            goal_handle.publish_feedback(feedback)
+
+        outcome = self.motion.wait_move(
+            targets, goal.tolerance, lambda: goal_handle.is_cancel_requested, publish)
+        result.positions, result.success, result.message = (
+            outcome.positions, outcome.success, outcome.message)
+        if outcome.state == 'cancelled':
+            goal_handle.canceled()
+        elif outcome.success:
+            goal_handle.succeed()
+        else:
+            goal_handle.abort()
+        return result
+
+    def _execute_home(self, goal_handle):
+        joints = list(goal_handle.request.joint_names) or list(self.joint_names)
+        result = Home.Result()
+        cancelled = threading.Event()
+        feedback = Home.Feedback()
+
+        def report(state: str) -> None:
+            if goal_handle.is_cancel_requested:
+                cancelled.set()
+            feedback.state = state
+            goal_handle.publish_feedback(feedback)
+
+        try:
+            if self.motion is None:
+                raise DeviceRefused(self.command_refusal())
+            self.controller.require()
+            result.message, result.success = self.motion.home(joints, report, cancelled), True
+        except GimbalError as exc:
+            result.success, result.message = False, str(exc)
+        if goal_handle.is_cancel_requested or cancelled.is_set():
+            self.controller.stop_joints(joints)
+            goal_handle.canceled()
+            result.success, result.message = False, 'homing cancelled'
+        elif result.success:
+            goal_handle.succeed()
+        else:
+            goal_handle.abort()
+        return result
+
+
+def guard_change_state_service(node: LifecycleNode) -> None:
+    """Answer an impossible lifecycle transition with success=false instead of dying.
+
+    rclpy's ``~/change_state`` lets the RCLError of a transition the current state
+    lacks escape into the executor, which ends the spin (found by `make soak`).
+    """
+    service = getattr(node, '_service_change_state', None)
+    if service is None:
+        return
+    handler = service.callback
+
+    def guarded(request: ChangeState.Request, response: ChangeState.Response):
+        try:
+            return handler(request, response)
+        except _rclpy.RCLError as exc:
+            node.get_logger().warning(
+                f'lifecycle transition {request.transition.label or request.transition.id!r}'
+                f' refused in state {node._state_machine.current_state[1]!r}: {exc}')
+            response.success = False
+            return response
+
+    service.callback = guarded
