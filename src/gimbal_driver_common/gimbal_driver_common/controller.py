@@ -211,11 +211,12 @@ class GimbalController:
     def command(
         self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float]
     ) -> None:
-        """A joint_command: validated, then queued for the command thread; returns at once.
+        """A joint_command: validated, then sent now if the link is free, else queued.
 
-        Newest wins: a queued command for a joint is replaced by a newer one for the
-        same joint before it is sent. Raises (nothing queued) when the command is
-        invalid or the axes cannot move.
+        The caller never waits behind another send: a command that finds the link busy
+        is queued for the command thread, and newest wins (a queued command for a joint
+        is replaced by a newer one for the same joint). Raises (nothing sent) when the
+        command is invalid or the axes cannot move.
         """
         self.require()
         plan = validate_joint_command(names, positions, velocities, self.config.limits)
@@ -229,7 +230,15 @@ class GimbalController:
                 self._pending[joint] = ('jog', velocity, None)
         self.watchdog.cancel(list(plan.moves) + [j for j, v in plan.jogs.items() if v == 0.0])
         self.watchdog.feed([j for j, v in plan.jogs.items() if v != 0.0])
-        self._command_ready.set()
+        # Fast path: send from the caller's thread when the link is free (no thread hand-off);
+        # otherwise the command thread sends it as soon as the current send is done.
+        if self._send_lock.acquire(blocking=False):
+            try:
+                self._flush_pending()
+            finally:
+                self._send_lock.release()
+        else:
+            self._command_ready.set()
 
     def send_moves(self, moves: Moves, offsets: dict[str, float] | None = None) -> None:
         """Send absolute moves now (move_to, presets, scans), after the queued commands."""
@@ -292,27 +301,31 @@ class GimbalController:
             self.stop_joints(joints)
 
     def _command_loop(self) -> None:
-        """Send queued joint_commands as soon as they arrive (moves first, then jogs)."""
+        """Send what :meth:`command` queued while another send held the link."""
         while not self._stopping.is_set():
             self._command_ready.wait()
             self._command_ready.clear()
             with self._send_lock:
-                with self._pending_lock:
-                    pending, self._pending = self._pending, {}
-                if not pending or not self.connected:
-                    continue
-                moves = {j: (v, s) for j, (kind, v, s) in pending.items() if kind == 'move'}
-                jogs = {j: v for j, (kind, v, _) in pending.items() if kind == 'jog'}
-                try:
-                    with device_boundary():
-                        if moves:
-                            self.device.move(moves)
-                        if jogs:
-                            self.device.jog(jogs)
-                except GimbalError as exc:
-                    self.log.error(f'joint_command failed on the device: {exc}')
-                    continue
-            self.commanded_targets.update({joint: move[0] for joint, move in moves.items()})
+                self._flush_pending()
+
+    def _flush_pending(self) -> None:
+        """Send the queued commands, moves first (caller holds the send lock)."""
+        with self._pending_lock:
+            pending, self._pending = self._pending, {}
+        if not pending or not self.connected:
+            return
+        moves = {j: (v, s) for j, (kind, v, s) in pending.items() if kind == 'move'}
+        jogs = {j: v for j, (kind, v, _) in pending.items() if kind == 'jog'}
+        try:
+            with device_boundary():
+                if moves:
+                    self.device.move(moves)
+                if jogs:
+                    self.device.jog(jogs)
+        except GimbalError as exc:
+            self.log.error(f'joint_command failed on the device: {exc}')
+            return
+        self.commanded_targets.update({joint: move[0] for joint, move in moves.items()})
 
     # ------------------------------------------------------ device thread
     def _device_loop(self) -> None:
