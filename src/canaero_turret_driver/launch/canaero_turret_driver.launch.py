@@ -10,35 +10,8 @@ use_description:=true also starts robot_state_publisher with urdf/canaero_turret
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """
 
-import os
-
-from ament_index_python.packages import get_package_share_directory
-from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import LifecycleNode
-
-from gimbal_driver_common.ros.description_launch import description_actions, description_parameter
+from gimbal_driver_common.ros.description_launch import driver_launch_description
 
 
-def generate_launch_description() -> LaunchDescription:
-    share = get_package_share_directory('canaero_turret_driver')
-    default_params = os.path.join(share, 'config', 'canaero_turret_driver.yaml')
-    return LaunchDescription([
-        DeclareLaunchArgument('params_file', default_value=default_params,
-                              description='parameter YAML (config/canaero_turret_driver*.yaml)'),
-        DeclareLaunchArgument('autostart', default_value='false',
-                              description='true: the node walks itself to active'),
-        DeclareLaunchArgument('namespace', default_value=''),
-        *description_actions('canaero_turret_driver', LaunchConfiguration('namespace')),
-        LifecycleNode(
-            package='canaero_turret_driver',
-            executable='canaero_turret_driver_node',
-            name='canaero_turret_driver',
-            namespace=LaunchConfiguration('namespace'),
-            output='screen',
-            parameters=[LaunchConfiguration('params_file'),
-                        {'autostart': LaunchConfiguration('autostart')},
-                        description_parameter()],
-        ),
-    ])
+def generate_launch_description():
+    return driver_launch_description('canaero_turret_driver')

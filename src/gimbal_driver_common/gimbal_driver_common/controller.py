@@ -18,44 +18,22 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Protocol, TypeVar
+from typing import TypeVar
 
+from gimbal_driver_common.config import ControllerConfig, Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, LinkError, device_boundary
-from gimbal_driver_common.joint_command import JointLimits, validate_joint_command
+from gimbal_driver_common.joint_command import validate_joint_command
 from gimbal_driver_common.periodic import Periodic
 from gimbal_driver_common.watchdog import JogWatchdog
 
 T = TypeVar('T')
+__all__ = ['ControllerConfig', 'GimbalController', 'Logger', 'is_moving']
 
 #: a joint without a device "moving" bit is moving when faster than this (rad/s or m/s)
 MOVING_SPEED = 1e-3
 #: longest a streamed device's thread waits for data before checking the link again
 STREAM_WAIT_S = 0.05
-
-
-class Logger(Protocol):
-    """The part of a logger the controller uses (rclpy's and :mod:`logging`'s both fit)."""
-
-    def info(self, msg: str) -> object: ...
-    def warning(self, msg: str) -> object: ...
-    def error(self, msg: str) -> object: ...
-
-
-@dataclass
-class ControllerConfig:
-    """The common parameters of interfaces.md, as the controller uses them (all runtime)."""
-
-    joint_names: list[str]
-    limits: dict[str, JointLimits]
-    publish_rate: float = 50.0
-    command_timeout: float = 0.5
-    reconnect_period: float = 1.0
-    goal_tolerance: float = 0.01
-    move_timeout: float = 60.0
-    #: the (pan, tilt) joints a scan sweeps; empty: pan/tilt if named so, else the first two
-    scan_joints: Sequence[str] = field(default_factory=tuple)
 
 
 def is_moving(sample: JointSample | None, joint: str) -> bool:
@@ -93,7 +71,8 @@ class GimbalController:
         self.watchdog = JogWatchdog(config.command_timeout, self._on_jog_expired)
         self.periodic = periodic or Periodic(on_error=log.error)
         self.periodic.add(self._watchdog_period(), self.watchdog.check)
-        self.halt_hooks: list[Callable[[], None]] = []  # e.g. stop a scan (policies)
+        self.halt_hooks: list[Callable[[], None]] = []  # stop and halt call these (policies)
+        self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
         self._send_lock = threading.Lock()  # one motion set-up at a time; stop goes last
         self._pending: dict[str, tuple[str, float, float | None]] = {}  # joint -> kind, value, v
         self._pending_lock = threading.Lock()
@@ -223,6 +202,8 @@ class GimbalController:
         movers = list(plan.moves) + [j for j, v in plan.jogs.items() if v != 0.0]
         if movers:
             self.require(movers)
+        for hook in self.preempt_hooks:
+            hook()
         with self._pending_lock:
             for joint, (target, speed) in plan.moves.items():
                 self._pending[joint] = ('move', target, speed)

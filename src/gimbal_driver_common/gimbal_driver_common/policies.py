@@ -71,6 +71,7 @@ class Motion:
         self._scan_stop = threading.Event()
         self._scan_thread: threading.Thread | None = None
         controller.halt_hooks.append(self.preempt)
+        controller.preempt_hooks.append(self._scan_stop_current)
 
     # ---------------------------------------------------------------- moves
     def start_move(
@@ -132,9 +133,15 @@ class Motion:
                     'failed', f'not reached within move_timeout {ctl.config.move_timeout:g} s',
                     positions)
 
-    def preempt(self) -> None:
-        """A new motion command ends a driver-side scan (a device scan ends with the move)."""
+    def _scan_stop_current(self) -> None:
         self._scan_stop.set()
+
+    def preempt(self) -> None:
+        """A new motion command ends a driver-side scan and supersedes a running move goal
+        (which then ends "stopped"), so waiting goals never pile up; a device scan ends
+        with the device's new move."""
+        self._scan_stop.set()
+        self.controller.motion_generation += 1
 
     # ---------------------------------------------------------------- homing
     def home(

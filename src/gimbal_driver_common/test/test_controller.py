@@ -424,3 +424,16 @@ def test_deactivate_stops_the_axes_and_refuses_commands(controller, device) -> N
     controller.deactivate()
     assert device.sent[-1] == ('stop', None)
     assert controller.refusal() is not None
+
+
+def test_a_new_move_supersedes_a_waiting_move(motion, controller, device) -> None:
+    device.step = 0.0001
+    targets = motion.start_move(['pan'], [0.9])
+    threading.Timer(0.05, lambda: motion.start_move(['tilt'], [0.1])).start()
+    assert motion.wait_move(targets).state == 'stopped'
+
+
+def test_joint_command_ends_a_driver_side_scan(motion, controller) -> None:
+    motion.start_scan(ScanRequest('sector', -0.2, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0))
+    controller.command(['pan'], [0.0], [])
+    wait_for(lambda: not motion.scanning, 2.0, 'the scan thread to end')

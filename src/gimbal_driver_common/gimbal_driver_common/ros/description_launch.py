@@ -14,9 +14,10 @@ from __future__ import annotations
 import os
 
 from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch_ros.actions import LifecycleNode, Node
 
 
 def default_description(package: str) -> str:
@@ -53,3 +54,30 @@ def description_actions(package: str, namespace: object = '') -> list[object]:
             description='URDF of the device (placeholder dimensions: measure yours)'),
         OpaqueFunction(function=state_publisher),
     ]
+
+
+def driver_launch_description(package: str) -> LaunchDescription:
+    """The standard launch of a driver: its lifecycle node ``<package>_node`` named ``<package>``.
+
+    Arguments: ``params_file`` (default share/<package>/config/<package>.yaml),
+    ``autostart`` (default false: a lifecycle manager configures and activates it),
+    ``namespace``, and the description arguments of :func:`description_actions`.
+    """
+    share = get_package_share_directory(package)
+    namespace = LaunchConfiguration('namespace')
+    return LaunchDescription([
+        DeclareLaunchArgument('params_file',
+                              default_value=os.path.join(share, 'config', f'{package}.yaml'),
+                              description=f'parameter YAML (config/{package}*.yaml)'),
+        DeclareLaunchArgument('autostart', default_value='false',
+                              description='true: the node walks itself to active'),
+        DeclareLaunchArgument('namespace', default_value=''),
+        *description_actions(package, namespace),
+        LifecycleNode(
+            package=package, executable=f'{package}_node', name=package,
+            namespace=namespace, output='screen',
+            parameters=[LaunchConfiguration('params_file'),
+                        {'autostart': LaunchConfiguration('autostart')},
+                        description_parameter()],
+        ),
+    ])

@@ -1,0 +1,32 @@
+"""What the controller is configured with, and the logger it writes to (no ROS)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from gimbal_driver_common.joint_command import JointLimits
+
+
+class Logger(Protocol):
+    """The part of a logger the controller uses (rclpy's and :mod:`logging`'s both fit)."""
+
+    def info(self, msg: str) -> object: ...
+    def warning(self, msg: str) -> object: ...
+    def error(self, msg: str) -> object: ...
+
+
+@dataclass
+class ControllerConfig:
+    """The common parameters of interfaces.md, as the controller uses them (all runtime)."""
+
+    joint_names: list[str]
+    limits: dict[str, JointLimits]
+    publish_rate: float = 50.0
+    command_timeout: float = 0.5
+    reconnect_period: float = 1.0
+    goal_tolerance: float = 0.01
+    move_timeout: float = 60.0
+    #: the (pan, tilt) joints a scan sweeps; empty: pan/tilt if named so, else the first two
+    scan_joints: Sequence[str] = field(default_factory=tuple)
