@@ -31,6 +31,7 @@ from rclpy.type_support import check_for_type_support
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from gimbal_driver_common.registry import DriverSpec, parameter_arguments
 from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import (
     DomainLease,
@@ -48,21 +49,9 @@ BAG_NAME = 'demo_bag'  # the rosbag2 bag directory in --output
 
 @dataclass
 class DemoTarget:
-    """One simulator + driver pair and the script that drives it."""
+    """One registered driver (simulator + node) and the script that drives it."""
 
-    title: str
-    package: str
-    node_executable: str
-    node_name: str
-    sim_executable: str
-    sim_args: Callable[[DemoTarget], list[str]]
-    node_params: Callable[[DemoTarget], list[str]]
-    ready_text: str = ''
-    ready: Callable[[DemoTarget], bool] | None = None
-    joints: tuple[str, ...] = ('pan', 'tilt')
-    move_goal: tuple[float, ...] = (0.4, 0.2)
-    jog_joint: str = 'pan'
-    jog_velocity: float = 0.2
+    spec: DriverSpec
     scan: StartScan.Request | None = None
     scan_seconds: float = 4.0
     extra_steps: list[tuple[str, Callable[[DemoTarget, RosTestClient], str]]] = field(
@@ -81,18 +70,52 @@ class DemoTarget:
     workdir: Path = Path()
     stop: threading.Event = field(default_factory=threading.Event)
 
+    @property
+    def title(self) -> str:
+        return self.spec.title
+
+    @property
+    def package(self) -> str:
+        return self.spec.package
+
+    @property
+    def node_name(self) -> str:
+        return self.spec.node_name
+
+    @property
+    def node_executable(self) -> str:
+        return self.spec.node_executable
+
+    @property
+    def sim_executable(self) -> str:
+        return self.spec.sim_executable
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        return self.spec.joints
+
+    @property
+    def move_goal(self) -> tuple[float, ...]:
+        return self.spec.move_goal
+
+    @property
+    def jog_joint(self) -> str:
+        return self.spec.demo.jog_joint or self.joints[0]
+
+    @property
+    def jog_velocity(self) -> float:
+        return self.spec.demo.jog_velocity
+
     def is_ready(self) -> bool:
         """The simulator accepts connections (its own readiness signal)."""
-        if self.ready is not None:
-            return self.ready(self)
-        if self.ready_text:
-            return self.sim is not None and self.ready_text in self.sim.output()
-        return True
+        from demo_targets import simulator_ready
+
+        return simulator_ready(self)
 
     @property
     def namespace(self) -> str:
         """Each driver runs in its own namespace so joint_states do not mix."""
-        return '/' + self.node_name.removesuffix('_driver')
+        return self.spec.namespace
 
     def ns(self, name: str) -> str:
         """A private (``~/``) name of the node."""
@@ -137,25 +160,11 @@ class DemoRosClient(RosTestClient):
         return super().run_action(action_type, name, goal, timeout, cancel_after)
 
 
-def virtual_gimbal_target() -> DemoTarget:
-    return DemoTarget(
-        title='virtual gimbal (reference)',
-        package='gimbal_driver_common',
-        node_executable='virtual_gimbal_node',
-        node_name='virtual_gimbal',
-        sim_executable='virtual_gimbal_sim',
-        sim_args=lambda t: ['--port', str(t.port)],
-        node_params=lambda t: [f'port:={t.port}'],
-        ready_text='listening',
-        scan=StartScan.Request(pattern='sector', pan_min=-0.3, pan_max=0.3, speed=0.6),
-    )
-
-
 def available_targets() -> list[DemoTarget]:
-    """Every target whose executables are built (drivers land one by one)."""
+    """Every registered driver whose executables are installed."""
     from demo_targets import driver_targets
 
-    targets = [virtual_gimbal_target(), *driver_targets()]
+    targets = driver_targets()
     usable = []
     for target in targets:
         try:
@@ -342,7 +351,7 @@ def start_processes(targets: list[DemoTarget], domain: int, stop: threading.Even
         target.port = free_tcp_port()
         try:
             target.sim = ManagedProcess.ros(target.package, target.sim_executable, domain,
-                                            target.sim_args(target))
+                                            target.spec.sim_argv(target.workdir, target.port))
         except OSError as exc:
             target.failed.append(f'start: simulator {target.sim_executable}: {exc}')
     for target in targets:
@@ -361,7 +370,10 @@ def start_processes(targets: list[DemoTarget], domain: int, stop: threading.Even
             tail = target.sim.output().strip().splitlines()[-3:]
             target.failed.append(f'start: {target.sim_executable} exited: {" / ".join(tail)}')
             continue
-        params = [x for p in target.node_params(target) for x in ('-p', p)]
+        from demo_targets import common_parameters
+
+        params = parameter_arguments({**common_parameters(target),
+                                      **target.spec.parameters(target.workdir, target.port)})
         target.node = ManagedProcess.ros(
             target.package, target.node_executable, domain,
             ['--ros-args', '-r', f'__ns:={target.namespace}', *params])
