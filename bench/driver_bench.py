@@ -298,7 +298,8 @@ def generic_run(spec: DriverSpec, domain: int) -> dict:
                 stream = StreamSpec(joint, settings.stream_base, float, settings.stream_tolerance,
                                     move_targets=settings.move_targets,
                                     node_name=spec.node_name)
-            base = {**handle.node_parameters(), 'command_timeout': 0.0}
+            base = {**handle.node_parameters(), 'command_timeout': 0.0,
+                    'presets_file': str(Path(workdir, 'presets.yaml'))}
             results.update(node_figures(domain, spec.package,
                                         {**base, 'publish_rate': settings.publish_rate},
                                         stream, recorder, executable=spec.node_executable))

@@ -28,8 +28,7 @@ SPEC = DriverSpec(
                    '--discovery-port', '0'),
     node_parameters={'host': '127.0.0.1', 'port': '{port}', 'password_file': '{password_file}',
                      'discovery_bind': '127.0.0.1', 'joint_names': ['pan', 'tilt', 'slider'],
-                     'motor_addresses': [2, 3, 1], 'joint_scales': [math.tau] * 3,
-                     'poll_period': 0.05},
+                     'motor_addresses': [2, 3, 1], 'joint_scales': [math.tau] * 3},
     ready_text='listening',
     password='kos-sim-secret',
     sim_handle='kessler_kos_driver.sim_handle:KesslerSimHandle',
@@ -42,5 +41,8 @@ SPEC = DriverSpec(
         extra_services={'take_picture': 'std_srvs/srv/Trigger',
                         'stop_playback': 'std_srvs/srv/Trigger',
                         'load_trajectory': 'gimbal_msgs/srv/LoadTrajectory'}),
-    bench=BenchSettings(module='kessler_kos'),
+    # the generic benchmark plus the kOS codec (bench/bench_kessler_kos.py); rad on 'pan',
+    # inside the calibrated 0..100 rotations
+    bench=BenchSettings(module='kessler_kos', stream_joint='pan', stream_base=20.0,
+                        stream_tolerance=2e-5 * math.tau, move_targets=(10.0, 40.0)),
 )

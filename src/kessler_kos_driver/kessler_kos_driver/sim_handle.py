@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import random
 import time
 from pathlib import Path
@@ -25,6 +26,12 @@ class KesslerSimHandle(SimHandle):
                                 port=self.port, discovery_port=0).start()
         self.port = self.sim.port
         self._started(self.sim.server, self.sim)
+
+    def device_target(self, joint: str) -> float | None:
+        """The motor's target (rotations) in rad: every joint is 2π rad per rotation."""
+        addresses = dict(zip(self.spec.joints, self.spec.node_parameters['motor_addresses'],
+                             strict=True))
+        return self.sim.device.motors[addresses[joint]].target * math.tau
 
     def malformed_frames(self, rng: random.Random) -> None:
         from kessler_kos_driver.protocol import MotorInfo, MotorInfoEntry

@@ -28,5 +28,7 @@ SPEC = DriverSpec(
     soak=SoakSettings(extra_services={'set_mode': 'gimbal_msgs/srv/SetMode',
                                       'save_configuration': 'std_srvs/srv/Trigger',
                                       'save_ffc': 'std_srvs/srv/Trigger'}),
-    bench=BenchSettings(module='ucamera'),
+    # the generic benchmark plus the UCSP codec (bench/bench_ucamera.py); the wire carries
+    # deg*100 (0.01 deg = 1.75e-4 rad)
+    bench=BenchSettings(module='ucamera', stream_joint='tilt', stream_tolerance=1e-4),
 )

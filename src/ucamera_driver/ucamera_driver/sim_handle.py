@@ -26,6 +26,10 @@ class UCameraSimHandle(SimHandle):
         self.sim = UCameraSim(SimConfig(), link_path=self.link).start()
         self._started(self.sim.server, self.sim)
 
+    def device_target(self, joint: str) -> float | None:
+        """The last commanded angle (rad) of ``joint``, as the gimbal model holds it."""
+        return self.sim.model.commanded_angles[self.spec.joints.index(joint)]
+
     def garbage(self, rng: random.Random) -> None:
         self.sim.inject_noise(rng.randrange(16, 200))
 
