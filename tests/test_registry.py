@@ -100,6 +100,8 @@ def test_placeholders_fill(spec: DriverSpec, tmp_path: Path) -> None:
                                                                                     4321)
     assert not [a for a in arguments if '{' in a and '}' in a and ':=[' not in a], arguments
     node_line = ' '.join(parameter_arguments(spec.parameters(tmp_path, 4321)))
+    if 'port' in spec.node_parameters:
+        assert spec.parameters(tmp_path, 4321)['port'] == 4321  # an int parameter stays one
     if spec.password:
         assert spec.password not in node_line
         password_file = tmp_path / f'{spec.name}_password'

@@ -18,6 +18,7 @@ the tool that uses it.
 from __future__ import annotations
 
 import importlib
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
@@ -119,9 +120,9 @@ class DriverSpec:
         """The namespace the demo runs the node in (node name without ``_driver``)."""
         return '/' + self.node_name.removesuffix('_driver')
 
-    def link_values(self, workdir: Path, port: int = 0) -> dict[str, str]:
+    def link_values(self, workdir: Path, port: int = 0) -> dict[str, Any]:
         """The placeholder values for a simulator in ``workdir`` on ``port``."""
-        return {'port': str(port), 'link': str(workdir / f'{self.name}_tty'),
+        return {'port': port, 'link': str(workdir / f'{self.name}_tty'),
                 'workdir': str(workdir), 'password': self.password,
                 'password_file': str(workdir / f'{self.name}_password')}
 
@@ -134,9 +135,11 @@ class DriverSpec:
         0600) the parameters name, so the password is never on a command line."""
         values = self.link_values(workdir, port)
         if self.password:
-            password_file = Path(values['password_file'])
-            password_file.write_text(self.password + '\n', encoding='utf-8')
-            password_file.chmod(0o600)
+            password_file = values['password_file']
+            descriptor = os.open(password_file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            os.fchmod(descriptor, 0o600)  # a file that existed keeps its mode otherwise
+            with os.fdopen(descriptor, 'w', encoding='utf-8') as stream:
+                stream.write(self.password + '\n')
         return {key: fill(value, values) for key, value in self.node_parameters.items()}
 
     @property
@@ -148,9 +151,12 @@ class DriverSpec:
         return self.node_executable, self.sim_executable
 
 
-def fill(value: Any, values: Mapping[str, str]) -> Any:
-    """A parameter value with placeholders filled (strings, and strings in lists)."""
+def fill(value: Any, values: Mapping[str, Any]) -> Any:
+    """A parameter value with placeholders filled (strings, and strings in lists); a value
+    that is one placeholder alone keeps the placeholder's type (``'{port}'`` -> an int)."""
     if isinstance(value, str):
+        if value.startswith('{') and value.endswith('}') and value[1:-1] in values:
+            return values[value[1:-1]]
         return value.format(**values)
     if isinstance(value, (list, tuple)):
         return [fill(item, values) for item in value]
