@@ -7,25 +7,19 @@ arrives (at most ``publish_rate``) with the time the report was read as ``header
 
 from __future__ import annotations
 
-import math
-
-from command_stream import DeviceRecorder, StreamSpec
 from driver_bench import (
     check_targets,
     codec_figures,
     explain_latency,
     explain_streamed_rate,
-    node_figures,
+    generic_run,
 )
 from driver_bench import tcp_wire_limit_frames_per_s as tcp_limit
 
+from gimbal_driver_common.registry import driver
 from kessler_kos_driver.protocol import FrameParser, MotorInfo, MotorInfoEntry, decode
-from kessler_kos_driver.sim import KosSimulator, SimSettings
 
-PACKAGE = 'kessler_kos_driver'
-DEFAULT_PUBLISH_RATE = 50.0   # the node's declared default (GimbalDriverNode)
 PAN_ADDRESS = 2
-TWO_PI = 2.0 * math.pi
 
 
 def codec() -> dict:
@@ -44,23 +38,10 @@ def codec() -> dict:
 
 
 def run(domain: int) -> dict:
-    results: dict = {'transport': 'tcp loopback; GetMotorInfo polled at publish_rate',
-                     'codec': codec()}
-    sim = KosSimulator(SimSettings(precalibrated=True), port=0, discovery_port=0)
-    pan = sim.device.motors[PAN_ADDRESS]
-    recorder = DeviceRecorder(sim.server, {'received': lambda: pan.target})
-    sim.start()
-    # rad on joint 'pan' (scale 2*pi rad per rotation), inside the calibrated 0..100 rot
-    stream = StreamSpec('pan', 20.0, lambda rad: rad / TWO_PI, 2e-5, move_targets=(10.0, 40.0),
-                        node_name=PACKAGE)
-
-    try:
-        results.update(node_figures(domain, PACKAGE, {
-            'host': '127.0.0.1', 'port': sim.port, 'publish_rate': DEFAULT_PUBLISH_RATE,
-            'reconnect_period': 0.5,
-        }, stream, recorder))
-    finally:
-        sim.stop()
+    """The generic benchmark against the registered kOS simulator, plus the codec."""
+    results = generic_run(driver('kessler_kos'), domain)
+    results['transport'] = 'tcp loopback; GetMotorInfo polled at publish_rate'
+    results['codec'] = codec()
     explain_latency(results, (
         'The node publishes each MotorInfo reply or MotorPosition/PlaybackStatus '
         'notification as it arrives (stamp = when the client read it), so the figure is '

@@ -7,29 +7,23 @@ node publishes it at once (at most ``publish_rate``).
 
 from __future__ import annotations
 
-import tempfile
-from pathlib import Path
-
-from command_stream import DeviceRecorder, StreamSpec
 from driver_bench import (
     add_note,
     check_targets,
     codec_figures,
     explain_latency,
     explain_streamed_rate,
-    node_figures,
+    generic_run,
 )
 from harness import wire_limit_frames_per_s
 
+from gimbal_driver_common.registry import driver
 from ucamera_driver.protocol import FrameParser
 from ucamera_driver.protocol.packets import AnglesReport, decode_packet, expected_payload_length
-from ucamera_driver.sim import SimConfig, UCameraModel, UCameraSim
+from ucamera_driver.sim import SimConfig, UCameraModel
 
-PACKAGE = 'ucamera_driver'
-DEFAULT_PUBLISH_RATE = 50.0   # the node's declared default (GimbalDriverNode)
-TELEMETRY_RATE = 50           # the node's default telemetry_rate parameter
+TELEMETRY_RATE = 50           # the spec's telemetry_rate parameter (the node's default)
 UART_BPS = 115200
-ANGLE_TOLERANCE = 1e-4        # rad: the wire carries deg*100 (0.01 deg = 1.75e-4 rad)
 
 
 def codec() -> dict:
@@ -52,23 +46,11 @@ def codec() -> dict:
 
 
 def run(domain: int) -> dict:
-    results: dict = {'transport': 'pty (no baud-rate pacing), streamed telemetry at '
-                                  f'{TELEMETRY_RATE} Hz', 'codec': codec()}
-    tmp = tempfile.TemporaryDirectory(prefix='bench-ucamera-')
-    sim = UCameraSim(SimConfig(init_time=0.1), link_path=str(Path(tmp.name, 'tty')))
-    model = sim.model
-    recorder = DeviceRecorder(sim.server, {'received': lambda: model.commanded_angles[1]})
-    sim.start()
-    stream = StreamSpec('tilt', -0.25, float, ANGLE_TOLERANCE, node_name=PACKAGE)   # rad
-
-    try:
-        results.update(node_figures(domain, PACKAGE, {
-            'serial_port': sim.port_name, 'presets_file': str(Path(tmp.name, 'presets.yaml')),
-            'publish_rate': DEFAULT_PUBLISH_RATE, 'telemetry_rate': TELEMETRY_RATE,
-        }, stream, recorder))
-    finally:
-        sim.stop()
-        tmp.cleanup()
+    """The generic benchmark against the registered U-Camera simulator, plus the codec."""
+    results = generic_run(driver('ucamera'), domain)
+    results['transport'] = ('pty (no baud-rate pacing), streamed telemetry at '
+                            f'{TELEMETRY_RATE} Hz')
+    results['codec'] = codec()
     explain_latency(results, (
         'The node publishes each AnglesReport as it arrives (stamp = its arrival), so the '
         'figure is publish + DDS transfer.'))

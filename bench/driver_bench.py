@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -40,6 +41,7 @@ from harness import (
     wire_limit_frames_per_s,
 )
 
+from gimbal_driver_common.registry import DriverSpec, parameter_arguments, resolve
 from gimbal_driver_common.testing import ManagedProcess, wait_for
 
 # Bytes a TCP segment adds to its payload on 100BASE-TX Ethernet: preamble+SFD 8, MAC header
@@ -103,23 +105,6 @@ def codec_figures(frame: str, frame_bytes: int, encode: Callable[[], object],
     }
 
 
-def ros_parameters(values: dict[str, object]) -> list[str]:
-    """``-p name:=value`` arguments; floats keep their decimal point (double parameters)."""
-    args: list[str] = []
-    for name, value in values.items():
-        if isinstance(value, bool):
-            text = 'true' if value else 'false'
-        elif isinstance(value, float):
-            text = repr(value)
-        elif isinstance(value, (list, tuple)):
-            text = '[' + ', '.join(repr(v) if isinstance(v, float) else str(v)
-                                   for v in value) + ']'
-        else:
-            text = str(value)
-        args += ['-p', f'{name}:={text}']
-    return args
-
-
 def start_node(domain: int, package: str, parameters: dict[str, object],
                params_file: bool = True, executable: str = '') -> ManagedProcess:
     """``<package>_node`` (or ``executable``) with its simulator YAML (if any) and
@@ -129,7 +114,7 @@ def start_node(domain: int, package: str, parameters: dict[str, object],
     if params_file and Path(config).is_file():
         args += ['--params-file', str(config)]
     return ManagedProcess.ros(package, executable or f'{package}_node', domain,
-                              args + ros_parameters(parameters), extra_env=node_hook_env())
+                              args + parameter_arguments(parameters), extra_env=node_hook_env())
 
 
 #: bench/node_hook/sitecustomize.py instruments the node process when one of these is set
@@ -287,3 +272,44 @@ def explain_streamed_rate(results: dict, source: str) -> None:
             f'joint_states {achieved} Hz at publish_rate {rate:g}: the node publishes each new '
             f'device sample as it arrives (publish_rate is the upper bound), so the rate is '
             f'that of {source} (device reports {results.get("device_reports_hz")} Hz).'))
+
+
+def generic_run(spec: DriverSpec, domain: int) -> dict:
+    """The benchmark of a driver without a ``bench_<module>.py``: its registered in-process
+    simulator (``spec.sim_handle``), the node at ``spec.bench.publish_rate`` with the spec's
+    link parameters; the joint_command stream when the handle shows device targets
+    (``SimHandle.device_target``); and, with ``spec.bench.max_rate``, the joint_states rate
+    the node reaches there."""
+    settings = spec.bench
+    joint = settings.stream_joint or spec.joints[0]
+    with tempfile.TemporaryDirectory(prefix=f'bench-{spec.name}-') as workdir:
+        handle = resolve(spec.sim_handle)(spec, Path(workdir))
+        handle.start()
+        results: dict = {'transport': f'in-process {type(handle).__name__}'}
+        try:
+            stream = recorder = None
+            try:
+                handle.device_target(joint)
+            except NotImplementedError as exc:
+                add_note(results, f'no joint_command stream: {exc}')
+            else:
+                recorder = DeviceRecorder(handle, {
+                    'received': lambda: handle.device_target(joint)})
+                stream = StreamSpec(joint, settings.stream_base, float, settings.stream_tolerance,
+                                    move_targets=settings.move_targets,
+                                    node_name=spec.node_name)
+            base = {**handle.node_parameters(), 'command_timeout': 0.0,
+                    'presets_file': str(Path(workdir, 'presets.yaml'))}
+            results.update(node_figures(domain, spec.package,
+                                        {**base, 'publish_rate': settings.publish_rate},
+                                        stream, recorder, executable=spec.node_executable))
+            if settings.max_rate:
+                fast = node_figures(domain, spec.package,
+                                    {**base, 'publish_rate': settings.max_rate},
+                                    window_seconds=3.0, executable=spec.node_executable)
+                results['max_rate_test'] = {'publish_rate': settings.max_rate,
+                                            'joint_states_hz': fast['joint_states_hz']}
+        finally:
+            handle.stop()
+    check_targets(results)
+    return results

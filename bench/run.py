@@ -1,7 +1,11 @@
 """``make bench``: run every driver benchmark and print one JSON document.
 
-Each ``bench/bench_<name>.py`` has ``run(domain_id) -> dict``. The rclpy
-reference and the loopback round trip are measured first, in the same run.
+The drivers come from the driver registry (gimbal_driver_common.registry). A driver
+whose spec names a benchmark module (``bench.module``) runs ``bench/bench_<module>.py``'s
+``run(domain_id) -> dict`` (device-specific figures: codec rates, wire limits); any other
+runs the generic benchmark (``driver_bench.generic_run``) against its registered
+in-process simulator. The rclpy reference and the loopback round trip are measured
+first, in the same run.
 The JSON is also written to ``bench_output/bench.json``; ``--markdown`` prints
 the README table from it.
 """
@@ -20,20 +24,33 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
+from driver_bench import generic_run  # noqa: E402
 from harness import ROOT, git_revision, loopback_rtt_us, rclpy_reference  # noqa: E402
 
+from gimbal_driver_common.registry import DriverSpec, drivers  # noqa: E402
 from gimbal_driver_common.testing import DomainLease  # noqa: E402
 
 
-def benchmarks() -> list[str]:
-    return sorted(p.stem.removeprefix('bench_') for p in HERE.glob('bench_*.py'))
+def benchmarks() -> dict[str, DriverSpec]:
+    """Driver name -> spec, for every registered driver."""
+    return {spec.name: spec for spec in drivers()}
+
+
+def run_benchmark(spec: DriverSpec, domain: int) -> dict:
+    if spec.bench.module:
+        return importlib.import_module(f'bench_{spec.bench.module}').run(domain)
+    return generic_run(spec, domain)
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('names', nargs='*', help=f'subset of {benchmarks()}')
+    registered = benchmarks()
+    parser.add_argument('names', nargs='*', help=f'subset of {list(registered)}')
     parser.add_argument('--markdown', action='store_true', help='print the README table')
     args = parser.parse_args()
+    unknown = [name for name in args.names if name not in registered]
+    if unknown:
+        parser.error(f'unknown driver(s) {unknown}; choose from {list(registered)}')
     output = ROOT / 'bench_output' / 'bench.json'
     if args.markdown:
         print(markdown(json.loads(output.read_text())))
@@ -49,11 +66,10 @@ def main() -> int:
             'loopback_tcp_rtt_us': loopback_rtt_us(),
             'rclpy_joint_state_pubsub_100hz': rclpy_reference(domain),
         }
-        for name in args.names or benchmarks():
+        for name in args.names or list(registered):
             print(f'bench: {name} ...', file=sys.stderr, flush=True)
             try:
-                module = importlib.import_module(f'bench_{name}')
-                results[name] = module.run(domain)
+                results[name] = run_benchmark(registered[name], domain)
             except Exception as exc:  # noqa: BLE001 - one failing bench must not hide the others
                 traceback.print_exc()
                 results[name] = {'error': f'{type(exc).__name__}: {exc}'}

@@ -31,6 +31,7 @@ from rclpy.type_support import check_for_type_support
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from gimbal_driver_common.registry import DriverSpec, parameter_arguments
 from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import (
     DomainLease,
@@ -48,21 +49,9 @@ BAG_NAME = 'demo_bag'  # the rosbag2 bag directory in --output
 
 @dataclass
 class DemoTarget:
-    """One simulator + driver pair and the script that drives it."""
+    """One registered driver (simulator + node) and the script that drives it."""
 
-    title: str
-    package: str
-    node_executable: str
-    node_name: str
-    sim_executable: str
-    sim_args: Callable[[DemoTarget], list[str]]
-    node_params: Callable[[DemoTarget], list[str]]
-    ready_text: str = ''
-    ready: Callable[[DemoTarget], bool] | None = None
-    joints: tuple[str, ...] = ('pan', 'tilt')
-    move_goal: tuple[float, ...] = (0.4, 0.2)
-    jog_joint: str = 'pan'
-    jog_velocity: float = 0.2
+    spec: DriverSpec
     scan: StartScan.Request | None = None
     scan_seconds: float = 4.0
     extra_steps: list[tuple[str, Callable[[DemoTarget, RosTestClient], str]]] = field(
@@ -81,18 +70,24 @@ class DemoTarget:
     workdir: Path = Path()
     stop: threading.Event = field(default_factory=threading.Event)
 
+    @property
+    def node_name(self) -> str:
+        return self.spec.node_name
+
+    @property
+    def jog_joint(self) -> str:
+        return self.spec.demo.jog_joint or self.spec.joints[0]
+
     def is_ready(self) -> bool:
         """The simulator accepts connections (its own readiness signal)."""
-        if self.ready is not None:
-            return self.ready(self)
-        if self.ready_text:
-            return self.sim is not None and self.ready_text in self.sim.output()
-        return True
+        from demo_targets import simulator_ready
+
+        return simulator_ready(self)
 
     @property
     def namespace(self) -> str:
         """Each driver runs in its own namespace so joint_states do not mix."""
-        return '/' + self.node_name.removesuffix('_driver')
+        return self.spec.namespace
 
     def ns(self, name: str) -> str:
         """A private (``~/``) name of the node."""
@@ -137,30 +132,16 @@ class DemoRosClient(RosTestClient):
         return super().run_action(action_type, name, goal, timeout, cancel_after)
 
 
-def virtual_gimbal_target() -> DemoTarget:
-    return DemoTarget(
-        title='virtual gimbal (reference)',
-        package='gimbal_driver_common',
-        node_executable='virtual_gimbal_node',
-        node_name='virtual_gimbal',
-        sim_executable='virtual_gimbal_sim',
-        sim_args=lambda t: ['--port', str(t.port)],
-        node_params=lambda t: [f'port:={t.port}'],
-        ready_text='listening',
-        scan=StartScan.Request(pattern='sector', pan_min=-0.3, pan_max=0.3, speed=0.6),
-    )
-
-
 def available_targets() -> list[DemoTarget]:
-    """Every target whose executables are built (drivers land one by one)."""
+    """Every registered driver whose executables are installed."""
     from demo_targets import driver_targets
 
-    targets = [virtual_gimbal_target(), *driver_targets()]
+    targets = driver_targets()
     usable = []
     for target in targets:
         try:
-            find_executable(target.package, target.node_executable)
-            find_executable(target.package, target.sim_executable)
+            find_executable(target.spec.package, target.spec.node_executable)
+            find_executable(target.spec.package, target.spec.sim_executable)
         except FileNotFoundError:
             continue
         usable.append(target)
@@ -205,10 +186,10 @@ def settled(target: DemoTarget, joint: str, stop: threading.Event, timeout: floa
 def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None:
     """The per-driver script: move, jog, preset, scan, then the driver's extras. Each step
     checks its effect on joint_states, so OK in the summary means the device did it."""
-    goal_joints = list(target.joints[: len(target.move_goal)])
+    goal_joints = list(target.spec.joints[: len(target.spec.move_goal)])
 
     def move() -> str:
-        goal = MoveTo.Goal(joint_names=goal_joints, positions=list(target.move_goal))
+        goal = MoveTo.Goal(joint_names=goal_joints, positions=list(target.spec.move_goal))
         result, _, feedback = ros.run_action(MoveTo, target.ns('move_to'), goal, timeout=60)
         if not result.success:
             raise RuntimeError(result.message)
@@ -216,7 +197,7 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
         return f'reached [{ends}] rad with {len(feedback)} feedback messages'
 
     def jog() -> str:
-        joint, velocity, seconds = target.jog_joint, target.jog_velocity, 1.5
+        joint, velocity, seconds = target.jog_joint, target.spec.demo.jog_velocity, 1.5
         before = joint_position(target, joint)
         end = time.monotonic() + seconds
         while time.monotonic() < end and not stop.is_set():
@@ -239,13 +220,13 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
 
     def preset() -> str:
         stored = ros.call(SetPreset, target.ns('set_preset'), SetPreset.Request(
-            index=1, name='demo', joint_names=goal_joints, positions=list(target.move_goal)))
+            index=1, name='demo', joint_names=goal_joints, positions=list(target.spec.move_goal)))
         if not stored.success:
             raise RuntimeError(stored.message)
         went = ros.call(GotoPreset, target.ns('goto_preset'), GotoPreset.Request(index=1))
         if not went.success:
             raise RuntimeError(went.message)
-        wanted = dict(zip(goal_joints, target.move_goal, strict=True))
+        wanted = dict(zip(goal_joints, target.spec.move_goal, strict=True))
         wait_for(lambda: stop.is_set() or all(
             abs(joint_position(target, j) - p) < 0.02 for j, p in wanted.items()), 30,
             f'the joints to reach preset 1 {wanted}')
@@ -256,7 +237,7 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
     def scan() -> str:
         if target.scan is None:
             return 'no scan for this device'
-        joint = target.joints[0]
+        joint = target.spec.joints[0]
         started = ros.call(StartScan, target.ns('start_scan'), target.scan)
         if not started.success:
             raise RuntimeError(started.message)
@@ -341,17 +322,17 @@ def start_processes(targets: list[DemoTarget], domain: int, stop: threading.Even
     for target in targets:
         target.port = free_tcp_port()
         try:
-            target.sim = ManagedProcess.ros(target.package, target.sim_executable, domain,
-                                            target.sim_args(target))
+            target.sim = ManagedProcess.ros(target.spec.package, target.spec.sim_executable, domain,
+                                            target.spec.sim_argv(target.workdir, target.port))
         except OSError as exc:
-            target.failed.append(f'start: simulator {target.sim_executable}: {exc}')
+            target.failed.append(f'start: simulator {target.spec.sim_executable}: {exc}')
     for target in targets:
         if target.failed:
             continue
         target.step = 'sim'
         try:
             wait_for(lambda t=target: t.is_ready() or not t.sim.running or stop.is_set(), 30,
-                     f'{target.sim_executable} to be ready')
+                     f'{target.spec.sim_executable} to be ready')
         except TimeoutError as exc:
             target.failed.append(f'start: {exc}')
             continue
@@ -359,11 +340,14 @@ def start_processes(targets: list[DemoTarget], domain: int, stop: threading.Even
             return
         if not target.sim.running:
             tail = target.sim.output().strip().splitlines()[-3:]
-            target.failed.append(f'start: {target.sim_executable} exited: {" / ".join(tail)}')
+            target.failed.append(f'start: {target.spec.sim_executable} exited: {" / ".join(tail)}')
             continue
-        params = [x for p in target.node_params(target) for x in ('-p', p)]
+        from demo_targets import common_parameters
+
+        params = parameter_arguments({**common_parameters(target),
+                                      **target.spec.parameters(target.workdir, target.port)})
         target.node = ManagedProcess.ros(
-            target.package, target.node_executable, domain,
+            target.spec.package, target.spec.node_executable, domain,
             ['--ros-args', '-r', f'__ns:={target.namespace}', *params])
         target.step = 'connect'
 
@@ -386,7 +370,7 @@ def stop_processes(targets: list[DemoTarget], recorder: ManagedProcess | None,
     stop_all([t.sim for t in targets if t.sim is not None])
     for target in targets:
         for process, name in ((target.node, target.node_name),
-                              (target.sim, target.sim_executable)):
+                              (target.sim, target.spec.sim_executable)):
             if process is not None:
                 (output / f'{name}.log').write_text(process.output())
                 Path(process.log_path).unlink(missing_ok=True)
@@ -413,7 +397,7 @@ def main() -> int:
     # (demo.mcap: the single-file recording of earlier versions.)
     previous = {'demo.mcap', 'positions.png', 'demo_failures.log', 'record_bag.log',
                 *(f'{t.node_name}.log' for t in targets),
-                *(f'{t.sim_executable}.log' for t in targets)}
+                *(f'{t.spec.sim_executable}.log' for t in targets)}
     output.mkdir(parents=True, exist_ok=True)
     for name in previous:
         (output / name).unlink(missing_ok=True)
@@ -465,7 +449,7 @@ def main() -> int:
                     waiting.remove(target)
                     target.step = 'ready'
                 elif not target.node.running:
-                    target.failed.append(f'start: {target.node_executable} exited')
+                    target.failed.append(f'start: {target.spec.node_executable} exited')
                     waiting.remove(target)
                 elif time.monotonic() > deadline:
                     target.failed.append(f'start: no {target.topic("joint_states")} in 60 s')
@@ -551,7 +535,7 @@ def summary(
         verdict = 'OK' if not target.failed else 'FAILED'
         if not target.failed and target.step != 'done':
             verdict = f'INTERRUPTED during {target.step}'
-        lines.append(f'  {target.title} [{target.node_name}]: {verdict}')
+        lines.append(f'  {target.spec.title} [{target.node_name}]: {verdict}')
         lines += [f'    done   {d}' for d in target.done]
         lines += [f'    failed {f}' for f in target.failed]
     lines.append(f'  logs: {output}/<node>.log, <simulator>.log, record_bag.log')

@@ -46,10 +46,12 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.action import ActionClient
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from soak_targets import TARGETS, Fault, SimHandle, joint_range
+from soak_targets import make_handle, soak_targets
 from std_srvs.srv import Trigger
 
+from gimbal_driver_common.registry import DriverSpec, parameter_arguments
 from gimbal_driver_common.ros.testing import _TYPE_SUPPORT_LOCK, RosTestClient
+from gimbal_driver_common.sim_handle import Fault, SimHandle
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
@@ -124,7 +126,21 @@ class Soak:
     # ------------------------------------------------------------------ set-up
     @property
     def node_name(self) -> str:
-        return self.handle.node_name
+        return self.spec.node_name
+
+    @property
+    def spec(self) -> DriverSpec:
+        return self.handle.spec
+
+    @property
+    def final_goal(self) -> dict[str, float]:
+        """The spec's move goal: a reachable goal for the final move (rad/m, per joint)."""
+        return dict(zip(self.spec.joints, self.spec.move_goal, strict=False))
+
+    @property
+    def secrets(self) -> tuple[str, ...]:
+        """Text that must never appear in the node log (the device password)."""
+        return (self.spec.password,) if self.spec.password else ()
 
     def service(self, name: str) -> str:
         return f'/{self.node_name}/{name}'
@@ -134,10 +150,8 @@ class Soak:
                       'diagnostics_period': 0.5, 'command_timeout': 0.5,
                       'presets_file': str(self.handle.workdir / 'presets.yaml'),
                       **self.handle.node_parameters()}
-        args = ['--ros-args']
-        for key, value in parameters.items():
-            args += ['-p', f'{key}:={format_parameter(value)}']
-        self.node = ManagedProcess.ros(self.handle.package, self.handle.node_executable,
+        args = ['--ros-args', *parameter_arguments(parameters)]
+        self.node = ManagedProcess.ros(self.spec.package, self.spec.node_executable,
                                        self.domain, args)
 
     def on_joint_state(self, msg: JointState) -> None:
@@ -257,11 +271,11 @@ class Soak:
         self.traffic_idle.set()
 
     def valid_position(self, rng: random.Random, joint: str) -> float:
-        low, high = joint_range(self.handle, joint)
+        low, high = self.handle.joint_range(joint)
         return rng.uniform(low, high)
 
     def random_joint_command(self, rng: random.Random) -> None:
-        joints = list(self.handle.joints)
+        joints = list(self.spec.joints)
         kind = rng.choice(('move', 'jog', 'nan', 'inf', 'unknown', 'mismatch', 'empty'))
         msg = JointState()
         if kind == 'move':
@@ -286,7 +300,7 @@ class Soak:
         self.counters.add('joint_commands')
 
     def random_common_service(self, rng: random.Random) -> None:
-        joints = list(self.handle.joints)
+        joints = list(self.spec.joints)
         choice = rng.randrange(8)
         if choice == 0:
             self.call(Trigger, self.service(rng.choice(('stop', 'stop_scan', 'reset_faults'))),
@@ -324,17 +338,17 @@ class Soak:
             self.call(Trigger, self.service('stop_scan'), Trigger.Request())
 
     def random_extra_service(self, rng: random.Random) -> None:
-        if not self.handle.extra_services:
+        if not self.spec.soak.extra_services:
             self.random_common_service(rng)
             return
-        name, type_name = rng.choice(sorted(self.handle.extra_services.items()))
+        name, type_name = rng.choice(sorted(self.spec.soak.extra_services.items()))
         srv_type = service_type(type_name)
         request = srv_type.Request()
         fill_randomly(request, rng)
         self.call(srv_type, self.service(name), request)
 
     def random_goal(self, rng: random.Random) -> None:
-        joints = list(self.handle.joints)
+        joints = list(self.spec.joints)
         if rng.random() < 0.25:
             self.action(Home, self.service('home'),
                         Home.Goal(joint_names=rng.choice(([], joints[:1], ['bogus']))),
@@ -361,7 +375,7 @@ class Soak:
         self.action(MoveTo, self.service('move_to'), goal, cancel_after=rng.uniform(0.0, 1.5))
 
     def random_parameter(self, rng: random.Random) -> None:
-        joints = len(self.handle.joints)
+        joints = len(self.spec.joints)
         name, value = rng.choice((
             ('publish_rate', ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
                                             double_value=rng.choice((-5.0, 0.0, 1e9, math.nan)))),
@@ -423,7 +437,7 @@ class Soak:
                 **outcome}
 
     def random_goal_positions(self) -> dict[str, float]:
-        return {j: round(self.valid_position(self.rng, j), 3) for j in self.handle.final_goal}
+        return {j: round(self.valid_position(self.rng, j), 3) for j in self.final_goal}
 
     def quiet_traffic(self) -> None:
         """Pause the random traffic and wait until its current request is done."""
@@ -516,10 +530,10 @@ class Soak:
     # ------------------------------------------------------------------ run
     def run(self) -> dict[str, object]:
         handle = self.handle
-        report: dict[str, object] = {'driver': handle.node_name, 'seconds': self.seconds}
+        report: dict[str, object] = {'driver': handle.spec.node_name, 'seconds': self.seconds}
         handle.start()
         self.start_node()
-        self.ros = RosTestClient(self.domain, f'soak_{handle.node_name}')
+        self.ros = RosTestClient(self.domain, f'soak_{handle.spec.node_name}')
         qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         with _TYPE_SUPPORT_LOCK:
             self.ros.node.create_subscription(JointState, '/joint_states', self.on_joint_state,
@@ -527,7 +541,7 @@ class Soak:
         started = time.monotonic()
         try:
             if self.joint_states_after(0.0, STARTUP_TIMEOUT_S) is None:
-                raise RuntimeError(f'no joint_states from {handle.node_executable} within '
+                raise RuntimeError(f'no joint_states from {handle.spec.node_executable} within '
                                    f'{STARTUP_TIMEOUT_S:g} s:\n{self.node.output()[-3000:]}')
             self.ros.subscribe('/diagnostics', DiagnosticArray)
             start_figures = proc_figures(self.node.process.pid)
@@ -542,7 +556,7 @@ class Soak:
             self.call(Trigger, self.service('reset_faults'), Trigger.Request())
             self.call(Trigger, self.service('stop'), Trigger.Request())
             diagnostics = self.diagnostics_healthy(30.0)
-            final = self.final_move(self.handle.final_goal)
+            final = self.final_move(self.final_goal)
             end_figures = proc_figures(self.node.process.pid)
             alive = self.node.running
         finally:
@@ -575,8 +589,8 @@ class Soak:
             'node_crashes': {'value': 0 if alive else 1, 'exit_code': exit_code,
                              'pass': alive and exit_code == 0},
             'tracebacks_in_log': {'value': tracebacks, 'pass': tracebacks == 0},
-            'secrets_in_log': {'value': sum(log.count(s) for s in self.handle.secrets),
-                               'pass': not any(s in log for s in self.handle.secrets)},
+            'secrets_in_log': {'value': sum(log.count(s) for s in self.secrets),
+                               'pass': not any(s in log for s in self.secrets)},
             'joint_states_resume_s': {'value': self.resume_times,
                                       'bound_s': bound, 'worst_s': worst,
                                       'pass': worst <= bound},
@@ -626,17 +640,6 @@ def service_type(name: str) -> type:
     return getattr(importlib.import_module(f'{package}.{kind}'), type_name)
 
 
-def format_parameter(value: object) -> str:
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, (list, tuple)):
-        return '[' + ', '.join(repr(v) if isinstance(v, (float, str)) else str(v)
-                               for v in value) + ']'
-    return str(value)
-
-
 INT_RANGES = {'uint8': (0, 255), 'uint16': (0, 65535), 'uint32': (0, 2**32 - 1),
               'int8': (-128, 127), 'int16': (-32768, 32767), 'int32': (-2**31, 2**31 - 1),
               'octet': (0, 255), 'byte': (0, 255)}
@@ -679,6 +682,7 @@ def log_simulator_to(path: Path) -> logging.Handler:
 
 
 def run_soak(drivers: list[str], seconds: float, seed: int) -> list[dict[str, object]]:
+    targets = soak_targets()
     reports = []
     for name in drivers:
         workdir = Path(tempfile.mkdtemp(prefix=f'gimbal-soak-{name}-'))
@@ -686,11 +690,11 @@ def run_soak(drivers: list[str], seconds: float, seed: int) -> list[dict[str, ob
         log_simulator_to(sim_log)
         try:
             with DomainLease() as domain:
-                handle = TARGETS[name](workdir)
+                handle = make_handle(targets[name], workdir)
                 try:
                     report = Soak(handle, domain, seconds, seed).run()
                 except Exception as exc:  # noqa: BLE001 - report the failure, soak the others
-                    report = {'driver': handle.node_name, 'pass': False,
+                    report = {'driver': handle.spec.node_name, 'pass': False,
                               'error': f'{type(exc).__name__}: {exc}',
                               'traceback': traceback.format_exc().splitlines()[-8:]}
                 report = {'target': name, 'seed': seed, **report, 'sim_log': str(sim_log)}
@@ -703,8 +707,9 @@ def run_soak(drivers: list[str], seconds: float, seed: int) -> list[dict[str, ob
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('drivers', nargs='*', default=list(TARGETS),
-                        help=f'drivers to soak (default all: {", ".join(TARGETS)})')
+    targets = soak_targets()
+    parser.add_argument('drivers', nargs='*', default=list(targets),
+                        help=f'drivers to soak (default all: {", ".join(targets)})')
     parser.add_argument('--seconds', type=float, default=float(os.environ.get('SOAK_S', 40)),
                         help='soak time per driver (env SOAK_S, default 40)')
     parser.add_argument('--seed', type=int, default=int(os.environ.get('SOAK_SEED', 14)),
@@ -712,9 +717,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--report', type=Path, default=None,
                         help='also write the reports (a JSON list) to this file')
     args = parser.parse_args(argv)
-    unknown = [d for d in args.drivers if d not in TARGETS]
+    unknown = [d for d in args.drivers if d not in targets]
     if unknown:
-        parser.error(f'unknown driver(s) {unknown}; choose from {list(TARGETS)}')
+        parser.error(f'unknown driver(s) {unknown}; choose from {list(targets)}')
     print(f'soak: seed {args.seed}, {args.seconds:g} s per driver: {", ".join(args.drivers)}',
           file=sys.stderr, flush=True)
     reports = run_soak(args.drivers, args.seconds, args.seed)

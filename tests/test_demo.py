@@ -23,14 +23,8 @@ import pytest
 pytestmark = pytest.mark.ros
 
 ROOT = Path(__file__).resolve().parent.parent
-# namespace -> (node name, joint names) of every driver the demo must run.
-DRIVERS = {
-    '/virtual_gimbal': ('virtual_gimbal', {'pan', 'tilt'}),
-    '/capture': ('capture_driver', {'pan', 'tilt'}),
-    '/canaero_turret': ('canaero_turret_driver', {'yaw', 'pitch'}),
-    '/kessler_kos': ('kessler_kos_driver', {'pan', 'tilt', 'slider'}),
-    '/ucamera': ('ucamera_driver', {'pan', 'tilt'}),
-}
+
+
 EXECUTABLES = ('_sim', '_node', 'record_bag.py')
 
 
@@ -55,6 +49,12 @@ def processes_in_domain(domain: str) -> list[str]:
 def test_demo_drives_every_driver_and_records_a_bag(tmp_path, check_rosbag2):
     if not (ROOT / 'install' / 'setup.bash').exists():
         pytest.skip('the workspace is not built (make build)')
+    from gimbal_driver_common.registry import drivers
+
+    specs = drivers()
+    # namespace -> (node name, joint names): the demo runs every registered driver
+    expected = {spec.namespace: (spec.node_name, set(spec.joints)) for spec in specs}
+    assert len(expected) >= 5, f'fewer drivers registered than the suite has: {expected}'
     output = tmp_path / 'demo'
     command = f'source scripts/ros_env.sh && exec python scripts/demo.py --output {output}'
     env = {k: v for k, v in os.environ.items() if k != 'ROS_DOMAIN_ID'}
@@ -69,7 +69,7 @@ def test_demo_drives_every_driver_and_records_a_bag(tmp_path, check_rosbag2):
         pytest.fail(f'the demo did not finish within 150 s:\n{out[-6000:]}')
     ended = time.time_ns()
     assert demo.returncode == 0, out[-6000:]
-    for node, _ in DRIVERS.values():
+    for node, _ in expected.values():
         assert re.search(rf'\[{node}\]: OK$', out, re.MULTILINE), f'{node} not OK:\n{out}'
     assert 'failed' not in out.split('demo summary', 1)[1]
 
@@ -86,18 +86,19 @@ def test_demo_drives_every_driver_and_records_a_bag(tmp_path, check_rosbag2):
             namespace = topic.rsplit('/', 1)[0]
             joints[namespace].update(msg.name)
             counts[namespace] += 1
-    for namespace, (node, names) in DRIVERS.items():
+    for namespace, (node, names) in expected.items():
         assert types[f'{namespace}/joint_states'] == 'sensor_msgs/msg/JointState'
         assert types[f'{namespace}/{node}/status'] == 'gimbal_msgs/msg/GimbalStatus'
         assert counts[namespace] > 20, f'{namespace}/joint_states: {counts[namespace]} messages'
         assert joints[namespace] == names, namespace
     assert types['/diagnostics'] == 'diagnostic_msgs/msg/DiagnosticArray'
-    password = re.search(r"KESSLER_PASSWORD = '([^']+)'",
-                         (ROOT / 'scripts' / 'demo_targets.py').read_text()).group(1)
+    passwords = [spec.password for spec in specs if spec.password]
+    assert passwords, 'no registered driver has a device password (Kessler has)'
     for path in bag.iterdir():
-        assert password.encode() not in path.read_bytes(), f'the Kessler password is in {path}'
+        for password in passwords:
+            assert password.encode() not in path.read_bytes(), f'a device password is in {path}'
 
     plot = output / 'positions.png'
     assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
-    for node, _ in DRIVERS.values():
+    for node, _ in expected.values():
         assert (output / f'{node}.log').is_file()

@@ -5,7 +5,6 @@ positive tilt raises it."""
 
 from __future__ import annotations
 
-import importlib
 import math
 from pathlib import Path
 
@@ -18,23 +17,11 @@ pytest.importorskip('gimbal_msgs', reason='the node classes need the built works
 from urdf_parser_py.urdf import URDF
 
 from gimbal_driver_common.kinematics import AimingChain
+from gimbal_driver_common.registry import drivers, resolve
 
 SRC = Path(__file__).resolve().parent.parent / 'src'
-#: package -> (description file, node class)
-DESCRIPTIONS = {
-    'gimbal_driver_common': (
-        'virtual_gimbal.urdf', 'gimbal_driver_common.virtual_gimbal_node.VirtualGimbalNode'),
-    'capture_driver': ('capture_driver.urdf', 'capture_driver.node.CaptureDriverNode'),
-    'canaero_turret_driver': (
-        'canaero_turret_driver.urdf', 'canaero_turret_driver.node.CanaeroTurretNode'),
-    'kessler_kos_driver': ('kessler_kos_driver.urdf', 'kessler_kos_driver.node.KosDriverNode'),
-    'ucamera_driver': ('ucamera_driver.urdf', 'ucamera_driver.node.UCameraDriverNode'),
-}
-
-
-def node_class(dotted: str) -> type:
-    module, name = dotted.rsplit('.', 1)
-    return getattr(importlib.import_module(module), name)
+#: package -> (description file, node class) of every registered driver
+DESCRIPTIONS = {spec.package: (spec.description, spec.node_class) for spec in drivers()}
 
 
 def per_joint(values, count: int) -> list[float]:
@@ -55,7 +42,7 @@ def test_every_package_ships_a_description() -> None:
 @pytest.mark.parametrize('pkg', list(DESCRIPTIONS))
 def test_joints_equal_the_node_defaults(pkg: str) -> None:
     robot = URDF.from_xml_file(str(description(pkg)))
-    node = node_class(DESCRIPTIONS[pkg][1])
+    node = resolve(DESCRIPTIONS[pkg][1])
     names = list(node.DEFAULT_JOINT_NAMES)
     assert robot.get_root() == 'base_link'
     chain = robot.get_chain('base_link', 'camera_link', joints=True, links=False)

@@ -20,18 +20,16 @@ import pytest
 import yaml
 from rcl_interfaces.srv import ListParameters
 
+from gimbal_driver_common.registry import drivers
 from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, find_executable
 
 pytestmark = pytest.mark.ros
 
 SRC = Path(__file__).resolve().parent.parent / 'src'
-DRIVERS = {
-    'capture_driver': 'capture_driver_node',
-    'canaero_turret_driver': 'canaero_turret_driver_node',
-    'kessler_kos_driver': 'kessler_kos_driver_node',
-    'ucamera_driver': 'ucamera_driver_node',
-}
+#: package -> node executable of every registered device driver (the reference virtual
+#: gimbal ships no launch files)
+DRIVERS = {spec.package: spec.node_executable for spec in drivers() if not spec.is_reference}
 
 
 class Recorded:

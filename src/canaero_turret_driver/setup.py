@@ -29,5 +29,9 @@ setup(
             f"canaero_turret_driver_node = {PACKAGE}.node:main",
             f"canaero_turret_sim = {PACKAGE}.sim:main",
         ],
+        # the driver registry (gimbal_driver_common.registry): demo, soak, bench and tests
+        "gimbal_driver_common.drivers": [
+            f"canaero_turret = {PACKAGE}.registration:SPEC",
+        ],
     },
 )

@@ -27,5 +27,9 @@ setup(
             'capture_driver_node = capture_driver.node:main',
             'capture_sim = capture_driver.sim:main',
         ],
+        # the driver registry (gimbal_driver_common.registry): demo, soak, bench and tests
+        'gimbal_driver_common.drivers': [
+            'capture = capture_driver.registration:SPEC',
+        ],
     },
 )

@@ -25,5 +25,9 @@ setup(
             'virtual_gimbal_sim = gimbal_driver_common.virtual_gimbal:sim_main',
             'virtual_gimbal_node = gimbal_driver_common.virtual_gimbal:node_main',
         ],
+        # the driver registry (gimbal_driver_common.registry): demo, soak, bench and tests
+        'gimbal_driver_common.drivers': [
+            'virtual_gimbal = gimbal_driver_common.registration:SPEC',
+        ],
     },
 )

@@ -27,5 +27,9 @@ setup(
             'kessler_kos_driver_node = kessler_kos_driver.node:main',
             'kessler_kos_sim = kessler_kos_driver.sim:main',
         ],
+        # the driver registry (gimbal_driver_common.registry): demo, soak, bench and tests
+        'gimbal_driver_common.drivers': [
+            'kessler_kos = kessler_kos_driver.registration:SPEC',
+        ],
     },
 )

@@ -27,5 +27,9 @@ setup(
             f"ucamera_driver_node = {PACKAGE}.node:main",
             f"ucamera_sim = {PACKAGE}.sim:main",
         ],
+        # the driver registry (gimbal_driver_common.registry): demo, soak, bench and tests
+        'gimbal_driver_common.drivers': [
+            'ucamera = ucamera_driver.registration:SPEC',
+        ],
     },
 )

@@ -1,0 +1,33 @@
+"""capture_driver in the driver registry (see :mod:`gimbal_driver_common.registry`).
+
+Demo and soak values: move pan 0.4, tilt -0.2 rad (limits ±π, ±π/2); jog pan 0.3 rad/s
+(max 1.5); the device's own SCN snake scan over pan ±0.2, tilt 0..0.2.
+"""
+
+from gimbal_driver_common.registry import BenchSettings, DemoSettings, DriverSpec, SoakSettings
+
+SPEC = DriverSpec(
+    name='capture',
+    title='Capture Systems pan-tilt pedestal (TCP)',
+    package='capture_driver',
+    node_executable='capture_driver_node',
+    node_name='capture_driver',
+    sim_executable='capture_sim',
+    node_class='capture_driver.node:CaptureDriverNode',
+    description='capture_driver.urdf',
+    joints=('pan', 'tilt'),
+    move_goal=(0.4, -0.2),
+    sim_arguments=('--port', '{port}'),
+    node_parameters={'transport': 'tcp', 'host': '127.0.0.1', 'port': '{port}',
+                     'status_period': 0.2, 'default_speed': 1.0, 'acceleration': 6.0},
+    ready_text='capture_sim ready',
+    sim_handle='capture_driver.sim_handle:CaptureSimHandle',
+    demo=DemoSettings(
+        jog_velocity=0.3,
+        scan={'pattern': 'snake', 'pan_min': -0.2, 'pan_max': 0.2, 'tilt_min': 0.0,
+              'tilt_max': 0.2, 'speed': 0.5, 'tilt_step': 0.1},
+        extra_steps=(('home', ''),)),
+    soak=SoakSettings(extra_services={'set_stabilization': 'std_srvs/srv/SetBool',
+                                      'command': 'gimbal_msgs/srv/DeviceCommand'}),
+    bench=BenchSettings(module='capture'),
+)

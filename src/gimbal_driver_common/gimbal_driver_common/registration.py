@@ -1,0 +1,23 @@
+"""The reference virtual gimbal in the driver registry (gimbal_driver_common.registry)."""
+
+from gimbal_driver_common.registry import BenchSettings, DemoSettings, DriverSpec
+
+SPEC = DriverSpec(
+    name='virtual_gimbal',
+    title='virtual gimbal (reference)',
+    package='gimbal_driver_common',
+    node_executable='virtual_gimbal_node',
+    node_name='virtual_gimbal',
+    sim_executable='virtual_gimbal_sim',
+    node_class='gimbal_driver_common.virtual_gimbal_node:VirtualGimbalNode',
+    description='virtual_gimbal.urdf',
+    joints=('pan', 'tilt'),
+    move_goal=(0.4, -0.2),
+    sim_arguments=('--port', '{port}'),
+    node_parameters={'host': '127.0.0.1', 'port': '{port}'},
+    ready_text='listening',
+    sim_handle='gimbal_driver_common.sim_handle:VirtualGimbalSim',
+    demo=DemoSettings(scan={'pattern': 'sector', 'pan_min': -0.3, 'pan_max': 0.3,
+                            'speed': 0.6}),
+    bench=BenchSettings(stream_joint='pan', max_rate=200.0),
+)
