@@ -115,8 +115,10 @@ def test_rep103_conversion_both_ways(rig: Rig) -> None:
     angles, _, mode = rig.device_commanded()
     assert mode == GimbalMode.ANGLES
     assert angles == pytest.approx((-0.5, 0.3), abs=1e-3)  # device pan is positive right
-    assert rig.device_angles() == pytest.approx((-0.5, 0.3), abs=2e-3)
-    assert rig.controller.positions()["pan"] == pytest.approx(0.5, abs=0.01)
+    assert rig.controller.positions()["pan"] == pytest.approx(0.5, abs=0.01)  # tolerance
+    wait_for(lambda: rig.device_angles() == pytest.approx((-0.5, 0.3), abs=2e-3),
+             what="the gimbal settled at device pan -0.5")
+    wait_for(lambda: rig.at(0.5, 0.3, tol=2e-3), what="joint pan +0.5 reported")
     # rates: a positive (REP-103, left) pan jog is a negative device rate, and back
     rig.controller.command(["pan"], [], [0.3])
     wait_for(lambda: rig.device_commanded()[1] == pytest.approx((-0.3, 0.0), abs=1e-3),
