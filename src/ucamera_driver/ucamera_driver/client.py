@@ -120,9 +120,8 @@ class ClientStats:
     discarded_bytes: int = 0
     unknown_packets: int = 0
     bad_payloads: int = 0
-    reconnects: int = 0
+    reconnects: int = 0  # start() after an earlier session (the supervisor reopening)
     silences: int = 0
-    link_errors: int = 0
     commands_sent: int = 0
 
 
@@ -248,7 +247,7 @@ class UCameraClient:
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=2.0)
         self._thread = None
-        self._close("client stopped")
+        self._close()
 
     @property
     def running(self) -> bool:
@@ -463,7 +462,7 @@ class UCameraClient:
                 self._next_refresh = now + self.refresh_period
                 self._refresh(now)
 
-    def _close(self, reason: str) -> None:
+    def _close(self) -> None:
         with self._write_lock:
             stream, self._stream = self._stream, None
         if stream is not None:
@@ -475,7 +474,7 @@ class UCameraClient:
             return  # stop() is closing the port: not a link loss
         self.last_error = reason
         LOG.warning("U-Camera %s: %s", self.description, reason)
-        self._close(reason)
+        self._close()
 
     def _receive(self, data: bytes) -> None:
         frames = self._parser.feed(data)

@@ -349,14 +349,7 @@ class UCameraDevice(Device):
         client = self.client
         if mode == GimbalMode.FFC_CALIBRATION and client.state().gimbal_type == GimbalType.DAYLIGHT:
             raise DeviceRefused("ffc_calibration needs an IR gimbal; this one is daylight")
-        with self._lock:
-            self._forget_motion()
-            if mode == GimbalMode.ANGLES:
-                client.hold_angles()  # angles mode holding the current position
-            elif mode == GimbalMode.RATES:
-                client.set_rates(0.0, 0.0)
-            else:
-                client.set_mode(mode)
+        self.command_mode(mode)
         deadline = time.monotonic() + self.settings.mode_timeout
         while time.monotonic() < deadline:
             if client.state().mode == mode:
@@ -368,6 +361,20 @@ class UCameraDevice(Device):
         raise DeviceTimeout(
             f"device did not report mode {key} within {self.settings.mode_timeout:g} s "
             f"(reports {mode_name(reported) if reported is not None else 'nothing'})")
+
+    def command_mode(self, mode: GimbalMode) -> None:
+        """Hand the axes to a device mode: the driver's set-point, ramp and jog end here.
+
+        ``angles`` holds the current position and ``rates`` starts with zero rates.
+        """
+        with self._lock:
+            self._forget_motion()
+            if mode == GimbalMode.ANGLES:
+                self.client.hold_angles()
+            elif mode == GimbalMode.RATES:
+                self.client.set_rates(0.0, 0.0)
+            else:
+                self.client.set_mode(mode)
 
     def set_telemetry_rate(self, rate: int) -> None:
         """Send a new report rate now (volatile); refused when the gimbal reports another."""
@@ -437,9 +444,7 @@ class PilotHoming(Homing):
     def home(self, joints: Sequence[str], report: Callable[[str], None],
              cancelled: threading.Event) -> str:
         device, client = self.device, self.device.client
-        with device._lock:
-            device._forget_motion()
-            client.set_mode(GimbalMode.PILOT)
+        device.command_mode(GimbalMode.PILOT)
         report("pilot mode requested")
         timeout = device.settings.home_timeout
         deadline = time.monotonic() + timeout
