@@ -158,7 +158,8 @@ def test_move_with_speed_ramps_the_setpoint_and_converges(rig: Rig) -> None:
     assert not is_moving(rig.controller.latest, "pan")
     # the device was told intermediate set-points (device pan = +0.6 at the end)
     assert any(0.1 < angle < 0.5 for angle in seen), seen
-    assert rig.device_commanded()[0][0] == pytest.approx(0.6, abs=1e-3)
+    wait_for(lambda: rig.device_commanded()[0][0] == pytest.approx(0.6, abs=1e-3),
+             what="the last set-point is the target")
 
 
 def test_moving_bit_follows_the_command_not_the_rates(rig: Rig) -> None:
@@ -192,9 +193,16 @@ def test_stop_holds_the_reported_angles(rig: Rig) -> None:
     assert "stopped" in rig.controller.stop()
     waiter.join()
     assert outcomes[0].state == "stopped"
-    held = rig.device_commanded()[0]
-    wait_for(lambda: rig.device_angles() == pytest.approx(held, abs=2e-3), what="holding")
-    assert abs(held[0]) < 1.5  # stopped short of the target (device pan +2.0)
+
+    def holding() -> bool:  # the hold packet reaches the gimbal a moment after stop()
+        model = rig.sim.model
+        with model.lock:
+            held = model.commanded_angles
+            return (model.pan.velocity == 0.0 and model.tilt.velocity == 0.0
+                    and (model.pan.position, model.tilt.position) == pytest.approx(held, abs=2e-3))
+
+    wait_for(holding, what="holding the reported angles")
+    assert abs(rig.device_commanded()[0][0]) < 1.5  # stopped short of the target (+2.0)
 
 
 def test_refusals_send_nothing(rig: Rig) -> None:
