@@ -7,16 +7,22 @@ from collections.abc import Iterator
 
 import pytest
 
+from gimbal_driver_common.errors import DeviceTimeout, LinkError
 from gimbal_driver_common.testing import wait_for
 from ucamera_driver.client import UCameraClient, UCameraError
-from ucamera_driver.protocol import GimbalMode, GimbalType, GpsFeed, RangeError
+from ucamera_driver.protocol import (
+    AntennaPositionReport,
+    GimbalMode,
+    GimbalType,
+    GpsFeed,
+    RangeError,
+    VersionRequest,
+)
 from ucamera_driver.sim import UCameraSim
 
 
 def make_client(sim: UCameraSim, **kwargs) -> UCameraClient:
     kwargs.setdefault("silence_timeout", 0.4)
-    kwargs.setdefault("reconnect_initial", 0.05)
-    kwargs.setdefault("reconnect_max", 0.2)
     return UCameraClient(sim.port_name, **kwargs)
 
 
@@ -157,26 +163,54 @@ def test_noise_and_corruption_are_survived(sim: UCameraSim, client: UCameraClien
     assert client.connected
 
 
+def restart(client: UCameraClient) -> None:
+    """What the controller's supervisor does after a link loss: close, then open again."""
+    client.stop()
+
+    def started() -> bool:
+        try:
+            client.start(timeout=0.5)
+        except UCameraError:
+            return False
+        return True
+
+    wait_for(started, what="the link to open again")
+
+
 def test_silence_then_recovery(sim: UCameraSim, client: UCameraClient) -> None:
     sim.set_silent(True)
     wait_for(lambda: not client.connected, what="silence detected")
+    wait_for(lambda: client.link_down, what="the link given up")
     assert client.stats.silences >= 1
     assert "no telemetry" in client.last_error
-    with pytest.raises(UCameraError):  # times out, or the port is being reopened
+    with pytest.raises(UCameraError):  # the link is down: no reopening by the client
         client.request_telemetry_rate(timeout=0.1)
     sim.set_silent(False)
-    wait_for(lambda: client.connected, what="telemetry back")
+    restart(client)
+    assert client.connected
     assert client.request_telemetry_rate() == 50
+    assert client.stats.reconnects == 1
 
 
-def test_link_drop_reconnects(sim: UCameraSim, client: UCameraClient) -> None:
+def test_link_drop_is_reported_and_start_reopens(sim: UCameraSim, client: UCameraClient) -> None:
     client.set_angles(0.2, 0.0)
     sim.drop_link(offline_for=0.3)
     wait_for(lambda: not client.connected, what="link loss noticed")
-    wait_for(lambda: client.connected, what="reconnected")
+    wait_for(lambda: client.link_down, what="the link given up")
+    with pytest.raises(LinkError):
+        client.set_angles(-0.2, 0.1)
+    restart(client)
     assert client.stats.reconnects >= 1
     client.set_angles(-0.2, 0.1)
     wait_for(lambda: close(client.state().pan, -0.2), what="commands after reconnect")
+
+
+def test_errors_are_the_core_hierarchy(sim: UCameraSim, client: UCameraClient) -> None:
+    with pytest.raises(DeviceTimeout):
+        client.request(VersionRequest(), AntennaPositionReport, timeout=0.05, attempts=1)
+    client.stop()
+    with pytest.raises(LinkError, match=r"link .* is down"):
+        client.set_zoom(0.5)
 
 
 def test_save_configuration_pause_is_not_silence(sim: UCameraSim, client: UCameraClient) -> None:
@@ -191,8 +225,8 @@ def test_save_configuration_pause_is_not_silence(sim: UCameraSim, client: UCamer
 
 
 def test_start_fails_clearly_without_device(tmp_path) -> None:
-    missing = UCameraClient(str(tmp_path / "no-such-tty"), reconnect_initial=0.05)
-    with pytest.raises(UCameraError, match=r"did not answer.*no-such-tty"):
+    missing = UCameraClient(str(tmp_path / "no-such-tty"))
+    with pytest.raises(LinkError, match=r"did not answer.*no-such-tty"):
         missing.start(timeout=0.5)
     assert not missing.running
 
@@ -202,3 +236,4 @@ def test_start_fails_on_silent_device(sim: UCameraSim) -> None:
     client = make_client(sim)
     with pytest.raises(UCameraError, match="did not answer"):
         client.start(timeout=0.6)
+    assert not client.running

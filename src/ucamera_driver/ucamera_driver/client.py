@@ -1,10 +1,14 @@
 """U-Camera device session over a serial port (no ROS).
 
-One I/O thread owns the link: it opens the port (with back-off), parses the
-telemetry stream (resynchronising after noise), answers request waiters,
-re-sends the current mode and angles/rates command at ``refresh_rate`` (the
-manual recommends at least 10 Hz, 5.1), and reopens the port when it
-disappears or when the telemetry stops for ``silence_timeout`` seconds.
+:meth:`UCameraClient.start` opens the port and starts one I/O thread that
+parses the telemetry stream (resynchronising after noise), answers request
+waiters and re-sends the current mode and angles/rates command at
+``refresh_rate`` (the manual recommends at least 10 Hz, 5.1). When the port
+fails or the telemetry stops for ``silence_timeout`` seconds the thread closes
+the port and ends with the reason in :attr:`UCameraClient.last_error`; the
+client never reopens it by itself: the controller's connection supervisor
+(``gimbal_driver_common.controller``) calls :meth:`stop` and :meth:`start`
+again. Errors are the core hierarchy (``gimbal_driver_common.errors``).
 
 Values are SI in the *device* frame (radians, rad/s, metres); sign
 conventions for ROS are applied by the node.
@@ -24,7 +28,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
-from gimbal_driver_common.transport import Backoff, ByteStream, SerialStream, TransportError
+from gimbal_driver_common.errors import DeviceTimeout, GimbalError, LinkError
+from gimbal_driver_common.transport import ByteStream, SerialStream, TransportError
 
 from .protocol import (
     AnglesReport,
@@ -74,15 +79,15 @@ ONE_SHOT_MODES = frozenset({GimbalMode.INIT, GimbalMode.GYRO_AUTOALIGN,
                             GimbalMode.FULL_AUTOALIGN, GimbalMode.FFC_CALIBRATION})
 
 
-class UCameraError(Exception):
+class UCameraError(GimbalError):
     """Base class of client errors; the message says what to check."""
 
 
-class NotConnectedError(UCameraError):
-    """The serial link is down (or the port is being reopened)."""
+class NotConnectedError(UCameraError, LinkError):
+    """The serial link is down (the supervisor reopens it)."""
 
 
-class RequestTimeoutError(UCameraError):
+class RequestTimeoutError(UCameraError, DeviceTimeout):
     """The gimbal did not answer a request."""
 
 
@@ -115,9 +120,8 @@ class ClientStats:
     discarded_bytes: int = 0
     unknown_packets: int = 0
     bad_payloads: int = 0
-    reconnects: int = 0
+    reconnects: int = 0  # start() after an earlier session (the supervisor reopening)
     silences: int = 0
-    link_errors: int = 0
     commands_sent: int = 0
 
 
@@ -141,10 +145,7 @@ class UCameraClient:
         request_timeout: float = 0.5,
         save_pause_grace: float = 3.0,
         one_shot_timeout: float = 2.0,
-        reconnect_initial: float = 0.2,
-        reconnect_max: float = 2.0,
         on_report: Callable[[Packet, float], None] | None = None,
-        on_link_change: Callable[[bool, str], None] | None = None,
     ) -> None:
         if stream_factory is None:
             if not port:
@@ -160,9 +161,7 @@ class UCameraClient:
         self.request_timeout = request_timeout
         self.save_pause_grace = save_pause_grace
         self.one_shot_timeout = one_shot_timeout
-        self._backoff = Backoff(reconnect_initial, reconnect_max)
         self._on_report = on_report
-        self._on_link_change = on_link_change
 
         self._lock = threading.RLock()
         self._write_lock = threading.Lock()
@@ -184,38 +183,60 @@ class UCameraClient:
 
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._sessions = 0
         self._link_broken = False
         self._last_rx = 0.0
         self._quiet_until = 0.0
         self._alive = False
         self._next_refresh = 0.0
-        self._reopen_at = 0.0
 
     # --- lifecycle -------------------------------------------------------
     def start(self, timeout: float = 3.0) -> VersionReport:
         """Open the port, start the I/O thread and read the device identity.
 
-        Raises UCameraError (and leaves nothing running) when the gimbal does not
-        answer within ``timeout``.
+        Raises :class:`NotConnectedError` when the port does not open or the link dies
+        meanwhile, :class:`RequestTimeoutError` when the gimbal does not answer within
+        ``timeout``; nothing is left running then. Callable again after :meth:`stop`.
         """
         if self._thread is not None:
             raise UCameraError("client already started")
+        stream = self._stream_factory()
+        try:
+            stream.open()
+        except TransportError as exc:
+            self.last_error = str(exc)
+            raise self._no_answer(NotConnectedError, timeout, str(exc)) from exc
+        if self._sessions:
+            self.stats.reconnects += 1
+        self._sessions += 1
+        with self._write_lock:
+            self._stream, self._link_broken = stream, False
+        self._parser.reset()
+        self._last_rx = time.monotonic()
+        self._next_refresh = 0.0
+        self.last_error = ""
+        LOG.info("opened %s", stream.description)
         self._stop.clear()
         self._thread = threading.Thread(target=self._io_loop, name="ucamera-io", daemon=True)
         self._thread.start()
         deadline = time.monotonic() + timeout
         last_failure = "no answer"
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and self._stream is not None:
             try:
                 return self.request_version(min(self.request_timeout,
                                                 max(0.05, deadline - time.monotonic())))
             except UCameraError as exc:
                 last_failure = str(exc)
                 time.sleep(0.05)
-        # the I/O thread's reason (cannot open, no telemetry) says more than a timeout
+        # the I/O thread's reason (read failure, no telemetry) says more than a timeout
+        link_died = self._stream is None
         reason = self.last_error or last_failure
         self.stop()
-        raise UCameraError(
+        raise self._no_answer(NotConnectedError if link_died else RequestTimeoutError,
+                              timeout, reason)
+
+    def _no_answer(self, kind: type[UCameraError], timeout: float, reason: str) -> UCameraError:
+        return kind(
             f"U-Camera on {self.description} did not answer Request Gimbal Version within "
             f"{timeout:g} s ({reason}); check cable, power, port name and baud rate (115200 8N1)"
         )
@@ -223,10 +244,10 @@ class UCameraClient:
     def stop(self) -> None:
         """Stop the I/O thread and close the port (commands already sent stay in effect)."""
         self._stop.set()
-        if self._thread is not None:
+        if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=2.0)
         self._thread = None
-        self._close("client stopped")
+        self._close()
 
     @property
     def running(self) -> bool:
@@ -236,6 +257,11 @@ class UCameraClient:
     def connected(self) -> bool:
         """True while the port is open and telemetry is arriving."""
         return self._alive
+
+    @property
+    def link_down(self) -> bool:
+        """True once the I/O thread gave the link up (reason in :attr:`last_error`)."""
+        return self._thread is not None and self._stream is None
 
     def state(self) -> GimbalState:
         with self._lock:
@@ -413,22 +439,16 @@ class UCameraClient:
 
     # --- I/O thread ------------------------------------------------------
     def _io_loop(self) -> None:
+        """Read and refresh until stopped or the link dies (then close and end)."""
         while not self._stop.is_set():
-            now = time.monotonic()
-            if self._stream is None:
-                if now < self._reopen_at:
-                    self._stop.wait(min(0.05, self._reopen_at - now))
-                    continue
-                self._open()
-                continue
             if self._link_broken:
                 self._drop("write failed: " + self.last_error)
-                continue
+                return
             try:
                 data = self._stream.read(1024, 0.02)
-            except TransportError as exc:
+            except (TransportError, AttributeError) as exc:  # AttributeError: closed by stop
                 self._drop(f"link lost: {exc}")
-                continue
+                return
             if data:
                 self._receive(data)
             now = time.monotonic()
@@ -437,49 +457,24 @@ class UCameraClient:
             if now - self._last_rx > quiet:
                 self.stats.silences += 1
                 self._drop(f"no telemetry for {now - self._last_rx:.1f} s")
-                continue
+                return
             if now >= self._next_refresh:
                 self._next_refresh = now + self.refresh_period
                 self._refresh(now)
 
-    def _open(self) -> None:
-        stream = self._stream_factory()
-        try:
-            stream.open()
-        except TransportError as exc:
-            self.last_error = str(exc)
-            self._reopen_at = time.monotonic() + self._backoff.next_delay()
-            return
-        with self._write_lock:
-            self._stream = stream
-            self._link_broken = False
-        self._parser.reset()
-        self._last_rx = time.monotonic()
-        LOG.info("opened %s", stream.description)
-
-    def _close(self, reason: str) -> None:
+    def _close(self) -> None:
         with self._write_lock:
             stream, self._stream = self._stream, None
         if stream is not None:
             stream.close()
-        self._set_alive(False, reason)
+        self._alive = False
 
     def _drop(self, reason: str) -> None:
+        if self._stop.is_set():
+            return  # stop() is closing the port: not a link loss
         self.last_error = reason
-        self.stats.reconnects += 1
-        LOG.warning("U-Camera %s: %s; reopening", self.description, reason)
-        self._close(reason)
-        self._reopen_at = time.monotonic() + self._backoff.next_delay()
-
-    def _set_alive(self, alive: bool, reason: str) -> None:
-        if alive == self._alive:
-            return
-        self._alive = alive
-        if self._on_link_change is not None:
-            try:
-                self._on_link_change(alive, reason)
-            except Exception:  # a callback must not kill the I/O thread
-                LOG.exception("link change callback failed")
+        LOG.warning("U-Camera %s: %s", self.description, reason)
+        self._close()
 
     def _receive(self, data: bytes) -> None:
         frames = self._parser.feed(data)
@@ -499,8 +494,7 @@ class UCameraClient:
                 continue
             self.stats.frames += 1
             self._last_rx = time.monotonic()
-            self._backoff.reset()
-            self._set_alive(True, "telemetry arriving")
+            self._alive = True
             self._dispatch(packet)
 
     def _dispatch(self, packet: Packet) -> None:

@@ -1,0 +1,531 @@
+"""The U-Camera as a :class:`~gimbal_driver_common.device.Device` (no ROS).
+
+Wraps one :class:`UCameraClient` and speaks the device contract: SI units,
+REP-103 signs and joint names. Everything that converts between the gimbal and
+ROS conventions lives here: axis signs (``invert_pan``/``invert_tilt``), the
+set-point ramp that gives angle moves a speed (the gimbal has no speed input),
+the "moving" bits, and the external-feed frames (ENU/FLU in, NED/FRD out).
+
+What lives where:
+
+* ``protocol/``: the codec (packets, scaling, range checks);
+* ``client.py``: the serial session (I/O thread, requests, refresh at >= 10 Hz,
+  link loss detection; no reconnect loop);
+* this module: the adapter and its capability objects (:class:`PilotHoming`,
+  :class:`UCameraStatus`) and the device extras the node exposes (modes, zoom,
+  IR palette, external feed, non-volatile saves behind ``allow_nv_write``);
+* ``node.py``: parameters, ``make_device()`` and the ROS topics and services of
+  the extras.
+
+Signs: the gimbal fixed frame of the manual (4.3.1) is X forward, Z down the
+pan axis toward the camera, so Y points right: positive device pan turns right
+and positive device tilt raises the camera. REP-103 wants positive pan to the
+left, so pan is negated (``invert_pan``, default true) and tilt is kept.
+
+Set-point ramp: a move with a speed ramps the angle set-point toward the
+target, stepped on every angles report by ``speed * elapsed`` (real time since
+the previous step), so the speed holds at any telemetry rate.
+
+"Moving": the gimbal reports its *actual* axis rates (5.5.3.4), which on a
+stabilised gimbal in flight follow the airframe even while it holds a
+direction. So the adapter sets the moving bit from what the driver commanded:
+in rates mode a non-zero commanded rate; in angles mode a running set-point
+ramp or a reported angle farther than ``goal_tolerance`` from the set-point.
+In modes the gimbal drives itself (stow, pilot, init, autoalign, FFC) it sets
+no bit, and the controller's one rule (reported speed) applies.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from gimbal_driver_common.controller import Logger
+from gimbal_driver_common.device import Device, DeviceInfo, Homing, JointSample, Moves, StatusReport
+from gimbal_driver_common.diagnostics import Level, StatusPart
+from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, InvalidRequest, Unsupported
+
+from .client import NotConnectedError, UCameraClient
+from .protocol import (
+    MODE_NAMES,
+    AnglesReport,
+    GimbalMode,
+    GimbalType,
+    GpsFeed,
+    Packet,
+    mode_name,
+)
+
+LOG = logging.getLogger(__name__)
+
+#: modes the gimbal leaves by itself (set_mode says so)
+SELF_ENDING_MODES = (GimbalMode.GYRO_AUTOALIGN, GimbalMode.FULL_AUTOALIGN,
+                     GimbalMode.FFC_CALIBRATION, GimbalMode.INIT)
+
+
+def _wrap(angle: float) -> float:
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+def quaternion_to_euler(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """ZYX Euler angles (roll, pitch, yaw) of a unit quaternion."""
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def enu_flu_to_ned_frd(roll: float, pitch: float, yaw: float) -> tuple[float, float, float]:
+    """REP-103 attitude (ENU world, FLU body) -> aerospace yaw, pitch, roll (NED/FRD).
+
+    Roll keeps its sign, pitch flips (FLU nose-down positive, FRD nose-up
+    positive) and yaw turns from "east, counter-clockwise" to "north, clockwise".
+    """
+    return _wrap(math.pi / 2 - yaw), -pitch, roll
+
+
+@dataclass
+class UCameraSettings:
+    """The node's parameters the device uses; the node shares one instance, so run-time
+    parameter changes (timeouts, rates) reach the adapter without plumbing."""
+
+    serial_port: str = "/dev/ttyUSB0"
+    baudrate: int = 115200
+    joint_names: tuple[str, str] = ("pan", "tilt")
+    invert_pan: bool = True
+    invert_tilt: bool = False
+    telemetry_rate: int = 50
+    refresh_rate: float = 10.0
+    silence_timeout: float = 1.5
+    request_timeout: float = 0.5
+    connect_timeout: float = 3.0
+    mode_timeout: float = 3.0
+    home_timeout: float = 20.0
+    gps_feed: str = ""
+    antenna_position: Sequence[float] = field(default_factory=lambda: [0.0])
+    ir_palette: int = -1
+    allow_nv_write: bool = False
+
+
+class UCameraDevice(Device):
+    """One U-Camera in joint space (REP-103); thread-safe."""
+
+    streamed = True  # angles arrive as periodic reports: publish each as it comes
+
+    def __init__(
+        self, settings: UCameraSettings, *, tolerance: Callable[[], float] = lambda: 0.01,
+        on_report: Callable[[Packet, float], None] | None = None,
+        log: Logger | logging.Logger = LOG,
+    ) -> None:
+        super().__init__()
+        self.settings = settings
+        self.tolerance = tolerance
+        self.log = log
+        self._listener = on_report
+        self.client = UCameraClient(
+            settings.serial_port, settings.baudrate, refresh_rate=settings.refresh_rate,
+            silence_timeout=settings.silence_timeout, request_timeout=settings.request_timeout,
+            on_report=self._on_report)
+        self.antenna: tuple[float, ...] | None = None
+        self._lock = threading.RLock()  # set-point, ramp and jog state (several threads)
+        self._setpoint: dict[str, float] = {}
+        self._ramp: dict[str, tuple[float, float]] = {}  # joint -> (target, speed)
+        self._ramp_time = 0.0
+        self._jog_rates: dict[str, float] = {}
+        self.capabilities.homing = PilotHoming(self)
+        self.capabilities.status = UCameraStatus(self)
+
+    # ---------------------------------------------------------------- frames
+    @property
+    def joint_names(self) -> tuple[str, str]:
+        return tuple(self.settings.joint_names)  # type: ignore[return-value]
+
+    def _signs(self) -> tuple[float, float]:
+        return (-1.0 if self.settings.invert_pan else 1.0,
+                -1.0 if self.settings.invert_tilt else 1.0)
+
+    def to_device(self, joint_values: dict[str, float]) -> tuple[float, float]:
+        """Joint values (REP-103) -> device (pan, tilt)."""
+        pan_name, tilt_name = self.joint_names
+        sign_pan, sign_tilt = self._signs()
+        return sign_pan * joint_values[pan_name], sign_tilt * joint_values[tilt_name]
+
+    def from_device(self, pan: float, tilt: float) -> dict[str, float]:
+        """Device (pan, tilt) -> joint values (REP-103)."""
+        sign_pan, sign_tilt = self._signs()
+        pan_name, tilt_name = self.joint_names
+        return {pan_name: sign_pan * pan, tilt_name: sign_tilt * tilt}
+
+    # --------------------------------------------------------------- contract
+    def open(self) -> DeviceInfo:
+        """Open the link, read the identity, apply the connect-time settings."""
+        client = self.client
+        client.refresh_period = 1.0 / self.settings.refresh_rate
+        version = client.start(timeout=self.settings.connect_timeout)
+        self._forget_motion()
+        try:
+            self._apply_connect_settings()
+            deadline = time.monotonic() + 1.0
+            while client.state().gimbal_type is None and time.monotonic() < deadline:
+                time.sleep(0.02)
+            if client.state().mode == GimbalMode.RATES:
+                # a jog may have been running when the link was lost: the gimbal keeps its
+                # last rates, so stop it before anything else (safety on (re)connect)
+                client.set_rates(0.0, 0.0)
+                with self._lock:
+                    self._jog_rates = dict.fromkeys(self.joint_names, 0.0)
+                self.log.warning("gimbal was in rates mode at connect: rates set to zero")
+        except Exception:
+            client.stop()
+            raise
+        gimbal_type = client.state().gimbal_type
+        kind = GimbalType(gimbal_type).name.lower() if gimbal_type in set(GimbalType) else "?"
+        return DeviceInfo(
+            model=f"Airelectronics U-Camera ({kind})",
+            serial_number=version.serial_number,
+            firmware_version=version.firmware,
+            hardware_id=f"ucamera-{version.serial_number}",
+        )
+
+    def _apply_connect_settings(self) -> None:
+        """The connect-time parameters (volatile until ~/save_configuration)."""
+        client, settings = self.client, self.settings
+        if settings.telemetry_rate:
+            achieved = client.set_telemetry_rate(settings.telemetry_rate)
+            if achieved != settings.telemetry_rate:
+                self.log.warning(
+                    f"telemetry_rate {settings.telemetry_rate} Hz requested, device reports "
+                    f"{achieved} Hz")
+        if settings.gps_feed:
+            client.configure_gps_feed(
+                GpsFeed.EXTERNAL if settings.gps_feed == "external" else GpsFeed.INTERNAL)
+        if len(settings.antenna_position) == 3:
+            client.set_antenna_position(*settings.antenna_position)
+        if settings.ir_palette >= 0:
+            client.set_ir_palette(settings.ir_palette)
+        try:
+            self.antenna = client.request_antenna_position()
+        except DeviceTimeout as exc:
+            self.log.warning(f"antenna position not read: {exc}")
+
+    def close(self) -> None:
+        self.client.stop()
+
+    def description(self) -> str:
+        return f"serial://{self.settings.serial_port}?baudrate={self.settings.baudrate}"
+
+    def link_healthy(self) -> bool:
+        if not self.client.connected:
+            raise NotConnectedError(
+                f"U-Camera link down: {self.client.last_error or 'no telemetry'}")
+        return True
+
+    def read(self) -> JointSample | None:
+        state = self.client.state()
+        if state.pan is None or state.tilt is None:
+            return None
+        positions = self.from_device(state.pan, state.tilt)
+        return JointSample(
+            positions=positions,
+            velocities=self.from_device(state.pan_rate or 0.0, state.tilt_rate or 0.0),
+            stamp=state.angles_time, moving=self._moving_bits(positions, state.mode))
+
+    def _moving_bits(self, positions: dict[str, float], mode: int | None) -> dict[str, bool]:
+        """From what the driver commanded (see the module docstring)."""
+        with self._lock:
+            if self._jog_rates and mode == GimbalMode.RATES:
+                return {name: rate != 0.0 for name, rate in self._jog_rates.items()}
+            if self._setpoint and mode == GimbalMode.ANGLES:
+                band = self.tolerance()
+                return {name: name in self._ramp or abs(positions[name] - target) > band
+                        for name, target in self._setpoint.items()}
+        return {}
+
+    def move(self, moves: Moves) -> None:
+        current = self._current_positions()
+        with self._lock:
+            for name in self.joint_names:
+                self._setpoint.setdefault(name, current.get(name, 0.0))
+            self._jog_rates.clear()
+            for name, (target, speed) in moves.items():
+                if speed is None:
+                    self._ramp.pop(name, None)
+                    self._setpoint[name] = target
+                else:
+                    # the gimbal has no speed input: ramp the angle set-point from where it is
+                    self._setpoint[name] = current.get(name, self._setpoint[name])
+                    self._ramp[name] = (target, speed)
+            self._ramp_time = time.monotonic()
+            self.client.set_angles(*self.to_device(self._setpoint))
+
+    def step_ramp(self) -> None:
+        """Advance the ramped set-points by the real time elapsed since the last step.
+
+        Runs on each angles report (the telemetry rate, 50 Hz by default).
+        """
+        with self._lock:
+            if not self._ramp:
+                return
+            now = time.monotonic()
+            elapsed, self._ramp_time = now - self._ramp_time, now
+            for name, (target, speed) in list(self._ramp.items()):
+                error = target - self._setpoint[name]
+                step = speed * elapsed
+                if abs(error) <= step:
+                    self._setpoint[name] = target
+                    self._ramp.pop(name)
+                else:
+                    self._setpoint[name] += math.copysign(step, error)
+            try:
+                self.client.set_angles(*self.to_device(self._setpoint))
+            except Exception as exc:  # noqa: BLE001 - the I/O thread must go on
+                self._ramp.clear()
+                self.log.warning(f"move set-point not sent, ramp dropped: {exc}")
+
+    def jog(self, velocities: dict[str, float]) -> None:
+        with self._lock:
+            self._ramp.clear()  # a jog replaces any ramped move (one mode for both axes)
+            for name in self.joint_names:
+                self._jog_rates.setdefault(name, 0.0)
+            self._jog_rates.update(velocities)
+            self._setpoint.clear()
+            self.client.set_rates(*self.to_device(self._jog_rates))
+
+    def stop(self, joints: Sequence[str] | None = None) -> None:
+        """Rates mode: zero rates (still stabilised); else angles at the reported angles."""
+        with self._lock:
+            if joints is not None and self._jog_rates and set(joints) != set(self.joint_names):
+                for name in joints:  # expired jog of some joints: zero only those rates
+                    self._jog_rates[name] = 0.0
+                self.client.set_rates(*self.to_device(self._jog_rates))
+                return
+            self._forget_motion()
+            self.client.hold()
+            if self.client.desired_mode == GimbalMode.RATES:
+                self._jog_rates = dict.fromkeys(self.joint_names, 0.0)
+            else:
+                state = self.client.state()
+                self._setpoint = self.from_device(state.pan or 0.0, state.tilt or 0.0)
+
+    def reset_faults(self) -> str:
+        raise Unsupported("the U-Camera protocol (UCSP) has no fault-reset command")
+
+    def _forget_motion(self) -> None:
+        with self._lock:
+            self._ramp.clear()
+            self._jog_rates.clear()
+            self._setpoint.clear()
+
+    def _current_positions(self) -> dict[str, float]:
+        state = self.client.state()
+        if state.pan is None or state.tilt is None:
+            return {}
+        return self.from_device(state.pan, state.tilt)
+
+    def _on_report(self, packet: Packet, stamp: float) -> None:
+        """Runs on the client's I/O thread for every received packet."""
+        if isinstance(packet, AnglesReport):
+            self.step_ramp()
+            self.notify_data()  # publish joint_states now
+        if self._listener is not None:
+            self._listener(packet, stamp)
+
+    # ------------------------------------------------------------------ extras
+    def mode(self) -> str:
+        mode = self.client.state().mode
+        return mode_name(mode) if mode is not None else ""
+
+    def set_mode(self, name: str) -> str:
+        """Select a mode by name; answer once the gimbal reports it (``mode_timeout``)."""
+        key = name.strip().lower()
+        if key not in MODE_NAMES:
+            raise InvalidRequest(
+                f"unknown mode {name!r}; the U-Camera modes are " + ", ".join(MODE_NAMES))
+        mode = MODE_NAMES[key]
+        client = self.client
+        if mode == GimbalMode.FFC_CALIBRATION and client.state().gimbal_type == GimbalType.DAYLIGHT:
+            raise DeviceRefused("ffc_calibration needs an IR gimbal; this one is daylight")
+        self.command_mode(mode)
+        deadline = time.monotonic() + self.settings.mode_timeout
+        while time.monotonic() < deadline:
+            if client.state().mode == mode:
+                suffix = (" (returns to angles by itself when done)"
+                          if mode in SELF_ENDING_MODES else "")
+                return f"mode {key} active{suffix}"
+            time.sleep(0.02)
+        reported = client.state().mode
+        raise DeviceTimeout(
+            f"device did not report mode {key} within {self.settings.mode_timeout:g} s "
+            f"(reports {mode_name(reported) if reported is not None else 'nothing'})")
+
+    def command_mode(self, mode: GimbalMode) -> None:
+        """Hand the axes to a device mode: the driver's set-point, ramp and jog end here.
+
+        ``angles`` holds the current position and ``rates`` starts with zero rates.
+        """
+        with self._lock:
+            self._forget_motion()
+            if mode == GimbalMode.ANGLES:
+                self.client.hold_angles()
+            elif mode == GimbalMode.RATES:
+                self.client.set_rates(0.0, 0.0)
+            else:
+                self.client.set_mode(mode)
+
+    def set_telemetry_rate(self, rate: int) -> None:
+        """Send a new report rate now (volatile); refused when the gimbal reports another."""
+        if not self.client.connected or rate == 0:
+            return  # applied when the link opens
+        achieved = self.client.set_telemetry_rate(rate)
+        if achieved != rate:
+            raise DeviceRefused(f"the gimbal reports {achieved} Hz")
+
+    def set_refresh_rate(self, rate: float) -> None:
+        self.client.refresh_period = 1.0 / rate
+
+    def set_zoom(self, level: float) -> None:
+        """Zoom 0 (wide) .. 1 (tele)."""
+        self.client.set_zoom(level)
+
+    def set_ir_palette(self, palette: int) -> None:
+        self.client.set_ir_palette(palette)
+
+    def send_external_velocity(self, east: float, north: float, up: float) -> None:
+        """ENU ground velocity (m/s) -> the gimbal's NED GPS velocities."""
+        self.client.send_gps_velocity(north, east, -up)
+
+    def send_external_fix(self, latitude: float, longitude: float, altitude: float,
+                          east: float, north: float, up: float) -> None:
+        """A fix (degrees, m) with its ENU velocity -> Send GPS Position and Velocities."""
+        self.client.send_gps(latitude, longitude, altitude, north, east, -up)
+
+    def send_external_attitude(self, x: float, y: float, z: float, w: float) -> None:
+        """Vehicle orientation quaternion (ENU world, FLU body) -> Send Vehicle Angles."""
+        norm = math.sqrt(x * x + y * y + z * z + w * w)
+        if not 0.9 < norm < 1.1:
+            raise InvalidRequest(f"quaternion norm {norm:.3f} is not 1")
+        yaw, pitch, roll = enu_flu_to_ned_frd(
+            *quaternion_to_euler(x / norm, y / norm, z / norm, w / norm))
+        self.client.send_vehicle_angles(yaw, pitch, roll)
+
+    def send_external_body_rates(self, x: float, y: float, z: float) -> None:
+        """FLU body rates (rad/s) -> FRD p, q, r -> Send Vehicle Angular Velocities."""
+        self.client.send_vehicle_rates(-z, -y, x)
+
+    def save_configuration(self) -> str:
+        self._check_nv_allowed("save_configuration")
+        self.client.save_configuration()
+        return "configuration saved to non-volatile memory (the gimbal is silent for about 1 s)"
+
+    def save_ffc(self) -> str:
+        self._check_nv_allowed("save_ffc")
+        if self.client.state().gimbal_type != GimbalType.IR:
+            raise DeviceRefused("save_ffc needs an IR gimbal")
+        self.client.save_ffc()
+        return "FFC calibration saved to the IR module (may take up to 10 s)"
+
+    def _check_nv_allowed(self, what: str) -> None:
+        if not self.settings.allow_nv_write:
+            raise DeviceRefused(
+                f"{what} refused: non-volatile writes need the parameter allow_nv_write:=true "
+                "(never during flight; keep the power stable while saving)")
+
+
+class PilotHoming(Homing):
+    """``~/home``: pilot mode, the gimbal points to pan 0 / tilt 0 (front view, 4.2)."""
+
+    def __init__(self, device: UCameraDevice) -> None:
+        self.device = device
+
+    def home(self, joints: Sequence[str], report: Callable[[str], None],
+             cancelled: threading.Event) -> str:
+        device, client = self.device, self.device.client
+        device.command_mode(GimbalMode.PILOT)
+        report("pilot mode requested")
+        timeout = device.settings.home_timeout
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if cancelled.is_set():
+                client.hold()
+                raise DeviceRefused("homing cancelled")
+            state = client.state()
+            tolerance = device.tolerance()
+            at_zero = (state.pan is not None and state.tilt is not None
+                       and abs(state.pan) <= tolerance and abs(state.tilt) <= tolerance)
+            if state.mode == GimbalMode.PILOT and at_zero:
+                return "pilot position reached (pan 0, tilt 0); device stays in pilot mode"
+            report(f"mode {mode_name(state.mode) if state.mode is not None else '?'}, "
+                   "going to pan 0 / tilt 0")
+            time.sleep(0.05)
+        raise DeviceTimeout(f"pilot position not reached within home_timeout {timeout:g} s "
+                            f"(device mode {mode_name(client.state().mode or 0)})")
+
+
+class UCameraStatus(StatusReport):
+    """Mode, link counters and telemetry rate for /diagnostics and ~/status."""
+
+    def __init__(self, device: UCameraDevice) -> None:
+        self.device = device
+        self._last_checksum_errors = 0
+
+    def mode(self) -> str:
+        return self.device.mode()
+
+    def errors(self) -> list[str]:
+        error = self.device.client.mode_error
+        return [error] if error else []
+
+    def axis_details(self, joint: str) -> dict[str, object]:
+        return {"calibrated": True, "homed": False}
+
+    def parts(self) -> list[StatusPart]:
+        device, client, settings = self.device, self.device.client, self.device.settings
+        state = client.state()
+        stats = client.stats
+        achieved = client.telemetry_rate_achieved()
+        new_errors = max(0, stats.checksum_errors - self._last_checksum_errors)
+        self._last_checksum_errors = stats.checksum_errors
+        mode = device.mode()
+        level, message = Level.OK, f"mode {mode or '?'}"
+        if settings.telemetry_rate and achieved < 0.7 * settings.telemetry_rate:
+            level = Level.WARN
+            message += f"; telemetry {achieved:.1f} Hz of {settings.telemetry_rate} Hz"
+        if new_errors:
+            level = Level.WARN
+            message += f"; {new_errors} checksum error(s) since last report"
+        pending = client.pending_automatic_mode
+        antenna = device.antenna
+        values = [
+            ("mode", mode),
+            ("automatic_mode_pending", mode_name(pending) if pending is not None else ""),
+            ("gimbal_type", GimbalType(state.gimbal_type).name.lower()
+             if state.gimbal_type in set(GimbalType) else str(state.gimbal_type)),
+            ("telemetry_rate_configured_hz", str(settings.telemetry_rate or "device default")),
+            ("telemetry_rate_achieved_hz", f"{achieved:.2f}"),
+            ("checksum_errors", str(stats.checksum_errors)),
+            ("length_errors", str(stats.length_errors)),
+            ("discarded_bytes", str(stats.discarded_bytes)),
+            ("unknown_packets", str(stats.unknown_packets)),
+            ("bad_payloads", str(stats.bad_payloads)),
+            ("silences", str(stats.silences)),
+            ("link_reopens", str(stats.reconnects)),
+            ("last_error", client.last_error),
+            ("zoom", "" if state.zoom is None else f"{state.zoom:.4f}"),
+            ("ir_palette", "" if state.ir_palette is None else str(state.ir_palette)),
+            ("antenna_position_m", "" if antenna is None
+             else ", ".join(f"{v:.3f}" for v in antenna)),
+            ("nv_write_allowed", str(settings.allow_nv_write)),
+        ]
+        parts = [StatusPart("device", level, message, values)]
+        positions = device.from_device(state.pan or 0.0, state.tilt or 0.0)
+        rates = device.from_device(state.pan_rate or 0.0, state.tilt_rate or 0.0)
+        for name in device.joint_names:
+            parts.append(StatusPart(name, Level.OK, "OK", [
+                ("position_rad", f"{positions[name]:.5f}"),
+                ("velocity_rad_s", f"{rates[name]:.5f}"),
+            ]))
+        return parts
