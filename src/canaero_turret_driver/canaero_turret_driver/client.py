@@ -52,7 +52,7 @@ from .protocol.identifiers import (
     identifier_table,
 )
 from .protocol.message import CanAerospaceMessage
-from .protocol.sequencing import MessageCodeCounter, MessageCodeTracker, SequenceEvent
+from .protocol.sequencing import MessageCodeCounter, MessageCodeTracker
 from .slcan import open_bus
 
 LOG = logging.getLogger("canaero_turret_driver.client")
@@ -143,7 +143,6 @@ class Counters:
     eed: int = 0
     bus_errors: int = 0
     reconnects: int = 0
-    send_errors: int = 0
     last_malformed: str = ""
 
 
@@ -216,8 +215,6 @@ class TurretClient:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.on_sample: Callable[[Sample], None] | None = None
-        self.on_eed: Callable[[EmergencyEvent], None] | None = None
-        self.on_sequence: Callable[[str, SequenceEvent, int], None] | None = None
         self.on_link: Callable[[bool, str], None] | None = None
 
     # --- link ---------------------------------------------------------------------
@@ -383,8 +380,6 @@ class TurretClient:
             self.counters.eed += 1
             self.events.append(event)
             LOG.warning("%s", event.describe())
-            if self.on_eed is not None:
-                self.on_eed(event)
             return
         service = ns.service_channel_of(message.can_id)
         if service is not None:
@@ -403,11 +398,8 @@ class TurretClient:
             self._malformed(f"id {message.can_id} ({ident.key}) carries {message.type_name}, "
                             f"the ICD says {ident.data_type.name}")
             return
-        event, missed = self.sequences.update((message.node_id, message.can_id),
-                                              message.message_code)
-        if event not in (SequenceEvent.FIRST, SequenceEvent.IN_ORDER) \
-                and self.on_sequence is not None:
-            self.on_sequence(ident.key, event, missed)
+        event, _missed = self.sequences.update((message.node_id, message.can_id),
+                                               message.message_code)
         if not event.accepted:
             return  # an old or duplicate value must not replace the newer one
         value = message.value
@@ -437,10 +429,6 @@ class TurretClient:
     def latest(self, key: str) -> Sample | None:
         with self._cache_lock:
             return self._cache.get(key)
-
-    def snapshot(self) -> dict[str, Sample]:
-        with self._cache_lock:
-            return dict(self._cache)
 
     def _learn_interval(self, key: str, gap: float) -> None:
         """Track how often an identifier arrives (the ICD leaves intervals to the device).
@@ -501,7 +489,6 @@ class TurretClient:
             with self._send_lock:
                 bus.send(frame, timeout=0.2)
         except (can.CanError, OSError, ValueError) as exc:
-            self.counters.send_errors += 1
             self._drop_bus(f"send failed: {exc}")
             raise LinkError(f"sending on {self.description} failed: {exc}") from exc
 

@@ -26,7 +26,7 @@ from gimbal_driver_common.controller import Logger
 from gimbal_driver_common.device import Device, DeviceInfo, DevicePresets, JointSample, Moves
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
 
-from .client import AXES, ClientConfig, CommandError, Sample, TurretClient
+from .client import AXES, CommandError, Sample, TurretClient
 from .protocol.identifiers import ActuatorMode, AxisStatus, TargetState
 from .status import TurretStatus
 
@@ -144,9 +144,8 @@ class TurretDevice(Device):
     streamed = True
 
     def __init__(
-        self, client_config: ClientConfig, settings: TurretSettings,
+        self, client: TurretClient, settings: TurretSettings,
         publish_rate: Callable[[], float], log: Logger | None = None,
-        client: TurretClient | None = None,
     ) -> None:
         super().__init__()
         if len(settings.joint_names) != len(AXES):
@@ -155,12 +154,11 @@ class TurretDevice(Device):
         self.settings = settings
         self.publish_rate = publish_rate
         self.log: Logger = log or logging.getLogger("canaero_turret_driver.device")
-        self.client = client or TurretClient(client_config)
+        self.client = client
         self.client.on_sample = self._on_sample
         self.client.on_link = self._on_link
         self.axis_of = dict(zip(settings.joint_names, AXES, strict=True))
         self.joint_of = {axis: joint for joint, axis in self.axis_of.items()}
-        self.ids_info = None
         self._cycle: set[str] = set()
         self._latest: JointSample | None = None
         self._speed_warned = False
@@ -189,7 +187,7 @@ class TurretDevice(Device):
         self._cycle.clear()
         try:
             client.open()
-            self.ids_info = info = client.identify()
+            info = client.identify()
             refused = client.request_intervals(self.interval_requests())
         except BaseException:
             client.close()

@@ -33,7 +33,7 @@ from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_driver_common.ros.run import run_driver
 from gimbal_msgs.srv import DeviceCommand, SetMode
 
-from .client import ClientConfig
+from .client import ClientConfig, TurretClient
 from .device import MODE_NAMES, SWITCHES, Heading, TurretDevice, TurretSettings
 from .protocol.identifiers import DATA_IDENTIFIERS, DEFAULT_ZOOM_POSITION_ID
 from .status import NODE_GROUPS
@@ -239,7 +239,7 @@ class CanaeroTurretNode(GimbalDriverNode):
 
     # ------------------------------------------------------------------ device
     def make_device(self) -> Device:
-        return TurretDevice(self._client_config(), self.settings,
+        return TurretDevice(TurretClient(self._client_config()), self.settings,
                             lambda: self.config.publish_rate, self.get_logger())
 
     def device_ready(self, device: Device) -> None:

@@ -113,8 +113,8 @@ def _supervised(client, settings=None, **config):
 
     controller_config = _controller_config(**config)
     log = logging.getLogger("canaero_turret_driver.test")
-    device = TurretDevice(client.config, settings or TurretSettings(),
-                          lambda: controller_config.publish_rate, log, client=client)
+    device = TurretDevice(client, settings or TurretSettings(),
+                          lambda: controller_config.publish_rate, log)
     controller = GimbalController(device, controller_config, log)
     controller.open()
     controller.activate()

@@ -41,7 +41,7 @@ class Rig:
         client_config = ClientConfig(interface="slcan", channel=self.link.port_name,
                                      bus_options={"sleep_after_open": 0},
                                      service_timeout=0.3, node_timeout=0.6, stale_timeout=0.6)
-        self.device = TurretDevice(client_config, settings or TurretSettings(),
+        self.device = TurretDevice(TurretClient(client_config), settings or TurretSettings(),
                                    lambda: self.config.publish_rate, LOG)
         self.controller = GimbalController(self.device, self.config, LOG,
                                            on_sample=self._count)
