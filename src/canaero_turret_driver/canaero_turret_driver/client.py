@@ -52,7 +52,7 @@ from .protocol.identifiers import (
     identifier_table,
 )
 from .protocol.message import CanAerospaceMessage
-from .protocol.sequencing import MessageCodeCounter, MessageCodeTracker
+from .protocol.sequencing import MessageCodeCounter, MessageCodeTracker, SequenceEvent
 from .slcan import open_bus
 
 LOG = logging.getLogger("canaero_turret_driver.client")
@@ -215,6 +215,7 @@ class TurretClient:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.on_sample: Callable[[Sample], None] | None = None
+        self.on_sequence: Callable[[str, SequenceEvent, int], None] | None = None
         self.on_link: Callable[[bool, str], None] | None = None
 
     # --- link ---------------------------------------------------------------------
@@ -398,8 +399,11 @@ class TurretClient:
             self._malformed(f"id {message.can_id} ({ident.key}) carries {message.type_name}, "
                             f"the ICD says {ident.data_type.name}")
             return
-        event, _missed = self.sequences.update((message.node_id, message.can_id),
-                                               message.message_code)
+        event, missed = self.sequences.update((message.node_id, message.can_id),
+                                              message.message_code)
+        if event not in (SequenceEvent.FIRST, SequenceEvent.IN_ORDER) \
+                and self.on_sequence is not None:
+            self.on_sequence(ident.key, event, missed)
         if not event.accepted:
             return  # an old or duplicate value must not replace the newer one
         value = message.value
@@ -429,6 +433,10 @@ class TurretClient:
     def latest(self, key: str) -> Sample | None:
         with self._cache_lock:
             return self._cache.get(key)
+
+    def snapshot(self) -> dict[str, Sample]:
+        with self._cache_lock:
+            return dict(self._cache)
 
     def _learn_interval(self, key: str, gap: float) -> None:
         """Track how often an identifier arrives (the ICD leaves intervals to the device).
