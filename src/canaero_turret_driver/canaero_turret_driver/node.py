@@ -27,6 +27,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import SetBool
 
 from gimbal_driver_common.device import Device
+from gimbal_driver_common.errors import GimbalError
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.heading import heading_imu
 from gimbal_driver_common.ros.parameters import ParameterError
@@ -252,7 +253,7 @@ class CanaeroTurretNode(GimbalDriverNode):
         if self.settings.actuator_mode and device is not None and self.connected:
             try:
                 self.controller.call(device.apply_actuator_mode)
-            except Exception as exc:  # noqa: BLE001 - activation goes on, the log says why
+            except GimbalError as exc:  # activation goes on, the log says why
                 self.get_logger().error(f"setting actuator mode at activate failed: {exc}")
         return result
 
