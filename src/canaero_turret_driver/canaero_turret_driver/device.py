@@ -182,16 +182,15 @@ class TurretDevice(Device):
 
     # ------------------------------------------------------------------ link
     def open(self) -> DeviceInfo:
-        """Open the interface, identify the turret (IDS) and ask for the intervals (TIS)."""
+        """Open the interface, identify the turret (IDS) and ask for the intervals (TIS).
+
+        On failure the controller calls close() and tries again every reconnect_period.
+        """
         client = self.client
         self._cycle.clear()
-        try:
-            client.open()
-            info = client.identify()
-            refused = client.request_intervals(self.interval_requests())
-        except BaseException:
-            client.close()
-            raise
+        client.open()
+        info = client.identify()
+        refused = client.request_intervals(self.interval_requests())
         if refused and not self._tis_refusal_logged:
             self._tis_refusal_logged = True
             self.log.warning(
