@@ -4,12 +4,13 @@ No ROS here. The client owns one `can.BusABC` (any python-can interface: socketc
 robot, slcan or virtual here). A receive thread decodes every frame, keeps the latest
 value of each data identifier with its arrival time, tracks message-code sequences per
 identifier, collects EED events and answers pending node-service requests. Interface
-errors (bus-off error frames, a vanished adapter, a failing send) close the bus; the
-thread reopens it every `reconnect_period` seconds until it works again.
+errors (bus-off error frames, a vanished adapter, a failing send) close the bus and end
+the receive thread; `connected` turns False and whoever supervises the link (the
+controller of gimbal_driver_common, through `TurretDevice`) closes and reopens it.
 
-Units: the public API is SI (rad, rad/s); the conversion to the ICD's degrees happens
-here, with an optional sign per axis (`yaw_sign`, `pitch_sign`) for installations where
-the device counts the other way than REP-103.
+Units: the identifier table converts each value to SI (rad, rad/s, ...) in the device's
+own direction; `TurretDevice` maps the axes to joints and applies the installation's
+REP-103 direction. Errors are the core's hierarchy (`gimbal_driver_common.errors`).
 
 Frames with an id not in the identifier table (including the out-of-scope functions)
 are counted as unknown and otherwise ignored.
@@ -27,6 +28,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import can
+
+from gimbal_driver_common import errors
 
 from .protocol import nodeservice as ns
 from .protocol.datatypes import DataType
@@ -59,15 +62,15 @@ CAN_ERR_BUSOFF = 0x40  # SocketCAN error-frame class bit for bus-off
 ICD_POSITION_LIMIT_DEG = 180.0  # set-point range "-180 ÷ 180" (6.1.2, 6.1.1 pitch)
 
 
-class TurretError(Exception):
+class TurretError(errors.GimbalError):
     """Base of the client's errors; the message is meant for a person."""
 
 
-class LinkError(TurretError):
+class LinkError(TurretError, errors.LinkError):
     """The CAN interface is not open or failed while sending."""
 
 
-class CommandError(TurretError, ValueError):
+class CommandError(TurretError, errors.InvalidRequest):
     """A command was refused before anything was sent."""
 
 
@@ -75,7 +78,15 @@ class ServiceError(TurretError):
     """A node-service request failed (no response, or a negative status)."""
 
 
-class NotAllowedError(TurretError):
+class ServiceRefused(ServiceError, errors.DeviceRefused):
+    """A node answered a node-service request with a negative status."""
+
+
+class ServiceTimeout(ServiceError, errors.DeviceTimeout):
+    """A node did not answer a node-service request (or stopped answering mid-transfer)."""
+
+
+class NotAllowedError(TurretError, errors.DeviceRefused):
     """A persistent or identity-changing service was not enabled by configuration."""
 
 
@@ -97,14 +108,12 @@ class ClientConfig:
     service_attempts: int = 3
     stale_timeout: float = 1.0
     node_timeout: float = 1.0
-    reconnect_period: float = 1.0
-    # Reopen the interface when no frame at all arrived for this long (0 = never). Some
-    # transports (a socketcand TCP link that the peer closed, a wedged USB adapter) go
-    # quiet instead of raising; a CAN bus with a broadcasting turret is never quiet.
+    # Drop the interface (connected -> False, the supervisor reopens it) when no frame at
+    # all arrived for this long (0 = never). Some transports (a socketcand TCP link that
+    # the peer closed, a wedged USB adapter) go quiet instead of raising; a CAN bus with a
+    # broadcasting turret is never quiet.
     reopen_after_silence: float = 0.0
     pad_frames: bool = False
-    yaw_sign: float = 1.0
-    pitch_sign: float = 1.0
     allow_node_id_change: bool = False
     allow_flash_programming: bool = False
     # DDS/DUS data messages count from 0 or from 1 (the ICD does not say, see nodeservice)
@@ -117,7 +126,7 @@ class Sample:
 
     key: str
     value: object  # as decoded (device units)
-    si: float | None  # SI value (signed per axis) for numeric values
+    si: float | None  # SI value (the device's own direction) for numeric values
     stamp: float  # wall-clock time of arrival (for ROS headers)
     received: float  # monotonic time of arrival (for staleness)
     message_code: int
@@ -134,7 +143,6 @@ class Counters:
     eed: int = 0
     bus_errors: int = 0
     reconnects: int = 0
-    send_errors: int = 0
     last_malformed: str = ""
 
 
@@ -203,10 +211,10 @@ class TurretClient:
         self.last_link_error = ""
         self._garbled_in_row = 0
         self._last_frame = time.monotonic()
+        self._opened_before = False
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.on_sample: Callable[[Sample], None] | None = None
-        self.on_eed: Callable[[EmergencyEvent], None] | None = None
         self.on_sequence: Callable[[str, SequenceEvent, int], None] | None = None
         self.on_link: Callable[[bool, str], None] | None = None
 
@@ -221,29 +229,33 @@ class TurretClient:
         return f"{self.config.interface}:{self.config.channel}"
 
     def open(self) -> None:
-        """Open the CAN interface now (raises LinkError) and start the receive thread."""
-        if self._bus is None:
-            self._open_bus()
-        self._start_thread()
+        """Open the CAN interface (raises LinkError) and start its receive thread.
 
-    def start(self) -> None:
-        """Start the receive thread, which opens the interface (and reopens it) by itself."""
-        self._start_thread()
-
-    def _start_thread(self) -> None:
-        if self._thread is None or not self._thread.is_alive():
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._run, name="canaero-client-rx",
-                                            daemon=True)
-            self._thread.start()
+        After the link dropped, call `close()` and then `open()` again: the client has no
+        reconnect loop of its own (the controller's supervisor is the only one).
+        """
+        if self._bus is not None:
+            return
+        self._stop_thread()
+        self._open_bus()
+        if self._opened_before:
+            self.counters.reconnects += 1
+        self._opened_before = True
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, args=(self._bus,),
+                                        name="canaero-client-rx", daemon=True)
+        self._thread.start()
 
     def close(self) -> None:
         """Stop the receive thread and release the interface. Safe to call twice."""
+        self._stop_thread()
+        self._drop_bus("closed", lost=False)
+
+    def _stop_thread(self) -> None:
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
-        self._drop_bus("closed", notify=False)
+        thread, self._thread = self._thread, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
 
     def _open_bus(self) -> None:
         try:
@@ -260,7 +272,8 @@ class TurretClient:
         if self.on_link is not None:
             self.on_link(True, f"CAN interface {self.description} open")
 
-    def _drop_bus(self, reason: str, notify: bool = True) -> None:
+    def _drop_bus(self, reason: str, lost: bool = True) -> None:
+        """Release the bus; `on_link(False, reason)` either way, a warning when `lost`."""
         with self._bus_lock:
             bus, self._bus = self._bus, None
         if bus is None:
@@ -271,27 +284,14 @@ class TurretClient:
         exchange = self._exchange
         if exchange is not None:
             exchange.abort()  # wake a waiting service request; it finds no response
-        if notify:
+        if lost:
             LOG.warning("CAN interface %s lost: %s", self.description, reason)
-            if self.on_link is not None:
-                self.on_link(False, reason)
+        if self.on_link is not None:
+            self.on_link(False, reason)
 
-    def _run(self) -> None:
-        next_attempt = 0.0
-        while not self._stop.is_set():
-            bus = self._bus
-            if bus is None:
-                now = time.monotonic()
-                if now < next_attempt:
-                    self._stop.wait(min(0.05, next_attempt - now))
-                    continue
-                next_attempt = now + self.config.reconnect_period
-                try:
-                    self._open_bus()
-                    self.counters.reconnects += 1
-                except LinkError as exc:
-                    LOG.debug("%s", exc)
-                continue
+    def _run(self, bus: can.BusABC) -> None:
+        """Receive on `bus` until it is dropped (link lost or closed), then end."""
+        while not self._stop.is_set() and self._bus is bus:
             try:
                 frame = bus.recv(timeout=0.05)
             except (ValueError, IndexError) as exc:
@@ -311,7 +311,7 @@ class TurretClient:
             if frame is None:
                 quiet = time.monotonic() - self._last_frame
                 if 0 < self.config.reopen_after_silence < quiet:
-                    self._drop_bus(f"no CAN frame for {quiet:.1f} s: reopening the interface")
+                    self._drop_bus(f"no CAN frame for {quiet:.1f} s: the interface looks dead")
                 continue
             self._last_frame = time.monotonic()
             self._garbled_in_row = 0
@@ -381,8 +381,6 @@ class TurretClient:
             self.counters.eed += 1
             self.events.append(event)
             LOG.warning("%s", event.describe())
-            if self.on_eed is not None:
-                self.on_eed(event)
             return
         service = ns.service_channel_of(message.can_id)
         if service is not None:
@@ -419,17 +417,10 @@ class TurretClient:
         if self.on_sample is not None:
             self.on_sample(sample)
 
-    def _sign(self, key: str) -> float:
-        if key in ("yaw_position", "yaw_velocity"):
-            return self.config.yaw_sign
-        if key in ("pitch_position", "pitch_velocity"):
-            return self.config.pitch_sign
-        return 1.0
-
     def _to_si(self, ident: Identifier, value: object) -> float | None:
         if isinstance(value, bool) or not isinstance(value, int | float):
             return None
-        return ident.to_si(value) * self._sign(ident.key)
+        return ident.to_si(value)
 
     def _service_frame(self, message: CanAerospaceMessage, now: float) -> None:
         exchange = self._exchange
@@ -506,7 +497,6 @@ class TurretClient:
             with self._send_lock:
                 bus.send(frame, timeout=0.2)
         except (can.CanError, OSError, ValueError) as exc:
-            self.counters.send_errors += 1
             self._drop_bus(f"send failed: {exc}")
             raise LinkError(f"sending on {self.description} failed: {exc}") from exc
 
@@ -529,9 +519,6 @@ class TurretClient:
             raise CommandError(f"unknown axis {axis!r}; the turret has {', '.join(AXES)}")
         return axis
 
-    def _axis_sign(self, axis: str) -> float:
-        return self.config.yaw_sign if axis == "yaw" else self.config.pitch_sign
-
     @staticmethod
     def _finite(what: str, value: float) -> float:
         if isinstance(value, bool) or not isinstance(value, int | float) \
@@ -543,7 +530,6 @@ class TurretClient:
         """Absolute position set-point (rad); the ICD range is -180..180 deg."""
         axis = self._axis(axis)
         degrees = math.degrees(self._finite(f"{axis} position", position_rad))
-        degrees *= self._axis_sign(axis)
         if abs(degrees) > ICD_POSITION_LIMIT_DEG + 1e-9:
             raise CommandError(f"{axis} position {position_rad:.4f} rad is outside the "
                                f"device range -pi..pi")
@@ -552,12 +538,12 @@ class TurretClient:
     def jog(self, axis: str, velocity_rad_s: float) -> None:
         axis = self._axis(axis)
         degrees = math.degrees(self._finite(f"{axis} velocity", velocity_rad_s))
-        self.command(f"{axis}_velocity_setpoint", degrees * self._axis_sign(axis))
+        self.command(f"{axis}_velocity_setpoint", degrees)
 
     def move_by(self, axis: str, offset_rad: float) -> None:
         axis = self._axis(axis)
         degrees = math.degrees(self._finite(f"{axis} offset", offset_rad))
-        self.command(f"{axis}_relative_setpoint", degrees * self._axis_sign(axis))
+        self.command(f"{axis}_relative_setpoint", degrees)
 
     def stop(self, axes: tuple[str, ...] | list[str] = AXES) -> None:
         bits = 0
@@ -610,8 +596,9 @@ class TurretClient:
                 if response is not None:
                     return response
                 if self._bus is None:
-                    break
-        raise ServiceError(
+                    raise LinkError(f"CAN interface {self.description} lost during {service}"
+                                    f": {self.last_link_error}")
+        raise ServiceTimeout(
             f"no {service} response from node {message.node_id} within "
             f"{self.config.service_timeout * 1000:.0f} ms ({attempts} attempts) on "
             f"{self.description}")
@@ -646,17 +633,17 @@ class TurretClient:
             self.send(start)
             reply = exchange.wait_next(timeout)
             if reply is None:
-                raise ServiceError(f"no DDS response from node {node} within "
+                raise ServiceTimeout(f"no DDS response from node {node} within "
                                    f"{timeout * 1000:.0f} ms")
             flow = ns.response_status(reply)
             final = None
             for message in messages:
                 while flow != ns.ServiceStatus.XON:
                     if flow in (ns.ServiceStatus.ABORT, ns.ServiceStatus.INVALID):
-                        raise ServiceError(self._download_ended(node, flow))
+                        raise ServiceRefused(self._download_ended(node, flow))
                     reply = exchange.wait_next(timeout * 10)  # XOFF: wait for XON
                     if reply is None:
-                        raise ServiceError(f"node {node} paused the download (XOFF) and "
+                        raise ServiceTimeout(f"node {node} paused the download (XOFF) and "
                                            "never resumed")
                     flow = ns.response_status(reply)
                 self.send(message)
@@ -669,7 +656,7 @@ class TurretClient:
             while final is None:
                 reply = exchange.wait_next(max(0.0, deadline - time.monotonic()))
                 if reply is None:
-                    raise ServiceError(f"node {node} sent no DDS checksum")
+                    raise ServiceTimeout(f"node {node} sent no DDS checksum")
                 if reply.data_type == DataType.CHKSUM:
                     final = reply
                 else:
@@ -701,7 +688,7 @@ class TurretClient:
     def _download_reply(self, reply: CanAerospaceMessage, node: int) -> int:
         status = ns.response_status(reply)
         if status in (ns.ServiceStatus.ABORT, ns.ServiceStatus.INVALID):
-            raise ServiceError(self._download_ended(node, status))
+            raise ServiceRefused(self._download_ended(node, status))
         return status
 
     def upload(self, memory_id: int, length: int, node_id: int | None = None) -> bytes:
@@ -721,22 +708,22 @@ class TurretClient:
             self.send(start)
             reply = exchange.wait_next(timeout)
             if reply is None:
-                raise ServiceError(f"no DUS response from node {node} within "
+                raise ServiceTimeout(f"no DUS response from node {node} within "
                                    f"{timeout * 1000:.0f} ms")
             status = ns.response_status(reply)
             if status != ns.ServiceStatus.OK:
-                raise ServiceError(f"node {node} refused the upload of memory {memory_id}: "
+                raise ServiceRefused(f"node {node} refused the upload of memory {memory_id}: "
                                    f"{ns.status_text(ns.ServiceCode.DUS, status)}")
             deadline = time.monotonic() + timeout + 0.01 * count + 0.5
             while True:
                 reply = exchange.wait_next(max(0.0, deadline - time.monotonic()))
                 if reply is None:
-                    raise ServiceError(f"DUS from node {node}: {len(received)} of {count} "
+                    raise ServiceTimeout(f"DUS from node {node}: {len(received)} of {count} "
                                        "data messages, then silence")
                 if reply.data_type == DataType.CHKSUM:
                     break
                 if reply.data_type == DataType.LONG:
-                    raise ServiceError(f"node {node} aborted the upload: "
+                    raise ServiceRefused(f"node {node} aborted the upload: "
                                        f"{ns.status_text(ns.ServiceCode.DUS, int(reply.value))}")
                 value = reply.value
                 received[reply.message_code] = bytes(value if isinstance(value, tuple)
@@ -775,7 +762,7 @@ class TurretClient:
             raise CommandError(f"TIS for {key}: {exc}") from exc
         status = ns.response_status(self.request(request))
         if status != ns.ServiceStatus.OK:
-            raise ServiceError(f"node {node} refused TIS {key} (id {ident.can_id}) = "
+            raise ServiceRefused(f"node {node} refused TIS {key} (id {ident.can_id}) = "
                                f"{interval_ms} ms: {ns.status_text(ns.ServiceCode.TIS, status)}")
         self._intervals_ms[key] = int(interval_ms)
         self._observed_interval.pop(key, None)
@@ -828,7 +815,7 @@ class TurretClient:
             raise CommandError(str(exc)) from exc
         status = ns.response_status(self.request(request))
         if status != ns.ServiceStatus.OK:
-            raise ServiceError(f"node {node} refused node-id {new_node_id}: "
+            raise ServiceRefused(f"node {node} refused node-id {new_node_id}: "
                                f"{ns.status_text(ns.ServiceCode.NIS, status)}")
         for name in ("turret_node_id", "cover_node_id", "rover_gnss_node_id",
                      "base_gnss_node_id", "zoom_node_id"):
@@ -846,7 +833,7 @@ class TurretClient:
         status = ns.response_status(self.request(
             ns.fps_request(node, security_code, self.config.service_channel)))
         if status != ns.ServiceStatus.OK:
-            raise ServiceError(f"node {node} refused flash programming: "
+            raise ServiceRefused(f"node {node} refused flash programming: "
                                f"{ns.status_text(ns.ServiceCode.FPS, status)}")
 
     def data_identifiers(self) -> list[Identifier]:

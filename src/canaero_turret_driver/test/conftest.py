@@ -32,12 +32,43 @@ def simulator(channel_name):
 
 @pytest.fixture
 def client(simulator, channel_name):
-    config = ClientConfig(interface="virtual", channel=channel_name, service_timeout=0.5,
-                          reconnect_period=0.1)
+    config = ClientConfig(interface="virtual", channel=channel_name, service_timeout=0.5)
     turret = TurretClient(config)
     turret.open()
     yield turret
     turret.close()
+
+
+class FlakyBus(can.BusABC):
+    """A virtual bus whose receive fails while `script` holds faults: "raise" (the adapter
+    vanished) or "busoff" (an error frame with the bus-off bit); a test may add more later."""
+
+    def __init__(self, channel, script):
+        self._inner = can.Bus(interface="virtual", channel=channel)
+        self._script = script
+        super().__init__(channel=channel)
+
+    def _recv_internal(self, timeout):
+        if self._script:
+            action = self._script.pop(0)
+            if action == "raise":
+                raise can.CanOperationError("adapter unplugged")
+            if action == "busoff":
+                return can.Message(is_error_frame=True, arbitration_id=0x40), False
+        return self._inner._recv_internal(timeout)
+
+    def send(self, msg, timeout=None):
+        self._inner.send(msg, timeout)
+
+    def shutdown(self):
+        self._inner.shutdown()
+        super().shutdown()
+
+
+@pytest.fixture
+def flaky_bus():
+    """The FlakyBus class, for a client's bus_factory."""
+    return FlakyBus
 
 
 @pytest.fixture
@@ -46,6 +77,57 @@ def spy_bus(channel_name):
     bus = can.Bus(interface="virtual", channel=channel_name)
     yield bus
     bus.shutdown()
+
+
+def _controller_config(**overrides):
+    """The turret's default joints and limits as a ControllerConfig (fast reconnects)."""
+    import math
+
+    from gimbal_driver_common.controller import ControllerConfig
+    from gimbal_driver_common.joint_command import limits_from_parameters
+
+    joints = ["yaw", "pitch"]
+    limits = limits_from_parameters(joints, [-math.pi, math.radians(-30.0)],
+                                    [math.pi, math.radians(60.0)],
+                                    [math.radians(60.0), math.radians(40.0)])
+    values = dict(joint_names=joints, limits=limits, publish_rate=50.0, command_timeout=0.4,
+                  reconnect_period=0.2, goal_tolerance=0.011, move_timeout=30.0)
+    values.update(overrides)
+    return ControllerConfig(**values)
+
+
+@pytest.fixture(scope="session")
+def controller_config():
+    """`_controller_config`: ControllerConfig for the turret's joints, with overrides."""
+    return _controller_config
+
+
+@contextlib.contextmanager
+def _supervised(client, settings=None, **config):
+    """`client` as a `TurretDevice` run by gimbal_driver_common's controller (the link
+    supervisor the node uses), open and active; yields the controller."""
+    import logging
+
+    from canaero_turret_driver.device import TurretDevice, TurretSettings
+    from gimbal_driver_common.controller import GimbalController
+
+    controller_config = _controller_config(**config)
+    log = logging.getLogger("canaero_turret_driver.test")
+    device = TurretDevice(client, settings or TurretSettings(),
+                          lambda: controller_config.publish_rate, log)
+    controller = GimbalController(device, controller_config, log)
+    controller.open()
+    controller.activate()
+    try:
+        yield controller
+    finally:
+        controller.shutdown()
+
+
+@pytest.fixture(scope="session")
+def supervised():
+    """The `_supervised` context manager: a client under the controller's supervisor."""
+    return _supervised
 
 
 @pytest.fixture(scope="session")

@@ -316,45 +316,29 @@ def test_commands_use_master_node_id_and_rolling_codes(client, spy_bus):
     assert len(seen[0]) == 8  # FLOAT: 4 header + 4 data bytes
 
 
-class _FlakyBus(can.BusABC):
-    """A bus that fails once on receive, then reports bus-off, then works."""
-
-    def __init__(self, channel, script):
-        self._inner = can.Bus(interface="virtual", channel=channel)
-        self._script = script
-        super().__init__(channel=channel)
-
-    def _recv_internal(self, timeout):
-        if self._script:
-            action = self._script.pop(0)
-            if action == "raise":
-                raise can.CanOperationError("adapter unplugged")
-            if action == "busoff":
-                return can.Message(is_error_frame=True, arbitration_id=0x40), False
-        return self._inner._recv_internal(timeout)
-
-    def send(self, msg, timeout=None):
-        self._inner.send(msg, timeout)
-
-    def shutdown(self):
-        self._inner.shutdown()
-        super().shutdown()
-
-
-def test_interface_errors_are_survived_with_reconnect(simulator, channel_name):
+def test_interface_errors_drop_the_bus_and_open_reopens_it(simulator, channel_name, flaky_bus):
+    """The client has no reconnect loop: an interface error drops the bus (and ends the
+    receive thread); close() + open() reopens it. test_device.py has the supervisor
+    doing that by itself."""
     script = ["raise", "busoff"]
     links = []
-    config = ClientConfig(interface="virtual", channel=channel_name, reconnect_period=0.05,
-                          service_timeout=0.5)
-    turret = TurretClient(config, bus_factory=lambda cfg: _FlakyBus(cfg.channel, script))
+    config = ClientConfig(interface="virtual", channel=channel_name, service_timeout=0.5)
+    turret = TurretClient(config, bus_factory=lambda cfg: flaky_bus(cfg.channel, script))
     turret.on_link = lambda up, why: links.append((up, why))
     turret.open()
     try:
-        assert wait_for(lambda: turret.counters.reconnects >= 2)
+        for reason in ("adapter unplugged", "bus-off"):
+            assert wait_for(lambda r=reason: any(r in why for up, why in links if not up)), links
+            assert not turret.connected
+            with pytest.raises(LinkError, match="not open"):
+                turret.move_to("yaw", 0.1)
+            turret.close()
+            turret.open()
+        assert turret.counters.reconnects == 2
         assert turret.counters.bus_errors >= 1
-        assert any("bus-off" in why for up, why in links if not up)
         assert wait_for(lambda: turret.latest("yaw_position") is not None)
         assert turret.identify().software_revision == 7
+        assert turret.connected
     finally:
         turret.close()
 
@@ -453,23 +437,6 @@ def test_transfer_numbering_mismatch_is_named(numbered_rig, channel_name):
     assert bytes(sim.memories[1].data[:8]) == bytes(8)  # nothing was written
     with pytest.raises(ServiceError, match="transfer_first_number"):
         client.upload(16, 8)
-
-
-def test_axis_sign_maps_device_direction(simulator, channel_name):
-    config = ClientConfig(interface="virtual", channel=channel_name, yaw_sign=-1.0)
-    turret = TurretClient(config)
-    turret.open()
-    try:
-        turret.move_to("yaw", 0.25)  # REP-103 +0.25 rad = device -14.3 deg
-        assert wait_for(lambda: abs(simulator.state()["axes"]["yaw"]["position"]
-                                    + math.degrees(0.25)) < 1e-3)
-        assert wait_for(lambda: abs((_si(turret, "yaw_position") or 9) - 0.25) < 1e-3)
-        turret.jog("yaw", 0.1)
-        assert wait_for(lambda: simulator.state()["axes"]["yaw"]["velocity"] < -5.0)
-        assert wait_for(lambda: (_si(turret, "yaw_velocity") or 0) > 0.09)
-        turret.stop()
-    finally:
-        turret.close()
 
 
 def test_device_restart_of_message_codes_is_followed(client, simulator):

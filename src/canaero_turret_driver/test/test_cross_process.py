@@ -67,7 +67,7 @@ def remote_client(sim_process):
     endpoint, _ = sim_process
     config = ClientConfig(interface="slcan", channel=endpoint["channel"],
                           bus_options={"sleep_after_open": 0}, service_timeout=0.5,
-                          reconnect_period=0.2, node_timeout=0.5, stale_timeout=0.5)
+                          node_timeout=0.5, stale_timeout=0.5)
     client = TurretClient(config)
     client.open()
     yield client
@@ -114,17 +114,38 @@ def test_lost_frames_garbage_and_eed_across_processes(sim_process, remote_client
     assert control.command("bogus").startswith("error")
 
 
-def test_link_drop_reconnects_by_itself(sim_process, remote_client):
+def _record_links(client: TurretClient) -> list[bool]:
+    """Every link change of `client` (up True, down False), keeping its own callback."""
+    links: list[bool] = []
+    chained = client.on_link
+
+    def record(up: bool, why: str) -> None:
+        links.append(up)
+        if chained is not None:
+            chained(up, why)
+
+    client.on_link = record
+    return links
+
+
+def _reconnected(controller, links: list[bool]) -> bool:
+    """The link went down and came up again, and the controller is connected."""
+    return False in links and True in links[links.index(False):] and controller.connected
+
+
+def test_link_drop_is_reopened_by_the_supervisor(sim_process, remote_client, supervised):
+    """The client has no reconnect loop: the controller (as in the node) reopens it."""
     _, control = sim_process
-    links = []
-    remote_client.on_link = lambda up, why: links.append(up)
-    assert wait_for(lambda: remote_client.latest("yaw_position") is not None)
-    assert control.command("drop_link 0.5") == "ok"
-    assert wait_for(lambda: False in links)
-    assert wait_for(lambda: remote_client.connected and True in links, timeout=15.0)
-    assert wait_for(lambda: not remote_client.is_stale("yaw_position"), timeout=10.0)
-    assert remote_client.counters.reconnects >= 1
-    assert remote_client.identify().hardware_revision == 2
+    with supervised(remote_client) as controller:
+        links = _record_links(remote_client)
+        assert wait_for(lambda: remote_client.latest("yaw_position") is not None)
+        assert control.command("drop_link 0.5") == "ok"
+        assert wait_for(lambda: False in links)
+        assert wait_for(lambda: _reconnected(controller, links), timeout=30.0)
+        assert wait_for(lambda: not remote_client.is_stale("yaw_position"), timeout=10.0)
+        assert remote_client.counters.reconnects >= 1
+        assert controller.reconnects >= 1
+        assert remote_client.identify().hardware_revision == 2
 
 
 @pytest.fixture
@@ -136,33 +157,34 @@ def socketcand_sim(tmp_path):
 def _socketcand_client(endpoint) -> TurretClient:
     config = ClientConfig(interface="socketcand", channel=endpoint["channel"],
                           bus_options={"host": endpoint["host"], "port": endpoint["port"]},
-                          service_timeout=0.5, reconnect_period=0.2, node_timeout=0.5,
-                          stale_timeout=0.5, reopen_after_silence=1.0)
+                          service_timeout=0.5, node_timeout=0.5, stale_timeout=0.5,
+                          reopen_after_silence=1.0)
     client = TurretClient(config)
     client.open()
     return client
 
 
-def test_socketcand_bridge_is_a_shared_bus(socketcand_sim):
+def test_socketcand_bridge_is_a_shared_bus(socketcand_sim, supervised):
     endpoint, control = socketcand_sim
     assert endpoint["host"] == "127.0.0.1"
     first, second = _socketcand_client(endpoint), _socketcand_client(endpoint)
     try:
-        assert first.identify().software_revision == 7
-        first.move_to("pitch", 0.3)
-        assert wait_for(lambda: second.latest("pitch_position") is not None
-                        and abs(second.latest("pitch_position").si - 0.3) < 1e-3)
-        assert control.command("silence turret") == "ok"
-        assert wait_for(lambda: second.node_silent())
-        assert control.command("resume") == "ok"
-        assert wait_for(lambda: not second.node_silent())
-        links = []
-        first.on_link = lambda up, why: links.append(up)
-        assert control.command("drop_link 0.3") == "ok"
-        assert wait_for(lambda: False in links)
-        assert wait_for(lambda: first.connected and True in links, timeout=15.0)
-        assert wait_for(lambda: not first.is_stale("yaw_position"), timeout=10.0)
-        assert first.identify().hardware_revision == 2
+        with supervised(first) as controller:
+            assert first.identify().software_revision == 7
+            first.move_to("pitch", 0.3)
+            assert wait_for(lambda: second.latest("pitch_position") is not None
+                            and abs(second.latest("pitch_position").si - 0.3) < 1e-3)
+            assert control.command("silence turret") == "ok"
+            assert wait_for(lambda: second.node_silent())
+            assert control.command("resume") == "ok"
+            assert wait_for(lambda: not second.node_silent())
+            assert wait_for(lambda: controller.connected, timeout=30.0)  # after the silence
+            links = _record_links(first)
+            assert control.command("drop_link 0.3") == "ok"
+            assert wait_for(lambda: False in links)
+            assert wait_for(lambda: _reconnected(controller, links), timeout=30.0)
+            assert wait_for(lambda: not first.is_stale("yaw_position"), timeout=10.0)
+            assert first.identify().hardware_revision == 2
     finally:
         first.close()
         second.close()

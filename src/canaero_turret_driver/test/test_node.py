@@ -21,7 +21,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from gimbal_driver_common.testing import wait_for
 from gimbal_msgs.action import MoveTo
-from gimbal_msgs.msg import GimbalStatus
+from gimbal_msgs.msg import AxisState, GimbalStatus
 from gimbal_msgs.srv import (
     ClearPreset,
     DeviceCommand,
@@ -79,6 +79,14 @@ def move(ros, names, values, relative=False):
     return ros.run_action(MoveTo, f"/{NODE}/move_to", goal, timeout=40)
 
 
+def test_status_constants_are_axis_state_values():
+    """status.py imports no ROS; its AxisState.STATE_* copies must stay equal."""
+    from canaero_turret_driver import status
+
+    assert (status.STATE_FAULT, status.STATE_DISABLED) == (AxisState.STATE_FAULT,
+                                                           AxisState.STATE_DISABLED)
+
+
 def test_joint_states_status_and_diagnostics(rig):
     ros, _, _, _ = rig
     msg = ros.wait_for_message("joint_states", JointState, lambda m: len(m.effort) == 2)
@@ -116,6 +124,9 @@ def test_motion_refused_on_a_faulted_axis_before_sending(rig):
     ros, control, _, _ = rig
     assert control.command("fault yaw") == "ok"
     wait_diag(ros, "yaw", 2)
+    status = ros.wait_for_message(f"/{NODE}/status", GimbalStatus,
+                                  lambda m: m.axes and m.axes[0].state == AxisState.STATE_FAULT)
+    assert status.axes[0].active_errors == ["drive_disabled"]
     before = control.state()["commands_received"]
     result, _, _ = move(ros, ["yaw"], [0.3])
     assert not result.success and "'yaw': drive disabled (fault)" in result.message

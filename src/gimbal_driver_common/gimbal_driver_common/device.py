@@ -82,6 +82,11 @@ class DevicePresets(abc.ABC):
     def goto(self, index: int, speed: float) -> str:
         """Move to a stored slot (speed 0: the device default)."""
 
+    def target(self, index: int) -> dict[str, float] | None:
+        """Where :meth:`goto` of ``index`` moves the joints, when the driver knows it
+        (it becomes the axes' ``target_position`` in ~/status); None: unknown."""
+        return None
+
     @abc.abstractmethod
     def list(self) -> list[tuple[int, str, dict[str, float]]]:
         """The stored slots as (index, name, joint positions)."""

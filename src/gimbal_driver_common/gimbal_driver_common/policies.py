@@ -248,7 +248,9 @@ class Motion:
         if device is not None:
             ctl.require(ctl.config.joint_names)
             self.preempt()
-            return ctl.call(lambda: device.goto(index, speed))
+            message = ctl.call(lambda: device.goto(index, speed))
+            ctl.commanded_targets.update(device.target(index) or {})
+            return message
         preset = self.store.get(index)
         names = [n for n in preset.positions if n in ctl.config.limits]
         ctl.require(names)

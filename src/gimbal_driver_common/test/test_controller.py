@@ -401,6 +401,23 @@ def test_device_slot_composes_with_the_yaml_store(motion, device) -> None:
     assert motion.list_presets() == []
 
 
+def test_device_slot_target_becomes_the_commanded_target(motion, controller, device) -> None:
+    """A device slot that knows where it leads (DevicePresets.target) sets target_position."""
+
+    class KnownSlot(SlotZeroPresets):
+        def target(self, index):
+            return dict(self.slot[1]) if self.slot else None
+
+    device.capabilities.presets = SlotZeroPresets()
+    motion.set_preset(0, 'home', {'pan': 0.3, 'tilt': 0.1})
+    motion.goto_preset(0, 0.0)
+    assert 'pan' not in controller.commanded_targets  # target unknown: left alone
+    device.capabilities.presets = known = KnownSlot()
+    known.slot = ('home', {'pan': 0.3, 'tilt': 0.1})
+    motion.goto_preset(0, 0.0)
+    assert controller.commanded_targets == {'pan': 0.3, 'tilt': 0.1}
+
+
 def test_preset_refusals(motion, device) -> None:
     with pytest.raises(InvalidRequest):
         motion.set_preset(1, 'x', {'pan': 9.0})
