@@ -15,9 +15,13 @@ waits for the ACK. On a serial line there is no greeting; the client sends COM_C
 
 Keep-alive (4.6.5): with ``keepalive_period`` > 0 the client configures the controller's
 supervision (COM_setKeepAliveTimeout/Count, COM_StartKeepAlive) so a dead host makes the
-pedestal stop, and a background thread sends COM_IsKeepAliveOn whenever the link has been
-idle for ``keepalive_period``. With ``auto_reconnect`` the same thread reopens a lost link
-(exponential backoff) and requests made meanwhile fail fast with :class:`NotConnected`.
+pedestal stop, and a background thread (:meth:`CaptureClient.start`) sends COM_IsKeepAliveOn
+whenever the link has been idle for ``keepalive_period``.
+
+A lost link raises :class:`NotConnected` and stays closed: reopening it is the job of the
+one connection supervisor, :class:`gimbal_driver_common.controller.GimbalController`, which
+calls :meth:`CaptureClient.connect` through the device adapter (``device.py``). The errors
+subclass the shared hierarchy in :mod:`gimbal_driver_common.errors`.
 """
 
 from __future__ import annotations
@@ -30,7 +34,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from gimbal_driver_common.transport import Backoff, ByteStream, TransportError
+from gimbal_driver_common import errors
+from gimbal_driver_common.transport import ByteStream, TransportError
 
 from .protocol import (
     REPLY_INFO,
@@ -58,20 +63,20 @@ SCAN_COMMANDS = {
 }
 
 
-class CaptureError(Exception):
+class CaptureError(errors.GimbalError):
     """Base of the client's errors; the message is meant for a person."""
 
 
-class NotConnected(CaptureError):
-    """No link to the controller (not opened yet, or lost and not yet recovered)."""
+class NotConnected(CaptureError, errors.LinkError):
+    """No link to the controller (not opened yet, or lost: the supervisor reconnects)."""
 
 
-class DeviceTimeout(CaptureError):
+class DeviceTimeout(CaptureError, errors.DeviceTimeout):
     """The controller did not answer in time."""
 
 
-class DeviceNack(CaptureError):
-    """The controller answered with a NACK byte."""
+class DeviceNack(CaptureError, errors.DeviceRefused):
+    """The controller answered with a NACK byte; the message carries its meaning."""
 
     def __init__(self, request: str, code: ReplyCode, detail: str = '') -> None:
         info = REPLY_INFO[code]
@@ -106,8 +111,6 @@ class CaptureClient:
         expect_greeting: bool = True,
         keepalive_period: float = 0.0,
         keepalive_count: int = 3,
-        auto_reconnect: bool = False,
-        reconnect_backoff: Backoff | None = None,
         resync_gap: float = 0.05,
         max_timeouts: int = 3,
     ) -> None:
@@ -118,8 +121,6 @@ class CaptureClient:
         self.expect_greeting = expect_greeting
         self.keepalive_period = keepalive_period
         self.keepalive_count = keepalive_count
-        self.auto_reconnect = auto_reconnect
-        self._backoff = reconnect_backoff or Backoff(0.2, 5.0)
         self.resync_gap = resync_gap
         self.max_timeouts = max_timeouts
         self._lock = threading.RLock()
@@ -129,15 +130,13 @@ class CaptureClient:
         self._connect_opcode = command('COM_Connect').opcode
         self._last_activity = 0.0
         self._consecutive_timeouts = 0
-        self._next_reconnect = 0.0
         self._worker: threading.Thread | None = None
         self._stop = threading.Event()
         self.last_error = 'not connected'
         self.connects = 0
         self.stats = {'requests': 0, 'timeouts': 0, 'nacks': 0, 'stale': 0}
-        self.on_connect: Callable[[], None] | None = None
         # Commands the host sends on its own whose opcode the device refused with 0xA6
-        # (name -> the device's answer); never sent again on this client.
+        # (name -> the device's answer); never sent again on this connection.
         self.unsupported: dict[str, str] = {}
 
     # ---------------------------------------------------------------- link
@@ -166,6 +165,7 @@ class CaptureClient:
                 raise NotConnected(str(exc)) from exc
             self._stream = stream
             self._decoder.reset()
+            self.unsupported = {}  # a new connection may be a different controller
             try:
                 self._handshake()
                 self._connected = True
@@ -177,12 +177,8 @@ class CaptureClient:
                 self._close_locked()
                 raise NotConnected(self.last_error) from exc
             self.connects += 1
-            self._backoff.reset()
             self.last_error = ''
         LOG.info('connected to %s', self.description)
-        callback = self.on_connect
-        if callback is not None:
-            callback()
 
     def _handshake(self) -> None:
         if self.expect_greeting:
@@ -237,10 +233,9 @@ class CaptureClient:
         if self._connected:
             LOG.warning('link lost: %s', why)
         self._close_locked()
-        self._next_reconnect = time.monotonic() + self._backoff.next_delay()
 
     def start(self) -> None:
-        """Start the keep-alive / reconnect thread (needed only for those two features)."""
+        """Start the keep-alive thread (needed only with ``keepalive_period`` > 0)."""
         if self._worker is not None and self._worker.is_alive():
             return
         self._stop.clear()
@@ -257,15 +252,7 @@ class CaptureClient:
     def _run(self) -> None:
         tick = 0.05
         while not self._stop.wait(tick):
-            if not self._connected:
-                if self.auto_reconnect and time.monotonic() >= self._next_reconnect:
-                    try:
-                        self.connect()
-                    except CaptureError as exc:
-                        self._next_reconnect = time.monotonic() + self._backoff.next_delay()
-                        LOG.debug('reconnect failed: %s', exc)
-                continue
-            if self.keepalive_period > 0 and (
+            if self._connected and self.keepalive_period > 0 and (
                 time.monotonic() - self._last_activity >= self.keepalive_period
             ):
                 with contextlib.suppress(CaptureError):
@@ -281,13 +268,6 @@ class CaptureClient:
         """
         cmd = command(name)
         with self._lock:
-            if not self._connected and self.auto_reconnect and (
-                time.monotonic() >= self._next_reconnect
-            ):
-                try:
-                    self.connect()
-                except CaptureError:
-                    self._next_reconnect = time.monotonic() + self._backoff.next_delay()
             return self._request_locked(cmd.name, axis, value, timeout)
 
     def _request_locked(self, name: str, axis: int | None, value: Any,

@@ -424,3 +424,15 @@ def test_deactivate_stops_the_axes_and_refuses_commands(controller, device) -> N
     controller.deactivate()
     assert device.sent[-1] == ('stop', None)
     assert controller.refusal() is not None
+
+
+def test_axis_state_codes_match_the_message() -> None:
+    """AxisStateCode (for ROS-free adapters) mirrors gimbal_msgs/AxisState's constants."""
+    from gimbal_driver_common.device import AxisStateCode
+
+    axis_state = pytest.importorskip(
+        'gimbal_msgs.msg', reason='needs the built workspace (make build)').AxisState
+    for code in AxisStateCode:
+        assert getattr(axis_state, f'STATE_{code.name}') == code.value
+    assert {n for n in dir(axis_state) if n.startswith('STATE_')} == {
+        f'STATE_{code.name}' for code in AxisStateCode}
