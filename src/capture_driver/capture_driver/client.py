@@ -39,7 +39,6 @@ from gimbal_driver_common.transport import ByteStream, TransportError
 
 from .protocol import (
     REPLY_INFO,
-    Command,
     Frame,
     GeoPoint,
     PresetRecord,
@@ -603,10 +602,3 @@ class TrackingState:
             return 'auto'
         return 'manual' if self.active else 'off'
 
-
-def describe_command(cmd: Command) -> str:
-    """One line per table entry (README and ~/command help)."""
-    arg = f'{cmd.arg.value} [{cmd.arg_unit}]' if cmd.arg_unit else cmd.arg.value
-    ret = f'{cmd.ret.value} [{cmd.ret_unit}]' if cmd.ret_unit else cmd.ret.value
-    return (f'{cmd.name} 0x{cmd.opcode:04X} axis={cmd.axis.name} arg={arg} ret={ret} '
-            f'({cmd.confidence})')

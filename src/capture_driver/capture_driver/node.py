@@ -384,24 +384,26 @@ class CaptureDriverNode(GimbalDriverNode):
         return self._device_service(response, lambda d: d.start_preset_loop())
 
     def _on_stop_loop(self, request, response):
-        def stop(device: CaptureDevice) -> str:
-            device.stop_preset_loop()
-            self.controller.stop()
-            return 'preset looping stopped'
-
-        return self._device_service(response, stop)
+        return self._stop_program(response, lambda d: d.stop_preset_loop(),
+                                  'preset looping stopped')
 
     def _on_start_target_loop(self, request, response):
         return self._device_service(response, lambda d: d.start_target_loop(),
                                     self.joint_names[:2])
 
     def _on_stop_target_loop(self, request, response):
-        def stop(device: CaptureDevice) -> str:
-            device.stop_target_loop()
-            self.controller.stop()
-            return 'target looping stopped'
+        return self._stop_program(response, lambda d: d.stop_target_loop(),
+                                  'target looping stopped')
 
-        return self._device_service(response, stop)
+    def _stop_program(self, response: object, stop: Callable[[CaptureDevice], None],
+                      message: str) -> object:
+        """End a device program (loop), then stop every axis as ~/stop does."""
+        def run(device: CaptureDevice) -> str:
+            stop(device)
+            self.controller.stop()
+            return message
+
+        return self._device_service(response, run)
 
     def _on_reset_gyro_drift(self, request, response):
         return self._device_service(response, lambda d: d.reset_gyro_drift())
