@@ -21,6 +21,7 @@ from typing import TypeVar
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
 from std_msgs.msg import MultiArrayDimension, UInt8MultiArray
 from std_srvs.srv import SetBool, Trigger
@@ -248,6 +249,12 @@ class CaptureDriverNode(GimbalDriverNode):
             self.periodic.remove(job)  # a reconfigure adds them again
             self.periodic.add(self._job_period(rate_name), job)
 
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        result = super().on_activate(state)
+        for job, _ in self._sensor_jobs():  # publish at once, as the first poll did
+            self.periodic.trigger(job)
+        return result
+
     @property
     def capture(self) -> CaptureDevice:
         """The adapter (after configure)."""
@@ -412,17 +419,27 @@ class CaptureDriverNode(GimbalDriverNode):
         def ranging(device: CaptureDevice) -> str:
             message = device.set_ranging(request.data)
             if request.data:
+                self.periodic.trigger(self._publish_range)
                 message += f': ~/range at {self.range_rate:g} Hz'
             return message
 
         return self._device_service(response, ranging)
 
     def _on_set_tracking(self, request, response):
-        return self._device_service(response, lambda d: d.set_tracking(request.mode))
+        def tracking(device: CaptureDevice) -> str:
+            message = device.set_tracking(request.mode)
+            self.periodic.trigger(self._publish_tracking)
+            return message
+
+        return self._device_service(response, tracking)
 
     def _on_set_output(self, number: int, request, response):
-        return self._device_service(
-            response, lambda d: d.set_digital_output(number, request.data))
+        def output(device: CaptureDevice) -> str:
+            message = device.set_digital_output(number, request.data)
+            self.periodic.trigger(self._publish_digital_io)
+            return message
+
+        return self._device_service(response, output)
 
     def _on_enable(self, request, response):
         def enable(device: CaptureDevice) -> str:

@@ -436,3 +436,17 @@ def test_axis_state_codes_match_the_message() -> None:
         assert getattr(axis_state, f'STATE_{code.name}') == code.value
     assert {n for n in dir(axis_state) if n.startswith('STATE_')} == {
         f'STATE_{code.name}' for code in AxisStateCode}
+
+
+def test_periodic_trigger_runs_a_job_now_then_on_its_period() -> None:
+    from gimbal_driver_common.periodic import Periodic
+
+    periodic = Periodic()
+    runs = threading.Semaphore(0)
+    try:
+        periodic.add(3600.0, runs.release)  # would first run in an hour
+        periodic.trigger(runs.release)
+        assert runs.acquire(timeout=10.0)
+        assert not runs.acquire(timeout=0.2)  # once, then back on its period
+    finally:
+        periodic.stop()
