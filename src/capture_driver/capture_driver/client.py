@@ -129,6 +129,10 @@ class CaptureClient:
         self._connect_opcode = command('COM_Connect').opcode
         self._last_activity = 0.0
         self._consecutive_timeouts = 0
+        # axis -> (mode, acceleration) this client's last motion set-up left on the device;
+        # forgotten on connect and on any other command that changes something
+        self._setups: dict[int, tuple[str, float | None]] = {}
+        self._in_setup = False
         self._worker: threading.Thread | None = None
         self._stop = threading.Event()
         self.last_error = 'not connected'
@@ -223,6 +227,7 @@ class CaptureClient:
 
     def _close_locked(self) -> None:
         self._connected = False
+        self._setups.clear()
         stream, self._stream = self._stream, None
         if stream is not None:
             stream.close()
@@ -276,6 +281,8 @@ class CaptureClient:
         frame = cmd.frame(axis, value, self.group if group is None else group)
         if self._stream is None:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
+        if not cmd.replies_with_data and not self._in_setup:
+            self._setups.clear()  # anything may have changed an axis' mode or profile
         for attempt in (1, 2):
             try:
                 reply = self._transact(name, frame, cmd.replies_with_data,
@@ -423,30 +430,74 @@ class CaptureClient:
         current = self.request('MOT_GetMotorCurrent', axis) if with_current else None
         return position, speed, current
 
+    def exclusive(self) -> threading.RLock:
+        """The request lock, for a caller that sends a whole motion set-up (several axes)
+        without the poll thread's requests in between: ``with client.exclusive(): ...``."""
+        return self._lock
+
     def move_absolute(self, axis: int, position_deg: float, speed_deg_s: float,
                       acceleration: float) -> None:
-        """The 7.1 motion profile, absolute: mode, TUM, absolute, acc, speed, position, update."""
-        for name, value in (
-            ('MOT_SetPositionMode', None), ('MOT_SetTum', None),
-            ('MOT_SetPositionAbsolute', None), ('MOT_SetAcceleration', acceleration),
-            ('MOT_SetSpeed', abs(speed_deg_s)), ('MOT_SendPosition', position_deg),
-            ('MOT_Update', None),
-        ):
-            self.run(name, axis, value)
+        """The 7.1 motion profile, absolute: mode, TUM, absolute, acc, speed, position, update.
+
+        When this client's last set-up of the axis was an absolute move and nothing else was
+        commanded since, the mode commands (SetPositionMode, SetPositionAbsolute) and an
+        unchanged acceleration are left out: 4 round trips instead of 7. TUM (4.2.14:
+        "advisable before each command session"), the speed, the position and MOT_Update
+        are always sent.
+        """
+        with self._lock:
+            known = self._setups.pop(axis, None)
+            same_mode = known is not None and known[0] == 'absolute'
+            steps: list[tuple[str, Any]] = []
+            if not same_mode:
+                steps.append(('MOT_SetPositionMode', None))
+            steps.append(('MOT_SetTum', None))
+            if not same_mode:
+                steps.append(('MOT_SetPositionAbsolute', None))
+            if not same_mode or known[1] != acceleration:
+                steps.append(('MOT_SetAcceleration', acceleration))
+            steps += [('MOT_SetSpeed', abs(speed_deg_s)), ('MOT_SendPosition', position_deg),
+                      ('MOT_Update', None)]
+            self._run_setup(axis, steps)
+            self._setups[axis] = ('absolute', acceleration)
 
     def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:
-        """Speed mode (4.2.9): the axis turns at ``velocity_deg_s`` until told otherwise."""
-        for name, value in (
-            ('MOT_SetSpeedMode', None), ('MOT_SetAcceleration', acceleration),
-            ('MOT_SetSpeed', velocity_deg_s), ('MOT_Update', None),
-        ):
-            self.run(name, axis, value)
+        """Speed mode (4.2.9): the axis turns at ``velocity_deg_s`` until told otherwise.
+
+        Speed mode and an unchanged acceleration are left out when this client's last
+        set-up of the axis left it in speed mode (a jog or a stop) and nothing else was
+        commanded since: a stream of jog commands costs 2 round trips each, not 4.
+        """
+        with self._lock:
+            known = self._setups.pop(axis, None)
+            same_mode = known is not None and known[0] == 'speed'
+            steps: list[tuple[str, Any]] = []
+            if not same_mode:
+                steps.append(('MOT_SetSpeedMode', None))
+            if not same_mode or known[1] != acceleration:
+                steps.append(('MOT_SetAcceleration', acceleration))
+            steps += [('MOT_SetSpeed', velocity_deg_s), ('MOT_Update', None)]
+            self._run_setup(axis, steps)
+            self._setups[axis] = ('speed', acceleration)
 
     def stop_axis(self, axis: int) -> None:
-        """Decelerate to rest: speed mode with speed 0 (works from position or speed mode)."""
-        for name, value in (('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
-                            ('MOT_Update', None)):
-            self.run(name, axis, value)
+        """Decelerate to rest: speed mode with speed 0 (works from position or speed mode).
+        Always the full sequence: a stop never relies on what the client remembers."""
+        with self._lock:
+            known = self._setups.pop(axis, None)
+            self._run_setup(axis, [('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
+                                   ('MOT_Update', None)])
+            self._setups[axis] = ('speed', known[1] if known else None)
+
+    def _run_setup(self, axis: int, steps: list[tuple[str, Any]]) -> None:
+        """Send one axis' motion set-up under the lock; the setters in it do not count as
+        "something else commanded" (see :attr:`_setups`)."""
+        self._in_setup = True
+        try:
+            for name, value in steps:
+                self.run(name, axis, value)
+        finally:
+            self._in_setup = False
 
     def stop_all(self, axes: list[int]) -> list[str]:
         """Stop scans, loops and every axis; returns the problems (empty when all worked)."""

@@ -410,35 +410,40 @@ class CaptureDevice(Device):
             self.target_looping = False
 
     def move(self, moves: Moves) -> None:
-        self.leave_device_programs()
+        """Absolute moves; the whole set-up of every axis under one hold of the client's
+        lock, so the poll does not interleave its reads."""
         acceleration = math.degrees(self.settings.acceleration)
-        for joint, (target, speed) in moves.items():
-            self.client.move_absolute(
-                self.axis(joint), self.to_device(joint, target),
-                math.degrees(speed if speed else self.settings.default_speed), acceleration)
+        with self.client.exclusive():
+            self.leave_device_programs()
+            for joint, (target, speed) in moves.items():
+                self.client.move_absolute(
+                    self.axis(joint), self.to_device(joint, target),
+                    math.degrees(speed if speed else self.settings.default_speed), acceleration)
 
     def jog(self, velocities: dict[str, float]) -> None:
-        self.leave_device_programs()
-        for joint, velocity in velocities.items():
-            if velocity == 0.0:
-                self.client.stop_axis(self.axis(joint))
-            else:
-                self.client.jog(self.axis(joint), self.to_device(joint, velocity),
-                                math.degrees(self.settings.acceleration))
+        with self.client.exclusive():
+            self.leave_device_programs()
+            for joint, velocity in velocities.items():
+                if velocity == 0.0:
+                    self.client.stop_axis(self.axis(joint))
+                else:
+                    self.client.jog(self.axis(joint), self.to_device(joint, velocity),
+                                    math.degrees(self.settings.acceleration))
 
     def stop(self, joints: Sequence[str] | None = None) -> None:
         """None: scans, loops and every axis (SCN_StopScan, PRST_StopPresetLooping,
         GPS_StopTargetLooping, then speed 0 per axis); else those axes."""
-        if joints is None:
-            problems = self.client.stop_all([self.axis(j) for j in self.joint_names])
-            self.device_scanning = self.preset_looping = self.target_looping = False
-        else:
-            problems = []
-            for joint in joints:
-                try:
-                    self.client.stop_axis(self.axis(joint))
-                except (DeviceNack, DeviceTimeout) as exc:
-                    problems.append(str(exc))
+        with self.client.exclusive():
+            if joints is None:
+                problems = self.client.stop_all([self.axis(j) for j in self.joint_names])
+                self.device_scanning = self.preset_looping = self.target_looping = False
+            else:
+                problems = []
+                for joint in joints:
+                    try:
+                        self.client.stop_axis(self.axis(joint))
+                    except (DeviceNack, DeviceTimeout) as exc:
+                        problems.append(str(exc))
         if problems:
             raise DeviceRefused('; '.join(problems))
 
