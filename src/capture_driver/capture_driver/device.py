@@ -153,6 +153,24 @@ class GpsFix:
     altitude: float  # m, NaN while GPS_GetAltitude's opcode is not established
 
 
+@dataclass
+class LevelErrors:
+    """Per joint, how far the IMU angle is from its levelling value (reported in degrees,
+    as the device counts them)."""
+
+    degrees: dict[str, float]
+
+    def within(self, tolerance: float) -> bool:
+        """All within ``tolerance`` rad."""
+        return all(abs(math.radians(e)) <= tolerance for e in self.degrees.values())
+
+    def progress(self) -> str:
+        return ', '.join(f'{j}: {abs(e):.3f} deg from level' for j, e in self.degrees.items())
+
+    def summary(self) -> str:
+        return ', '.join(f'{j} ({abs(e):.3f} deg)' for j, e in self.degrees.items())
+
+
 def axis_flags(registers: dict[str, int]) -> list[ActiveFlag]:
     """Active flags of one axis' polled registers (MER, DER, SRH, SRL, MSR, CMER, OPR)."""
     return [a for r in AXIS_REGISTERS for a in r.decode(registers.get(r.name, 0))]
@@ -700,8 +718,8 @@ class CaptureDevice(Device):
         self.client.run('IMU_ResetGyroDriftCompensation', sensor)
         return f'gyro drift compensation of IMU sensor {sensor} reset to 0'
 
-    def level_errors(self, joints: Sequence[str]) -> dict[str, float]:
-        """Per joint: device degrees between the IMU angle and its levelling value."""
+    def level_errors(self, joints: Sequence[str]) -> LevelErrors:
+        """Per joint: the angle between the IMU and its levelling value."""
         imu = self.client.imu()
         errors = {}
         for joint in joints:
@@ -709,7 +727,7 @@ class CaptureDevice(Device):
             level = self.client.request('IMU_getLevelingValue', axis)
             error = level - imu[IMU_ANGLE_BY_AXIS[axis]]
             errors[joint] = (error + 180.0) % 360.0 - 180.0  # yaw is 0..360
-        return errors
+        return LevelErrors(errors)
 
     def start_leveling(self, joints: Sequence[str]) -> None:
         """IMU_Leveling (4.5.11) per joint, after checking the pose it ends at (current
@@ -724,7 +742,7 @@ class CaptureDevice(Device):
         refusal = self.refusal(joints)
         if refusal:
             raise DeviceRefused(refusal)
-        errors = self.level_errors(joints)
+        errors = self.level_errors(joints).degrees
         targets = {j: self.from_device(j, self.client.request('MOT_GetLoadPosition',
                                                                self.axis(j)) + errors[j])
                    for j in joints}
@@ -734,20 +752,22 @@ class CaptureDevice(Device):
             self.client.run('IMU_Leveling', self.axis(joint))
         self.on_targets(targets)
 
-    def start_gyro_drift(self) -> int:
-        """IMU_GyroDriftCompensation on ``gyro_drift_sensor``; returns the sensor."""
+    def start_gyro_drift(self) -> None:
+        """IMU_GyroDriftCompensation on ``gyro_drift_sensor``."""
         if not self.has_imu:
             raise DeviceRefused('the controller reports no IMU (IMU_IsReadyImu)')
         refusal = self.refusal(self.joint_names)
         if refusal:
             raise DeviceRefused(refusal)
-        sensor = self.settings.gyro_drift_sensor
-        self.client.run('IMU_GyroDriftCompensation', sensor)
-        return sensor
+        self.client.run('IMU_GyroDriftCompensation', self.settings.gyro_drift_sensor)
 
-    def gyro_drift(self) -> float:
-        """The measured drift of ``gyro_drift_sensor`` in deg/s (as the device reports)."""
-        return self.client.request('IMU_GetGyroDrift', self.settings.gyro_drift_sensor)
+    def gyro_drift_result(self) -> str:
+        """The drift ``gyro_drift_sensor`` measured, in deg/s (as the device reports) and
+        rad/s."""
+        sensor = self.settings.gyro_drift_sensor
+        drift = self.client.request('IMU_GetGyroDrift', sensor)
+        return (f'gyro drift of IMU sensor {sensor}: {drift:.5f} deg/s '
+                f'({math.radians(drift):.6f} rad/s), compensated by the controller')
 
     def command(self, name: str, axis: int, arguments: Sequence[str]) -> tuple[str, list[str]]:
         """Run any in-scope table entry by name (``~/command``); returns (message, results).

@@ -543,15 +543,12 @@ class CaptureDriverNode(GimbalDriverNode):
         ctl = self.controller
         generation = ctl.motion_generation
         deadline = time.monotonic() + self.move_timeout
-        tolerance = math.degrees(self.goal_tolerance)
         while True:
             errors = ctl.call(lambda: device.level_errors(joints))
             moving = ctl.latest is None or any(ctl.moving(j) for j in joints)
-            report(', '.join(f'{j}: {abs(e):.3f} deg from level' for j, e in errors.items())
-                   + (' (moving)' if moving else ''))
-            if all(abs(e) <= tolerance for e in errors.values()) and not moving:
-                return 'levelled ' + ', '.join(f'{j} ({abs(e):.3f} deg)'
-                                               for j, e in errors.items())
+            report(errors.progress() + (' (moving)' if moving else ''))
+            if errors.within(self.goal_tolerance) and not moving:
+                return 'levelled ' + errors.summary()
             if goal_handle.is_cancel_requested or generation != ctl.motion_generation:
                 ctl.stop_joints(joints)
                 raise DeviceRefused('levelling cancelled; axes stopped')
@@ -569,7 +566,7 @@ class CaptureDriverNode(GimbalDriverNode):
                                      f'measures IMU sensor {self.gyro_drift_sensor}, '
                                      'gyro_drift_sensor)')
             ctl, device = self.controller, self.capture
-            sensor = ctl.call(device.start_gyro_drift)
+            ctl.call(device.start_gyro_drift)
             generation = ctl.motion_generation
             start = time.monotonic()
             while (elapsed := time.monotonic() - start) < self.gyro_drift_time:
@@ -585,9 +582,7 @@ class CaptureDriverNode(GimbalDriverNode):
                 report(f'holding still while measuring the gyro drift: {elapsed:.1f} of '
                        f'{self.gyro_drift_time:g} s')
                 time.sleep(0.2)
-            drift = ctl.call(device.gyro_drift)
-            return (f'gyro drift of IMU sensor {sensor}: {drift:.5f} deg/s '
-                    f'({math.radians(drift):.6f} rad/s), compensated by the controller')
+            return ctl.call(device.gyro_drift_result)
 
         return self._run_guarded(goal_handle, work)
 

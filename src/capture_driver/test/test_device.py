@@ -272,3 +272,18 @@ def test_link_drop_then_the_controller_reconnects(rig):
     assert client.read_axis(2)[0] == 0.0
     targets = rig.motion.start_move(['tilt'], [0.1])
     assert rig.motion.wait_move(targets).success
+
+
+def test_levelling_targets_and_reaches_the_leveling_value(tcp_rig):
+    ctl, device = tcp_rig.controller, tcp_rig.device
+    tcp_rig.sim.model.set_pose(2, 10.0)
+    tcp_rig.wait_positions({'tilt': math.radians(10.0)})
+    ctl.call(lambda: device.command('IMU_setLevelingValue', 2, ['-3']))
+    ctl.call(lambda: device.start_leveling(['tilt']))
+    # the end pose is reported (and was limit-checked) in rad, REP-103
+    assert ctl.commanded_targets['tilt'] == pytest.approx(math.radians(-3.0), abs=1e-3)
+    wait_for(lambda: ctl.call(lambda: device.level_errors(['tilt'])).within(2e-3)
+             and not ctl.moving('tilt'), 20.0, 'levelled')
+    assert tcp_rig.sim_axis(2).position == pytest.approx(-3.0, abs=0.1)
+    with pytest.raises(InvalidRequest, match='unknown joint'):
+        ctl.call(lambda: device.start_leveling(['elbow']))
