@@ -450,4 +450,3 @@ def test_deactivate_stops_the_axes_and_refuses_commands(controller, device) -> N
     controller.deactivate()
     assert device.sent[-1] == ('stop', None)
     assert controller.refusal() is not None
-
