@@ -255,19 +255,11 @@ class CaptureDriverNode(GimbalDriverNode):
             self.periodic.trigger(job)
         return result
 
-    @property
-    def capture(self) -> CaptureDevice:
-        """The adapter (after configure)."""
-        device = self.device
-        if not isinstance(device, CaptureDevice):
-            raise DeviceRefused(self.command_refusal() or 'node is not configured')
-        return device
-
     def _device_service(self, response: object, request: Callable[[CaptureDevice], str],
                         joints: Sequence[str] | None = None) -> object:
         """Answer a service with one adapter call (refusals and errors: success=false)."""
-        return self.serve_request(
-            response, lambda: self.controller.call(lambda: request(self.capture), joints))
+        return self.serve_request(response, lambda: self.controller.call(
+            lambda: request(self.controller.device), joints))
 
     # ----------------------------------------------------------- sensor topics
     def _sensor_jobs(self) -> list[tuple[Callable[[], None], str]]:
@@ -284,9 +276,10 @@ class CaptureDriverNode(GimbalDriverNode):
                      rate: float, read: Callable[[CaptureDevice], T]) -> T | None:
         """One sensor read while active, connected and the device has the sensor; a
         failed read is a throttled warning, never an exception."""
-        device = self.device
-        if (rate <= 0 or not self.active or not self.connected
-                or not isinstance(device, CaptureDevice) or not available(device)):
+        if rate <= 0 or not self.active or not self.connected:
+            return None
+        device = self.controller.device
+        if not available(device):
             return None
         try:
             return self.controller.call(lambda: read(device))
@@ -471,7 +464,7 @@ class CaptureDriverNode(GimbalDriverNode):
             self.get_logger().warning(f'~/goto_lla ignored: {refusal}')
             return
         try:
-            pose = self.controller.call(lambda: self.capture.goto_lla(
+            pose = self.controller.call(lambda: self.controller.device.goto_lla(
                 msg.latitude, msg.longitude, msg.altitude))
         except GimbalError as exc:
             self.get_logger().error(f'~/goto_lla refused, nothing moved: {exc}')
@@ -483,8 +476,7 @@ class CaptureDriverNode(GimbalDriverNode):
     # ----------------------------------------------------------- actions
     def _busy_reason(self) -> str | None:
         """Why the pedestal is not at rest for a guarded operation, or None."""
-        device = self.device
-        program = device.program_running() if isinstance(device, CaptureDevice) else None
+        program = self.controller.device.program_running() if self.controller else None
         if program:
             return program
         if self.motion is not None and self.motion.scanning:
@@ -531,7 +523,7 @@ class CaptureDriverNode(GimbalDriverNode):
         joints = list(goal_handle.request.joint_names) or list(self.joint_names)
 
         def work(report: Callable[[str], None]) -> str:
-            device = self.capture
+            device = self.controller.device  # _run_guarded checked it is configured
             self.controller.call(lambda: device.start_leveling(joints))
             return self._wait_level(device, joints, report, goal_handle)
 
@@ -565,7 +557,8 @@ class CaptureDriverNode(GimbalDriverNode):
                 raise InvalidRequest('the drift compensation takes no joint names (it '
                                      f'measures IMU sensor {self.gyro_drift_sensor}, '
                                      'gyro_drift_sensor)')
-            ctl, device = self.controller, self.capture
+            ctl = self.controller  # _run_guarded checked it is configured
+            device = ctl.device
             ctl.call(device.start_gyro_drift)
             generation = ctl.motion_generation
             start = time.monotonic()
