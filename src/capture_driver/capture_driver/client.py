@@ -15,9 +15,13 @@ waits for the ACK. On a serial line there is no greeting; the client sends COM_C
 
 Keep-alive (4.6.5): with ``keepalive_period`` > 0 the client configures the controller's
 supervision (COM_setKeepAliveTimeout/Count, COM_StartKeepAlive) so a dead host makes the
-pedestal stop, and a background thread sends COM_IsKeepAliveOn whenever the link has been
-idle for ``keepalive_period``. With ``auto_reconnect`` the same thread reopens a lost link
-(exponential backoff) and requests made meanwhile fail fast with :class:`NotConnected`.
+pedestal stop, and a background thread (:meth:`CaptureClient.start`) sends COM_IsKeepAliveOn
+whenever the link has been idle for ``keepalive_period``.
+
+A lost link raises :class:`NotConnected` and stays closed: reopening it is the job of the
+one connection supervisor, :class:`gimbal_driver_common.controller.GimbalController`, which
+calls :meth:`CaptureClient.connect` through the device adapter (``device.py``). The errors
+subclass the shared hierarchy in :mod:`gimbal_driver_common.errors`.
 """
 
 from __future__ import annotations
@@ -30,11 +34,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from gimbal_driver_common.transport import Backoff, ByteStream, TransportError
+from gimbal_driver_common import errors
+from gimbal_driver_common.transport import ByteStream, TransportError
 
 from .protocol import (
     REPLY_INFO,
-    Command,
     Frame,
     GeoPoint,
     PresetRecord,
@@ -58,20 +62,20 @@ SCAN_COMMANDS = {
 }
 
 
-class CaptureError(Exception):
+class CaptureError(errors.GimbalError):
     """Base of the client's errors; the message is meant for a person."""
 
 
-class NotConnected(CaptureError):
-    """No link to the controller (not opened yet, or lost and not yet recovered)."""
+class NotConnected(CaptureError, errors.LinkError):
+    """No link to the controller (not opened yet, or lost: the supervisor reconnects)."""
 
 
-class DeviceTimeout(CaptureError):
+class DeviceTimeout(CaptureError, errors.DeviceTimeout):
     """The controller did not answer in time."""
 
 
-class DeviceNack(CaptureError):
-    """The controller answered with a NACK byte."""
+class DeviceNack(CaptureError, errors.DeviceRefused):
+    """The controller answered with a NACK byte; the message carries its meaning."""
 
     def __init__(self, request: str, code: ReplyCode, detail: str = '') -> None:
         info = REPLY_INFO[code]
@@ -106,8 +110,6 @@ class CaptureClient:
         expect_greeting: bool = True,
         keepalive_period: float = 0.0,
         keepalive_count: int = 3,
-        auto_reconnect: bool = False,
-        reconnect_backoff: Backoff | None = None,
         resync_gap: float = 0.05,
         max_timeouts: int = 3,
     ) -> None:
@@ -118,8 +120,6 @@ class CaptureClient:
         self.expect_greeting = expect_greeting
         self.keepalive_period = keepalive_period
         self.keepalive_count = keepalive_count
-        self.auto_reconnect = auto_reconnect
-        self._backoff = reconnect_backoff or Backoff(0.2, 5.0)
         self.resync_gap = resync_gap
         self.max_timeouts = max_timeouts
         self._lock = threading.RLock()
@@ -129,15 +129,17 @@ class CaptureClient:
         self._connect_opcode = command('COM_Connect').opcode
         self._last_activity = 0.0
         self._consecutive_timeouts = 0
-        self._next_reconnect = 0.0
+        # axis -> (mode, acceleration) this client's last motion set-up left on the device;
+        # forgotten on connect and on any other command that changes something
+        self._setups: dict[int, tuple[str, float | None]] = {}
+        self._in_setup = False
         self._worker: threading.Thread | None = None
         self._stop = threading.Event()
         self.last_error = 'not connected'
         self.connects = 0
         self.stats = {'requests': 0, 'timeouts': 0, 'nacks': 0, 'stale': 0}
-        self.on_connect: Callable[[], None] | None = None
         # Commands the host sends on its own whose opcode the device refused with 0xA6
-        # (name -> the device's answer); never sent again on this client.
+        # (name -> the device's answer); never sent again on this connection.
         self.unsupported: dict[str, str] = {}
 
     # ---------------------------------------------------------------- link
@@ -166,6 +168,7 @@ class CaptureClient:
                 raise NotConnected(str(exc)) from exc
             self._stream = stream
             self._decoder.reset()
+            self.unsupported = {}  # a new connection may be a different controller
             try:
                 self._handshake()
                 self._connected = True
@@ -177,12 +180,8 @@ class CaptureClient:
                 self._close_locked()
                 raise NotConnected(self.last_error) from exc
             self.connects += 1
-            self._backoff.reset()
             self.last_error = ''
         LOG.info('connected to %s', self.description)
-        callback = self.on_connect
-        if callback is not None:
-            callback()
 
     def _handshake(self) -> None:
         if self.expect_greeting:
@@ -228,6 +227,7 @@ class CaptureClient:
 
     def _close_locked(self) -> None:
         self._connected = False
+        self._setups.clear()
         stream, self._stream = self._stream, None
         if stream is not None:
             stream.close()
@@ -237,10 +237,9 @@ class CaptureClient:
         if self._connected:
             LOG.warning('link lost: %s', why)
         self._close_locked()
-        self._next_reconnect = time.monotonic() + self._backoff.next_delay()
 
     def start(self) -> None:
-        """Start the keep-alive / reconnect thread (needed only for those two features)."""
+        """Start the keep-alive thread (needed only with ``keepalive_period`` > 0)."""
         if self._worker is not None and self._worker.is_alive():
             return
         self._stop.clear()
@@ -257,15 +256,7 @@ class CaptureClient:
     def _run(self) -> None:
         tick = 0.05
         while not self._stop.wait(tick):
-            if not self._connected:
-                if self.auto_reconnect and time.monotonic() >= self._next_reconnect:
-                    try:
-                        self.connect()
-                    except CaptureError as exc:
-                        self._next_reconnect = time.monotonic() + self._backoff.next_delay()
-                        LOG.debug('reconnect failed: %s', exc)
-                continue
-            if self.keepalive_period > 0 and (
+            if self._connected and self.keepalive_period > 0 and (
                 time.monotonic() - self._last_activity >= self.keepalive_period
             ):
                 with contextlib.suppress(CaptureError):
@@ -281,13 +272,6 @@ class CaptureClient:
         """
         cmd = command(name)
         with self._lock:
-            if not self._connected and self.auto_reconnect and (
-                time.monotonic() >= self._next_reconnect
-            ):
-                try:
-                    self.connect()
-                except CaptureError:
-                    self._next_reconnect = time.monotonic() + self._backoff.next_delay()
             return self._request_locked(cmd.name, axis, value, timeout)
 
     def _request_locked(self, name: str, axis: int | None, value: Any,
@@ -297,6 +281,8 @@ class CaptureClient:
         frame = cmd.frame(axis, value, self.group if group is None else group)
         if self._stream is None:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
+        if not cmd.replies_with_data and not self._in_setup:
+            self._setups.clear()  # anything may have changed an axis' mode or profile
         for attempt in (1, 2):
             try:
                 reply = self._transact(name, frame, cmd.replies_with_data,
@@ -444,30 +430,74 @@ class CaptureClient:
         current = self.request('MOT_GetMotorCurrent', axis) if with_current else None
         return position, speed, current
 
+    def exclusive(self) -> threading.RLock:
+        """The request lock, for a caller that sends a whole motion set-up (several axes)
+        without the poll thread's requests in between: ``with client.exclusive(): ...``."""
+        return self._lock
+
     def move_absolute(self, axis: int, position_deg: float, speed_deg_s: float,
                       acceleration: float) -> None:
-        """The 7.1 motion profile, absolute: mode, TUM, absolute, acc, speed, position, update."""
-        for name, value in (
-            ('MOT_SetPositionMode', None), ('MOT_SetTum', None),
-            ('MOT_SetPositionAbsolute', None), ('MOT_SetAcceleration', acceleration),
-            ('MOT_SetSpeed', abs(speed_deg_s)), ('MOT_SendPosition', position_deg),
-            ('MOT_Update', None),
-        ):
-            self.run(name, axis, value)
+        """The 7.1 motion profile, absolute: mode, TUM, absolute, acc, speed, position, update.
+
+        When this client's last set-up of the axis was an absolute move and nothing else was
+        commanded since, the mode commands (SetPositionMode, SetPositionAbsolute) and an
+        unchanged acceleration are left out: 4 round trips instead of 7. TUM (4.2.14:
+        "advisable before each command session"), the speed, the position and MOT_Update
+        are always sent.
+        """
+        with self._lock:
+            known = self._setups.pop(axis, None)
+            same_mode = known is not None and known[0] == 'absolute'
+            steps: list[tuple[str, Any]] = []
+            if not same_mode:
+                steps.append(('MOT_SetPositionMode', None))
+            steps.append(('MOT_SetTum', None))
+            if not same_mode:
+                steps.append(('MOT_SetPositionAbsolute', None))
+            if not same_mode or known[1] != acceleration:
+                steps.append(('MOT_SetAcceleration', acceleration))
+            steps += [('MOT_SetSpeed', abs(speed_deg_s)), ('MOT_SendPosition', position_deg),
+                      ('MOT_Update', None)]
+            self._run_setup(axis, steps)
+            self._setups[axis] = ('absolute', acceleration)
 
     def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:
-        """Speed mode (4.2.9): the axis turns at ``velocity_deg_s`` until told otherwise."""
-        for name, value in (
-            ('MOT_SetSpeedMode', None), ('MOT_SetAcceleration', acceleration),
-            ('MOT_SetSpeed', velocity_deg_s), ('MOT_Update', None),
-        ):
-            self.run(name, axis, value)
+        """Speed mode (4.2.9): the axis turns at ``velocity_deg_s`` until told otherwise.
+
+        Speed mode and an unchanged acceleration are left out when this client's last
+        set-up of the axis left it in speed mode (a jog or a stop) and nothing else was
+        commanded since: a stream of jog commands costs 2 round trips each, not 4.
+        """
+        with self._lock:
+            known = self._setups.pop(axis, None)
+            same_mode = known is not None and known[0] == 'speed'
+            steps: list[tuple[str, Any]] = []
+            if not same_mode:
+                steps.append(('MOT_SetSpeedMode', None))
+            if not same_mode or known[1] != acceleration:
+                steps.append(('MOT_SetAcceleration', acceleration))
+            steps += [('MOT_SetSpeed', velocity_deg_s), ('MOT_Update', None)]
+            self._run_setup(axis, steps)
+            self._setups[axis] = ('speed', acceleration)
 
     def stop_axis(self, axis: int) -> None:
-        """Decelerate to rest: speed mode with speed 0 (works from position or speed mode)."""
-        for name, value in (('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
-                            ('MOT_Update', None)):
-            self.run(name, axis, value)
+        """Decelerate to rest: speed mode with speed 0 (works from position or speed mode).
+        Always the full sequence: a stop never relies on what the client remembers."""
+        with self._lock:
+            known = self._setups.pop(axis, None)
+            self._run_setup(axis, [('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
+                                   ('MOT_Update', None)])
+            self._setups[axis] = ('speed', known[1] if known else None)
+
+    def _run_setup(self, axis: int, steps: list[tuple[str, Any]]) -> None:
+        """Send one axis' motion set-up under the lock; the setters in it do not count as
+        "something else commanded" (see :attr:`_setups`)."""
+        self._in_setup = True
+        try:
+            for name, value in steps:
+                self.run(name, axis, value)
+        finally:
+            self._in_setup = False
 
     def stop_all(self, axes: list[int]) -> list[str]:
         """Stop scans, loops and every axis; returns the problems (empty when all worked)."""
@@ -623,10 +653,3 @@ class TrackingState:
             return 'auto'
         return 'manual' if self.active else 'off'
 
-
-def describe_command(cmd: Command) -> str:
-    """One line per table entry (README and ~/command help)."""
-    arg = f'{cmd.arg.value} [{cmd.arg_unit}]' if cmd.arg_unit else cmd.arg.value
-    ret = f'{cmd.ret.value} [{cmd.ret_unit}]' if cmd.ret_unit else cmd.ret.value
-    return (f'{cmd.name} 0x{cmd.opcode:04X} axis={cmd.axis.name} arg={arg} ret={ret} '
-            f'({cmd.confidence})')

@@ -248,8 +248,10 @@ def test_threads_share_one_client(client):
     assert not errors
 
 
-def test_tcp_link_drop_and_auto_reconnect(sim):
-    c = tcp_client(sim, auto_reconnect=True, keepalive_period=0.2)
+def test_tcp_link_drop_raises_not_connected_until_reopened(sim):
+    """The client has no reconnect loop of its own: a lost link raises NotConnected and
+    stays closed until connect() (the controller's supervisor, test_device.py) reopens it."""
+    c = tcp_client(sim, keepalive_period=0.2)
     c.connect()
     c.start()
     try:
@@ -257,26 +259,35 @@ def test_tcp_link_drop_and_auto_reconnect(sim):
         with pytest.raises(NotConnected):
             for _ in range(50):
                 c.read_axis(1)
-        wait_for(lambda: c.connected, 10.0, 'reconnected')
+        assert not c.connected
+        c.connect()
+        assert c.connected
         assert c.read_axis(1)[0] == 0.0
         assert c.connects >= 2
     finally:
         c.stop()
 
 
-def test_pty_link_drop_and_auto_reconnect(sim):
-    c = pty_client(sim, auto_reconnect=True)
+def test_pty_link_drop_raises_not_connected_until_reopened(sim):
+    c = pty_client(sim)
     c.connect()
-    c.start()
     try:
         sim.pty.drop_link(offline_for=0.2)
         with pytest.raises(NotConnected):
             for _ in range(50):
                 c.read_axis(1)
-        wait_for(lambda: c.connected, 10.0, 'reconnected')
+        wait_for(lambda: _reopens(c), 10.0, 'reopened after the pty came back')
         assert c.read_axis(2)[0] == 0.0
     finally:
         c.stop()
+
+
+def _reopens(c: CaptureClient) -> bool:
+    try:
+        c.connect()
+    except NotConnected:
+        return False
+    return c.connected
 
 
 def test_silent_device_closes_the_link(sim):
@@ -463,3 +474,71 @@ def test_video_tracker_pelco_relay_and_dual_gimbal_commands(client, sim):
     assert client.request('STB_GetPosKi', 1) == 0.25
     client.request('DG_SetMaxDiff', 2, 0.01)
     assert client.request('DG_GetMaxDiff', 2) == pytest.approx(0.01)
+
+
+SETUP_COMMANDS = ('MOT_SetPositionMode', 'MOT_SetTum', 'MOT_SetPositionAbsolute',
+                  'MOT_SetAcceleration', 'MOT_SetSpeed', 'MOT_SendPosition', 'MOT_Update',
+                  'MOT_SetSpeedMode')
+
+
+def _sent_since(sim, before: dict[str, int]) -> dict[str, int]:
+    return {name: _sent(sim, name) - before[name] for name in SETUP_COMMANDS
+            if _sent(sim, name) > before[name]}
+
+
+def _counts(sim) -> dict[str, int]:
+    return {name: _sent(sim, name) for name in SETUP_COMMANDS}
+
+
+def test_repeated_absolute_moves_send_only_what_changed(client, sim):
+    client.move_absolute(1, 10.0, 60.0, 200.0)
+    settle(client, 1, 10.0)
+    before = _counts(sim)
+    client.move_absolute(1, -5.0, 40.0, 200.0)  # same mode and acceleration, new speed
+    assert _sent_since(sim, before) == {'MOT_SetTum': 1, 'MOT_SetSpeed': 1,
+                                        'MOT_SendPosition': 1, 'MOT_Update': 1}
+    settle(client, 1, -5.0)
+    before = _counts(sim)
+    client.move_absolute(1, 3.0, 40.0, 300.0)  # a new acceleration is sent
+    assert _sent_since(sim, before) == {'MOT_SetTum': 1, 'MOT_SetAcceleration': 1,
+                                        'MOT_SetSpeed': 1, 'MOT_SendPosition': 1,
+                                        'MOT_Update': 1}
+    settle(client, 1, 3.0)
+
+
+def test_anything_else_commanded_brings_back_the_full_setup(client, sim):
+    full = dict.fromkeys(('MOT_SetPositionMode', 'MOT_SetTum', 'MOT_SetPositionAbsolute',
+                          'MOT_SetAcceleration', 'MOT_SetSpeed', 'MOT_SendPosition',
+                          'MOT_Update'), 1)
+    client.move_absolute(2, 5.0, 60.0, 200.0)
+    settle(client, 2, 5.0)
+    client.request('STB_StabilizationOff')  # any other setter: the mode may have changed
+    before = _counts(sim)
+    client.move_absolute(2, 8.0, 60.0, 200.0)
+    assert _sent_since(sim, before) == full
+    settle(client, 2, 8.0)
+    client.stop_axis(2)  # a stop leaves speed mode: the next move sets position mode again
+    before = _counts(sim)
+    client.move_absolute(2, 2.0, 60.0, 200.0)
+    assert _sent_since(sim, before) == full
+    settle(client, 2, 2.0)
+    client.close()
+    client.connect()  # a new connection knows nothing
+    before = _counts(sim)
+    client.move_absolute(2, 0.0, 60.0, 200.0)
+    assert _sent_since(sim, before) == full
+    settle(client, 2, 0.0)
+
+
+def test_a_jog_stream_sends_speed_and_update_only(client, sim):
+    client.jog(1, 10.0, 300.0)
+    wait_for(lambda: client.read_axis(1)[1] > 5.0, 5.0, 'jogging +')
+    before = _counts(sim)
+    client.jog(1, -20.0, 300.0)
+    assert _sent_since(sim, before) == {'MOT_SetSpeed': 1, 'MOT_Update': 1}
+    wait_for(lambda: client.read_axis(1)[1] < -15.0, 5.0, 'jogging - at the new speed')
+    before = _counts(sim)
+    client.stop_axis(1)  # a stop always sends its whole sequence
+    assert _sent_since(sim, before) == {'MOT_SetSpeedMode': 1, 'MOT_SetSpeed': 1,
+                                        'MOT_Update': 1}
+    wait_for(lambda: client.read_axis(1)[1] == 0.0, 5.0, 'stopped')

@@ -14,6 +14,7 @@ clients serialise requests on their own link lock.
 from __future__ import annotations
 
 import abc
+import enum
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -25,6 +26,21 @@ from gimbal_driver_common.scan import ScanRequest
 
 #: joint -> (target position, max speed or None for the device default)
 Moves = dict[str, tuple[float, float | None]]
+
+
+class AxisStateCode(enum.IntEnum):
+    """``gimbal_msgs/AxisState`` state values, for ROS-free adapters whose
+    :meth:`StatusReport.axis_details` reports a ``state``."""
+
+    UNKNOWN = 0
+    IDLE = 1
+    MOVING = 2
+    JOGGING = 3
+    HOMING = 4
+    SCANNING = 5
+    PLAYBACK = 6
+    FAULT = 7
+    DISABLED = 8
 
 
 @dataclass

@@ -42,6 +42,15 @@ class Periodic:
                     job[0], job[1] = period, time.monotonic() + period
         self._wake.set()
 
+    def trigger(self, callback: Callable[[], object]) -> None:
+        """Run a job as soon as possible (then every period again), e.g. a topic that
+        should publish at once when it is switched on rather than one period later."""
+        with self._lock:
+            for job in self._jobs:
+                if job[2] == callback:
+                    job[1] = time.monotonic()
+        self._wake.set()
+
     def remove(self, callback: Callable[[], object]) -> None:
         with self._lock:
             self._jobs = [job for job in self._jobs if job[2] != callback]

@@ -291,6 +291,32 @@ def test_moving_rule_prefers_the_device_bit() -> None:
     assert not is_moving(JointSample({'pan': 0.0}, {'pan': 1e-4}), 'pan')
 
 
+def test_axis_state_codes_match_the_message() -> None:
+    """AxisStateCode (for ROS-free adapters) mirrors gimbal_msgs/AxisState's constants."""
+    from gimbal_driver_common.device import AxisStateCode
+
+    axis_state = pytest.importorskip(
+        'gimbal_msgs.msg', reason='needs the built workspace (make build)').AxisState
+    for code in AxisStateCode:
+        assert getattr(axis_state, f'STATE_{code.name}') == code.value
+    assert {n for n in dir(axis_state) if n.startswith('STATE_')} == {
+        f'STATE_{code.name}' for code in AxisStateCode}
+
+
+def test_periodic_trigger_runs_a_job_now_then_on_its_period() -> None:
+    from gimbal_driver_common.periodic import Periodic
+
+    periodic = Periodic()
+    runs = threading.Semaphore(0)
+    try:
+        periodic.add(3600.0, runs.release)  # would first run in an hour
+        periodic.trigger(runs.release)
+        assert runs.acquire(timeout=10.0)
+        assert not runs.acquire(timeout=0.2)  # once, then back on its period
+    finally:
+        periodic.stop()
+
+
 def test_device_nack_becomes_the_error_with_the_devices_reason(controller, device) -> None:
     device.nack_moves = True
     with pytest.raises(DeviceRefused, match='axis disabled'):

@@ -1,0 +1,289 @@
+"""GimbalController + CaptureDevice against the simulator in-process, over its real
+transports (TCP loopback and a pty); no ROS.
+
+Waits are "up to a timeout" for a condition, never timing assertions.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+
+import pytest
+
+from capture_driver.client import DeviceNack, NotConnected
+from capture_driver.device import CaptureDevice, CaptureSettings
+from capture_driver.protocol import COMMANDS
+from capture_driver.sim import CaptureSimulator, PedestalModel
+from gimbal_driver_common.controller import ControllerConfig, GimbalController
+from gimbal_driver_common.device import AxisStateCode
+from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
+from gimbal_driver_common.joint_command import JointLimits
+from gimbal_driver_common.policies import Motion
+from gimbal_driver_common.scan import ScanRequest
+from gimbal_driver_common.testing import wait_for
+
+JOINTS = ['pan', 'tilt']
+LOG = logging.getLogger('test_device')
+
+
+@pytest.fixture
+def sim():
+    simulator = CaptureSimulator(PedestalModel(time_scale=8.0), tcp_port=0, pty=True).start()
+    yield simulator
+    simulator.stop()
+
+
+def make_config(command_timeout: float = 0.5) -> ControllerConfig:
+    return ControllerConfig(
+        joint_names=list(JOINTS),
+        limits={'pan': JointLimits(-math.pi, math.pi, 1.5),
+                'tilt': JointLimits(-math.pi / 2, math.pi / 2, 1.5)},
+        publish_rate=20.0, command_timeout=command_timeout, reconnect_period=0.2,
+        goal_tolerance=2e-3, move_timeout=30.0)
+
+
+def make_settings(sim, transport: str = 'tcp', **overrides) -> CaptureSettings:
+    link = ({'host': '127.0.0.1', 'port': sim.tcp.port} if transport == 'tcp'
+            else {'serial_port': sim.pty.port_name})
+    values = dict(joint_names=list(JOINTS), axis_ids=[1, 2], joint_directions=[-1.0, 1.0],
+                  gear_ratios=[1.0, 1.0], transport=transport, keepalive_period=0.0,
+                  default_speed=1.0, acceleration=6.0, status_period=0.1, **link)
+    values.update(overrides)
+    return CaptureSettings(**values)
+
+
+class Rig:
+    """One device, its controller (open and active) and the motion policies."""
+
+    def __init__(self, sim, transport: str = 'tcp', command_timeout: float = 0.5) -> None:
+        self.sim = sim
+        self.config = make_config(command_timeout)
+        self.device = CaptureDevice(make_settings(sim, transport), self.config, LOG)
+        self.controller = GimbalController(self.device, self.config, LOG)
+        self.device.on_targets = self.controller.commanded_targets.update
+        self.motion = Motion(self.controller, scan_patterns=self.device.capabilities.scans
+                             .patterns)
+        self.controller.open()
+        self.controller.activate()
+        wait_for(lambda: self.controller.latest is not None, 10.0, 'first sample')
+
+    def close(self) -> None:
+        self.controller.shutdown()
+
+    def sim_axis(self, axis: int):
+        return self.sim.model.axes[axis]
+
+    def sent(self, name: str) -> int:
+        opcode = COMMANDS[name].opcode
+        return sum(1 for frame in list(self.sim.model.requests) if frame.opcode == opcode)
+
+    def wait_positions(self, targets: dict[str, float], tolerance: float = 2e-3,
+                       timeout: float = 20.0) -> None:
+        def there() -> bool:
+            current = self.controller.positions()
+            return all(abs(current.get(j, math.inf) - p) <= tolerance
+                       for j, p in targets.items())
+
+        wait_for(there, timeout, f'joints at {targets}')
+
+
+@pytest.fixture(params=['tcp', 'pty'])
+def rig(request, sim):
+    rig = Rig(sim, request.param)
+    yield rig
+    rig.close()
+
+
+@pytest.fixture
+def tcp_rig(sim):
+    rig = Rig(sim, 'tcp', command_timeout=0.3)
+    yield rig
+    rig.close()
+
+
+def test_connect_reads_the_identity(tcp_rig):
+    ctl = tcp_rig.controller
+    assert ctl.connected
+    info = ctl.device_info
+    assert info.serial_number == '24017'
+    assert info.firmware_version.startswith('2.24.0')
+    assert info.hardware_id == 'capture-pnCAP-PT2-SIM-sn24017-hw3.1-fw2.24.0'
+    assert tcp_rig.device.description() == f'tcp://127.0.0.1:{tcp_rig.sim.tcp.port}'
+    assert tcp_rig.device.has_imu and tcp_rig.device.has_gps
+
+
+def test_positions_convert_from_device_degrees_and_signs(tcp_rig):
+    tcp_rig.sim.model.set_pose(1, 30.0)  # yaw 30 deg clockwise
+    tcp_rig.sim.model.set_pose(2, -12.0)  # pitch 12 deg down
+    tcp_rig.wait_positions({'pan': -math.radians(30.0), 'tilt': math.radians(-12.0)})
+
+
+def test_move_converges_with_rep103_signs_on_the_device(rig):
+    targets = rig.motion.start_move(JOINTS, [0.4, -0.2])
+    outcome = rig.motion.wait_move(targets)
+    assert outcome.success, outcome.message
+    # REP-103 pan is counter-clockwise; Capture yaw counts clockwise (joint_directions -1)
+    assert rig.sim_axis(1).position == pytest.approx(-math.degrees(0.4), abs=0.05)
+    assert rig.sim_axis(2).position == pytest.approx(math.degrees(-0.2), abs=0.05)
+    assert rig.controller.commanded_targets == pytest.approx({'pan': 0.4, 'tilt': -0.2})
+
+
+def test_jog_converts_the_speed_and_the_watchdog_stops_it(tcp_rig):
+    ctl = tcp_rig.controller
+    ctl.command(['pan'], [], [0.3])
+    # +0.3 rad/s pan (counter-clockwise) is a negative yaw speed on the device
+    wait_for(lambda: tcp_rig.sim_axis(1).velocity < -1.0, 10.0, 'device jogging clockwise-')
+    wait_for(lambda: ctl.latest.velocities['pan'] > 0.1, 10.0, 'positive pan velocity')
+    # no further joint_command: the dead-man watchdog (0.3 s) stops the axis
+    wait_for(lambda: tcp_rig.sim_axis(1).velocity == 0.0, 10.0, 'jog stopped by the watchdog')
+    assert not ctl.watchdog.jogging
+    wait_for(lambda: not ctl.moving('pan'), 10.0, 'pan at rest in the samples')
+
+
+def test_stop_ends_a_move_and_halts_every_axis(tcp_rig):
+    ctl, motion = tcp_rig.controller, tcp_rig.motion
+    targets = motion.start_move(['pan'], [-2.5], [0.2])
+    wait_for(lambda: tcp_rig.sim_axis(1).velocity != 0.0, 10.0, 'moving')
+    outcome: list = []
+    waiter = threading.Thread(target=lambda: outcome.append(motion.wait_move(targets)))
+    waiter.start()
+    assert 'stopped' in ctl.stop()
+    waiter.join(30.0)
+    assert outcome and outcome[0].state == 'stopped'
+    wait_for(lambda: all(a.velocity == 0.0 for a in tcp_rig.sim.model.axes.values()), 10.0,
+             'axes at rest')
+    assert abs(tcp_rig.sim_axis(1).position - math.degrees(2.5)) > 10.0  # not reached
+
+
+def test_faulted_and_off_axes_are_refused_with_the_reason_and_nothing_sent(tcp_rig):
+    ctl, motion, device = tcp_rig.controller, tcp_rig.motion, tcp_rig.device
+    tcp_rig.sim.model.inject_fault(1, 'over_current')
+    wait_for(lambda: ctl.refusal(['pan']) is not None, 10.0, 'fault seen in the registers')
+    assert 'pan is faulted' in ctl.refusal(['pan'])
+    assert ctl.refusal(['tilt']) is None
+    assert device.capabilities.status.axis_details('pan')['state'] == AxisStateCode.FAULT
+    before = tcp_rig.sent('MOT_SendPosition'), tcp_rig.sent('MOT_Update')
+    with pytest.raises(DeviceRefused, match='pan is faulted'):
+        motion.start_move(JOINTS, [0.3, 0.0])
+    with pytest.raises(DeviceRefused, match='pan is faulted'):
+        ctl.command(['pan'], [0.3], [])
+    with pytest.raises(DeviceRefused, match='pan is faulted'):
+        motion.start_scan(ScanRequest('snake', -0.2, 0.2, 0.0, 0.2, 0.5, 0.1, 0.0))
+    assert (tcp_rig.sent('MOT_SendPosition'), tcp_rig.sent('MOT_Update')) == before
+    message = ctl.reset_faults()
+    assert 'ACKed MOT_ResetFaults' in message and 'pan on, no fault' in message
+    assert ctl.refusal(['pan']) is None
+    # a drive switched off: refused with the axis state
+    ctl.call(lambda: device.set_power(False))
+    wait_for(lambda: 'pan drive is off' in (ctl.refusal(['pan']) or ''), 10.0, 'drive off')
+    ctl.call(lambda: device.set_power(True))
+    wait_for(lambda: ctl.refusal(JOINTS) is None, 10.0, 'drives on again')
+
+
+def test_device_nack_is_a_refusal_carrying_the_devices_reason(tcp_rig):
+    assert tcp_rig.sim.control('nack A6 MOT_Update') == 'ok'
+    with pytest.raises(DeviceNack) as info:
+        tcp_rig.motion.start_move(['tilt'], [0.05])
+    assert isinstance(info.value, DeviceRefused)
+    assert 'NACK 0xA6' in str(info.value) and 'Invalid command' in str(info.value)
+
+
+def test_invalid_requests_send_nothing(tcp_rig):
+    ctl, device = tcp_rig.controller, tcp_rig.device
+    before = len(tcp_rig.sim.model.requests)
+    with pytest.raises(InvalidRequest, match='preset index 16'):
+        ctl.call(lambda: device.capabilities.presets.set(16, 'x', {'pan': 0.0}))
+    with pytest.raises(InvalidRequest, match='bad argument'):
+        ctl.call(lambda: device.command('MOT_SetSpeed', 1, ['fast']))
+    with pytest.raises(DeviceRefused, match='allow_reboot'):
+        ctl.call(lambda: device.command('COM_Reboot', 0, []))
+    with pytest.raises(InvalidRequest, match='latitude'):
+        ctl.call(lambda: device.goto_lla(91.0, 0.0, 0.0))
+    # only the controller's own polls reached the device
+    polls = {COMMANDS[n].opcode for n in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed',
+                                           'MOT_GetMotorCurrent')}
+    sent = [f for f in list(tcp_rig.sim.model.requests)[before:] if f.opcode not in polls]
+    assert all(COMMANDS['MOT_SetSpeed'].opcode != f.opcode for f in sent)
+    assert all(COMMANDS['PRST_SetPreset'].opcode != f.opcode for f in sent)
+    assert all(COMMANDS['COM_Reboot'].opcode != f.opcode for f in sent)
+
+
+def test_preset_slots_convert_both_ways(tcp_rig):
+    ctl, motion = tcp_rig.controller, tcp_rig.motion
+    motion.set_preset(2, 'gate', {'pan': -0.3, 'tilt': 0.25})
+    record = tcp_rig.sim.model.presets[2]
+    assert record.angles[0] == pytest.approx(math.degrees(0.3), abs=1e-3)  # yaw clockwise
+    assert record.angles[1] == pytest.approx(math.degrees(0.25), abs=1e-3)
+    listed = {p.index: p for p in motion.list_presets()}
+    assert listed[2].positions == pytest.approx({'pan': -0.3, 'tilt': 0.25}, abs=1e-4)
+    assert 'device preset 2' in motion.goto_preset(2, 0.8)
+    assert ctl.commanded_targets == pytest.approx({'pan': -0.3, 'tilt': 0.25}, abs=1e-4)
+    tcp_rig.wait_positions({'pan': -0.3, 'tilt': 0.25})
+    with pytest.raises(DeviceRefused, match='empty'):
+        motion.goto_preset(9, 0.0)
+    assert 'cleared' in motion.clear_preset(2)
+    assert 2 not in tcp_rig.sim.model.presets
+
+
+def test_device_scan_converts_limits_and_stop_ends_it(tcp_rig):
+    ctl, motion = tcp_rig.controller, tcp_rig.motion
+    message = motion.start_scan(ScanRequest('snake', -0.2, 0.2, 0.0, 0.2, 0.5, 0.1, 0.0))
+    assert message.startswith('device snake scan started')
+    params = tcp_rig.sim.model.scan_params
+    assert (params['yaw_min'], params['yaw_max']) == pytest.approx(
+        (-math.degrees(0.2), math.degrees(0.2)), abs=1e-3)
+    assert params['speed'] == pytest.approx(math.degrees(0.5), abs=1e-3)
+    assert tcp_rig.sim.model.scan is not None
+    ctl.stop()
+    assert tcp_rig.sim.model.scan is None
+    with pytest.raises(InvalidRequest, match='zigzag'):
+        motion.start_scan(ScanRequest('sector', -0.2, 0.2, 0.0, 0.0, 0.3, 0.1, 0.0))
+
+
+def test_imu_reading_is_rep103(tcp_rig):
+    device = tcp_rig.device
+    model = tcp_rig.sim.model
+    reading = tcp_rig.controller.call(device.imu)
+    raw = tcp_rig.controller.call(device.client.imu)
+    assert reading.yaw == pytest.approx(-math.radians(raw['yaw']), abs=1e-6)
+    assert reading.pitch == pytest.approx(math.radians(raw['pitch']), abs=1e-6)
+    fix = tcp_rig.controller.call(device.gps_fix)
+    assert (fix.latitude, fix.longitude) == pytest.approx(
+        (model.gps_position.latitude, model.gps_position.longitude), abs=1e-6)
+
+
+def test_link_drop_then_the_controller_reconnects(rig):
+    """The controller's supervisor is the only reconnect loop: the client raises
+    NotConnected (a LinkError) and stays closed until the controller reopens it."""
+    ctl, client = rig.controller, rig.device.client
+    connects = client.connects
+    if rig.device.settings.transport == 'tcp':
+        rig.sim.drop_link()
+    else:
+        rig.sim.pty.drop_link(offline_for=0.2)
+    with pytest.raises(NotConnected) as info:
+        for _ in range(200):
+            client.read_axis(1)
+    assert isinstance(info.value, LinkError)
+    wait_for(lambda: ctl.reconnects >= 1 and ctl.connected, 15.0, 'reconnected')
+    assert client.connected and client.connects >= connects + 1
+    assert client.read_axis(2)[0] == 0.0
+    targets = rig.motion.start_move(['tilt'], [0.1])
+    assert rig.motion.wait_move(targets).success
+
+
+def test_levelling_targets_and_reaches_the_leveling_value(tcp_rig):
+    ctl, device = tcp_rig.controller, tcp_rig.device
+    tcp_rig.sim.model.set_pose(2, 10.0)
+    tcp_rig.wait_positions({'tilt': math.radians(10.0)})
+    ctl.call(lambda: device.command('IMU_setLevelingValue', 2, ['-3']))
+    ctl.call(lambda: device.start_leveling(['tilt']))
+    # the end pose is reported (and was limit-checked) in rad, REP-103
+    assert ctl.commanded_targets['tilt'] == pytest.approx(math.radians(-3.0), abs=1e-3)
+    wait_for(lambda: ctl.call(lambda: device.level_errors(['tilt'])).within(2e-3)
+             and not ctl.moving('tilt'), 20.0, 'levelled')
+    assert tcp_rig.sim_axis(2).position == pytest.approx(-3.0, abs=0.1)
+    with pytest.raises(InvalidRequest, match='unknown joint'):
+        ctl.call(lambda: device.start_leveling(['elbow']))
