@@ -221,6 +221,8 @@ class KosDevice(Device):
             return (f'a move is playing ({playback_state_name(client.playback.status)}); '
                     'call ~/stop_playback or ~/stop first')
         for name in joints:
+            if name not in self.joints:
+                continue   # an unknown joint is the command check's to name
             address = self.joints[name].address
             motor = client.motors.get(address)
             if motor is None:

@@ -208,6 +208,8 @@ def test_refusal_reasons_and_nothing_sent(rig):
         rig.motion.start_move(['pan'], [1.0])
     assert rig.sim.command('online 2') == 'ok'
     wait_for(lambda: ctl.refusal(['pan']) is None, TIMEOUT, 'pan online')
+    with pytest.raises(InvalidRequest, match='unknown joint'):
+        rig.motion.start_move(['elbow'], [0.0])
     ctl.deactivate()
     assert 'not active' in ctl.refusal()
     ctl.activate()
