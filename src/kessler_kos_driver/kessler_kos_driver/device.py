@@ -214,12 +214,20 @@ class KosDevice(Device):
         moving = dict.fromkeys(positions, True) if client.playback_running else {}
         return JointSample(positions, velocities, stamp=stamp, moving=moving)
 
-    def refusal(self, joints: Sequence[str]) -> str | None:
-        """A playing move owns the motors; an offline or missing motor cannot move."""
+    def playing(self) -> str | None:
+        """Why nothing else may move or load now: a playing move owns the motors."""
         client = self.client
         if client.playback_running:
             return (f'a move is playing ({playback_state_name(client.playback.status)}); '
                     'call ~/stop_playback or ~/stop first')
+        return None
+
+    def refusal(self, joints: Sequence[str]) -> str | None:
+        """A playing move owns the motors; an offline or missing motor cannot move."""
+        reason = self.playing()
+        if reason:
+            return reason
+        client = self.client
         for name in joints:
             if name not in self.joints:
                 continue   # an unknown joint is the command check's to name
@@ -233,11 +241,9 @@ class KosDevice(Device):
 
     def require_idle(self) -> None:
         """Refuse while a move plays (loads, setups, calibration, moves)."""
-        client = self.client
-        if client.playback_running:
-            raise DeviceRefused(
-                f'a move is playing ({playback_state_name(client.playback.status)}); '
-                'call ~/stop_playback or ~/stop first')
+        reason = self.playing()
+        if reason:
+            raise DeviceRefused(reason)
 
     def _motor(self, joint: str) -> MotorState:
         address = self.joints[joint].address

@@ -56,7 +56,6 @@ from .protocol import (
     REPORT_SIZE,
     USB_KEEPALIVE_PERIOD_S,
     PlaybackMode,
-    playback_state_name,
 )
 from .usb_link import USB_BACKENDS, UsbTarget
 
@@ -249,11 +248,7 @@ class KosDriverNode(GimbalDriverNode):
         def scales_busy() -> str | None:
             if self.controller is None:
                 return None
-            device = self.kos
-            if device.client.playback_running:
-                return (f'a move is playing '
-                        f'({playback_state_name(device.client.playback.status)}); stop it first')
-            reason = self.controller.busy()
+            reason = self.kos.playing() or self.controller.busy()
             return f'the axes must be idle ({reason})' if reason else None
 
         def set_joint_scales(scales: list[float]) -> None:
