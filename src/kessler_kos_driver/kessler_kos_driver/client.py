@@ -359,12 +359,9 @@ class KosClient:
     def close(self) -> None:
         """Close the link and end the session's threads (safe to call repeatedly)."""
         self.connected = False
-        self._session_stop.set()
         with self._lock:
-            stream, self._stream = self._stream, None
-            self._cond.notify_all()
-        if stream is not None:
-            stream.close()
+            stream, stop = self._stream, self._session_stop
+        self._end_session(stream, stop)
         for thread in (self._reader, self._ticker):
             if thread is not None and thread is not threading.current_thread():
                 thread.join(timeout=2.0)
@@ -400,7 +397,10 @@ class KosClient:
                 while self._seq.get(message_id, 0) == seq0:
                     remaining = deadline - time.monotonic()
                     what = type(message).__name__
-                    if remaining <= 0 or self._stream is None:
+                    if self._stream is None:   # the link was lost (or closed) meanwhile
+                        raise NotConnected(f'link to {self.description} lost while waiting '
+                                           f'for the reply to {what}')
+                    if remaining <= 0:
                         raise DeviceTimeout(f'no reply to {what} from {self.description} '
                                             f'within {timeout:.1f} s')
                     if self._reader is not None and not self._reader.is_alive():
@@ -453,7 +453,23 @@ class KosClient:
         self.connected = False
         LOG.warning('kOS link to %s lost: %s', self.description, reason)
         self.last_error_text = f'link lost: {reason}'
-        threading.Thread(target=self.close, name='kos-teardown', daemon=True).start()
+        with self._lock:
+            stream, stop = self._stream, self._session_stop
+        # Not inline: this runs on the session's own threads or a caller's, and closing a
+        # HID stream waits for a read in progress.
+        threading.Thread(target=self._end_session, args=(stream, stop), name='kos-teardown',
+                         daemon=True).start()
+
+    def _end_session(self, stream: ByteStream | None, stop: threading.Event) -> None:
+        """End one session: its threads see `stop`, its stream closes. A session opened since
+        (the controller reconnects while this runs late) is left alone."""
+        stop.set()
+        with self._lock:
+            if self._stream is stream:
+                self._stream = None
+            self._cond.notify_all()
+        if stream is not None:
+            stream.close()
 
     def _tick_wait(self, next_poll: float) -> float:
         if self.poll_period <= 0:
