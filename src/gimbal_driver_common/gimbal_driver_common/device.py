@@ -140,7 +140,11 @@ class StatusReport(abc.ABC):
         return []
 
     def axis_details(self, joint: str) -> dict[str, object]:
-        """Extra AxisState fields for ``joint`` (state, calibrated, homed, active_errors)."""
+        """Extra AxisState fields for ``joint`` (state, calibrated, homed, active_errors).
+
+        ``state`` may be given by name ('fault', 'disabled', 'playback', ...: AxisState's
+        STATE_* without the prefix), so an adapter needs no ROS import.
+        """
         return {}
 
 

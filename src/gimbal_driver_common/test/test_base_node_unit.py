@@ -111,3 +111,35 @@ def test_look_at_refuses_an_unknown_aim_frame(context) -> None:
 def test_look_at_with_a_usable_description_still_waits_for_an_active_node(context) -> None:
     message = look_at_refusal(context, description_file=str(VIRTUAL_GIMBAL))
     assert 'not active' in message
+
+
+def test_axis_state_given_by_name_in_axis_details() -> None:
+    """A ROS-free adapter names the AxisState (no gimbal_msgs import); ~/status maps it."""
+    import logging
+
+    from gimbal_driver_common.controller import ControllerConfig, GimbalController
+    from gimbal_driver_common.device import Device, StatusReport
+    from gimbal_driver_common.joint_command import JointLimits
+    from gimbal_driver_common.ros import messages
+    from gimbal_msgs.msg import AxisState
+
+    class Report(StatusReport):
+        def parts(self):
+            return []
+
+        def axis_details(self, joint):
+            return {'state': 'fault' if joint == 'pan' else 'playback', 'calibrated': True}
+
+    class Named(Device):
+        def __init__(self):
+            super().__init__()
+            self.capabilities.status = Report()
+
+        open = read = move = jog = stop = lambda self, *args: None
+
+    config = ControllerConfig(['pan', 'tilt'], {n: JointLimits() for n in ('pan', 'tilt')})
+    ctl = GimbalController(Named(), config, logging.getLogger('test'))
+    ctl.connected = True
+    msg = messages.gimbal_status(ctl, ['pan', 'tilt'])
+    assert [a.state for a in msg.axes] == [AxisState.STATE_FAULT, AxisState.STATE_PLAYBACK]
+    assert all(a.calibrated for a in msg.axes)

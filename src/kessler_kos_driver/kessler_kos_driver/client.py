@@ -3,10 +3,13 @@
 Responsibilities: discovery (listen for NetworkInfo datagrams), the initialisation sequence
 (DeviceInfo, UserPassword, MotorInfo, DeviceGUID), request/response matching, notification
 handling (motor, playback, error state, aux inputs), the 10 s keep-alive, periodic state
-polling, automatic reconnection, and checked commands (limits are checked before any byte is
-sent). Over USB (`usb=UsbTarget(...)`) the link is a :class:`~.usb_link.HidStream` (report
-framing and the 4 s USB keep-alive) and no password message is sent: the document's USB notes
-say UserPassword and DevicePassword are "not required or supported".
+polling and checked commands (limits are checked before any byte is sent). Reconnecting is not
+the client's job: the controller's supervisor (gimbal_driver_common.controller) calls
+:meth:`KosClient.connect` again after a loss, which the client reports through `connected`
+and `last_error_text`. Over USB (`usb=UsbTarget(...)`) the link is a
+:class:`~.usb_link.HidStream` (report framing and the 4 s USB keep-alive) and no password
+message is sent: the document's USB notes say UserPassword and DevicePassword are "not
+required or supported".
 
 Design notes:
 - Set messages and actions have no reply. Where the caller needs to know the outcome the client
@@ -30,12 +33,8 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from gimbal_driver_common.transport import (
-    Backoff,
-    ByteStream,
-    TcpStream,
-    TransportError,
-)
+from gimbal_driver_common import errors
+from gimbal_driver_common.transport import ByteStream, TcpStream, TransportError
 
 from .protocol import (
     ALL_MOTORS,
@@ -96,23 +95,23 @@ from .usb_link import HidDevice, HidStream, UsbTarget
 LOG = logging.getLogger('kessler_kos_driver.client')
 
 
-class KosError(Exception):
-    """Base of the client's errors; messages say what to do."""
+class KosError(errors.GimbalError):
+    """Base of the client's errors (in the shared hierarchy); messages say what to do."""
 
 
-class NotConnected(KosError):
-    pass
+class NotConnected(KosError, errors.LinkError):
+    """No link (unreachable, no discovery datagram, USB device missing) or the link dropped."""
 
 
-class DeviceTimeout(KosError):
-    pass
+class DeviceTimeout(KosError, errors.DeviceTimeout):
+    """The device did not answer a Get in time."""
 
 
-class PasswordRejected(KosError):
-    pass
+class PasswordRejected(KosError, errors.DeviceRefused):
+    """The password does not match (checked locally) or the device locked us out."""
 
 
-class CommandRejected(KosError):
+class CommandRejected(KosError, errors.DeviceRefused):
     """A command refused before sending (limits, unknown motor) or by the device."""
 
 
@@ -253,8 +252,6 @@ class KosClient:
         self.silence_timeout = max(2.0 * reply_timeout, 1.0)
         self._reader: threading.Thread | None = None
         self._ticker: threading.Thread | None = None
-        self._supervisor: threading.Thread | None = None
-        self._stop = threading.Event()
         self._session_stop = threading.Event()
         self.connected = False
         self.device_info: DeviceInfo | None = None
@@ -263,13 +260,11 @@ class KosClient:
         self.playback = PlaybackInfo()
         self.errors: deque[ErrorEvent] = deque(maxlen=50)
         self.error_total = 0           # ErrorStatus notifications received so far
-        self.reconnects = 0
         self.malformed_frames = 0
         self.unsupported_replies = 0
-        self.last_error_text = ''
+        self.last_error_text = ''      # why the link was lost (for the supervisor's reason)
         self.on_playback: Callable[[PlaybackStatus], None] | None = None
         self.on_error: Callable[[ErrorEvent], None] | None = None
-        self.on_connection: Callable[[bool], None] | None = None
         self.on_motor_update: Callable[[], None] | None = None
         self.aux_inputs = 0            # AuxInputStatus bits (DeviceInfo, then notifications)
         self.on_aux_inputs: Callable[[int], None] | None = None
@@ -290,7 +285,7 @@ class KosClient:
 
     def connect(self) -> None:
         """Open the link and run the initialisation sequence; raises KosError on failure."""
-        self._teardown()
+        self.close()
         if self.usb is not None:
             host = ''
         else:
@@ -315,17 +310,16 @@ class KosClient:
         try:
             self._initialise()
         except Exception:
-            self._teardown()
+            self.close()
             raise
         self.connected = True
         self._ticker = threading.Thread(target=self._tick_loop, args=(self._session_stop,),
                                         name='kos-keepalive', daemon=True)
         self._ticker.start()
+        self.last_error_text = ''
         LOG.info('connected to %s (%s firmware %s, %d motors)', self.description,
                  self.device_info.device_type if self.device_info else '?',
                  self.device_info.firmware if self.device_info else '?', len(self.motors))
-        if self.on_connection:
-            self.on_connection(True)
 
     def _initialise(self) -> None:
         """Document "Initialization": DeviceInfo, UserPassword, MotorInfo, DeviceGUID."""
@@ -363,55 +357,15 @@ class KosClient:
             self.playback.status = info.playback_status
 
     def close(self) -> None:
-        """Stop the supervisor (if any) and close the link."""
-        self._stop.set()
-        if self._supervisor is not None:
-            self._supervisor.join(timeout=5.0)
-            self._supervisor = None
-        self._teardown()
-
-    def _teardown(self, was_connected: bool | None = None) -> None:
-        if was_connected is None:
-            was_connected = self.connected
+        """Close the link and end the session's threads (safe to call repeatedly)."""
         self.connected = False
-        self._session_stop.set()
         with self._lock:
-            stream, self._stream = self._stream, None
-            self._cond.notify_all()
-        if stream is not None:
-            stream.close()
+            stream, stop = self._stream, self._session_stop
+        self._end_session(stream, stop)
         for thread in (self._reader, self._ticker):
             if thread is not None and thread is not threading.current_thread():
                 thread.join(timeout=2.0)
         self._reader = self._ticker = None
-        if was_connected and self.on_connection:
-            self.on_connection(False)
-
-    def start(self, reconnect_period: float = 1.0, max_backoff: float = 10.0) -> None:
-        """Keep a session up in the background: connect, and reconnect after losses."""
-        self._stop.clear()
-        self._supervisor = threading.Thread(
-            target=self._supervise, args=(reconnect_period, max_backoff), name='kos-supervisor',
-            daemon=True)
-        self._supervisor.start()
-
-    def _supervise(self, reconnect_period: float, max_backoff: float) -> None:
-        backoff = Backoff(max(reconnect_period, 0.05), max(max_backoff, reconnect_period))
-        first = True
-        while not self._stop.is_set():
-            if not self.connected:
-                try:
-                    self.connect()
-                    backoff.reset()
-                    if not first:
-                        self.reconnects += 1
-                    first = False
-                except KosError as exc:
-                    self.last_error_text = str(exc)
-                    LOG.warning('kOS connection to %s failed: %s', self.description, exc)
-                    self._stop.wait(backoff.next_delay())
-                    continue
-            self._stop.wait(0.05)
 
     # ------------------------------------------------------------------- messaging
     def send(self, message: Message) -> None:
@@ -443,7 +397,10 @@ class KosClient:
                 while self._seq.get(message_id, 0) == seq0:
                     remaining = deadline - time.monotonic()
                     what = type(message).__name__
-                    if remaining <= 0 or self._stream is None:
+                    if self._stream is None:   # the link was lost (or closed) meanwhile
+                        raise NotConnected(f'link to {self.description} lost while waiting '
+                                           f'for the reply to {what}')
+                    if remaining <= 0:
                         raise DeviceTimeout(f'no reply to {what} from {self.description} '
                                             f'within {timeout:.1f} s')
                     if self._reader is not None and not self._reader.is_alive():
@@ -496,8 +453,23 @@ class KosClient:
         self.connected = False
         LOG.warning('kOS link to %s lost: %s', self.description, reason)
         self.last_error_text = f'link lost: {reason}'
-        threading.Thread(target=self._teardown, args=(True,), name='kos-teardown',
+        with self._lock:
+            stream, stop = self._stream, self._session_stop
+        # Not inline: this runs on the session's own threads or a caller's, and closing a
+        # HID stream waits for a read in progress.
+        threading.Thread(target=self._end_session, args=(stream, stop), name='kos-teardown',
                          daemon=True).start()
+
+    def _end_session(self, stream: ByteStream | None, stop: threading.Event) -> None:
+        """End one session: its threads see `stop`, its stream closes. A session opened since
+        (the controller reconnects while this runs late) is left alone."""
+        stop.set()
+        with self._lock:
+            if self._stream is stream:
+                self._stream = None
+            self._cond.notify_all()
+        if stream is not None:
+            stream.close()
 
     def _tick_wait(self, next_poll: float) -> float:
         if self.poll_period <= 0:

@@ -410,18 +410,7 @@ def test_axis_fault_during_playback(calibrated):
     assert wait_until(lambda: not client.motors[3].calibrated)
 
 
-def test_reconnect_after_link_drop(calibrated):
-    sim, client = calibrated
-    client.close()
-    states = []
-    client.on_connection = states.append
-    client.start(reconnect_period=0.05)
-    assert wait_until(lambda: client.connected)
-    sim.command('drop 0.3')
-    assert wait_until(lambda: False in states, 5)
-    assert wait_until(lambda: client.connected and client.reconnects >= 1, 10)
-    assert states[-1] is True
-    client.refresh_motors()
+# Reconnecting is the controller's job: test_device.py::test_link_drop_then_reconnect.
 
 
 def test_connect_failure_is_clear():
@@ -460,17 +449,8 @@ def test_motor_calibrated_notification_updates_state(calibrated):
     assert wait_until(lambda: client.motors[1].end_position == 42.0)
 
 
-def test_silent_device_is_detected_and_recovered(calibrated):
-    sim, client = calibrated
-    client.close()
-    client.silence_timeout = 0.5
-    client.start(reconnect_period=0.1)
-    assert wait_until(lambda: client.connected)
-    sim.server.set_silent(True)
-    assert wait_until(lambda: not client.connected, 5)
-    assert 'silent' in client.last_error_text
-    sim.server.set_silent(False)
-    assert wait_until(lambda: client.connected, 10)
+# The silent device, detected by the client and recovered by the controller's supervisor:
+# test_device.py::test_silent_device_is_detected_and_recovered.
 
 
 def test_rapid_to_first_key_frame(calibrated):

@@ -18,7 +18,8 @@ from std_srvs.srv import Trigger
 from gimbal_driver_common.ros.testing import RosTestClient, driver_rig, joint_positions
 from gimbal_driver_common.testing import free_tcp_port
 from gimbal_msgs.action import MoveTo
-from gimbal_msgs.msg import GimbalStatus
+from gimbal_msgs.msg import AxisState, AxisTrajectory, BezierSegment, GimbalStatus
+from gimbal_msgs.srv import LoadTrajectory
 
 pytestmark = pytest.mark.ros
 
@@ -66,15 +67,21 @@ def test_joint_scales_apply_while_idle(rig) -> None:
     pan_near(ros, 30.0)
 
 
+def scale_change_refusal(ros: RosTestClient) -> str:
+    """Try a joint_scales change that the node must refuse while the axes move; the reason."""
+    refused = ros.set_parameter(NODE, 'joint_scales', [TWO_PI, math.pi, TWO_PI])
+    assert not refused.successful
+    assert 'axes must be idle' in refused.reason
+    return refused.reason
+
+
 def test_joint_scales_refused_while_jogging_and_when_invalid(rig) -> None:
     ros, _ = rig
     ros.publish('joint_command', JointState(name=['pan'], velocity=[2.0]))
     try:
         ros.wait_for_message('joint_states', JointState,
                              lambda m: abs(m.velocity[m.name.index('pan')]) > 1.0, timeout=10)
-        refused = ros.set_parameter(NODE, 'joint_scales', [TWO_PI, math.pi, TWO_PI])
-        assert not refused.successful
-        assert 'axes must be idle' in refused.reason and 'pan' in refused.reason
+        assert 'pan' in scale_change_refusal(ros)
     finally:
         assert ros.call(Trigger, f'/{NODE}/stop', Trigger.Request()).success
     assert ros.get_parameter(NODE, 'joint_scales') == [TWO_PI, TWO_PI, TWO_PI]
@@ -82,6 +89,25 @@ def test_joint_scales_refused_while_jogging_and_when_invalid(rig) -> None:
     assert not refused.successful and 'finite non-zero' in refused.reason
     refused = ros.set_parameter(NODE, 'joint_scales', [TWO_PI])
     assert not refused.successful and 'need 3' in refused.reason
+
+
+def test_joint_scales_refused_while_a_move_plays(rig) -> None:
+    ros, _ = rig
+    segment = BezierSegment(p0_time=0.0, p0_position=0.0, p1_time=1 / 3, p1_position=0.0,
+                            p2_time=2 / 3, p2_position=0.2, p3_time=1.0, p3_position=0.2)
+    load = LoadTrajectory.Request(
+        playback_mode=LoadTrajectory.Request.MODE_LIVE_MOTION, duration=4.0, loop_count=255,
+        rapid_reverse=True, axes=[AxisTrajectory(joint_name='pan', segments=[segment])])
+    reply = ros.call(LoadTrajectory, f'/{NODE}/load_trajectory', load)
+    assert reply.success, reply.message
+    assert ros.call(Trigger, f'/{NODE}/start_playback', Trigger.Request()).success
+    try:
+        ros.wait_for_message(f'/{NODE}/status', GimbalStatus,
+                             lambda s: s.axes[1].state == AxisState.STATE_PLAYBACK, timeout=15)
+        assert 'a move is playing' in scale_change_refusal(ros)
+    finally:
+        assert ros.call(Trigger, f'/{NODE}/stop_playback', Trigger.Request()).success
+    assert ros.get_parameter(NODE, 'joint_scales') == [TWO_PI, TWO_PI, TWO_PI]
 
 
 def test_other_kos_parameters(rig) -> None:

@@ -8,15 +8,20 @@ model), so every byte the client would hand to hidapi is checked.
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
 
 import pytest
 
+from gimbal_driver_common.controller import ControllerConfig, GimbalController
+from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import LinkClosed, TransportError
 from kessler_kos_driver.client import CommandRejected, KosClient, NotConnected
+from kessler_kos_driver.device import KosDevice as KosAdapter
+from kessler_kos_driver.device import joint_mappings
 from kessler_kos_driver.moves import (
     AxisRange,
     JointMapping,
@@ -263,14 +268,27 @@ def test_aux_inputs_leds_and_software_id_over_usb(usb_rig):
 
 
 def test_unplugged_usb_device_is_a_lost_link_and_reconnects(usb_rig):
+    """The client sees the lost link; the controller's supervisor (the only reconnect loop)
+    opens the adapter again once the device is back."""
     _device, hid_device, client = usb_rig
-    client.start(reconnect_period=0.05)
-    assert wait_until(lambda: client.connected)
-    hid_device.unplug()
-    assert wait_until(lambda: not client.connected)
-    assert 'read error' in client.last_error_text or 'not open' in client.last_error_text
-    hid_device.plug_in()
-    assert wait_until(lambda: client.connected and client.reconnects == 1)
+    joints = ['slider', 'pan', 'tilt']
+    config = ControllerConfig(joints, {n: JointLimits() for n in joints}, reconnect_period=0.05)
+    errors = []
+    controller = GimbalController(
+        KosAdapter(client, joint_mappings(joints, [1, 2, 3], [TWO_PI] * 3), config), config,
+        logging.getLogger('test_usb'), on_link_change=lambda: errors.append(controller.link_error))
+    controller.open()
+    try:
+        assert wait_until(lambda: controller.connected)
+        hid_device.unplug()
+        assert wait_until(lambda: not controller.connected)
+        assert wait_until(lambda: errors)
+        assert 'read error' in errors[0] or 'not open' in errors[0]
+        hid_device.plug_in()
+        assert wait_until(lambda: controller.connected and controller.reconnects == 1)
+        assert client.connected and client.description == 'usb://1234:5678'
+    finally:
+        controller.close()
 
 
 def test_usb_client_without_device_fails_clearly():

@@ -1,0 +1,636 @@
+"""The kOS device adapter: KosClient on the shared device contract, in SI units (no ROS).
+
+The device works in motor rotations; everything the controller and the node see is SI
+(rad, or m for a slider) through `joint_scales` (SI units per rotation; a negative scale
+flips the direction so a motor that counts the other way still follows REP-103). Every
+scale, sign and unit conversion of the driver lives here:
+:meth:`KosDevice.read` (rotations -> SI), :meth:`KosDevice.move` and :meth:`KosDevice.jog`
+(SI -> rotations, checked against the motor maxima before anything is sent), the key-frame
+load, the calibration range, ~/playback_status positions and the diagnostics values.
+
+Capabilities: :class:`KosHoming` (first key frame of a loaded move, else the begin marks) and
+:class:`KosStatus` (ErrorStatus latch, lock state, per-motor diagnostics). kOS has no device
+presets and no device scans, so the controller's YAML presets and driver-side scans serve it.
+The playback, calibration, picture, LED and SoftwareID requests the node exposes as its own
+services are plain methods of :class:`KosDevice`, called through ``controller.call``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from gimbal_driver_common.device import (
+    Device,
+    DeviceInfo,
+    Homing,
+    JointSample,
+    Moves,
+    StatusReport,
+)
+from gimbal_driver_common.diagnostics import Level, StatusPart
+from gimbal_driver_common.errors import (
+    DeviceRefused,
+    DeviceTimeout,
+    GimbalError,
+    InvalidRequest,
+)
+from gimbal_driver_common.joint_command import JointLimits
+
+from .client import ErrorEvent, KosClient, KosError, MotorState, NotConnected
+from .moves import (
+    AxisRange,
+    JointMapping,
+    Keyframe,
+    PlaybackSettings,
+    from_keyframes,
+    from_segments,
+)
+from .protocol import (
+    ERROR_CODES,
+    DeviceType,
+    ErrorCode,
+    LedState,
+    PlaybackMode,
+    PlaybackState,
+    PlaybackStatus,
+    ProtocolError,
+    Trajectory,
+    playback_state_name,
+)
+
+LOG = logging.getLogger('kessler_kos_driver.device')
+
+# AuxInputStatus bits (document "AuxInputStatus"): buttons in this order; bit 4 = a slave
+# controller is present.
+AUX_INPUT_BUTTONS = ('master_tip', 'master_ring', 'slave_tip', 'slave_ring')
+AUX_SLAVE_PRESENT_BIT = 4
+LED_NAMES = {int(state): state.name.lower() for state in LedState}
+DEVICE_MODELS = {
+    DeviceType.CINESHOOTER: 'Kessler CineShooter',
+    DeviceType.SECOND_SHOOTER_PRO: 'Kessler Second Shooter Pro',
+    DeviceType.SECOND_SHOOTER_PLUS: 'Kessler Second Shooter Plus',
+}
+#: ErrorStatus notifications kept for diagnostics until ~/reset_faults
+LATCHED_ERRORS_MAX = 20
+
+
+class MotionConfig(Protocol):
+    """What the adapter reads from the controller's configuration (live, runtime parameters)."""
+
+    limits: dict[str, JointLimits]
+    move_timeout: float
+    goal_tolerance: float
+
+
+@dataclass
+class KosSettings:
+    """kOS-specific tuning the node changes at run time (``ros2 param set``)."""
+
+    acceleration_scale: float = 0.5    # fraction of MaxMaxAcceleration for moves and jogs
+    playback_timeout: float = 60.0     # s to wait for SetupCompleted / MotorsHome
+
+
+@dataclass
+class PlaybackReport:
+    """One PlaybackStatus notification with the motor positions in SI, by joint."""
+
+    status: int
+    status_name: str
+    elapsed: float
+    photo_count: int
+    positions: dict[str, float] = field(default_factory=dict)
+
+
+def _finite_or(value: float, default: float) -> float:
+    return value if math.isfinite(value) else default
+
+
+class KosDevice(Device):
+    """One kOS device (TCP or USB HID) in SI units; callbacks run on the client's reader."""
+
+    #: positions come from MotorInfo polls (every ``poll_period``) and notifications
+    streamed = True
+
+    def __init__(
+        self, client: KosClient, joints: Sequence[JointMapping], config: MotionConfig,
+        settings: KosSettings | None = None,
+        on_playback: Callable[[PlaybackReport], None] | None = None,
+        on_aux_inputs: Callable[[int], None] | None = None,
+    ) -> None:
+        super().__init__()
+        self.client = client
+        self.joints = {m.name: m for m in joints}
+        self.config = config
+        self.settings = settings or KosSettings()
+        self.on_playback = on_playback or (lambda report: None)
+        self.on_aux_inputs = on_aux_inputs or (lambda status: None)
+        #: LEDStatus / SoftwareID as last read (connect, ~/command), for diagnostics
+        self.device_settings: dict[str, str] = {}
+        self.status = KosStatus(self)
+        self.capabilities.homing = KosHoming(self)
+        self.capabilities.status = self.status
+        client.on_motor_update = self.notify_data
+        client.on_playback = self._playback_notified
+        client.on_aux_inputs = lambda status: self.on_aux_inputs(status)
+        client.on_error = self.status.latch
+
+    # ------------------------------------------------------------ conversion
+    def joint_of(self, address: int) -> str | None:
+        return next((m.name for m in self.joints.values() if m.address == address), None)
+
+    def to_si(self, joint: str, rotations: float) -> float:
+        """A position or signed velocity in rotations as SI (the scale's sign flips it)."""
+        return rotations * self.joints[joint].scale
+
+    def to_rotations(self, joint: str, si: float) -> float:
+        return si / self.joints[joint].scale
+
+    def magnitude_si(self, joint: str, rotations: float) -> float:
+        """A speed or acceleration limit (no direction) in SI."""
+        return rotations * abs(self.joints[joint].scale)
+
+    def set_joint_scales(self, scales: Sequence[float], targets: dict[str, float]) -> None:
+        """New SI units per rotation; ``targets`` (SI, by joint) keep their motor positions."""
+        for (name, mapping), scale in zip(list(self.joints.items()), scales, strict=True):
+            if name in targets:
+                targets[name] *= scale / mapping.scale
+            self.joints[name] = JointMapping(name, mapping.address, scale)
+
+    # ------------------------------------------------------------- contract
+    def open(self) -> DeviceInfo:
+        client = self.client
+        client.connect()
+        missing = [f'{m.name} (motor {m.address})' for m in self.joints.values()
+                   if m.address not in client.motors]
+        if missing:
+            LOG.warning('joints without a connected motor: %s; device motors: %s', missing,
+                        sorted(client.motors))
+        self.status.locked_out = False
+        self._read_device_settings()
+        self.on_aux_inputs(client.aux_inputs)
+        info = client.device_info
+        model = (DEVICE_MODELS.get(info.device_type, f'kOS device type {info.device_type}')
+                 if info else 'kOS device')
+        return DeviceInfo(model=model, serial_number=client.guid,
+                          firmware_version=info.firmware if info else '',
+                          hardware_id=client.guid or client.description)
+
+    def close(self) -> None:
+        self.client.close()
+
+    def description(self) -> str:
+        return self.client.description
+
+    def link_healthy(self) -> bool:
+        """The client sees a lost link first (read/write error, silent device): its reason."""
+        if not self.client.connected:
+            raise NotConnected(self.client.last_error_text or 'link down')
+        return True
+
+    def read(self) -> JointSample | None:
+        """Motor positions (rotations) as SI; offline or never-reported motors are left out.
+
+        kOS has no per-motor "moving" bit, but a playing move owns every motor: then every
+        joint reads moving; otherwise the controller's velocity rule applies.
+        """
+        client = self.client
+        positions: dict[str, float] = {}
+        velocities: dict[str, float] = {}
+        stamp = 0.0
+        for name, mapping in self.joints.items():
+            motor = client.motors.get(mapping.address)
+            if motor is None or not motor.online or not motor.stamp:
+                continue
+            positions[name] = self.to_si(name, motor.position)
+            velocities[name] = self.to_si(name, motor.velocity)
+            stamp = max(stamp, motor.stamp)
+        if not positions:
+            return None
+        moving = dict.fromkeys(positions, True) if client.playback_running else {}
+        return JointSample(positions, velocities, stamp=stamp, moving=moving)
+
+    def playing(self) -> str | None:
+        """Why nothing else may move or load now: a playing move owns the motors."""
+        client = self.client
+        if client.playback_running:
+            return (f'a move is playing ({playback_state_name(client.playback.status)}); '
+                    'call ~/stop_playback or ~/stop first')
+        return None
+
+    def refusal(self, joints: Sequence[str]) -> str | None:
+        """A playing move owns the motors; an offline or missing motor cannot move."""
+        reason = self.playing()
+        if reason:
+            return reason
+        client = self.client
+        for name in joints:
+            if name not in self.joints:
+                continue   # an unknown joint is the command check's to name
+            address = self.joints[name].address
+            motor = client.motors.get(address)
+            if motor is None:
+                return f'joint {name!r}: motor {address} is not connected'
+            if not motor.online:
+                return f'joint {name!r}: motor {address} is offline'
+        return None
+
+    def require_idle(self) -> None:
+        """Refuse while a move plays (loads, setups, calibration, moves)."""
+        reason = self.playing()
+        if reason:
+            raise DeviceRefused(reason)
+
+    def _motor(self, joint: str) -> MotorState:
+        address = self.joints[joint].address
+        if address not in self.client.motors:
+            raise DeviceRefused(f'joint {joint!r}: motor {address} is not connected')
+        return self.client.motor(address)
+
+    def _acceleration(self, motor: MotorState) -> float:
+        return motor.max_acceleration * self.settings.acceleration_scale
+
+    def move(self, moves: Moves) -> None:
+        """Absolute moves: every target and speed is checked (in rotations) before sending.
+
+        No speed: the joint's velocity_max, capped at the motor's MaxMaxSetupSpeed.
+        """
+        self.require_idle()
+        client = self.client
+        messages = []
+        for name, (target, speed) in moves.items():
+            motor = self._motor(name)
+            wanted = speed if speed is not None else self.config.limits[name].velocity_max
+            speed_rot = abs(self.to_rotations(name, wanted))
+            if speed is None:
+                speed_rot = min(speed_rot, motor.max_setup_speed)
+            try:
+                messages.append(client.check_move(
+                    motor.address, self.to_rotations(name, target), speed_rot,
+                    self._acceleration(motor)))
+            except DeviceRefused as exc:
+                raise InvalidRequest(f'joint {name!r}: {exc}') from exc
+        for message in messages:
+            client.send(message)
+
+    def jog(self, velocities: dict[str, float]) -> None:
+        """Velocities (SI/s) as moves toward the end of travel at that speed (0 stops)."""
+        self.require_idle()
+        motors = {name: self._motor(name) for name in velocities}
+        rotations = {name: self.to_rotations(name, v) for name, v in velocities.items()}
+        for name, velocity in rotations.items():
+            motor = motors[name]
+            if abs(velocity) > motor.max_setup_speed:
+                raise InvalidRequest(
+                    f'joint {name!r}: {abs(velocities[name]):.4f} exceeds the motor maximum '
+                    f'{self.magnitude_si(name, motor.max_setup_speed):.4f}')
+        for name, velocity in rotations.items():
+            motor = motors[name]
+            self.client.jog(motor.address, velocity, self._acceleration(motor))
+
+    def stop(self, joints: Sequence[str] | None = None) -> None:
+        client = self.client
+        if joints is None:
+            client.stop_all()
+            return
+        for name in joints:
+            motor = client.motors.get(self.joints[name].address)
+            if motor is not None and motor.online:
+                client.stop_motor(motor.address)
+
+    def reset_faults(self) -> str:
+        """kOS has no fault-clear command: clear the latched errors and re-read MotorInfo."""
+        count = self.status.clear()
+        client = self.client
+        client.refresh_motors()
+        uncalibrated = [n for n, m in self.joints.items()
+                        if m.address in client.motors and not client.motors[m.address].calibrated]
+        note = (f'; not calibrated (recalibrate with ~/calibrate): {uncalibrated}'
+                if uncalibrated else '')
+        return f'cleared {count} latched device error(s){note}'
+
+    # ------------------------------------------------------------- playback
+    def _ranges(self) -> dict[int, AxisRange]:
+        return {a: AxisRange(m.begin_position, m.end_position)
+                for a, m in self.client.motors.items() if m.online}
+
+    def load_keyframes(self, frames: list[Keyframe], settings: PlaybackSettings) -> Trajectory:
+        """Fit SI key frames to the calibrated ranges, load and confirm the move."""
+        self.require_idle()
+        self.client.refresh_motors()
+        return self._load(lambda: from_keyframes(frames, self.joints, self._ranges(), settings))
+
+    def load_segments(
+        self, segments: dict[str, list[tuple[float, ...]]], settings: PlaybackSettings
+    ) -> Trajectory:
+        """Load explicit normalised Bezier segments per joint."""
+        self.require_idle()
+        self.client.refresh_motors()
+        return self._load(lambda: from_segments(segments, self.joints, settings))
+
+    def _load(self, build: Callable[[], Trajectory]) -> Trajectory:
+        try:
+            trajectory = build()
+            self.client.load_trajectory(trajectory)
+        except (ProtocolError, KosError) as exc:
+            raise DeviceRefused(f'trajectory not loaded: {exc}') from exc
+        return trajectory
+
+    def setup_playback(self, delay_return: bool) -> None:
+        """SetupPlayback, answered once SetupCompleted arrives."""
+        self.require_idle()
+        client = self.client
+        marker = len(client.playback.history)
+        client.setup_playback(delay_return=delay_return)
+        timeout = self.settings.playback_timeout
+        if not client.wait_for(
+                lambda: PlaybackState.SETUP_COMPLETED in client.playback.history[marker:],
+                timeout):
+            raise DeviceTimeout(f'no SetupCompleted notification within {timeout:g} s')
+
+    def start_playback(self) -> None:
+        self.require_idle()
+        self.client.start_playback()
+
+    def stop_playback(self) -> None:
+        self.client.stop_playback()
+
+    def _playback_notified(self, note: PlaybackStatus) -> None:
+        photos = note.photo_count
+        report = PlaybackReport(
+            status=int(note.status), status_name=playback_state_name(note.status),
+            elapsed=float(_finite_or(note.elapsed_time, 0.0)),
+            photo_count=(min(round(photos), 2**32 - 1)
+                         if math.isfinite(photos) and photos >= 0 else 0))
+        for address, position in sorted(note.positions.items()):
+            name = self.joint_of(address)
+            if name is not None:
+                report.positions[name] = self.to_si(name, float(position))
+        self.on_playback(report)
+
+    # ---------------------------------------------------- calibration, camera
+    def mark_begin(self, joint: str) -> None:
+        self.require_idle()
+        self.client.mark_begin(self._mapping(joint).address)
+
+    def mark_end(self, joint: str) -> tuple[float, float]:
+        """MarkEndPosition; the calibrated (begin, end) in SI."""
+        self.require_idle()
+        begin, end = self.client.mark_end(self._mapping(joint).address)
+        return self.to_si(joint, begin), self.to_si(joint, end)
+
+    def reset_axis(self, joint: str) -> None:
+        self.require_idle()
+        self.client.reset_axis(self._mapping(joint).address)
+
+    def _mapping(self, joint: str) -> JointMapping:
+        mapping = self.joints.get(joint)
+        if mapping is None:
+            raise InvalidRequest(f'unknown joint {joint!r}; this device has {list(self.joints)}')
+        return mapping
+
+    def take_picture(self, exposure: float) -> None:
+        self.client.take_picture(exposure)
+
+    # --------------------------------------------------------- LEDs, SoftwareID
+    def _read_device_settings(self) -> None:
+        """LEDStatus and SoftwareID once per connection, for diagnostics."""
+        self.device_settings = {}
+        try:
+            self._remember_leds(*self.client.led_status())
+            self.software_id()
+        except GimbalError as exc:
+            LOG.warning('cannot read LEDStatus/SoftwareID: %s', exc)
+
+    def _remember_leds(self, master: int, slave: int) -> tuple[str, str]:
+        names = LED_NAMES.get(master, str(master)), LED_NAMES.get(slave, str(slave))
+        self.device_settings['led_master'], self.device_settings['led_slave'] = names
+        return names
+
+    def led_status(self) -> tuple[str, str]:
+        """(master, slave) LED states by name."""
+        return self._remember_leds(*self.client.led_status())
+
+    def set_led_status(self, master: int, slave: int) -> tuple[str, str]:
+        return self._remember_leds(*self.client.set_led_status(master, slave))
+
+    def software_id(self) -> int:
+        value = self.client.software_id()
+        self.device_settings['last_client_software_id'] = str(value)
+        return value
+
+    def set_software_id(self, platform: int) -> int:
+        value = self.client.set_software_id(platform)
+        self.device_settings['last_client_software_id'] = str(value)
+        return value
+
+    @property
+    def aux_inputs(self) -> int:
+        return self.client.aux_inputs
+
+
+class KosHoming(Homing):
+    """~/home: a loaded move returns to its first key frame (RapidToFirstKeyFrame until
+    MotorsHome); otherwise calibrated joints move to their begin mark (0) and uncalibrated
+    joints only get their latched errors cleared (kOS has no homing without calibration)."""
+
+    def __init__(self, device: KosDevice) -> None:
+        self.device = device
+
+    def home(
+        self, joints: Sequence[str], report: Callable[[str], None], cancelled: threading.Event
+    ) -> str:
+        device, client = self.device, self.device.client
+        device.require_idle()
+        if client.playback.loaded:
+            return self._first_key_frame(report, cancelled)
+        calibrated = [n for n in joints if device.joints[n].address in client.motors
+                      and client.motors[device.joints[n].address].calibrated]
+        uncalibrated = [n for n in joints if n not in calibrated]
+        device.status.clear({device.joints[n].address for n in uncalibrated})
+        if calibrated:
+            report('moving to the begin marks')
+            device.move({n: (0.0, None) for n in calibrated})
+            self._wait_at_begin(calibrated, cancelled)
+        parts = []
+        if calibrated:
+            parts.append(f'at the begin mark: {calibrated}')
+        if uncalibrated:
+            parts.append('not calibrated, errors cleared (no homing without calibration): '
+                         f'{uncalibrated}')
+        return '; '.join(parts)
+
+    def _first_key_frame(self, report: Callable[[str], None], cancelled: threading.Event) -> str:
+        client = self.device.client
+        report('returning to the first key frame')
+        marker = len(client.playback.history)
+        client.rapid_to_first_key_frame()
+        if not client.wait_for(
+                lambda: PlaybackState.MOTORS_HOME in client.playback.history[marker:]
+                or cancelled.is_set(), self.device.settings.playback_timeout):
+            raise DeviceTimeout('no MotorsHome notification: the return to the first key '
+                                'frame did not complete')
+        return 'at the first key frame of the loaded move'
+
+    def _wait_at_begin(self, joints: list[str], cancelled: threading.Event) -> None:
+        """Until every joint reads within goal_tolerance of 0 (waits on MotorInfo updates)."""
+        device, config = self.device, self.device.config
+        tolerance = config.goal_tolerance
+
+        def at_begin() -> bool:
+            if cancelled.is_set():
+                return True
+            motors = device.client.motors
+            return all(abs(device.to_si(n, motors[device.joints[n].address].position))
+                       <= tolerance for n in joints)
+
+        if not device.client.wait_for(at_begin, config.move_timeout) and not cancelled.is_set():
+            raise DeviceTimeout(f'begin marks not reached within {config.move_timeout:g} s')
+
+
+class KosStatus(StatusReport):
+    """Diagnostics from the ErrorStatus latch, lock state, playback and MotorInfo (in SI)."""
+
+    def __init__(self, device: KosDevice) -> None:
+        self.device = device
+        self.locked_out = False
+        self._errors: list[ErrorEvent] = []
+        self._lock = threading.Lock()
+
+    def latch(self, event: ErrorEvent) -> None:
+        """An ErrorStatus notification: kept until ~/reset_faults (or homing the axis)."""
+        with self._lock:
+            self._errors.append(event)
+            del self._errors[:-LATCHED_ERRORS_MAX]
+        if event.code == ErrorCode.LOCKED_OUT:
+            self.locked_out = True
+        joint = self.device.joint_of(event.motor_address)
+        where = f'joint {joint!r}' if joint else f'motor {event.motor_address}'
+        LOG.error('device error %d: %s (%s)', event.code, event.description, where)
+
+    def clear(self, addresses: set[int] | None = None) -> int:
+        """Forget the latched errors (of these motors only); returns how many."""
+        with self._lock:
+            before = len(self._errors)
+            if addresses is None:
+                self._errors.clear()
+                self.locked_out = False
+            else:
+                self._errors = [e for e in self._errors if e.motor_address not in addresses]
+            return before - len(self._errors)
+
+    def latched(self) -> list[ErrorEvent]:
+        with self._lock:
+            return list(self._errors)
+
+    def _device_wide(self, errors: list[ErrorEvent]) -> list[ErrorEvent]:
+        addresses = {m.address for m in self.device.joints.values()}
+        return [e for e in errors if e.motor_address not in addresses]
+
+    def parts(self) -> list[StatusPart]:
+        device, client = self.device, self.device.client
+        errors = self.latched()
+        device_errors = self._device_wide(errors)
+        playback = playback_state_name(client.playback.status)
+        aux = client.aux_inputs
+        part = StatusPart('device', values=[
+            ('lock', 'LOCKED (password rejected)' if self.locked_out else 'unlocked'),
+            ('playback_status', playback),
+            ('move_loaded', str(client.playback.loaded)),
+            ('guid', client.guid),
+            ('malformed_frames', str(client.malformed_frames)),
+            ('unsupported_replies', str(client.unsupported_replies)),
+            ('transport', 'usb' if client.usb is not None else 'tcp'),
+            *([('usb_dropped_reports', str(client.usb_dropped_reports))]
+              if client.usb is not None else []),
+            ('aux_inputs', ' '.join(f'{n}={aux >> b & 1}'
+                                    for b, n in enumerate(AUX_INPUT_BUTTONS))),
+            ('slave_controller_present', str(bool(aux >> AUX_SLAVE_PRESENT_BIT & 1))),
+            *sorted(device.device_settings.items()),
+            *[(f'error_{e.code}', f'{e.description} (motor {e.motor_address})')
+              for e in device_errors],
+        ])
+        if self.locked_out:
+            part.level, part.message = Level.ERROR, 'device locked: password rejected'
+        elif device_errors:
+            part.level = Level.ERROR
+            part.message = f'error {device_errors[-1].code}: {device_errors[-1].description}'
+        else:
+            part.message = f'OK, playback {playback}'
+        return [part] + [self._axis_part(name, errors) for name in device.joints]
+
+    def _axis_part(self, name: str, errors: list[ErrorEvent]) -> StatusPart:
+        device = self.device
+        mapping = device.joints[name]
+        motor = device.client.motors.get(mapping.address)
+        part = StatusPart(name)
+        if motor is None or not motor.online:
+            part.level, part.message = Level.ERROR, f'motor {mapping.address} offline'
+            part.values = [('motor_address', str(mapping.address)), ('online', 'False')]
+            return part
+        axis_errors = [e for e in errors if e.motor_address == mapping.address]
+        part.values = [
+            ('motor_address', str(mapping.address)), ('online', 'True'),
+            ('calibrated', str(motor.calibrated)),
+            ('begin_position', f'{device.to_si(name, motor.begin_position):.6g}'),
+            ('end_position', f'{device.to_si(name, motor.end_position):.6g}'),
+            ('position_rotations', f'{motor.position:.6g}'),
+            ('max_setup_speed', f'{device.magnitude_si(name, motor.max_setup_speed):.6g}'),
+            ('max_move_speed', f'{device.magnitude_si(name, motor.max_move_speed):.6g}'),
+            ('max_acceleration', f'{device.magnitude_si(name, motor.max_acceleration):.6g}'),
+            ('fiz_motor', str(motor.is_fiz)),
+            *[(f'error_{e.code}', e.description) for e in axis_errors],
+        ]
+        if axis_errors:
+            part.level = Level.ERROR
+            part.message = f'error {axis_errors[-1].code}: {axis_errors[-1].description}'
+        elif not motor.calibrated:
+            part.level = Level.WARN
+            part.message = 'not calibrated (no playback, uncalibrated travel)'
+        else:
+            part.message = 'calibrated'
+        return part
+
+    def mode(self) -> str:
+        client = self.device.client
+        mode = client.device_info.playback_mode if client.device_info else 0
+        try:
+            mode_name = PlaybackMode(mode).name.lower()
+        except ValueError:
+            mode_name = str(mode)
+        return f'{mode_name}/{playback_state_name(client.playback.status)}'
+
+    def errors(self) -> list[str]:
+        return [f'{e.code}: {e.description}' for e in self._device_wide(self.latched())]
+
+    def axis_details(self, joint: str) -> dict[str, object]:
+        """calibrated/homed (kOS: the begin and end marks are set), the motor's latched
+        errors, and the state names 'disabled' (offline), 'fault', 'playback'."""
+        device = self.device
+        address = device.joints[joint].address
+        motor = device.client.motors.get(address)
+        if motor is None:
+            return {'state': 'disabled'}
+        errors = [ERROR_CODES[e.code].description if e.code in ERROR_CODES else
+                  f'error {e.code}' for e in self.latched() if e.motor_address == address]
+        details: dict[str, object] = {'calibrated': motor.calibrated,
+                                      'homed': motor.calibrated, 'active_errors': errors}
+        if not motor.online:
+            details['state'] = 'disabled'
+        elif errors:
+            details['state'] = 'fault'
+        elif device.client.playback_running:
+            details['state'] = 'playback'
+        return details
+
+
+def joint_mappings(
+    names: Sequence[str], addresses: Sequence[int], scales: Sequence[float]
+) -> list[JointMapping]:
+    """The joint -> (motor address, SI per rotation) table from the parameters."""
+    return [JointMapping(n, a, s) for n, a, s in zip(names, addresses, scales, strict=True)]
+
