@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING
 
-from gimbal_driver_common.device import StatusReport
+from gimbal_driver_common.device import AxisStateCode, StatusReport
 from gimbal_driver_common.diagnostics import Level, StatusPart
 
 from .client import AXES, TurretClient
@@ -31,9 +31,6 @@ NODE_GROUPS = {
 GROUP_OF_NODE_ID = {1: "turret", 2: "cover", 5: "rover_gnss", 6: "base_gnss", 7: "zoom"}
 AXIS_KEYS = ("motor_temperature", "power_stage_temperature", "bus_voltage", "current",
              "humidity", "revolutions", "actuator_mode_state", "status")
-# gimbal_msgs/AxisState.STATE_* (this module imports no ROS; test_node checks the values)
-STATE_FAULT = 7
-STATE_DISABLED = 8
 
 
 class TurretStatus(StatusReport):
@@ -254,7 +251,7 @@ class TurretStatus(StatusReport):
         details: dict[str, object] = {"calibrated": True}
         if not status.enabled:
             fault = status.actuator_mode != ActuatorMode.FREE_RUN
-            details["state"] = STATE_FAULT if fault else STATE_DISABLED
+            details["state"] = AxisStateCode.FAULT if fault else AxisStateCode.DISABLED
             details["active_errors"] = ["drive_disabled"] if fault else ["free_run"]
         return details
 

@@ -79,14 +79,6 @@ def move(ros, names, values, relative=False):
     return ros.run_action(MoveTo, f"/{NODE}/move_to", goal, timeout=40)
 
 
-def test_status_constants_are_axis_state_values():
-    """status.py imports no ROS; its AxisState.STATE_* copies must stay equal."""
-    from canaero_turret_driver import status
-
-    assert (status.STATE_FAULT, status.STATE_DISABLED) == (AxisState.STATE_FAULT,
-                                                           AxisState.STATE_DISABLED)
-
-
 def test_joint_states_status_and_diagnostics(rig):
     ros, _, _, _ = rig
     msg = ros.wait_for_message("joint_states", JointState, lambda m: len(m.effort) == 2)

@@ -113,12 +113,12 @@ def test_look_at_with_a_usable_description_still_waits_for_an_active_node(contex
     assert 'not active' in message
 
 
-def test_axis_state_given_by_name_in_axis_details() -> None:
-    """A ROS-free adapter names the AxisState (no gimbal_msgs import); ~/status maps it."""
+def test_axis_state_code_in_axis_details() -> None:
+    """A ROS-free adapter gives an AxisStateCode (no gimbal_msgs import); ~/status has it."""
     import logging
 
     from gimbal_driver_common.controller import ControllerConfig, GimbalController
-    from gimbal_driver_common.device import Device, StatusReport
+    from gimbal_driver_common.device import AxisStateCode, Device, StatusReport
     from gimbal_driver_common.joint_command import JointLimits
     from gimbal_driver_common.ros import messages
     from gimbal_msgs.msg import AxisState
@@ -128,7 +128,8 @@ def test_axis_state_given_by_name_in_axis_details() -> None:
             return []
 
         def axis_details(self, joint):
-            return {'state': 'fault' if joint == 'pan' else 'playback', 'calibrated': True}
+            return {'state': AxisStateCode.FAULT if joint == 'pan' else AxisStateCode.PLAYBACK,
+                    'calibrated': True}
 
     class Named(Device):
         def __init__(self):

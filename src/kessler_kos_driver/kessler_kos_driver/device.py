@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from gimbal_driver_common.device import (
+    AxisStateCode,
     Device,
     DeviceInfo,
     Homing,
@@ -609,22 +610,22 @@ class KosStatus(StatusReport):
 
     def axis_details(self, joint: str) -> dict[str, object]:
         """calibrated/homed (kOS: the begin and end marks are set), the motor's latched
-        errors, and the state names 'disabled' (offline), 'fault', 'playback'."""
+        errors, and the state DISABLED (offline), FAULT or PLAYBACK."""
         device = self.device
         address = device.joints[joint].address
         motor = device.client.motors.get(address)
         if motor is None:
-            return {'state': 'disabled'}
+            return {'state': AxisStateCode.DISABLED}
         errors = [ERROR_CODES[e.code].description if e.code in ERROR_CODES else
                   f'error {e.code}' for e in self.latched() if e.motor_address == address]
         details: dict[str, object] = {'calibrated': motor.calibrated,
                                       'homed': motor.calibrated, 'active_errors': errors}
         if not motor.online:
-            details['state'] = 'disabled'
+            details['state'] = AxisStateCode.DISABLED
         elif errors:
-            details['state'] = 'fault'
+            details['state'] = AxisStateCode.FAULT
         elif device.client.playback_running:
-            details['state'] = 'playback'
+            details['state'] = AxisStateCode.PLAYBACK
         return details
 
 

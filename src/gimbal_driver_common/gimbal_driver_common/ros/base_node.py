@@ -47,9 +47,7 @@ from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import GimbalStatus, Preset
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
 
-#: kept importable from here for drivers written against the older base node
-DeviceError = DeviceRefused
-__all__ = ['DeviceError', 'DeviceInfo', 'GimbalDriverNode', 'JointSample', 'run_driver']
+__all__ = ['GimbalDriverNode', 'run_driver']
 
 
 class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):

@@ -117,9 +117,7 @@ def gimbal_status(ctl: GimbalController | None, joint_names: list[str]) -> Gimba
             axis.state = AxisState.STATE_IDLE
         try:
             for key, value in (report.axis_details(name) if report else {}).items():
-                if key == 'state' and isinstance(value, str):  # a ROS-free adapter's name
-                    value = getattr(AxisState, f'STATE_{value.upper()}')
-                setattr(axis, key, value)
+                setattr(axis, key, int(value) if key == 'state' else value)  # AxisStateCode
         except Exception as exc:  # noqa: BLE001
             axis.active_errors = [f'status unavailable: {exc}']
         msg.axes.append(axis)
