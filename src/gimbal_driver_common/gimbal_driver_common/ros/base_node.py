@@ -237,8 +237,8 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
         self._joint_pub = self.create_publisher(JointState, 'joint_states', state_qos)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._status_pub = self.create_publisher(GimbalStatus, '~/status', 10)
-        # depth 10: the callback only queues, so a burst is not dropped by the middleware
-        self.create_subscription(JointState, 'joint_command', self._on_joint_command, 10,
+        # keep-last 1 (interfaces.md): newest wins; the callback never waits on the device
+        self.create_subscription(JointState, 'joint_command', self._on_joint_command, 1,
                                  callback_group=MutuallyExclusiveCallbackGroup())
         services = [
             (Trigger, '~/stop', self._on_stop),
