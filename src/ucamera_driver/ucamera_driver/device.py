@@ -169,8 +169,11 @@ class UCameraDevice(Device):
         self._forget_motion()
         try:
             self._apply_connect_settings()
-            deadline = time.monotonic() + 1.0
-            while client.state().gimbal_type is None and time.monotonic() < deadline:
+            # the mode decides the safety stop below: wait for the first report that carries
+            # it (up to connect_timeout; under load the first report can take over a second)
+            deadline = time.monotonic() + self.settings.connect_timeout
+            while (client.state().gimbal_type is None or client.state().mode is None) \
+                    and time.monotonic() < deadline:
                 time.sleep(0.02)
             if client.state().mode == GimbalMode.RATES:
                 # a jog may have been running when the link was lost: the gimbal keeps its
