@@ -40,8 +40,7 @@ class InProcessVirtualGimbal(SimulatorHandle):
     def moving(self, joint: str) -> bool:
         device: VirtualGimbal = self.device
         with device.lock:
-            axis = device.axes[joint]
-            return axis.target is not None or axis.jog != 0.0
+            return device.axes[joint].moving
 
     def drop_link(self, seconds: float) -> None:
         self.server.drop_link(seconds)
