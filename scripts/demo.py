@@ -32,6 +32,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.sim_control import parse_ready_line
 from gimbal_driver_common.testing import (
     DomainLease,
     ManagedProcess,
@@ -57,7 +58,6 @@ class DemoTarget:
     sim_executable: str
     sim_args: Callable[[DemoTarget], list[str]]
     node_params: Callable[[DemoTarget], list[str]]
-    ready_text: str = ''
     ready: Callable[[DemoTarget], bool] | None = None
     joints: tuple[str, ...] = ('pan', 'tilt')
     move_goal: tuple[float, ...] = (0.4, 0.2)
@@ -82,12 +82,11 @@ class DemoTarget:
     stop: threading.Event = field(default_factory=threading.Event)
 
     def is_ready(self) -> bool:
-        """The simulator accepts connections (its own readiness signal)."""
+        """The simulator accepts connections: it printed its JSON ready line."""
         if self.ready is not None:
             return self.ready(self)
-        if self.ready_text:
-            return self.sim is not None and self.ready_text in self.sim.output()
-        return True
+        return self.sim is not None and parse_ready_line(
+            self.sim.output(), self.sim_executable) is not None
 
     @property
     def namespace(self) -> str:
@@ -146,7 +145,6 @@ def virtual_gimbal_target() -> DemoTarget:
         sim_executable='virtual_gimbal_sim',
         sim_args=lambda t: ['--port', str(t.port)],
         node_params=lambda t: [f'port:={t.port}'],
-        ready_text='listening',
         scan=StartScan.Request(pattern='sector', pan_min=-0.3, pan_max=0.3, speed=0.6),
     )
 

@@ -73,7 +73,6 @@ def capture_target() -> DemoTarget:
         node_params=lambda t: [*common_params(t), 'transport:=tcp', 'host:=127.0.0.1',
                                f'port:={t.port}', 'status_period:=0.2', 'default_speed:=1.0',
                                'acceleration:=6.0'],
-        ready_text='capture_sim ready',
         move_goal=(0.4, -0.2),
         jog_velocity=0.3,
         scan=StartScan.Request(pattern='snake', pan_min=-0.2, pan_max=0.2, tilt_min=0.0,
@@ -83,10 +82,6 @@ def capture_target() -> DemoTarget:
 
 
 # ----------------------------------------------------------------------------- CANaerospace
-def canaero_ready(target: DemoTarget) -> bool:
-    return (target.workdir / 'canaero_ready.json').exists()
-
-
 def canaero_cover_and_fix(target: DemoTarget, ros: RosTestClient) -> str:
     reply = ros.call(SetBool, target.ns('set_cover'), SetBool.Request(data=True))
     if not reply.success:
@@ -103,14 +98,12 @@ def canaero_target() -> DemoTarget:
         node_executable='canaero_turret_driver_node',
         node_name='canaero_turret_driver',
         sim_executable='canaero_turret_sim',
-        sim_args=lambda t: ['--link', str(t.workdir / 'canaero_tty'),
-                            '--ready-file', str(t.workdir / 'canaero_ready.json')],
+        sim_args=lambda t: ['--link', str(t.workdir / 'canaero_tty')],
         node_params=lambda t: [*common_params(t), 'can_interface:=slcan',
                                f'can_channel:={t.workdir / "canaero_tty"}',
                                "can_options:=['sleep_after_open=0']", 'service_timeout:=0.3',
                                "transmission_intervals:=['yaw_position=20','pitch_position=20']",
                                'actuator_mode:=auto_brake'],
-        ready=canaero_ready,
         joints=('yaw', 'pitch'),
         move_goal=(0.4, 0.2),
         jog_joint='yaw',
@@ -182,7 +175,6 @@ def kessler_target() -> DemoTarget:
         sim_args=lambda t: ['--port', str(t.port), '--password', KESSLER_PASSWORD,
                             '--precalibrated', '--discovery-port', '0'],
         node_params=params,
-        ready_text='listening',
         joints=KESSLER_JOINTS,
         move_goal=(3.0, -2.0),
         jog_joint='pan',
@@ -193,10 +185,6 @@ def kessler_target() -> DemoTarget:
 
 
 # ----------------------------------------------------------------------------- U-Camera
-def ucamera_ready(target: DemoTarget) -> bool:
-    return target.sim is not None and str(target.workdir / 'ucamera_tty') in target.sim.output()
-
-
 def ucamera_zoom(target: DemoTarget, ros: RosTestClient) -> str:
     """Zoom to half tele; repeat the command until the gimbal reports it (a single message
     right after discovery can be lost)."""
@@ -220,7 +208,6 @@ def ucamera_target() -> DemoTarget:
         sim_args=lambda t: ['--link', str(t.workdir / 'ucamera_tty')],
         node_params=lambda t: [*common_params(t), f'serial_port:={t.workdir / "ucamera_tty"}',
                                'telemetry_rate:=50', 'gps_feed:=external'],
-        ready=ucamera_ready,
         move_goal=(0.4, -0.3),
         jog_velocity=0.3,
         scan=StartScan.Request(pattern='sector', pan_min=-0.3, pan_max=0.3, speed=0.5),
