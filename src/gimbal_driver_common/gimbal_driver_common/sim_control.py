@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import random
 import signal
 import socket
@@ -349,9 +350,10 @@ def wait_for_ready(process: object, name: str, timeout: float = 30.0) -> dict:
 
 
 def run_simulator(control: SimControl, endpoint: dict[str, object], control_port: int = 0,
-                  stdin: TextIO | None = None) -> None:
+                  stdin: TextIO | None = None, ready_file: str | None = None) -> None:
     """A simulator's ``main`` loop: TCP console (``control_port`` < 0: none), the stdin
-    console, the ready line, then wait for SIGINT, SIGTERM or ``quit``."""
+    console, the ready line (also written to ``ready_file`` if given), then wait for
+    SIGINT, SIGTERM or ``quit``."""
     stop = threading.Event()
     control.on_quit = stop.set
     server = ControlServer(control, control_port).start() if control_port >= 0 else None
@@ -360,7 +362,12 @@ def run_simulator(control: SimControl, endpoint: dict[str, object], control_port
         ready['control_port'] = server.port
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
-    print(ready_line(control.name, **ready), flush=True)
+    line = ready_line(control.name, **ready)
+    if ready_file:
+        with open(ready_file + '.tmp', 'w', encoding='utf-8') as handle:
+            handle.write(line + '\n')
+        os.replace(ready_file + '.tmp', ready_file)
+    print(line, flush=True)
     console = sys.stdin if stdin is None else stdin
     threading.Thread(target=serve_lines, args=(control, console, sys.stdout), daemon=True,
                      name=f'{control.name}-stdin').start()
