@@ -40,6 +40,7 @@ class InProcessVirtualGimbal(SimulatorHandle):
     def moving(self, joint: str) -> bool:
         device: VirtualGimbal = self.device
         with device.lock:
+            device.step()  # the model integrates lazily: bring it up to now
             return device.axes[joint].moving
 
     def drop_link(self, seconds: float) -> None:
