@@ -15,7 +15,7 @@ from capture_driver.protocol import COMMANDS, GeoPoint, ProtocolError, ReplyCode
 from capture_driver.protocol.geometry import aim_at
 from capture_driver.protocol.registers import CMER, SRL
 from capture_driver.sim import CaptureSimulator, PedestalModel
-from gimbal_driver_common.sim_control import parse_ready_line
+from gimbal_driver_common.sim_control import read_ready_line
 from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import SerialStream, TcpStream
 
@@ -320,11 +320,7 @@ def test_capture_sim_process_with_control_console():
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )
     try:
-        info = None
-        while info is None:
-            line = proc.stdout.readline()
-            assert line, 'simulator exited'
-            info = parse_ready_line(line, 'capture_sim')
+        info = read_ready_line(proc.stdout, 'capture_sim')
         c = CaptureClient(lambda: TcpStream('127.0.0.1', info['port']))
         c.connect()
         with socket.create_connection(('127.0.0.1', info['control_port'])) as control:

@@ -335,6 +335,16 @@ def parse_ready_line(text: str, name: str | None = None) -> dict | None:
     return None
 
 
+def read_ready_line(stream: TextIO, name: str) -> dict:
+    """Read a simulator's stdout (a pipe) up to its ready line; return it (raises if the
+    output ends first)."""
+    for line in stream:
+        found = parse_ready_line(line, name)
+        if found is not None:
+            return found
+    raise RuntimeError(f'{name} ended before it was ready')
+
+
 def wait_for_ready(process: object, name: str, timeout: float = 30.0) -> dict:
     """Wait for simulator ``name``'s ready line in a ``testing.ManagedProcess``'s output;
     return it (raises if the process ends first or the line does not come)."""

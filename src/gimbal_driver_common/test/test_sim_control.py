@@ -15,6 +15,7 @@ from gimbal_driver_common.sim_control import (
     SimControl,
     decode_state,
     parse_ready_line,
+    read_ready_line,
     ready_line,
 )
 from gimbal_driver_common.testing import wait_for
@@ -152,8 +153,8 @@ def test_sim_process_ready_line_stdin_console_and_quit() -> None:
         [sys.executable, '-m', 'gimbal_driver_common.virtual_gimbal', '--port', '0'],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
-        ready = parse_ready_line(proc.stdout.readline(), 'virtual_gimbal_sim')
-        assert ready is not None and ready['port'] > 0 and ready['control_port'] > 0
+        ready = read_ready_line(proc.stdout, 'virtual_gimbal_sim')
+        assert ready['port'] > 0 and ready['control_port'] > 0
         proc.stdin.write('fault overtemp\n')
         proc.stdin.flush()
         assert proc.stdout.readline().strip() == 'ok'

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from gimbal_driver_common.sim_control import ControlClient, parse_ready_line
+from gimbal_driver_common.sim_control import ControlClient, read_ready_line
 from kessler_kos_driver.client import DeviceTimeout, KosClient
 from kessler_kos_driver.protocol import ErrorCode
 
@@ -32,8 +32,8 @@ def test_cli_serves_and_obeys_control_commands():
                    '--password', 'pw', '--motors', 'slider,pan,tilt,focus', '--precalibrated',
                    '--time-scale', '10')
     try:
-        ready = parse_ready_line(proc.stdout.readline(), 'kessler_kos_sim')
-        assert ready is not None and ready['motors'] == ['slider', 'pan', 'tilt', 'focus']
+        ready = read_ready_line(proc.stdout, 'kessler_kos_sim')
+        assert ready['motors'] == ['slider', 'pan', 'tilt', 'focus']
         client = KosClient('127.0.0.1', ready['port'], password='pw', poll_period=0)
         client.connect()
         assert sorted(client.motors) == [1, 2, 3, 4] and client.motors[4].is_fiz

@@ -14,7 +14,7 @@ import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gimbal_driver_common.sim_control import ControlClient, control_state, parse_ready_line
+from gimbal_driver_common.sim_control import ControlClient, control_state, read_ready_line
 from gimbal_driver_common.testing import wait_for
 from ucamera_driver.protocol import (
     FrameParser,
@@ -153,11 +153,7 @@ def test_sim_process_ready_line_and_shared_verbs_over_the_pty() -> None:
     proc = subprocess.Popen([sys.executable, "-m", "ucamera_driver.sim", "--init-time", "0.1"],
                             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True)
     try:
-        ready = None
-        while ready is None:
-            line = proc.stdout.readline()
-            assert line, "simulator exited"
-            ready = parse_ready_line(line, "ucamera_sim")
+        ready = read_ready_line(proc.stdout, "ucamera_sim")
         with ControlClient(ready["control_port"]) as control, \
                 serial.Serial(ready["pty"], 115200, timeout=0.2) as port:
             def received(seconds: float) -> bytes:
