@@ -135,7 +135,7 @@ class AxisMotion:
         deceleration = self._deceleration()
         if math.isinf(deceleration):
             return math.inf
-        step_speed = deceleration * dt
+        step_speed = max(deceleration, 1e-9) * dt  # a device may be set to 0: crawl, not crash
         steps = (-1.0 + math.sqrt(1.0 + 8.0 * distance / (step_speed * dt))) / 2.0
         return steps * step_speed
 

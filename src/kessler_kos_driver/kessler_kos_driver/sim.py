@@ -211,7 +211,8 @@ class KosDevice:
         self.motors: dict[int, SimMotor] = {}
         for index, role in enumerate(settings.motors):
             maxima = DOCUMENTED_MAXIMA.get(role, DOCUMENTED_MAXIMA['pan'])
-            motor = SimMotor(address=index + 1, role=role, max_setup_speed=maxima.speed,
+            motor = SimMotor(address=index + 1, role=role, acceleration=maxima.acceleration,
+                             max_setup_speed=maxima.speed,
                              max_move_speed=maxima.speed, max_acceleration=maxima.acceleration)
             if settings.precalibrated:
                 motor.end = DEFAULT_RANGES.get(role, 100.0)
