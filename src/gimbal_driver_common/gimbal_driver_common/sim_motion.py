@@ -116,6 +116,8 @@ class AxisMotion:
     def step(self, dt: float) -> bool:
         """Advance ``dt`` seconds; True when the axis came to rest during it (arrived at its
         target, braked to a stop or ran into a limit)."""
+        if self.velocity == 0.0 and not self.jog_velocity and self.goal()[0] is None:
+            return False  # at rest with nothing to do (the common case: keep it cheap)
         came_to_rest = False
         while dt > 0.0:
             sub = min(dt, MAX_SUBSTEP_S)
