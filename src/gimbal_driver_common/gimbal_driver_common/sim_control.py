@@ -155,6 +155,8 @@ class SimControl:
             return f'error {verb}: {exc}'
         except (IndexError, KeyError, ValueError, TypeError) as exc:
             return f'error {verb}: bad arguments {" ".join(args)!r} ({exc!r}); usage: {entry.usage}'
+        except (OSError, RuntimeError) as exc:  # a link or device hook failed: say so
+            return f'error {verb}: {exc!r}'
         return 'ok' if answer is None else f'ok {answer}'
 
     # ---------------------------------------------------------------- shared verbs
@@ -308,10 +310,14 @@ def control_state(port: int, timeout: float = 10.0) -> dict:
 
 
 def serve_lines(control: SimControl, lines: Iterable[str], out: TextIO) -> None:
-    """The stdin console: answer each line on ``out`` (ends quietly at end of input)."""
-    for line in lines:
-        if line.strip():
-            print(control.execute(line), file=out, flush=True)
+    """The stdin console: answer each line on ``out`` (ends quietly at end of input, or when
+    the terminal refuses a background process)."""
+    try:
+        for line in lines:
+            if line.strip():
+                print(control.execute(line), file=out, flush=True)
+    except OSError:
+        return
 
 
 # ------------------------------------------------------------------ ready line
@@ -372,6 +378,9 @@ def run_simulator(control: SimControl, endpoint: dict[str, object], control_port
         ready['control_port'] = server.port
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
+    # started in the background of a shell (`capture_sim &`): reading the terminal must not
+    # stop the simulator (SIGTTIN); the read fails instead and the stdin console ends
+    signal.signal(signal.SIGTTIN, signal.SIG_IGN)
     line = ready_line(control.name, **ready)
     if ready_file:
         with open(ready_file + '.tmp', 'w', encoding='utf-8') as handle:
