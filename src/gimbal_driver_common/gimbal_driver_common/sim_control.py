@@ -68,7 +68,7 @@ class Verb:
     usage: str
 
 
-def parse_switch(words: Sequence[str], verb: str) -> bool:
+def parse_switch(words: Sequence[str]) -> bool:
     """``on``/``off`` (or 1/0, true/false) -> bool; anything else is an error."""
     if len(words) != 1 or words[0].lower() not in ON_WORDS + OFF_WORDS:
         raise ControlError(f'expected on or off, got {" ".join(words) or "nothing"!r}')
@@ -104,10 +104,9 @@ class SimControl:
     fault_names: Iterable[str] = ()
     #: device part of ``clear`` (latched faults, queued NACKs); silence is cleared here
     clear_device: Callable[[], None] | None = None
-    #: overrides of the link verbs for devices whose link is not a sim_server (CAN bus)
-    drop: Callable[[float], None] | None = None
+    #: ``silence`` of the device itself where falling silent is not the link's doing (the
+    #: turret: its CAN nodes go quiet, the slcan adapter keeps answering)
     silence: Callable[[bool], None] | None = None
-    garbage: Callable[[bytes], None] | None = None
     on_quit: Callable[[], None] | None = None
     seed: int = 1
     verbs: dict[str, Verb] = field(default_factory=dict)
@@ -168,31 +167,25 @@ class SimControl:
         seconds = float(args[0]) if args else 0.0
         if seconds < 0:
             raise ControlError(f'seconds {seconds} < 0')
-        if self.drop is not None:
-            self.drop(seconds)
-            return
         self._need_links('drop')
         for link in self.links:
             link.drop_link(seconds)
 
     def _silence(self, args: list[str]) -> None:
-        silent = parse_switch(args, 'silence')
-        self.silenced = silent
+        silent = parse_switch(args)
         if self.silence is not None:
             self.silence(silent)
-            return
-        self._need_links('silence')
-        for link in self.links:
-            link.set_silent(silent)
+        else:
+            self._need_links('silence')
+            for link in self.links:
+                link.set_silent(silent)
+        self.silenced = silent
 
     def _garbage(self, args: list[str]) -> str:
         data = parse_garbage(args, self._rng)
-        if self.garbage is not None:
-            self.garbage(data)
-        else:
-            self._need_links('garbage')
-            for link in self.links:
-                link.inject(data)
+        self._need_links('garbage')
+        for link in self.links:
+            link.inject(data)
         return f'{len(data)} bytes'
 
     def _nack(self, args: list[str]) -> str | None:
