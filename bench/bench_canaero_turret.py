@@ -130,7 +130,7 @@ def run(domain: int) -> dict:
     pitch = simulator.axes[PITCH]
     # one frame carries the whole command: the drive holds the target once it is handled
     recorder = DeviceRecorder(server, {
-        'received': lambda: pitch.target_position if pitch.mode == 'position' else None})
+        'received': lambda: pitch.target})
     server.start()
     # joint 'pitch' in rad, pitch_direction +1, the drive in degrees (FLOAT)
     stream = StreamSpec('pitch', -0.25, math.degrees, 0.01, node_name=PACKAGE)

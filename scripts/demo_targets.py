@@ -11,12 +11,11 @@ machine do not collide. Each simulator binds 127.0.0.1 only.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from demo import DemoTarget
 
 from gimbal_driver_common.registry import DriverSpec, drivers, resolve
 from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.sim_control import parse_ready_line
 from gimbal_msgs.action import Home
 from gimbal_msgs.srv import StartScan
 
@@ -29,14 +28,10 @@ def common_parameters(target: DemoTarget) -> dict[str, object]:
 
 
 def simulator_ready(target: DemoTarget) -> bool:
-    """The simulator accepts a link: its ready file exists, or its output shows the
-    spec's ready text (placeholders filled). The one place that reads simulator output."""
-    spec, values = target.spec, target.spec.link_values(target.workdir, target.port)
-    if spec.ready_file:
-        return Path(spec.ready_file.format(**values)).exists()
-    if spec.ready_text:
-        return target.sim is not None and spec.ready_text.format(**values) in target.sim.output()
-    return True
+    """The simulator accepts a link: it printed its JSON ready line (``sim_control``).
+    The one place that reads simulator output."""
+    return target.sim is not None and parse_ready_line(
+        target.sim.output(), target.spec.sim_executable) is not None
 
 
 def run_home(target: DemoTarget, ros: RosTestClient) -> str:

@@ -58,7 +58,7 @@ def gimbal() -> Iterator[Gimbal]:
         port = testing.free_tcp_port()
         with testing.ManagedProcess.ros('gimbal_driver_common', 'virtual_gimbal_sim', domain,
                                         ['--port', str(port)]) as sim:
-            sim.wait_for_output('listening', timeout=60)
+            sim.wait_for_output('{"ready": "virtual_gimbal_sim"', timeout=60)
             with testing.ManagedProcess.ros('gimbal_driver_common', 'virtual_gimbal_node', domain,
                                             ['--ros-args', '-p', f'port:={port}']) as node, \
                     ros_testing.RosTestClient(domain, 'record_bag_test') as client:

@@ -17,12 +17,11 @@ SPEC = DriverSpec(
     description='canaero_turret_driver.urdf',
     joints=('yaw', 'pitch'),
     move_goal=(0.4, 0.2),
-    sim_arguments=('--link', '{link}', '--ready-file', '{workdir}/canaero_turret_ready.json'),
+    sim_arguments=('--link', '{link}'),
     node_parameters={'can_interface': 'slcan', 'can_channel': '{link}',
                      'can_options': ['sleep_after_open=0'], 'service_timeout': 0.3,
                      'transmission_intervals': ['yaw_position=20', 'pitch_position=20'],
                      'actuator_mode': 'auto_brake'},
-    ready_file='{workdir}/canaero_turret_ready.json',
     sim_handle='canaero_turret_driver.sim_handle:CanaeroSimHandle',
     demo=DemoSettings(
         jog_velocity=0.3,

@@ -10,10 +10,12 @@ periodic NOD broadcasts. It is reached in one of two ways:
   python-can's `slcan` interface (`channel=<pty path>`). This is how the node tests and
   `canaero_turret_sim` work on machines without SocketCAN.
 
-Fault injection (methods of `TurretSimulator`, and the same words on the control port
-`--control-port`, one command per line, see `ControlServer`): silence a node, lose or
-repeat NOD frames (message-code gaps), malformed frames, EED events, axis drive faults,
-periphery faults; `PtySimServer.drop_link` and `inject` cut the link or send garbage.
+Axes run on the shared trapezoidal model (`gimbal_driver_common.sim_motion`). Fault
+injection (methods of `TurretSimulator`, and the shared control verbs of
+`gimbal_driver_common.sim_control` on stdin and the `--control-port` console, see
+`make_control`): silence the nodes or one node, lose or repeat NOD frames (message-code
+gaps), malformed frames, EED events, axis drive faults, periphery faults; `drop` and
+`garbage` cut the link or send garbage bytes.
 
 Simulator-defined EED codes (the ICD defines none): see `EedCode`. Operation id = the
 offending command (`Operation`), location id = 1 yaw, 2 pitch, 0 whole node.
@@ -23,13 +25,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import logging
 import math
 import os
-import signal
-import socket
-import socketserver
 import threading
 import time
 from collections.abc import Callable, Iterable
@@ -37,6 +35,15 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 
 import can
+
+from gimbal_driver_common.sim_control import (
+    ControlClient,
+    ControlError,
+    ControlServer,
+    SimControl,
+    run_simulator,
+)
+from gimbal_driver_common.sim_motion import AxisMotion
 
 from .protocol import nodeservice as ns
 from .protocol.datatypes import DataType
@@ -112,27 +119,32 @@ MIN_INTERVAL_MS = 10
 MAX_INTERVAL_MS = 10000
 
 
-@dataclass
-class AxisModel:
-    """One drive: trapezoidal velocity profile toward a position or velocity target.
+class AxisModel(AxisMotion):
+    """One drive on the shared trapezoidal model (``AxisMotion``), in degrees.
 
-    Positions are kept unwrapped in degrees; a continuous axis (yaw) reports them
+    Positions are kept unwrapped; a continuous axis (yaw, no limits) reports them
     wrapped to -180..180 and counts revolutions, a limited axis (pitch) stops at its
-    limits.
+    limits. ``mode`` is the drive's idle | position | velocity.
     """
 
-    name: str
-    max_velocity: float  # deg/s
-    acceleration: float  # deg/s^2
-    min_position: float | None = None
-    max_position: float | None = None
-    position: float = 0.0
-    velocity: float = 0.0
-    mode: str = "idle"  # idle | position | velocity
-    target_position: float = 0.0
-    target_velocity: float = 0.0
-    actuator_mode: int = ActuatorMode.AUTO_BRAKE
-    fault: bool = False
+    def __init__(self, name: str, max_velocity: float, acceleration: float,
+                 min_position: float | None = None,
+                 max_position: float | None = None) -> None:
+        super().__init__(max_speed=max_velocity, acceleration=acceleration,
+                         min_position=min_position, max_position=max_position)
+        self.name = name
+        self.actuator_mode: int = ActuatorMode.AUTO_BRAKE
+        self.fault = False
+
+    @property
+    def max_velocity(self) -> float:
+        return self.max_speed
+
+    @property
+    def mode(self) -> str:
+        if self.target is not None:
+            return "position"
+        return "velocity" if self.jog_velocity is not None else "idle"
 
     @property
     def continuous(self) -> bool:
@@ -166,69 +178,22 @@ class AxisModel:
         assert self.min_position is not None and self.max_position is not None
         return self.min_position <= position <= self.max_position
 
-    def move_to(self, position: float) -> None:
+    def move_to(self, position: float, speed: float | None = None) -> None:
+        """Absolute set-point; a continuous axis takes the short way round."""
         if self.continuous:
-            delta = (position - self.reported_position + 180.0) % 360.0 - 180.0
-            self.target_position = self.position + delta
-        else:
-            self.target_position = position
-        self.mode = "position"
+            position = self.position + (position - self.reported_position + 180.0) % 360.0 - 180.0
+        super().move_to(position, speed)
 
     def move_by(self, delta: float) -> None:
-        base = self.target_position if self.mode == "position" else self.position
-        target = base + delta
-        if not self.continuous:
-            assert self.min_position is not None and self.max_position is not None
-            target = min(max(target, self.min_position), self.max_position)
-        self.target_position = target
-        self.mode = "position"
+        base = self.target if self.target is not None else self.position
+        super().move_to(base + delta)  # a limited axis clamps to its limits
 
-    def jog(self, velocity: float) -> None:
-        self.target_velocity = max(-self.max_velocity, min(self.max_velocity, velocity))
-        self.mode = "velocity"
-
-    def stop(self) -> None:
-        self.mode = "idle"
-
-    def step(self, dt: float) -> None:
+    def step(self, dt: float) -> bool:
         if dt <= 0:
-            return
+            return False
         if not self.enabled:
-            self.mode = "idle"
-            desired = 0.0
-        elif self.mode == "position":
-            error = self.target_position - self.position
-            if abs(error) < 1e-4 and abs(self.velocity) <= self.acceleration * dt:
-                self.position = self.target_position
-                self.velocity = 0.0
-                self.mode = "idle"
-                return
-            braking_speed = math.sqrt(2.0 * self.acceleration * abs(error))
-            desired = math.copysign(min(self.max_velocity, braking_speed), error)
-        elif self.mode == "velocity":
-            desired = self.target_velocity
-        else:
-            desired = 0.0
-        change = desired - self.velocity
-        limit = self.acceleration * dt
-        self.velocity += max(-limit, min(limit, change))
-        new_position = self.position + self.velocity * dt
-        if self.mode == "position":
-            # Do not overshoot the target within one step.
-            before = self.target_position - self.position
-            after = self.target_position - new_position
-            if before * after < 0:
-                new_position = self.target_position
-                self.velocity = 0.0
-                self.mode = "idle"
-        if not self.continuous:
-            assert self.min_position is not None and self.max_position is not None
-            if new_position <= self.min_position or new_position >= self.max_position:
-                new_position = min(max(new_position, self.min_position), self.max_position)
-                self.velocity = 0.0
-                if self.mode == "velocity":
-                    self.mode = "idle"
-        self.position = new_position
+            self.stop()  # a disabled drive brakes to rest and drops its set-point
+        return super().step(dt)
 
 
 @dataclass
@@ -764,8 +729,9 @@ class TurretSimulator:
         """Snapshot for tests and the control port."""
         with self._lock:
             return {
-                "axes": {name: {"position": a.reported_position, "velocity": a.velocity,
-                                "mode": a.mode, "actuator_mode": int(a.actuator_mode),
+                "axes": {name: {**a.snapshot(), "position": a.reported_position,
+                                "unwrapped_position": a.position,
+                                "actuator_mode": int(a.actuator_mode),
                                 "fault": a.fault, "revolutions": a.revolutions}
                          for name, a in self.axes.items()},
                 "cover_state": int(self.cover_state), "fan_on": self.fan_on,
@@ -1015,132 +981,68 @@ def encode_socketcand(frame: can.Message) -> str:
     return f"< frame {can_id} {stamp:.6f} {bytes(frame.data).hex().upper()} >"
 
 
-# --- control port ------------------------------------------------------------------
+# --- control verbs -----------------------------------------------------------------
 
-class ControlServer:
-    """Line commands on 127.0.0.1 to drive fault injection from another process.
+FAULT_NAMES = ("drive", "case_sensor")
 
-    Commands (answer: "ok" or "error <why>", `state` answers one JSON line):
-      silence <node|all> [seconds]   node = turret|cover|rover_gnss|base_gnss|zoom
-      resume [node|all]
-      lose <key> [count]             key = identifier key, e.g. yaw_position
-      repeat <key> [count]
-      malformed [count]
-      eed <error_code> [operation] [location] [node]
-      fault <yaw|pitch> [on|off]
-      case_sensor_fault [on|off]
-      drop_link [offline_seconds]    (pty transport only)
-      garbage [text]                 (pty transport only)
-      clear
-      state
+
+def make_control(simulator: TurretSimulator, link: object | None = None) -> SimControl:
+    """The shared control verbs for the turret plus its own (``link``: the PtySimServer or
+    TcpSimServer the simulator is reached through; None on a python-can bus).
+
+    ``silence on|off`` silences every CAN node (the slcan adapter keeps answering, as a
+    real adapter on a bus whose nodes went quiet); ``fault drive [yaw|pitch]`` trips a
+    drive (EED + disabled axis), ``fault case_sensor`` the periphery's case sensor.
+    Device verbs: node_silence, lose, repeat, malformed, eed.
     """
 
-    def __init__(self, simulator: TurretSimulator, port: int = 0,
-                 link: object | None = None) -> None:
-        self.simulator = simulator
-        self.link = link  # a PtySimServer (drop_link/inject) or None
-        outer = self
+    def silence(silent: bool) -> None:
+        simulator.silence_all(math.inf if silent else 0)
 
-        class Handler(socketserver.StreamRequestHandler):
-            def handle(self) -> None:
-                for raw in self.rfile:
-                    line = raw.decode("utf-8", "replace").strip()
-                    if not line:
-                        continue
-                    self.wfile.write((outer.execute(line) + "\n").encode())
+    def fault(args: list[str]) -> None:
+        name = args[0].lower()
+        if name == "drive":
+            axes = args[1:] or [YAW]
+            for axis in axes:
+                if axis not in simulator.axes:
+                    raise ControlError(f"no axis {axis!r}; axes {', '.join(simulator.axes)}")
+                simulator.set_axis_fault(axis, True)
+        elif name == "case_sensor":
+            simulator.set_case_sensor_fault(True)
+        else:
+            raise ControlError(f"unknown fault {name!r}; names: {', '.join(FAULT_NAMES)}")
 
-        class Server(socketserver.ThreadingTCPServer):
-            allow_reuse_address = True
-            daemon_threads = True
+    def node_silence(args: list[str]) -> None:
+        node, switch = args[0], (args[1].lower() if len(args) > 1 else "on")
+        duration = 0.0 if switch == "off" else math.inf if switch == "on" else float(switch)
+        nodes = list(simulator.node_ids) if node == "all" else [node]
+        for name in nodes:
+            simulator.set_silent(name, duration)
 
-        self._server = Server(("127.0.0.1", port), Handler)
-        self._thread = threading.Thread(target=self._server.serve_forever, daemon=True,
-                                        name="canaero-sim-control")
+    def eed(args: list[str]) -> None:
+        numbers = [int(a, 0) for a in args[:3]]
+        simulator.emit_eed(*numbers, node=args[3] if len(args) > 3 else "turret")
 
-    @property
-    def port(self) -> int:
-        return self._server.server_address[1]
-
-    def start(self) -> ControlServer:
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        if self._thread.is_alive():
-            self._server.shutdown()
-        self._server.server_close()
-
-    def execute(self, line: str) -> str:
-        words = line.split()
-        command, args = words[0].lower(), words[1:]
-        sim = self.simulator
-        try:
-            if command == "silence":
-                node = args[0] if args else "all"
-                duration = float(args[1]) if len(args) > 1 else math.inf
-                if node == "all":
-                    sim.silence_all(duration)
-                else:
-                    sim.set_silent(node, duration)
-            elif command == "resume":
-                node = args[0] if args else "all"
-                if node == "all":
-                    sim.silence_all(0)
-                else:
-                    sim.set_silent(node, 0)
-            elif command == "lose":
-                sim.lose_frames(args[0], int(args[1]) if len(args) > 1 else 1)
-            elif command == "repeat":
-                sim.repeat_frames(args[0], int(args[1]) if len(args) > 1 else 1)
-            elif command == "malformed":
-                sim.send_malformed(int(args[0]) if args else 3)
-            elif command == "eed":
-                numbers = [int(a, 0) for a in args[:3]]
-                node = args[3] if len(args) > 3 else "turret"
-                sim.emit_eed(*numbers, node=node)
-            elif command == "fault":
-                sim.set_axis_fault(args[0], not (len(args) > 1 and args[1] == "off"))
-            elif command == "case_sensor_fault":
-                sim.set_case_sensor_fault(not (args and args[0] == "off"))
-            elif command == "drop_link":
-                if self.link is None:
-                    return "error drop_link needs the pty transport"
-                self.link.drop_link(float(args[0]) if args else 0.0)  # type: ignore[attr-defined]
-            elif command == "garbage":
-                if self.link is None:
-                    return "error garbage needs the pty transport"
-                text = " ".join(args) if args else "t1Z\rxx\r\x00\xff"
-                self.link.inject(text.encode("latin-1"))  # type: ignore[attr-defined]
-            elif command == "clear":
-                sim.clear_faults()
-            elif command == "state":
-                return json.dumps(sim.state())
-            else:
-                return f"error unknown command {command!r}"
-        except (IndexError, ValueError, KeyError) as exc:
-            return f"error {command}: {exc}"
-        return "ok"
+    control = SimControl(
+        "canaero_turret_sim", simulator.state, links=[link] if link is not None else [],
+        silence=silence,
+        no_nack="CANaerospace services have no negative acknowledge the turret sends; its "
+                "error path is the EED event (fault, eed)",
+        fault=fault, fault_names=FAULT_NAMES, clear_device=simulator.clear_faults)
+    control.add_verb("node_silence", node_silence,
+                     "node_silence NODE|all [on|off|SECONDS] "
+                     "(NODE: turret, cover, rover_gnss, base_gnss, zoom)")
+    control.add_verb("lose", lambda a: simulator.lose_frames(
+        a[0], int(a[1]) if len(a) > 1 else 1), "lose KEY [COUNT] (e.g. yaw_position)")
+    control.add_verb("repeat", lambda a: simulator.repeat_frames(
+        a[0], int(a[1]) if len(a) > 1 else 1), "repeat KEY [COUNT]")
+    control.add_verb("malformed", lambda a: simulator.send_malformed(int(a[0]) if a else 3),
+                     "malformed [COUNT]")
+    control.add_verb("eed", eed, "eed CODE [OPERATION] [LOCATION] [NODE]")
+    return control
 
 
-class ControlClient:
-    """Small client for `ControlServer` (used by tests and scripts)."""
-
-    def __init__(self, port: int, host: str = "127.0.0.1", timeout: float = 5.0) -> None:
-        self._sock = socket.create_connection((host, port), timeout=timeout)
-        self._file = self._sock.makefile("rwb")
-
-    def command(self, line: str) -> str:
-        self._file.write(line.encode() + b"\n")
-        self._file.flush()
-        return self._file.readline().decode().strip()
-
-    def state(self) -> dict[str, object]:
-        return json.loads(self.command("state"))
-
-    def close(self) -> None:
-        with contextlib.suppress(OSError):
-            self._file.close()
-            self._sock.close()
+__all__ = ["ControlClient", "ControlServer", "make_control"]
 
 
 # --- command line ------------------------------------------------------------------
@@ -1161,7 +1063,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="python-can interface for --transport bus (e.g. socketcan)")
     parser.add_argument("--channel", default="vcan0", help="python-can channel for bus")
     parser.add_argument("--control-port", type=int, default=0,
-                        help="TCP port on 127.0.0.1 for fault-injection commands (0 = any)")
+                        help="control console on 127.0.0.1 (0 = any free port, -1 = none); "
+                             "the same verbs are read on stdin")
     parser.add_argument("--turret-node-id", type=int, default=TURRET_NODE_ID)
     parser.add_argument("--zoom-position-id", type=int, default=DEFAULT_ZOOM_POSITION_ID)
     parser.add_argument("--fps-security-code", type=int, default=DEFAULT_FPS_SECURITY_CODE)
@@ -1173,7 +1076,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--pad-frames", action="store_true",
                         help="send 8-byte frames (zero padded) like the ICD examples")
     parser.add_argument("--ready-file", default=None,
-                        help="write a JSON line with link path and control port when ready")
+                        help="also write the JSON ready line to this file")
     parser.add_argument("-v", "--verbose", action="store_true")
     return parser
 
@@ -1188,9 +1091,6 @@ def main(argv: list[str] | None = None) -> int:
                        refuse_tis=args.refuse_tis,
                        transfer_first_number=args.transfer_first_number)
     simulator = TurretSimulator(config)
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
     link = None
     runner = None
     bus = None
@@ -1198,7 +1098,7 @@ def main(argv: list[str] | None = None) -> int:
         from gimbal_driver_common.sim_server import PtySimServer
 
         link = PtySimServer(lambda: SlcanSession(simulator), link_path=args.link).start()
-        endpoint = {"interface": "slcan", "channel": link.port_name}
+        endpoint = {"interface": "slcan", "channel": link.port_name, "pty": link.port_name}
     elif args.transport == "socketcand":
         from gimbal_driver_common.sim_server import TcpSimServer
 
@@ -1212,19 +1112,10 @@ def main(argv: list[str] | None = None) -> int:
         bus = open_bus(args.interface, args.channel)
         runner = BusSimRunner(simulator, bus).start()
         endpoint = {"interface": args.interface, "channel": args.channel}
-    control = ControlServer(simulator, args.control_port, link).start()
-    endpoint["control_port"] = control.port  # type: ignore[assignment]
-    LOG.info("simulator ready: %s", json.dumps(endpoint))
-    print(json.dumps(endpoint), flush=True)
-    if args.ready_file:
-        with open(args.ready_file + ".tmp", "w", encoding="utf-8") as handle:
-            handle.write(json.dumps(endpoint) + "\n")
-        os.replace(args.ready_file + ".tmp", args.ready_file)
     try:
-        while not stop.wait(0.2):
-            pass
+        run_simulator(make_control(simulator, link), endpoint, args.control_port,
+                      ready_file=args.ready_file)
     finally:
-        control.stop()
         if link is not None:
             link.stop()
         if runner is not None:

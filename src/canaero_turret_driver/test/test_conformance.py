@@ -45,7 +45,7 @@ class TurretSim(SimulatorHandle):
         return self.control.state()["axes"][joint]["velocity"] != 0.0
 
     def drop_link(self, seconds: float) -> None:
-        assert self.control.command(f"drop_link {seconds}") == "ok"
+        assert self.control.command(f"drop {seconds}") == "ok"
 
     def close(self) -> None:
         if self.control is not None:

@@ -19,6 +19,7 @@ import canaero_turret_driver
 import gimbal_driver_common
 from canaero_turret_driver.client import ClientConfig, ServiceError, TurretClient
 from canaero_turret_driver.sim import ControlClient
+from gimbal_driver_common.sim_control import parse_ready_line
 from gimbal_driver_common.testing import ManagedProcess
 
 
@@ -49,6 +50,9 @@ def running_sim(tmp_path: pathlib.Path, *arguments: str):
     try:
         assert wait_for(ready.exists, timeout=20.0), "simulator did not start"
         endpoint = json.loads(ready.read_text())
+        # the ready file holds the one JSON ready line the simulator prints
+        assert wait_for(lambda: parse_ready_line(process.output(), "canaero_turret_sim")
+                        == endpoint, timeout=20.0)
         control = ControlClient(endpoint["control_port"])
         yield endpoint, control
         control.close()
@@ -86,11 +90,17 @@ def test_identify_move_and_data_across_processes(sim_process, remote_client):
 def test_silence_and_recovery_across_processes(sim_process, remote_client):
     _, control = sim_process
     assert wait_for(lambda: not remote_client.node_silent())
-    assert control.command("silence turret") == "ok"
+    assert control.command("node_silence turret") == "ok"
     assert wait_for(lambda: remote_client.node_silent())
     with pytest.raises(ServiceError):
         remote_client.identify()
-    assert control.command("resume") == "ok"
+    assert control.command("node_silence all off") == "ok"
+    assert wait_for(lambda: not remote_client.node_silent()
+                    and not remote_client.is_stale("yaw_position"))
+    assert control.command("silence on") == "ok"  # the shared verb: every node quiet
+    assert wait_for(lambda: remote_client.node_silent()
+                    and remote_client.is_stale("yaw_position"))
+    assert control.command("silence off") == "ok"
     assert wait_for(lambda: not remote_client.node_silent()
                     and not remote_client.is_stale("yaw_position"))
 
@@ -100,7 +110,7 @@ def test_lost_frames_garbage_and_eed_across_processes(sim_process, remote_client
     assert wait_for(lambda: remote_client.latest("yaw_position") is not None)
     assert control.command("lose yaw_position 4") == "ok"
     assert wait_for(lambda: remote_client.sequences.stats((1, 1303)).lost >= 4)
-    assert control.command("garbage") == "ok"
+    assert control.command("garbage hex 74315a0d78780d00ff") == "ok 9 bytes"
     assert wait_for(lambda: remote_client.counters.malformed >= 1)
     code = remote_client.latest("yaw_position").message_code
     assert wait_for(lambda: remote_client.latest("yaw_position").message_code != code)
@@ -139,7 +149,7 @@ def test_link_drop_is_reopened_by_the_supervisor(sim_process, remote_client, sup
     with supervised(remote_client) as controller:
         links = _record_links(remote_client)
         assert wait_for(lambda: remote_client.latest("yaw_position") is not None)
-        assert control.command("drop_link 0.5") == "ok"
+        assert control.command("drop 0.5") == "ok"
         assert wait_for(lambda: False in links)
         assert wait_for(lambda: _reconnected(controller, links), timeout=30.0)
         assert wait_for(lambda: not remote_client.is_stale("yaw_position"), timeout=10.0)
@@ -174,13 +184,13 @@ def test_socketcand_bridge_is_a_shared_bus(socketcand_sim, supervised):
             first.move_to("pitch", 0.3)
             assert wait_for(lambda: second.latest("pitch_position") is not None
                             and abs(second.latest("pitch_position").si - 0.3) < 1e-3)
-            assert control.command("silence turret") == "ok"
+            assert control.command("node_silence turret") == "ok"
             assert wait_for(lambda: second.node_silent())
-            assert control.command("resume") == "ok"
+            assert control.command("node_silence all off") == "ok"
             assert wait_for(lambda: not second.node_silent())
             assert wait_for(lambda: controller.connected, timeout=30.0)  # after the silence
             links = _record_links(first)
-            assert control.command("drop_link 0.3") == "ok"
+            assert control.command("drop 0.3") == "ok"
             assert wait_for(lambda: False in links)
             assert wait_for(lambda: _reconnected(controller, links), timeout=30.0)
             assert wait_for(lambda: not first.is_stale("yaw_position"), timeout=10.0)

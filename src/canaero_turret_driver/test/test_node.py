@@ -114,7 +114,7 @@ def test_move_to_absolute_and_relative(rig):
 
 def test_motion_refused_on_a_faulted_axis_before_sending(rig):
     ros, control, _, _ = rig
-    assert control.command("fault yaw") == "ok"
+    assert control.command("fault drive yaw") == "ok"
     wait_diag(ros, "yaw", 2)
     status = ros.wait_for_message(f"/{NODE}/status", GimbalStatus,
                                   lambda m: m.axes and m.axes[0].state == AxisState.STATE_FAULT)
@@ -257,7 +257,7 @@ def test_transmission_intervals_requested_at_connect(rig):
 
 def test_diagnostics_on_injected_faults_and_reset(rig):
     ros, control, _, _ = rig
-    assert control.command("fault pitch") == "ok"
+    assert control.command("fault drive pitch") == "ok"
     diag = wait_diag(ros, "pitch", 2)
     assert "disabled" in part(diag, "pitch").message
     wait_diag(ros, "emergency events", 1)
@@ -266,24 +266,24 @@ def test_diagnostics_on_injected_faults_and_reset(rig):
     wait_diag(ros, "pitch", 0)
     assert control.command("lose yaw_position 5") == "ok"
     wait_diag(ros, "message codes", 1)
-    assert control.command("case_sensor_fault on") == "ok"
+    assert control.command("fault case_sensor") == "ok"
     wait_diag(ros, "periphery", 1)
-    assert control.command("case_sensor_fault off") == "ok"
-    assert control.command("silence zoom") == "ok"
+    assert control.command("clear") == "ok"
+    assert control.command("node_silence zoom") == "ok"
     diag = wait_diag(ros, "data freshness", 1)
     values = {kv.key: kv.value for kv in part(diag, "data freshness").values}
     assert "zoom_position" in values["stale"]
     assert part(diag, "connection").level[0] == 0
-    assert control.command("resume zoom") == "ok"
+    assert control.command("node_silence zoom off") == "ok"
     wait_diag(ros, "data freshness", 0)
 
 
 def test_turret_silence_is_an_error_and_recovers(rig):
     ros, control, _, _ = rig
-    assert control.command("silence turret") == "ok"
+    assert control.command("node_silence turret") == "ok"
     diag = wait_diag(ros, "connection", 2)
     assert "silent" in part(diag, "connection").message
-    assert control.command("resume turret") == "ok"
+    assert control.command("node_silence turret off") == "ok"
     wait_diag(ros, "connection", 0, timeout=20)
     ros.wait_for_message("joint_states", JointState, timeout=20)
     assert move(ros, ["yaw"], [0.1])[0].success

@@ -9,10 +9,10 @@ from canaero_turret_driver.protocol import CanAerospaceMessage, DataType
 from canaero_turret_driver.protocol import nodeservice as ns
 from canaero_turret_driver.sim import (
     AxisModel,
-    ControlServer,
     SlcanSession,
     TurretSimulator,
     encode_slcan,
+    make_control,
 )
 
 
@@ -105,16 +105,24 @@ def test_wrong_data_type_command_gives_eed():
 
 
 def test_control_commands_report_errors():
-    control = ControlServer(TurretSimulator())
-    try:
-        assert control.execute("silence nobody").startswith("error")
-        assert control.execute("lose not_a_key").startswith("error")
-        assert control.execute("drop_link").startswith("error")
-        assert control.execute("fault yaw") == "ok"
-        assert control.execute("clear") == "ok"
-        assert '"axes"' in control.execute("state")
-    finally:
-        control.stop()
+    clock = FakeClock()
+    sim = TurretSimulator(clock=clock)
+    control = make_control(sim)  # on a python-can bus: no byte link
+    assert control.execute("node_silence nobody").startswith("error")
+    assert control.execute("lose not_a_key").startswith("error")
+    assert control.execute("drop").startswith("error drop: canaero_turret_sim has no byte")
+    assert control.execute("nack on").startswith("error nack: not applicable")
+    assert control.execute("fault drive pitch") == "ok"
+    assert sim.state()["axes"]["pitch"]["fault"]
+    assert control.execute("fault case_sensor") == "ok"
+    assert any(f.arbitration_id == 1 for f in sim.poll())  # the drive fault's EED
+    assert control.execute("silence on") == "ok"
+    assert sim.poll() == []  # every node silent
+    assert control.execute("clear") == "ok"
+    assert not sim.state()["axes"]["pitch"]["fault"]
+    clock.now += 1.0
+    assert sim.poll()  # broadcasting again
+    assert '"axes"' in control.execute("state")
 
 
 @settings(max_examples=200, deadline=None)

@@ -8,9 +8,12 @@ limit switches, axis on/off, emergency stop), homing, the three device scan patt
 keep-alive supervision, and registers (MER, DER, SRH, SRL, MSR, CMER, CSR, operation,
 system state) whose bits follow the motion.
 
-Fault injection (methods of :class:`PedestalModel`, the ``--control-port`` text protocol,
-and the servers' ``drop_link``/``inject``): latched axis faults, NACK replies, lost
-replies, garbage bytes, a silent device and a dropped link.
+Axes run on the shared trapezoidal model (``gimbal_driver_common.sim_motion``). Fault
+injection (methods of :class:`PedestalModel`, and the shared control verbs of
+``gimbal_driver_common.sim_control`` on stdin and the ``--control-port`` console: drop,
+silence, garbage, nack, fault, clear, state, quit, plus Capture's lose, unknown, pose,
+detect, dio, count): latched axis and system faults, NACK replies, lost replies, garbage
+bytes, a silent device and a dropped link.
 
 Assumptions where the spec is silent are marked "sim:" in comments.
 """
@@ -18,18 +21,22 @@ Assumptions where the spec is silent are marked "sim:" in comments.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
-import math
-import signal
-import socket
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from gimbal_driver_common.sim_server import LOOPBACK, PtySimServer, TcpSimServer
+from gimbal_driver_common.sim_control import (
+    ControlError,
+    SimControl,
+    control_request,
+    control_state,
+    run_simulator,
+)
+from gimbal_driver_common.sim_motion import AxisMotion
+from gimbal_driver_common.sim_server import PtySimServer, TcpSimServer
 
 from .protocol import (
     BY_OPCODE,
@@ -67,19 +74,18 @@ DRIFT_MEASURE_TIME = 2.0  # s (simulated), sim: how long the drift calculation t
 
 
 @dataclass
-class AxisModel:
-    """One motor axis in load degrees."""
+class AxisModel(AxisMotion):
+    """One motor axis in load degrees, on the shared trapezoidal model (``AxisMotion``:
+    ``target`` is the position move, ``jog_velocity`` the speed-mode velocity, ``speed``
+    the profile speed, ``acceleration`` the profile acceleration and deceleration)."""
 
-    number: int
-    position: float = 0.0
-    velocity: float = 0.0
+    number: int = 0
+    acceleration: float = 180.0
+    speed: float | None = 0.0  # sim: COM_Connect sets speed 0 (4.6.2)
+    jog_velocity: float | None = 0.0
     speed_mode: bool = False
     relative: bool = True
-    acceleration: float = 180.0
-    speed: float = 0.0  # sim: COM_Connect sets speed 0 (4.6.2)
     pending_position: float | None = None
-    target: float | None = None
-    jog_velocity: float = 0.0
     axis_on: bool = True
     homing: bool = False
     homed: bool = True
@@ -102,54 +108,52 @@ class AxisModel:
     def moving(self) -> bool:
         return abs(self.velocity) > 1e-6 or self.target is not None or self.homing
 
-    def stop(self) -> None:
-        self.target = None
+    def stop(self, immediate: bool = False) -> None:
+        """End the move, jog or homing run (braking at the profile's rate unless immediate)."""
+        super().stop(immediate)
         self.jog_velocity = 0.0
         self.homing = False
 
     def halt(self) -> None:
         """Immediate stop (emergency stop, fault, keep-alive expiry)."""
-        self.stop()
-        self.velocity = 0.0
+        self.stop(immediate=True)
 
-    def step(self, dt: float) -> None:
+    def goal(self) -> tuple[float | None, float | None]:
+        if self.homing:
+            return 0.0, HOMING_SPEED
+        return self.target, self.speed
+
+    def on_arrival(self) -> None:
+        if self.homing:
+            self.homing, self.homed = False, True
+        self.target = None
+
+    def _active_limits(self) -> tuple[float | None, float | None]:
+        """The switches that stop the axis: software limits when active, hardware always."""
+        lows, highs = [], []
+        if self.swls_active:
+            lows.append(self.swls_neg)
+            highs.append(self.swls_pos)
+        if self.hard_limits is not None:
+            lows.append(self.hard_limits[0])
+            highs.append(self.hard_limits[1])
+        return (max(lows) if lows else None), (min(highs) if highs else None)
+
+    def step(self, dt: float) -> bool:
         if self.faulted or not self.axis_on:
             self.velocity = 0.0
-            return
-        if self.homing:
-            target, vmax = 0.0, HOMING_SPEED
-        elif self.target is not None:
-            target, vmax = self.target, abs(self.speed)
-        else:
-            target, vmax = None, 0.0
-        accel = max(self.acceleration, 1e-3)
+            return False
         previous = self.velocity
-        if target is not None:
-            error = target - self.position
-            desired = math.copysign(min(vmax, math.sqrt(2.0 * accel * abs(error))), error)
-            if abs(desired) < abs(self.velocity) and desired * self.velocity >= 0:
-                self.velocity = desired  # on the braking curve: follow it exactly
-            else:
-                self.velocity += max(-accel * dt, min(accel * dt, desired - self.velocity))
-            advance = self.velocity * dt
-            if abs(error) > 1e-9 and vmax <= 0.0:
-                self.velocity = 0.0  # speed 0: the profile does not move
-            elif abs(error) <= 1e-9 or (advance * error > 0 and abs(advance) >= abs(error)):
-                self.position, self.velocity = target, 0.0  # arrives within this step
-                if self.homing:
-                    self.homing, self.homed = False, True
-                self.target = None
-            else:
-                self.position += advance
-        else:
-            desired = self.jog_velocity
-            self.velocity += max(-accel * dt, min(accel * dt, desired - self.velocity))
-            self.position += self.velocity * dt
+        self.set_limits(*self._active_limits())
+        came_to_rest = super().step(dt)
         change = self.velocity - previous
         self.current_ma = 200.0 + 5.0 * abs(self.velocity) + 0.5 * abs(change) / max(dt, 1e-6)
         self._enforce_limits()
+        return came_to_rest
 
     def _enforce_limits(self) -> None:
+        """Limit-switch flags while the axis rests on a switch (the motion model has already
+        stopped it there); a move or jog still pushing outward is dropped."""
         self.limit_flags = 0
         checks = []
         if self.swls_active:
@@ -276,7 +280,7 @@ class PedestalModel:
         if axes not in (2, 3):
             raise ValueError('the simulator models 2 or 3 axes')
         self.lock = threading.RLock()
-        self.axes = {n: AxisModel(n) for n in range(1, axes + 1)}
+        self.axes = {n: AxisModel(number=n) for n in range(1, axes + 1)}
         self.axes[2].hard_limits = (-TILT_HARD_LIMIT, TILT_HARD_LIMIT)
         self.gps_present = gps
         self.imu_present = imu
@@ -324,6 +328,7 @@ class PedestalModel:
         self.drift_measuring: dict[int, float] = {}  # sensor -> simulated seconds left
         # fault injection
         self.nack_queue: deque[tuple[ReplyCode, int | None]] = deque()
+        self.nack_all: ReplyCode | None = None  # NACK every request with this code
         self.drop_replies = 0
         self.requests: list[Frame] = []  # every request received (tests inspect it)
         self._stop = threading.Event()
@@ -516,6 +521,17 @@ class PedestalModel:
         with self.lock:
             self.drop_replies += count
 
+    def clear_injected(self) -> None:
+        """Remove every injected fault: latched axis and system faults, queued or
+        permanent NACKs, replies still to lose."""
+        with self.lock:
+            for axis in self.axes.values():
+                axis.mer_latched = axis.der_latched = 0
+            self.csr_latched = 0
+            self.nack_queue.clear()
+            self.nack_all = None
+            self.drop_replies = 0
+
     def set_pose(self, axis: int, degrees: float) -> None:
         with self.lock:
             self.axes[axis].position = degrees
@@ -529,6 +545,9 @@ class PedestalModel:
             self.requests.append(frame)
             if len(self.requests) > 5000:
                 del self.requests[:1000]
+            if self.nack_all is not None:
+                self.protocol_error = f'injected NACK 0x{int(self.nack_all):02X}'
+                return bytes([self.nack_all])
             for i, (code, opcode) in enumerate(self.nack_queue):
                 if opcode is None or opcode == frame.opcode:
                     del self.nack_queue[i]
@@ -1246,6 +1265,7 @@ class CaptureSimulator:
                     if tcp_port is not None else None)
         self.pty = (PtySimServer(lambda: CaptureSession(self.model, greet=False), pty_link)
                     if pty else None)
+        self._controls: SimControl | None = None
 
     def start(self) -> CaptureSimulator:
         self.model.start()
@@ -1282,126 +1302,117 @@ class CaptureSimulator:
                 server.set_silent(silent)
 
     def control(self, line: str) -> str:
-        """Run one fault-injection command (see :data:`CONTROL_HELP`); return the answer."""
-        words = line.split()
-        if not words:
-            return 'error: empty command'
-        verb, args = words[0].lower(), words[1:]
+        """Run one control request (the shared verbs plus Capture's); return the answer."""
+        return self.controls.execute(line)
+
+    @property
+    def controls(self) -> SimControl:
+        if self._controls is None:
+            self._controls = self._make_controls()
+        return self._controls
+
+    def _make_controls(self) -> SimControl:
         model = self.model
-        try:
-            if verb == 'fault':
-                model.inject_fault(int(args[0]), args[1])
-            elif verb == 'system_fault':
-                model.inject_system_fault(args[0])
-            elif verb == 'nack':
-                code = int(args[0], 16)
-                opcode = COMMANDS[args[1]].opcode if len(args) > 1 and args[1] != '*' else None
-                count = int(args[2]) if len(args) > 2 else 1
-                model.nack_next(code, opcode, count)
-            elif verb == 'lose':
-                model.lose_replies(int(args[0]) if args else 1)
-            elif verb == 'garbage':
-                self.inject_garbage(bytes.fromhex(''.join(args)) if args else b'\x13\x37\x50')
-            elif verb == 'drop':
-                self.drop_link(float(args[0]) if args else 0.0)
-            elif verb == 'silent':
-                self.set_silent(args[0].lower() in ('1', 'on', 'true'))
-            elif verb == 'unknown':
-                opcode = COMMANDS[args[0]].opcode
-                with model.lock:
-                    if len(args) > 1 and args[1].lower() in ('off', '0', 'false'):
-                        model.unknown_opcodes.discard(opcode)
-                    else:
-                        model.unknown_opcodes.add(opcode)
-            elif verb == 'pose':
-                model.set_pose(int(args[0]), float(args[1]))
-            elif verb == 'count':
-                opcode = COMMANDS[args[0]].opcode
-                with model.lock:
-                    return f'ok {sum(1 for f in model.requests if f.opcode == opcode)}'
-            elif verb == 'detect':
-                model.set_target_detected(int(args[0]), args[1].lower() in ('1', 'on', 'true'))
-            elif verb == 'dio':
-                with model.lock:
-                    model.stored[('COM_digitalio', int(args[0]))] = int(
-                        args[1].lower() in ('1', 'on', 'true'))
-            elif verb == 'state':
-                with model.lock:
-                    return 'ok ' + json.dumps({
-                        'axes': {n: {'position': a.position, 'velocity': a.velocity,
-                                     'axis_on': a.axis_on, 'homing': a.homing,
-                                     'faulted': a.faulted} for n, a in model.axes.items()},
-                        'scanning': model.scan is not None,
-                        'preset_looping': bool(model.preset_looping),
-                        'emergency_stop': model.emergency_stop,
-                        'presets': sorted(model.presets),
-                        'target_looping': bool(model.target_looping),
-                        'tracker_mode': model.tracker_mode,
-                        'gyro_drift': model.gyro_drift,
-                        'digital_io': {n: model.stored.get(('COM_digitalio', n), 0)
-                                       for n in range(1, 7)},
-                        'lrf_measuring': bool(model.stored.get(('LRF_measuring', 0))),
-                        'keepalive': model.keepalive_on,
-                        'requests': len(model.requests),
-                        'requests_by_command': dict(Counter(
-                            BY_OPCODE[f.opcode].name if f.opcode in BY_OPCODE
-                            else f'0x{f.opcode:04X}' for f in model.requests)),
-                        'connections': self.tcp.connections if self.tcp else 0,
-                    })
-            elif verb == 'help':
-                return 'ok ' + CONTROL_HELP
+        links = [server for server in (self.tcp, self.pty) if server is not None]
+        control = SimControl('capture_sim', self.state, links=links, nack=self._nack,
+                             fault=self._fault, fault_names=(*FAULTS, *SYSTEM_FAULTS),
+                             clear_device=model.clear_injected)
+        control.add_verb('lose', lambda a: model.lose_replies(int(a[0]) if a else 1),
+                         'lose [COUNT]')
+        control.add_verb('unknown', self._unknown, 'unknown COMMAND [on|off]')
+        control.add_verb('pose', lambda a: model.set_pose(int(a[0]), float(a[1])),
+                         'pose AXIS DEG')
+        control.add_verb('detect', lambda a: model.set_target_detected(
+            int(a[0]), a[1].lower() in ('1', 'on', 'true')), 'detect CAMERA on|off')
+        control.add_verb('dio', self._dio, 'dio N 0|1')
+        control.add_verb('count', self._count, 'count COMMAND')
+        return control
+
+    def _nack(self, args: list[str]) -> str | None:
+        """``nack on [HEXCODE]`` / ``nack off`` / ``nack COMMAND|* [COUNT] [HEXCODE]``."""
+        model, word = self.model, args[0]
+        if word.lower() in ('on', 'off'):
+            code = ReplyCode(int(args[1], 16)) if len(args) > 1 else ReplyCode.EXECUTION_ERROR
+            with model.lock:
+                model.nack_all = code if word.lower() == 'on' else None
+                if word.lower() == 'off':
+                    model.nack_queue.clear()
+            return None
+        opcode = None if word == '*' else COMMANDS[word].opcode
+        count = int(args[1]) if len(args) > 1 else 1
+        code = int(args[2], 16) if len(args) > 2 else ReplyCode.EXECUTION_ERROR
+        model.nack_next(code, opcode, count)
+        return None
+
+    def _fault(self, args: list[str]) -> str | None:
+        """``fault NAME [AXIS]``: an axis fault of FAULTS (MER bits latched, default axis 1),
+        a CSR flag name, or ``fault BITS [AXIS]`` with a MER bit mask."""
+        model, name = self.model, args[0]
+        if name in SYSTEM_FAULTS:
+            model.inject_system_fault(name)
+            return None
+        axis = int(args[1]) if len(args) > 1 else 1
+        if axis not in model.axes:
+            raise ControlError(f'no axis {axis}; axes {sorted(model.axes)}')
+        if name in FAULTS:
+            model.inject_fault(axis, name)
+            return None
+        bits = int(name, 0)
+        with model.lock:
+            model.axes[axis].mer_latched |= bits
+            model.axes[axis].halt()
+            model.scan = None
+        return None
+
+    def _unknown(self, args: list[str]) -> None:
+        opcode = COMMANDS[args[0]].opcode
+        with self.model.lock:
+            if len(args) > 1 and args[1].lower() in ('off', '0', 'false'):
+                self.model.unknown_opcodes.discard(opcode)
             else:
-                return f'error: unknown command {verb!r}; try help'
-        except (IndexError, KeyError, ValueError) as exc:
-            return f'error: {exc!r}; try help'
-        return 'ok'
+                self.model.unknown_opcodes.add(opcode)
+
+    def _dio(self, args: list[str]) -> None:
+        with self.model.lock:
+            self.model.stored[('COM_digitalio', int(args[0]))] = int(
+                args[1].lower() in ('1', 'on', 'true'))
+
+    def _count(self, args: list[str]) -> str:
+        opcode = COMMANDS[args[0]].opcode
+        with self.model.lock:
+            return str(sum(1 for f in self.model.requests if f.opcode == opcode))
+
+    def state(self) -> dict:
+        """The ``state`` answer: axes (load degrees) and the controller's modes."""
+        model = self.model
+        with model.lock:
+            return {
+                'axes': {n: {**a.snapshot(), 'axis_on': a.axis_on, 'homing': a.homing,
+                             'faulted': a.faulted} for n, a in model.axes.items()},
+                'scanning': model.scan is not None,
+                'preset_looping': bool(model.preset_looping),
+                'emergency_stop': model.emergency_stop,
+                'presets': sorted(model.presets),
+                'target_looping': bool(model.target_looping),
+                'tracker_mode': model.tracker_mode,
+                'gyro_drift': model.gyro_drift,
+                'digital_io': {n: model.stored.get(('COM_digitalio', n), 0)
+                               for n in range(1, 7)},
+                'lrf_measuring': bool(model.stored.get(('LRF_measuring', 0))),
+                'keepalive': model.keepalive_on,
+                'requests': len(model.requests),
+                'requests_by_command': dict(Counter(
+                    BY_OPCODE[f.opcode].name if f.opcode in BY_OPCODE
+                    else f'0x{f.opcode:04X}' for f in model.requests)),
+                'connections': self.tcp.connections if self.tcp else 0,
+                'nack_all': model.nack_all is not None,
+            }
 
 
-CONTROL_HELP = (
-    'fault AXIS NAME (NAME in ' + ','.join(FAULTS) + ') | system_fault CSR_FLAG | '
-    'nack HEXCODE [COMMAND|*] [COUNT] | lose [COUNT] | garbage [HEX] | drop [OFFLINE_S] | '
-    'silent on|off | unknown COMMAND [on|off] | pose AXIS DEG | detect CAMERA on|off | '
-    'dio N 0|1 | count COMMAND | state | help'
-)
-
-
-def serve_control(sim: CaptureSimulator, port: int, ready: Callable[[int], None]) -> None:
-    """Line-based fault-injection console on 127.0.0.1 (one command per line)."""
-    listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    listener.bind((LOOPBACK, port))
-    listener.listen(4)
-    ready(listener.getsockname()[1])
-
-    def serve(conn: socket.socket) -> None:
-        with conn, conn.makefile('rw', encoding='utf-8', newline='\n') as stream:
-            for line in stream:
-                stream.write(sim.control(line) + '\n')
-                stream.flush()
-
-    while True:
-        try:
-            conn, _ = listener.accept()
-        except OSError:
-            return
-        threading.Thread(target=serve, args=(conn,), daemon=True).start()
-
-
-def control(port: int, line: str, timeout: float = 5.0) -> str:
-    """Send one console command to a running simulator; its answer line (tests, users)."""
-    with socket.create_connection((LOOPBACK, port), timeout=timeout) as sock:
-        stream = sock.makefile('rw')
-        stream.write(line + '\n')
-        stream.flush()
-        return stream.readline().strip()
-
-
-def console_state(port: int) -> dict:
-    """The console's ``state`` answer as a dict (raises if the simulator refuses)."""
-    answer = control(port, 'state')
-    if not answer.startswith('ok '):
-        raise RuntimeError(f'capture_sim state: {answer}')
-    return json.loads(answer[3:])
+#: one request to a running capture_sim's TCP console (the shared protocol)
+control = control_request
+#: its ``state`` answer as a dict
+console_state = control_state
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -1421,8 +1432,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--gear-ratio', type=float, default=1.0)
     parser.add_argument('--time-scale', type=float, default=1.0,
                         help='simulated seconds per real second (faster tests)')
-    parser.add_argument('--control-port', type=int, default=-1,
-                        help='fault-injection console on 127.0.0.1 (0 = any free port)')
+    parser.add_argument('--control-port', type=int, default=0,
+                        help='control console on 127.0.0.1 (0 = any free port, -1 = none); '
+                             'the same verbs are read on stdin')
     parser.add_argument('--unknown', action='append', default=[], metavar='COMMAND',
                         help='play a device that does not know this table command: it '
                              'answers 0xA6 "Opcode not Recognized" (repeatable)')
@@ -1439,24 +1451,12 @@ def main(argv: list[str] | None = None) -> int:
     sim = CaptureSimulator(model, tcp_port=None if args.port < 0 else args.port,
                            pty=args.pty, pty_link=args.pty_link)
     sim.start()
-    info: dict[str, object] = {'tcp_port': sim.tcp.port if sim.tcp else None,
-                               'pty': sim.pty.port_name if sim.pty else None}
-    if args.control_port >= 0:
-        ready = threading.Event()
-
-        def on_ready(port: int) -> None:
-            info['control_port'] = port
-            ready.set()
-
-        threading.Thread(target=serve_control, args=(sim, args.control_port, on_ready),
-                         daemon=True).start()
-        ready.wait(5.0)
-    print('capture_sim ready ' + json.dumps(info), flush=True)
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    stop.wait()
-    sim.stop()
+    try:
+        run_simulator(sim.controls, {'port': sim.tcp.port if sim.tcp else None,
+                                     'pty': sim.pty.port_name if sim.pty else None},
+                      args.control_port)
+    finally:
+        sim.stop()
     return 0
 
 

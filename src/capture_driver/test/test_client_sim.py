@@ -15,6 +15,7 @@ from capture_driver.protocol import COMMANDS, GeoPoint, ProtocolError, ReplyCode
 from capture_driver.protocol.geometry import aim_at
 from capture_driver.protocol.registers import CMER, SRL
 from capture_driver.sim import CaptureSimulator, PedestalModel
+from gimbal_driver_common.sim_control import read_ready_line
 from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import SerialStream, TcpStream
 
@@ -330,16 +331,12 @@ def test_capture_sim_process_with_control_console():
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
     )
     try:
-        line = ''
-        while 'capture_sim ready' not in line:
-            line = proc.stdout.readline()
-            assert line, 'simulator exited'
-        info = json.loads(line.split('ready ', 1)[1])
-        c = CaptureClient(lambda: TcpStream('127.0.0.1', info['tcp_port']))
+        info = read_ready_line(proc.stdout, 'capture_sim')
+        c = CaptureClient(lambda: TcpStream('127.0.0.1', info['port']))
         c.connect()
         with socket.create_connection(('127.0.0.1', info['control_port'])) as control:
             stream = control.makefile('rw')
-            stream.write('nack A6 MOT_Update\n')
+            stream.write('nack MOT_Update 1 A6\n')
             stream.flush()
             assert stream.readline().strip() == 'ok'
             with pytest.raises(DeviceNack):
@@ -351,6 +348,31 @@ def test_capture_sim_process_with_control_console():
             stream.write('bogus\n')
             stream.flush()
             assert stream.readline().startswith('error')
+
+            def ask(line: str) -> str:
+                stream.write(line + '\n')
+                stream.flush()
+                return stream.readline().strip()
+
+            # the shared fault verbs act on the TCP link the client uses
+            assert ask('fault over_current 2') == 'ok'
+            assert c.request('MOT_MerRegister', 2) & (1 << 8)
+            assert ask('nack on') == 'ok'
+            with pytest.raises(DeviceNack):
+                c.request('MOT_GetLoadPosition', 1)
+            assert ask('clear') == 'ok'
+            assert c.request('MOT_MerRegister', 2) == 0
+            assert ask('garbage hex 13 37') == 'ok 2 bytes'
+            wait_for(lambda: c.request('COM_IsConnected') and c.garbage_bytes >= 2, 10,
+                     'the garbage to be skipped')
+            assert ask('silence on') == 'ok'
+            with pytest.raises(DeviceTimeout):
+                c.request('MOT_GetLoadPosition', 1)
+            assert ask('silence off') == 'ok'
+            assert ask('drop 0') == 'ok'
+            with pytest.raises((NotConnected, DeviceTimeout, OSError)):
+                for _ in range(20):
+                    c.request('MOT_GetLoadPosition', 1)
         c.close()
     finally:
         proc.terminate()

@@ -30,7 +30,7 @@ class CaptureSim(SimulatorHandle):
         self.process = ManagedProcess.ros(PKG, 'capture_sim', domain, [
             '--port', str(self.port), '--control-port', str(self.control_port),
             '--time-scale', '4'])
-        self.process.wait_for_output('capture_sim ready', timeout=30)
+        self.process.wait_for_output('{"ready": "capture_sim"', timeout=30)
 
     def control(self, line: str) -> str:
         with socket.create_connection(('127.0.0.1', self.control_port), timeout=5.0) as sock:

@@ -36,7 +36,7 @@ def look_at_rig():
             '--port', str(port), '--control-port', str(control_port), '--time-scale', '4'])
 
         def start_node() -> ManagedProcess:
-            sim.wait_for_output('capture_sim ready')
+            sim.wait_for_output('{"ready": "capture_sim"')
             return ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
                 '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
                 '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',

@@ -50,7 +50,7 @@ def rig():
     port, control_port = free_tcp_port(), free_tcp_port()
     sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
         '--port', str(port), '--control-port', str(control_port), '--time-scale', '4'])
-    sim.wait_for_output('capture_sim ready')
+    sim.wait_for_output('{"ready": "capture_sim"')
     node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
         '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
         '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',
@@ -178,7 +178,7 @@ def test_device_scan_and_stop(rig):
 
 def test_nack_surfaces_as_clear_service_error(rig):
     ros, control_port, *_ = rig
-    assert control(control_port, 'nack E6 STB_StabilizationOn') == 'ok'
+    assert control(control_port, 'nack STB_StabilizationOn 1 E6') == 'ok'
     reply = ros.call(SetBool, srv('set_stabilization'), SetBool.Request(data=True))
     assert not reply.success
     assert 'NACK 0xE6' in reply.message and 'Execution error' in reply.message
@@ -186,7 +186,7 @@ def test_nack_surfaces_as_clear_service_error(rig):
     assert reply.success, reply.message
     reply = ros.call(SetBool, srv('set_stabilization'), SetBool.Request(data=False))
     assert reply.success, reply.message
-    assert control(control_port, 'nack A6 MOT_Update') == 'ok'
+    assert control(control_port, 'nack MOT_Update 1 A6') == 'ok'
     goal = MoveTo.Goal(joint_names=['tilt'], positions=[0.05])
     result, _, _ = ros.run_action(MoveTo, srv('move_to'), goal, timeout=40)
     assert not result.success
@@ -272,7 +272,7 @@ def test_emergency_stop(rig):
 
 def test_fault_reported_then_reset(rig):
     ros, control_port, *_ = rig
-    assert control(control_port, 'fault 1 over_current') == 'ok'
+    assert control(control_port, 'fault over_current 1') == 'ok'
     status = ros.wait_for_diagnostic(NODE, 'pan', lambda s: s.level == b'\x02')
     keys = {kv.key for kv in status.values}
     assert 'CMER.over_current' in keys and 'SRH.fault' in keys
@@ -316,7 +316,7 @@ def assert_motion_refused(ros, control_port, reason: str) -> None:
 
 def test_motion_on_faulted_or_off_axis_is_refused_and_reset_quotes_device(rig):
     ros, control_port, *_ = rig
-    assert control(control_port, 'fault 1 over_current') == 'ok'
+    assert control(control_port, 'fault over_current 1') == 'ok'
     status = ros.wait_for_diagnostic(NODE, 'pan', lambda s: s.level == b'\x02')
     assert 'SRH.fault' in {kv.key for kv in status.values}
     assert_motion_refused(ros, control_port, 'pan is faulted')

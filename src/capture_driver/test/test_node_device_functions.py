@@ -47,7 +47,7 @@ def rig():
     port, control_port = free_tcp_port(), free_tcp_port()
     sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
         '--port', str(port), '--control-port', str(control_port), '--time-scale', '4'])
-    sim.wait_for_output('capture_sim ready')
+    sim.wait_for_output('{"ready": "capture_sim"')
     node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
         '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
         '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',
@@ -329,7 +329,7 @@ def test_enable_switches_drives_and_status_shows_it(rig):
 
 def test_enable_refuses_a_faulted_drive(rig):
     ros, control_port = rig
-    assert control(control_port, 'fault 1 over_current') == 'ok'
+    assert control(control_port, 'fault over_current 1') == 'ok'
     ros.wait_for_message(f'/{NODE}/status', GimbalStatus, lambda m: axis_states(m).get(
         'pan') == AxisState.STATE_FAULT, timeout=15)
     reply = ros.call(SetBool, srv('enable'), SetBool.Request(data=True))
@@ -364,7 +364,7 @@ def test_controller_without_digital_io_is_not_polled_for_it():
         node = None
         ros = None
         try:
-            sim.wait_for_output('capture_sim ready')
+            sim.wait_for_output('{"ready": "capture_sim"')
             node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
                 '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
                 '-p', 'digital_io_rate:=10.0', '-p', 'status_period:=0.2'])

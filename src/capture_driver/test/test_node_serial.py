@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-
 import pytest
 
 pytest.importorskip('rclpy', reason='node tests need the ROS environment')
@@ -13,6 +11,7 @@ from sensor_msgs.msg import JointState
 
 from capture_driver.sim import control
 from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.sim_control import wait_for_ready
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
 from gimbal_msgs.action import MoveTo
 
@@ -37,9 +36,7 @@ def test_node_over_serial_moves_and_survives_unplugging():
     node = None
     ros = None
     try:
-        out = sim.wait_for_output('capture_sim ready')
-        line = next(x for x in out.splitlines() if 'capture_sim ready' in x)
-        tty = json.loads(line.split('ready ', 1)[1])['pty']
+        tty = wait_for_ready(sim, 'capture_sim')['pty']
         node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
             '--ros-args', '-p', 'transport:=serial', '-p', f'serial_port:={tty}',
             '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',

@@ -45,7 +45,7 @@ def run_default_node(sim_args: list[str]):
     port, control_port = free_tcp_port(), free_tcp_port()
     sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
         '--port', str(port), '--control-port', str(control_port), *sim_args])
-    sim.wait_for_output('capture_sim ready')
+    sim.wait_for_output('{"ready": "capture_sim"')
     node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
         '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}'])
     ros = RosTestClient(domain)

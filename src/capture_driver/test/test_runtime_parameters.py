@@ -26,7 +26,7 @@ def rig():
     port = free_tcp_port()
     with driver_rig(PKG, 'capture_sim', ['--port', str(port), '--control-port',
                                          str(free_tcp_port()), '--time-scale', '4'],
-                    'capture_sim ready', 'capture_driver_node',
+                    '{"ready": "capture_sim"', 'capture_driver_node',
                     ['host:=127.0.0.1', f'port:={port}', 'publish_rate:=20.0',
                      'reconnect_period:=0.3', 'imu_rate:=5.0', 'fix_rate:=0.0']) as rig:
         yield rig.ros, rig.node

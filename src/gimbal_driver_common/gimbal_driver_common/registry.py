@@ -88,7 +88,7 @@ class BenchSettings:
 class DriverSpec:
     """One driver: its executables, how its simulator is started, and what tools do with it.
 
-    Values in ``sim_arguments``, ``node_parameters`` and ``ready_text`` may name the
+    Values in ``sim_arguments`` and ``node_parameters`` may name the
     placeholders of :meth:`link_values`: ``{port}`` (a free TCP port on 127.0.0.1),
     ``{link}`` (a pseudo-terminal path), ``{workdir}`` (a private directory),
     ``{password}`` and ``{password_file}``. ``node_parameters`` connect the node to its
@@ -107,8 +107,6 @@ class DriverSpec:
     move_goal: tuple[float, ...]  # a reachable goal for the first joints (rad/m)
     sim_arguments: tuple[str, ...] = ()
     node_parameters: Mapping[str, Any] = field(default_factory=dict)
-    ready_text: str = ''         # a line of the simulator's output once it accepts a link
-    ready_file: str = ''         # or a file the simulator writes then
     password: str = ''           # the simulator's device password (never logged)
     sim_handle: str = ''         # 'module:Class' of the in-process simulator handle
     demo: DemoSettings = field(default_factory=DemoSettings)

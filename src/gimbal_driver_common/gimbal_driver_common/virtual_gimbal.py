@@ -14,58 +14,53 @@ request line -> one reply line (ASCII, ``\\n``-terminated, SI units)::
     HOME                   -> OK          (both axes to 0 at default speed)
     RESET                  -> OK          (clears fault bits)
     anything else          -> ERR <reason>
+
+Motion runs on the shared trapezoidal axis model (``sim_motion.AxisMotion``); the
+simulator is driven by the shared control verbs (``sim_control``: drop, silence,
+garbage, ``nack`` = ERR replies, ``fault overtemp|BITS``, clear, state, quit).
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
 
 from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout
+from gimbal_driver_common.sim_control import ControlError, SimControl, run_simulator
+from gimbal_driver_common.sim_motion import AxisMotion
 from gimbal_driver_common.sim_server import TcpSimServer
 from gimbal_driver_common.transport import LinkClosed, TcpStream, TransportError
 
 JOINTS = ('pan', 'tilt')
 DEFAULT_SPEED = 0.8  # rad/s
+#: rad/s^2, accelerating and braking: DEFAULT_SPEED in 0.1 s, so moves keep nearly the
+#: timing of the earlier constant-speed model (an invented device: no spec to follow)
+DEFAULT_ACCELERATION = 8.0
 FAULT_OVERTEMP = 0x1
-
-
-@dataclass
-class _Axis:
-    position: float = 0.0
-    velocity: float = 0.0
-    target: float | None = None
-    speed: float = DEFAULT_SPEED
-    jog: float = 0.0
+FAULT_NAMES = {'overtemp': FAULT_OVERTEMP}
 
 
 class VirtualGimbal:
-    """Kinematics of two axes moving at constant speed toward targets or jogging."""
+    """Two axes on the shared trapezoidal model, integrated lazily at each request."""
 
-    def __init__(self) -> None:
-        self.axes = {name: _Axis() for name in JOINTS}
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self.axes = {name: AxisMotion(acceleration=DEFAULT_ACCELERATION)
+                     for name in JOINTS}
         self.faults = 0
+        self.nack_all = False  # sim: answer every request with ERR (the console's nack)
+        self.nack_pending: list[str | None] = []  # next requests to refuse (None: any)
         self.lock = threading.Lock()
-        self._last = time.monotonic()
+        self._clock = clock
+        self._last = clock()
 
     def step(self) -> None:
-        now = time.monotonic()
+        now = self._clock()
         dt, self._last = now - self._last, now
         for axis in self.axes.values():
-            if axis.target is not None:
-                error = axis.target - axis.position
-                move = math.copysign(min(abs(error), axis.speed * dt), error)
-                axis.position += move
-                axis.velocity = move / dt if dt > 0 else 0.0
-                if abs(axis.target - axis.position) < 1e-9:
-                    axis.target, axis.velocity = None, 0.0
-            else:
-                axis.position += axis.jog * dt
-                axis.velocity = axis.jog
+            axis.step(dt)
 
     def handle(self, line: str) -> str:
         with self.lock:
@@ -74,38 +69,46 @@ class VirtualGimbal:
             if not words:
                 return 'ERR empty request'
             command, args = words[0].upper(), words[1:]
+            refused = self._injected_nack(command)
+            if refused:
+                return refused
             try:
                 return self._dispatch(command, args)
             except (ValueError, KeyError, IndexError) as exc:
                 return f'ERR {command}: {exc}'
+
+    def _injected_nack(self, command: str) -> str:
+        if self.nack_all:
+            return f'ERR {command}: injected NACK'
+        for index, wanted in enumerate(self.nack_pending):
+            if wanted in (None, command):
+                del self.nack_pending[index]
+                return f'ERR {command}: injected NACK'
+        return ''
 
     def _dispatch(self, command: str, args: list[str]) -> str:
         if command == 'ID':
             return 'ID virtual-gimbal VG-0001 1.0.0'
         if command == 'GET':
             pan, tilt = self.axes['pan'], self.axes['tilt']
-            moving = sum(1 << i for i, a in enumerate(self.axes.values())
-                         if a.target is not None or a.jog)
+            moving = sum(1 << i for i, a in enumerate(self.axes.values()) if a.moving)
             return (f'POS {pan.position:.6f} {tilt.position:.6f} {pan.velocity:.6f} '
                     f'{tilt.velocity:.6f} {moving} {self.faults}')
         if command == 'MOVE':
             axis = self.axes[args[0]]
             speed = float(args[2])
-            axis.target, axis.jog = float(args[1]), 0.0
-            axis.speed = speed if speed > 0 else DEFAULT_SPEED
+            axis.move_to(float(args[1]), speed if speed > 0 else DEFAULT_SPEED)
             return 'OK'
         if command == 'JOG':
-            axis = self.axes[args[0]]
-            axis.target, axis.jog = None, float(args[1])
+            self.axes[args[0]].jog(float(args[1]))
             return 'OK'
         if command == 'STOP':
             for name in args or JOINTS:
-                axis = self.axes[name]
-                axis.target, axis.jog, axis.velocity = None, 0.0, 0.0
+                self.axes[name].stop()
             return 'OK'
         if command == 'HOME':
             for axis in self.axes.values():
-                axis.target, axis.jog, axis.speed = 0.0, 0.0, DEFAULT_SPEED
+                axis.move_to(0.0, DEFAULT_SPEED)
             return 'OK'
         if command == 'RESET':
             self.faults = 0
@@ -114,6 +117,41 @@ class VirtualGimbal:
             self.faults = int(args[0])
             return 'OK'
         return f'ERR unknown command {command}'
+
+    # ----------------------------------------------------------- control verbs
+    def control_nack(self, args: list[str]) -> str | None:
+        """``nack on|off`` (every request) or ``nack COMMAND|* [COUNT]`` (the next ones)."""
+        word = args[0].lower()
+        with self.lock:
+            if word in ('on', 'off'):
+                self.nack_all = word == 'on'
+                if word == 'off':
+                    self.nack_pending.clear()
+                return None
+            count = int(args[1]) if len(args) > 1 else 1
+            self.nack_pending += [None if word == '*' else word.upper()] * count
+        return None
+
+    def control_fault(self, args: list[str]) -> str | None:
+        name = args[0].lower()
+        bits = FAULT_NAMES[name] if name in FAULT_NAMES else int(name, 0)
+        if bits < 0:
+            raise ControlError(f'fault bits {bits} < 0')
+        with self.lock:
+            self.faults |= bits
+        return None
+
+    def control_clear(self) -> None:
+        with self.lock:
+            self.faults = 0
+            self.nack_all = False
+            self.nack_pending.clear()
+
+    def state(self) -> dict:
+        with self.lock:
+            self.step()
+            return {'axes': {name: axis.snapshot() for name, axis in self.axes.items()},
+                    'faults': self.faults, 'nack_all': self.nack_all}
 
 
 class _LineSession:
@@ -135,6 +173,13 @@ class _LineSession:
 def make_server(port: int = 0) -> tuple[TcpSimServer, VirtualGimbal]:
     device = VirtualGimbal()
     return TcpSimServer(lambda: _LineSession(device), port=port).start(), device
+
+
+def make_control(server: TcpSimServer, device: VirtualGimbal) -> SimControl:
+    """The shared control verbs for a running virtual gimbal."""
+    return SimControl('virtual_gimbal_sim', device.state, links=[server],
+                      nack=device.control_nack, fault=device.control_fault,
+                      fault_names=tuple(FAULT_NAMES), clear_device=device.control_clear)
 
 
 class VirtualGimbalClient:
@@ -173,14 +218,12 @@ def sim_main(argv: list[str] | None = None) -> int:
     """``virtual_gimbal_sim --port N``: serve the virtual gimbal on 127.0.0.1."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--port', type=int, default=4950)
+    parser.add_argument('--control-port', type=int, default=0,
+                        help='control console on 127.0.0.1 (0 = any free port, -1 = none)')
     args = parser.parse_args(argv)
-    server, _ = make_server(args.port)
-    print(f'virtual_gimbal_sim listening on 127.0.0.1:{server.port}', flush=True)
+    server, device = make_server(args.port)
     try:
-        while True:
-            time.sleep(1.0)
-    except KeyboardInterrupt:
-        pass
+        run_simulator(make_control(server, device), {'port': server.port}, args.control_port)
     finally:
         server.stop()
     return 0

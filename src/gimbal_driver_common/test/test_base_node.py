@@ -27,7 +27,7 @@ NODE = 'virtual_gimbal'
 
 def start_sim(port: int) -> ManagedProcess:
     sim = ManagedProcess.ros(PKG, 'virtual_gimbal_sim', 0, ['--port', str(port)])
-    sim.wait_for_output('listening')
+    sim.wait_for_output('{"ready": "virtual_gimbal_sim"')
     return sim
 
 

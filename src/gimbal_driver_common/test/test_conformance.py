@@ -40,8 +40,8 @@ class InProcessVirtualGimbal(SimulatorHandle):
     def moving(self, joint: str) -> bool:
         device: VirtualGimbal = self.device
         with device.lock:
-            axis = device.axes[joint]
-            return axis.target is not None or axis.jog != 0.0
+            device.step()  # the model integrates lazily: bring it up to now
+            return device.axes[joint].moving
 
     def drop_link(self, seconds: float) -> None:
         self.server.drop_link(seconds)

@@ -44,7 +44,7 @@ def look_at_rig():
         sim = ManagedProcess.ros(PKG, 'virtual_gimbal_sim', 0, ['--port', str(port)])
 
         def start_node() -> ManagedProcess:
-            sim.wait_for_output('listening')
+            sim.wait_for_output('{"ready": "virtual_gimbal_sim"')
             return ManagedProcess.ros(PKG, 'virtual_gimbal_node', domain, [
                 '--ros-args', '-p', f'port:={port}', '-p', 'reconnect_period:=0.2',
                 '-p', f'position_min:=[{-math.pi}, -0.8]'])

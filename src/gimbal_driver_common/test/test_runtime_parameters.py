@@ -38,7 +38,8 @@ def move(ros: RosTestClient, names, values):
 @pytest.fixture(scope='module')
 def rig():
     port = free_tcp_port()
-    with driver_rig(PKG, 'virtual_gimbal_sim', ['--port', str(port)], 'listening',
+    with driver_rig(PKG, 'virtual_gimbal_sim', ['--port', str(port)],
+                    '{"ready": "virtual_gimbal_sim"',
                     'virtual_gimbal_node', [f'port:={port}', 'reconnect_period:=0.2',
                                             'command_timeout:=0.4']) as rig:
         yield rig.ros, rig.node

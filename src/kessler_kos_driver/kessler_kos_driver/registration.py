@@ -29,7 +29,6 @@ SPEC = DriverSpec(
     node_parameters={'host': '127.0.0.1', 'port': '{port}', 'password_file': '{password_file}',
                      'discovery_bind': '127.0.0.1', 'joint_names': ['pan', 'tilt', 'slider'],
                      'motor_addresses': [2, 3, 1], 'joint_scales': [math.tau] * 3},
-    ready_text='listening',
     password='kos-sim-secret',
     sim_handle='kessler_kos_driver.sim_handle:KesslerSimHandle',
     demo=DemoSettings(

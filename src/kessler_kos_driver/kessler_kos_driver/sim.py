@@ -18,8 +18,10 @@ What it models (document sections in brackets):
   `hid.device` and carries the same device model in 64-byte reports with report ID 0x01, so
   the client's USB transport runs end to end in-process; a USB session needs no password
   (UserPassword/DevicePassword get UnsupportedMessage) and takes the six-byte keep-alive;
+- motion on the shared trapezoidal model (``gimbal_driver_common.sim_motion``);
 - fault injection: link drop, motor offline/online, axis fault (ErrorStatus 16 + reset),
-  garbage bytes, silence; from Python or from a line-based control port on 127.0.0.1.
+  garbage bytes, silence; from Python or with the shared control verbs
+  (``gimbal_driver_common.sim_control``) on stdin and the TCP console on 127.0.0.1.
 
 Simulated time runs `time_scale` times faster than wall time (durations, delays, exposures and
 physics); keep-alive and discovery periods are wall-clock.
@@ -31,13 +33,19 @@ import argparse
 import contextlib
 import logging
 import math
-import signal
 import socket
 import sys
 import threading
 import time
 from dataclasses import dataclass, field
 
+from gimbal_driver_common.sim_control import (
+    ControlServer,
+    SimControl,
+    control_request,
+    run_simulator,
+)
+from gimbal_driver_common.sim_motion import AxisMotion
 from gimbal_driver_common.sim_server import TcpSimServer
 
 from .protocol import (
@@ -110,19 +118,16 @@ ALLOWED_WHILE_LOCKED = (GetDeviceInfo, GetNetworkInfo, UserPassword)
 
 
 @dataclass
-class SimMotor:
-    address: int
-    role: str
-    position: float = 0.0
-    velocity: float = 0.0
-    target: float = 0.0
-    speed: float = 0.0
-    acceleration: float = 0.0
+class SimMotor(AxisMotion):
+    """One motor in rotations on the shared trapezoidal model (``AxisMotion``); its travel
+    is the calibrated range (or +-UNCALIBRATED_TARGET before calibration)."""
+
+    address: int = 1
+    role: str = 'pan'
     begin: float = 0.0
     end: float = 0.0                  # 0 = uncalibrated
     mark_begin_raw: float | None = None
     online: bool = True
-    moving: bool = False
     max_setup_speed: float = 0.0
     max_move_speed: float = 0.0
     max_acceleration: float = 0.0
@@ -140,47 +145,23 @@ class SimMotor:
             return min(0.0, self.end), max(0.0, self.end)
         return -UNCALIBRATED_TARGET, UNCALIBRATED_TARGET
 
+    def clamp(self, position: float) -> float:
+        low, high = self.travel_limits()  # follows calibration as it changes
+        return min(max(position, low), high)
+
     def command(self, target: float, speed: float, acceleration: float) -> None:
-        lo, hi = self.travel_limits()
-        self.target = min(max(target, lo), hi)
-        self.speed = min(max(speed, 0.0), self.max_setup_speed)
+        """SetPositionSpeedAcceleration: speed and acceleration capped at the maxima;
+        speed 0 decelerates to a stop where the motor can."""
+        speed = min(max(speed, 0.0), self.max_setup_speed)
         accel = acceleration if acceleration > 0 else self.max_acceleration
         self.acceleration = min(accel, self.max_acceleration)
-        if self.speed == 0.0:
-            self.halt_smoothly()
-        self.moving = True
-
-    def halt_smoothly(self) -> None:
-        """Speed 0: decelerate to a stop where the motor can."""
-        a = self.acceleration or self.max_acceleration
-        stopping = self.velocity * abs(self.velocity) / (2 * a) if a > 0 else 0.0
-        self.target = self.position + stopping
-        self.speed = abs(self.velocity)
+        if speed == 0.0:
+            self.stop()
+        else:
+            self.move_to(target, speed)
 
     def halt_now(self) -> None:
-        self.velocity = 0.0
-        self.target = self.position
-        self.moving = False
-
-    def step(self, dt: float) -> bool:
-        """Integrate one physics step; True when the motor just became idle."""
-        if not self.moving:
-            return False
-        error = self.target - self.position
-        a = self.acceleration or self.max_acceleration
-        if abs(error) < 1e-6 and abs(self.velocity) <= a * dt:
-            self.position, self.velocity, self.moving = self.target, 0.0, False
-            return True
-        direction = math.copysign(1.0, error)
-        desired = direction * min(self.speed, math.sqrt(2 * a * abs(error)))
-        change = min(max(desired - self.velocity, -a * dt), a * dt)
-        self.velocity += change
-        new_position = self.position + self.velocity * dt
-        if (self.target - new_position) * error <= 0:   # crossed or reached the target
-            self.position, self.velocity, self.moving = self.target, 0.0, False
-            return True
-        self.position = new_position
-        return False
+        self.stop(immediate=True)
 
 
 @dataclass
@@ -230,7 +211,8 @@ class KosDevice:
         self.motors: dict[int, SimMotor] = {}
         for index, role in enumerate(settings.motors):
             maxima = DOCUMENTED_MAXIMA.get(role, DOCUMENTED_MAXIMA['pan'])
-            motor = SimMotor(index + 1, role, max_setup_speed=maxima.speed,
+            motor = SimMotor(address=index + 1, role=role, acceleration=maxima.acceleration,
+                             max_setup_speed=maxima.speed,
                              max_move_speed=maxima.speed, max_acceleration=maxima.acceleration)
             if settings.precalibrated:
                 motor.end = DEFAULT_RANGES.get(role, 100.0)
@@ -285,8 +267,11 @@ class KosDevice:
         pb = self.playback
         if pb.phase in ('play',):
             self._step_playback(dt)
+        playing = set(pb.trajectory.axes) if pb.phase == 'play' and pb.trajectory else set()
         for motor in self.motors.values():
-            if motor.step(dt) and pb.phase not in ('play',):
+            if motor.address in playing:
+                continue  # the playback sets these positions itself
+            if motor.step(dt) and pb.phase != 'play':
                 self.broadcast(MotorPosition(motor.address, motor.position))
         if pb.phase == 'homing' and not any(
                 self.motors[a].moving for a in pb.homing_targets if a in self.motors):
@@ -320,10 +305,8 @@ class KosDevice:
         pb.homing_targets = self._first_positions()
         for address, target in pb.homing_targets.items():
             motor = self.motors[address]
-            motor.target = target
-            motor.speed = max(motor.max_move_speed * percent, 1e-3)
             motor.acceleration = motor.max_acceleration
-            motor.moving = True
+            motor.move_to(target, max(motor.max_move_speed * percent, 1e-3))
         pb.phase = 'homing'
         pb.start_after_homing = then_start
 
@@ -389,7 +372,7 @@ class KosDevice:
                           else traj.effective_duration())
         pb.phase = 'play'
         for motor in (self.motors[a] for a in traj.axes):
-            motor.moving = False
+            motor.halt_now()
         self._playback_note(PlaybackState.START_FORWARD if forward
                             else PlaybackState.START_REVERSE)
 
@@ -413,8 +396,7 @@ class KosDevice:
         if fraction < 1.0:
             return
         for motor in (self.motors[a] for a in traj.axes):
-            motor.velocity = 0.0
-            motor.target = motor.position
+            motor.halt_now()
         if traj.playback.playback_mode == PlaybackMode.TIMELAPSE_CONTINUOUS:
             while pb.photos < traj.timelapse.pre_move_photos + traj.timelapse.move_photos:
                 self._take_photo()
@@ -484,8 +466,8 @@ class KosDevice:
             pb.elapsed = pb.sms_frame / tl.move_photos
             for address, target in self._curve_positions(pb.elapsed).items():
                 motor = self.motors[address]
-                motor.target, motor.speed = target, motor.max_move_speed
-                motor.acceleration, motor.moving = motor.max_acceleration, True
+                motor.acceleration = motor.max_acceleration
+                motor.move_to(target, motor.max_move_speed)
             pb.sms_step = 'move'
         elif pb.sms_step == 'move' and not any(self.motors[a].moving for a in traj.axes):
             self._playback_note(PlaybackState.SMS_MOTORS_STOPPED)
@@ -600,7 +582,8 @@ class KosDevice:
                 return True   # motors are under playback control
             target = message.position
             if isinstance(message, BumpPositionSpeedAcceleration):
-                target = (motor.target if motor.moving else motor.position) + message.position
+                target = (motor.target if motor.target is not None
+                          else motor.position) + message.position
             motor.command(target, message.speed, message.acceleration)
         elif isinstance(message, MarkBeginPosition):
             motor = self._motor_for(message.motor_address, session)
@@ -656,7 +639,6 @@ class KosDevice:
         # position equals MarkEnd.
         motor.halt_now()
         motor.begin, motor.end, motor.position = 0.0, span, span
-        motor.target = span
         motor.mark_begin_raw = None
         self.broadcast(MotorCalibrated(motor.address, 0.0, span))
 
@@ -913,7 +895,8 @@ class KosSimulator:
         self.control_port = 0
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
-        self._control_sock: socket.socket | None = None
+        self._control_server: ControlServer | None = None
+        self.controls = self._make_controls()
 
     @property
     def port(self) -> int:
@@ -923,21 +906,16 @@ class KosSimulator:
         self.server.start()
         self._spawn(self._background, 'kos-sim-background')
         if self.control_port_requested is not None:
-            sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            sock.bind(('127.0.0.1', self.control_port_requested))
-            sock.listen(2)
-            sock.settimeout(0.2)
-            self._control_sock = sock
-            self.control_port = sock.getsockname()[1]
-            self._spawn(self._control_loop, 'kos-sim-control')
+            self._control_server = ControlServer(self.controls,
+                                                 self.control_port_requested).start()
+            self.control_port = self._control_server.port
         return self
 
     def stop(self) -> None:
         self._stop.set()
         self.server.stop()
-        if self._control_sock is not None:
-            self._control_sock.close()
+        if self._control_server is not None:
+            self._control_server.stop()
         for thread in self._threads:
             thread.join(timeout=2.0)
 
@@ -970,81 +948,63 @@ class KosSimulator:
         finally:
             beacon.close()
 
-    # ------------------------------------------------------------- fault injection
+    # ------------------------------------------------------------- control verbs
     def command(self, line: str) -> str:
-        """Run one fault-injection/control command; returns 'ok ...' or 'error ...'."""
-        words = line.split()
-        if not words:
-            return 'error empty command'
-        verb, args = words[0].lower(), words[1:]
+        """Run one control request (shared verbs plus kOS's own); return the answer line."""
+        return self.controls.execute(line)
+
+    def _make_controls(self) -> SimControl:
         device = self.device
-        try:
-            if verb == 'drop':
-                self.server.drop_link(float(args[0]) if args else 0.0)
-            elif verb == 'garbage':
-                self.server.inject(bytes.fromhex(''.join(args)) if args else b'\xde\xad\xbe\xef')
-            elif verb == 'silent':
-                self.server.set_silent(bool(args) and args[0] in ('on', '1', 'true'))
-            elif verb in ('offline', 'online'):
-                device.set_motor_online(int(args[0]), verb == 'online')
-            elif verb == 'fault':
-                device.inject_axis_fault(int(args[0]), int(args[1]) if len(args) > 1 else 16)
-            elif verb == 'error':
-                with device.lock:
-                    device.broadcast(ErrorStatus(int(args[0]), int(args[1]) if len(args) > 1
-                                                 else 0))
-            elif verb == 'aux':
-                bits = int(args[0], 0)
-                with device.lock:
-                    device.aux_input = bits
-                    device.broadcast(AuxInputStatus(bits))
-            elif verb == 'status':
-                with device.lock:
-                    motors = ' '.join(
-                        f'{m.address}:{m.role}:{m.position:.4f}:{m.end:.3f}:'
-                        f'{"on" if m.online else "off"}' for m in device.motors.values())
-                    return (f'ok phase={device.playback.phase} photos={device.photos_taken} '
-                            f'clients={self.server.client_count} {motors}')
-            else:
-                return (f'error unknown command {verb!r}; use drop [s], garbage [hex], '
-                        'silent on|off, offline N, online N, fault N [code], error CODE [N], '
-                        'aux BITS, status')
-        except (ValueError, IndexError, KeyError) as exc:
-            return f'error {verb}: {exc}'
-        return 'ok'
+        control = SimControl(
+            'kessler_kos_sim', self.state, links=[self.server],
+            no_nack='kOS answers a bad request with ErrorStatus (see fault and error), '
+                    'it has no negative acknowledge',
+            fault=self._fault, fault_names=('axis',), clear_device=self._clear_injected)
+        control.add_verb('offline', lambda a: device.set_motor_online(int(a[0]), False),
+                         'offline MOTOR')
+        control.add_verb('online', lambda a: device.set_motor_online(int(a[0]), True),
+                         'online MOTOR')
+        control.add_verb('error', self._error, 'error CODE [MOTOR] (ErrorStatus, no reset)')
+        control.add_verb('aux', self._aux, 'aux BITS (AuxInputStatus)')
+        return control
 
-    def _control_loop(self) -> None:
-        assert self._control_sock is not None
-        while not self._stop.is_set():
-            try:
-                conn, _ = self._control_sock.accept()
-            except (TimeoutError, BlockingIOError):
-                continue
-            except OSError:
-                return
-            with conn, contextlib.suppress(OSError):
-                conn.settimeout(5.0)
-                buffer = b''
-                while b'\n' not in buffer:
-                    chunk = conn.recv(1024)
-                    if not chunk:
-                        break
-                    buffer += chunk
-                for line in buffer.decode(errors='replace').splitlines():
-                    conn.sendall((self.command(line) + '\n').encode())
+    def _fault(self, args: list[str]) -> None:
+        """``fault axis MOTOR`` or ``fault CODE MOTOR``: ErrorStatus with axis reset."""
+        code = ErrorCode.AXIS_FAULT if args[0].lower() == 'axis' else int(args[0], 0)
+        self.device.inject_axis_fault(int(args[1]) if len(args) > 1 else 1, code)
+
+    def _error(self, args: list[str]) -> None:
+        with self.device.lock:
+            self.device.broadcast(ErrorStatus(int(args[0]), int(args[1]) if len(args) > 1
+                                              else 0))
+
+    def _aux(self, args: list[str]) -> None:
+        bits = int(args[0], 0)
+        with self.device.lock:
+            self.device.aux_input = bits
+            self.device.broadcast(AuxInputStatus(bits))
+
+    def _clear_injected(self) -> None:
+        for address, motor in self.device.motors.items():
+            if not motor.online:
+                self.device.set_motor_online(address, True)
+
+    def state(self) -> dict:
+        """The ``state`` answer: motors (rotations) by role, playback phase, photos."""
+        device = self.device
+        with device.lock:
+            return {
+                'axes': {m.role: {**m.snapshot(), 'address': m.address, 'begin': m.begin,
+                                  'end': m.end, 'online': m.online}
+                         for m in device.motors.values()},
+                'phase': device.playback.phase, 'photos': device.photos_taken,
+                'clients': self.server.client_count, 'led': list(device.led),
+                'aux_input': device.aux_input,
+            }
 
 
-def control(port: int, line: str, timeout: float = 5.0) -> str:
-    """Send one control command to a running simulator (used by tests and users)."""
-    with socket.create_connection(('127.0.0.1', port), timeout) as sock:
-        sock.sendall(line.encode() + b'\n')
-        data = b''
-        while not data.endswith(b'\n'):
-            chunk = sock.recv(1024)
-            if not chunk:
-                break
-            data += chunk
-    return data.decode().strip()
+#: one request to a running kessler_kos_sim's TCP console (the shared protocol)
+control = control_request
 
 
 def build_arg_parser() -> argparse.ArgumentParser:
@@ -1065,9 +1025,9 @@ def build_arg_parser() -> argparse.ArgumentParser:
                         help='drop a connection silent for this many wall seconds (30)')
     parser.add_argument('--discovery-port', type=int, default=DEFAULT_TCP_PORT,
                         help='UDP port NetworkInfo beacons go to on 127.0.0.1 (0 = off)')
-    parser.add_argument('--control-port', type=int, default=None,
-                        help='TCP port on 127.0.0.1 for fault-injection commands '
-                             '(0 = any free port; default off)')
+    parser.add_argument('--control-port', type=int, default=0,
+                        help='control console on 127.0.0.1 (0 = any free port, -1 = none); '
+                             'the same verbs are read on stdin')
     parser.add_argument('--verbose', action='store_true')
     return parser
 
@@ -1089,22 +1049,18 @@ def main(argv: list[str] | None = None) -> int:
     settings = SimSettings(password=args.password, motors=roles,
                            precalibrated=args.precalibrated, time_scale=args.time_scale,
                            keepalive_timeout=args.keepalive_timeout)
-    sim = KosSimulator(settings, port=args.port, discovery_port=args.discovery_port,
-                       control_port=args.control_port)
+    sim = KosSimulator(settings, port=args.port, discovery_port=args.discovery_port)
     try:
         sim.start()
     except OSError as exc:
         print(f'kessler_kos_sim: cannot listen on 127.0.0.1:{args.port}: {exc}',
               file=sys.stderr)
         return 1
-    control_text = f' control 127.0.0.1:{sim.control_port}' if sim.control_port else ''
-    print(f'kessler_kos_sim listening on 127.0.0.1:{sim.port}{control_text} '
-          f'motors={",".join(roles)}', flush=True)
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
-    stop.wait()
-    sim.stop()
+    try:
+        run_simulator(sim.controls, {'port': sim.port, 'motors': list(roles)},
+                      args.control_port)
+    finally:
+        sim.stop()
     return 0
 
 

@@ -374,8 +374,8 @@ def test_take_picture(make_sim, make_client):
 
 def test_garbage_is_skipped(calibrated):
     sim, client = calibrated
-    sim.command('garbage 00ff04ffff1234')
-    sim.command('garbage 0400')
+    assert sim.command('garbage hex 00ff04ffff1234') == 'ok 7 bytes'
+    assert sim.command('garbage hex 0400') == 'ok 2 bytes'
     assert wait_until(lambda: client.malformed_frames > 0)
     client.refresh_motors()
     client.barrier()
@@ -403,7 +403,7 @@ def test_axis_fault_during_playback(calibrated):
     client.load_trajectory(traj)
     client.start_playback()
     assert client.wait_playback(S.START_FORWARD, 10)
-    assert sim.command('fault 3') == 'ok'
+    assert sim.command('fault axis 3') == 'ok'
     assert client.wait_playback(S.FULL_STOP, 5)
     assert wait_until(lambda: any(e.code == ErrorCode.AXIS_FAULT and e.motor_address == 3
                                   for e in client.errors))

@@ -9,7 +9,6 @@ here) and narrows the node's tilt limits so that a low point is beyond them.
 from __future__ import annotations
 
 import math
-import re
 
 import pytest
 
@@ -23,8 +22,8 @@ from gimbal_driver_common.ros.look_at_testing import (
     installed_description,
     node_against_sim,
 )
+from gimbal_driver_common.sim_control import control_state
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
-from kessler_kos_driver.sim import control
 
 pytestmark = pytest.mark.ros
 
@@ -34,9 +33,8 @@ TWO_PI = 2 * math.pi
 
 
 def motor_rotations(control_port: int) -> dict[str, float]:
-    """Role -> position in motor rotations, from the simulator's status line."""
-    status = control(control_port, 'status')
-    return {role: float(pos) for role, pos in re.findall(r'\d+:(\w+):(-?[\d.]+):', status)}
+    """Role -> position in motor rotations, from the simulator's ``state`` answer."""
+    return {role: axis['position'] for role, axis in control_state(control_port)['axes'].items()}
 
 
 @pytest.fixture(scope='module')
@@ -48,7 +46,7 @@ def look_at_rig():
             '--password', PASSWORD, '--precalibrated', '--time-scale', '2'])
 
         def start_node() -> ManagedProcess:
-            sim.wait_for_output('listening')
+            sim.wait_for_output('{"ready": "kessler_kos_sim"')
             return ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain, [
                 '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
                 '-p', f'password:={PASSWORD}', '-p', 'reconnect_period:=0.2',

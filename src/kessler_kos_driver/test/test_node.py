@@ -24,6 +24,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from gimbal_driver_common.ros.testing import RosTestClient, find_diagnostic, joint_positions
+from gimbal_driver_common.sim_control import control_state
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import AxisTrajectory, BezierSegment, GimbalStatus, PlaybackStatus
@@ -54,7 +55,7 @@ def rig():
     sim = ManagedProcess.ros(PKG, 'kessler_kos_sim', domain, [
         '--port', str(port), '--control-port', str(control_port), '--discovery-port', '0',
         '--password', PASSWORD, '--precalibrated', '--time-scale', '2'])
-    sim.wait_for_output('listening')
+    sim.wait_for_output('{"ready": "kessler_kos_sim"')
     node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain, [
         '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
         '-p', f'password:={PASSWORD}', '-p', 'reconnect_period:=0.2',
@@ -230,7 +231,7 @@ def test_load_refusals_send_nothing(rig):
     unknown.keyframes.joint_names = ['slider', 'pan', 'roll']
     reply = ros.call(LoadTrajectory, srv('load_trajectory'), unknown)
     assert not reply.success and 'roll' in reply.message
-    assert 'phase=idle' in control(control_port, 'status')
+    assert control_state(control_port)['phase'] == 'idle'
 
 
 def test_explicit_segments_rapid_reverse_loop_and_stop(rig):
@@ -323,7 +324,7 @@ def test_calibrate_take_picture_and_home(rig):
     bad = ros.call(Calibrate, srv('calibrate'), Calibrate.Request(joint_name='roll'))
     assert not bad.success and 'unknown joint' in bad.message
     assert trigger(ros, 'take_picture').success
-    assert 'photos=1' in control(control_port, 'status')
+    assert control_state(control_port)['photos'] == 1
 
 
 def test_password_never_leaves_the_node(rig):
@@ -340,7 +341,7 @@ def test_password_never_leaves_the_node(rig):
 
 def test_axis_fault_offline_motor_and_reset(rig):
     ros, control_port, _, _ = rig
-    assert control(control_port, 'fault 3') == 'ok'
+    assert control(control_port, 'fault axis 3') == 'ok'
     diag = wait_diag(ros, 'tilt', lambda s: s.level[0] == 2)
     assert 'error 16' in find_diagnostic(diag, NODE, 'tilt').message
     reply = trigger(ros, 'reset_faults')

@@ -34,7 +34,7 @@ def rig():
     with driver_rig(PKG, 'kessler_kos_sim', [
             '--port', str(port), '--control-port', str(free_tcp_port()),
             '--discovery-port', '0', '--password', 'pw-runtime', '--precalibrated',
-            '--time-scale', '2'], 'listening', 'kessler_kos_driver_node', [
+            '--time-scale', '2'], '{"ready": "kessler_kos_sim"', 'kessler_kos_driver_node', [
             'host:=127.0.0.1', f'port:={port}', 'password:=pw-runtime',
             'reconnect_period:=0.2', 'command_timeout:=0.0']) as rig:
         yield rig.ros, rig.node

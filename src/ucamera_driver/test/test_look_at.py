@@ -7,7 +7,6 @@ joint space and the simulator reports the negated pan angle.
 from __future__ import annotations
 
 import math
-import re
 
 import pytest
 
@@ -21,7 +20,8 @@ from gimbal_driver_common.ros.look_at_testing import (
     installed_description,
     node_against_sim,
 )
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.sim_control import control_state, wait_for_ready
+from gimbal_driver_common.testing import DomainLease, ManagedProcess
 
 pytestmark = pytest.mark.ros
 
@@ -29,27 +29,21 @@ PKG = "ucamera_driver"
 SIM_ARGS = ["--init-time", "0.1", "--max-rate", "180", "--acceleration", "1800"]
 
 
-def device_angles_deg(sim: ManagedProcess, fifo: str) -> tuple[float, float]:
-    """(pan, tilt) in device degrees: the simulator prints a status line on request."""
-    before = sim.output().count("mode=")
-    with open(fifo, "w", encoding="utf-8") as pipe:
-        pipe.write("status\n")
-    wait_for(lambda: sim.output().count("mode=") > before, 10.0, "sim status")
-    line = [x for x in sim.output().splitlines() if "mode=" in x][-1]
-    return (float(re.search(r"pan=(-?[\d.]+)deg", line).group(1)),
-            float(re.search(r"tilt=(-?[\d.]+)deg", line).group(1)))
+def device_angles_deg(control_port: int) -> tuple[float, float]:
+    """(pan, tilt) in device degrees, from the simulator's ``state`` answer."""
+    axes = control_state(control_port)["axes"]
+    return math.degrees(axes["pan"]["position"]), math.degrees(axes["tilt"]["position"])
 
 
 @pytest.fixture(scope="module")
 def look_at_rig(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("ucamera_look_at")
-    link, fifo = str(tmp / "tty"), str(tmp / "control")
+    link = str(tmp / "tty")
     with DomainLease() as domain:
-        sim = ManagedProcess.ros(PKG, "ucamera_sim", domain,
-                                 ["--link", link, "--control-fifo", fifo, *SIM_ARGS])
+        sim = ManagedProcess.ros(PKG, "ucamera_sim", domain, ["--link", link, *SIM_ARGS])
+        control_port = wait_for_ready(sim, "ucamera_sim")["control_port"]
 
         def start_node() -> ManagedProcess:
-            sim.wait_for_output(link)
             params = {"serial_port": link, "reconnect_period": "0.3",
                       "presets_file": str(tmp / "presets.yaml"),
                       "position_min": f"[{-math.pi}, -0.8]"}
@@ -58,7 +52,7 @@ def look_at_rig(tmp_path_factory):
 
         with node_against_sim(domain, sim, start_node) as ros:
             check = LookAtCheck(ros, PKG, installed_description(PKG))
-            yield LookAtRig(check, lambda: device_angles_deg(sim, fifo))
+            yield LookAtRig(check, lambda: device_angles_deg(control_port))
 
 
 class TestLookAt(LookAtSuite):

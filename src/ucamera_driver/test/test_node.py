@@ -1,15 +1,14 @@
 """The node and the simulator as separate processes, checked through rclpy.
 
 Needs the colcon-built workspace (``make build`` then ``source scripts/ros_env.sh``).
-The simulator runs with short durations and takes fault commands through a
-named pipe (``--control-fifo``); its ``status`` answer shows the device-frame
+The simulator runs with short durations and takes the shared control verbs on its
+TCP console (``--control-port``); its ``state`` answer shows the device-frame
 angles, which checks the REP-103 sign conversion (device pan is negated).
 """
 
 from __future__ import annotations
 
 import math
-import re
 import tempfile
 import time
 from collections.abc import Iterator
@@ -31,6 +30,11 @@ from std_msgs.msg import Float64, UInt16  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from gimbal_driver_common.ros.testing import RosTestClient  # noqa: E402
+from gimbal_driver_common.sim_control import (  # noqa: E402
+    control_request,
+    control_state,
+    wait_for_ready,
+)
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for  # noqa: E402
 from gimbal_msgs.action import Home, MoveTo  # noqa: E402
 from gimbal_msgs.msg import GimbalStatus  # noqa: E402
@@ -59,11 +63,9 @@ class Rig:
         domain = self.lease.acquire()
         self.tmp = tempfile.TemporaryDirectory(prefix="ucamera-node-test-")
         self.link = str(Path(self.tmp.name, "tty"))
-        self.fifo = str(Path(self.tmp.name, "control"))
         self.sim = ManagedProcess.ros("ucamera_driver", "ucamera_sim", domain,
-                                      ["--link", self.link, "--control-fifo", self.fifo,
-                                       *SIM_ARGS])
-        self.sim.wait_for_output(self.link)
+                                      ["--link", self.link, *SIM_ARGS])
+        self.control_port = wait_for_ready(self.sim, "ucamera_sim")["control_port"]
         params = {"serial_port": self.link, "presets_file": f"{self.tmp.name}/presets.yaml",
                   "velocity_max": "[3.0, 3.0]", "reconnect_period": "0.3",
                   "silence_timeout": "0.5", "diagnostics_period": "0.3", **node_params}
@@ -86,20 +88,15 @@ class Rig:
 
     # simulator control
     def sim_command(self, line: str) -> None:
-        with open(self.fifo, "w", encoding="utf-8") as fifo:
-            fifo.write(line + "\n")
+        answer = control_request(self.control_port, line)
+        assert answer.startswith("ok"), answer
 
-    def sim_status(self) -> str:
-        before = self.sim.output().count("mode=")
-        self.sim_command("status")
-        wait_for(lambda: self.sim.output().count("mode=") > before, 5.0, "sim status")
-        return [line for line in self.sim.output().splitlines() if "mode=" in line][-1]
+    def sim_state(self) -> dict:
+        return control_state(self.control_port)
 
     def device_angles_deg(self) -> tuple[float, float]:
-        status = self.sim_status()
-        pan = float(re.search(r"pan=(-?[\d.]+)deg", status).group(1))
-        tilt = float(re.search(r"tilt=(-?[\d.]+)deg", status).group(1))
-        return pan, tilt
+        axes = self.sim_state()["axes"]
+        return math.degrees(axes["pan"]["position"]), math.degrees(axes["tilt"]["position"])
 
     # ROS helpers
     def joints(self, predicate, timeout: float = 15.0) -> JointState:
@@ -259,14 +256,15 @@ def test_external_feed_reaches_the_gimbal(rig: Rig) -> None:
     out = wait_for(forwarded, 15.0, "the external fix in ~/fix")
     assert out.longitude == pytest.approx(-45.25)
     assert out.altitude == pytest.approx(321.0)
-    wait_for(lambda: "vehicle_angles_deg=90.0,-0.0,0.0" in rig.sim_status()
-             or "vehicle_angles_deg=90.0,0.0,0.0" in rig.sim_status(), 10.0, "vehicle angles")
+    wait_for(lambda: (angles := rig.sim_state()["vehicle_angles"]) is not None
+             and [round(math.degrees(a), 1) + 0.0 for a in angles] == [90.0, 0.0, 0.0],
+             10.0, "vehicle angles")
 
 
 def test_save_configuration_with_opt_in(rig: Rig) -> None:
     reply = rig.trigger("save_configuration")
     assert reply.success, reply.message
-    wait_for(lambda: "nv_saves=1" in rig.sim_status(), 10.0, "an NV write in the simulator")
+    wait_for(lambda: rig.sim_state()["nv_saves"] == 1, 10.0, "an NV write in the simulator")
     reply = rig.trigger("save_ffc")
     assert reply.success, reply.message
     # the ~1 s pause is not a disconnection
@@ -331,19 +329,19 @@ def test_lifecycle_deactivate_and_activate(rig: Rig) -> None:
 
 
 def test_silence_and_link_drop_recovery(rig: Rig) -> None:
-    rig.sim_command("silence")
+    rig.sim_command("silence on")
 
     def disconnected(array: DiagnosticArray) -> bool:
         part = device_part(array, "connection")
         return part is not None and part.level == bytes([2])
 
     rig.diagnostics(disconnected)
-    rig.sim_command("resume")
+    rig.sim_command("silence off")
     rig.status(lambda s: s.connection == GimbalStatus.CONNECTION_CONNECTED, timeout=20.0)
     # a jog running when the link drops: the gimbal keeps its last rates, so the
     # node must zero them when it reconnects
     rig.command(["pan"], velocities=[0.3], until=lambda m: m.velocity[0] > 0.2)
-    rig.sim_command("drop_link 0.5")
+    rig.sim_command("drop 0.5")
     rig.status(lambda s: s.connection != GimbalStatus.CONNECTION_CONNECTED)
     connected = rig.status(lambda s: s.connection == GimbalStatus.CONNECTION_CONNECTED,
                            timeout=20.0)
@@ -366,7 +364,7 @@ def test_real_hardware_yaml_loads_and_nv_write_needs_opt_in() -> None:
         assert not reply.success
         assert "allow_nv_write" in reply.message
         assert not setup.trigger("save_ffc").success
-        assert "nv_saves=0" in setup.sim_status()
+        assert setup.sim_state()["nv_saves"] == 0
     finally:
         setup.close()
 

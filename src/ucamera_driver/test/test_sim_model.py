@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+import json
 import math
+import os
+import subprocess
+import sys
+import time
 
 import pytest
+import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from gimbal_driver_common.sim_control import ControlClient, control_state, read_ready_line
+from gimbal_driver_common.testing import wait_for
 from ucamera_driver.protocol import (
     FrameParser,
     GimbalMode,
@@ -130,9 +138,48 @@ def test_text_commands(make_config) -> None:
     assert sim.faults.corrupt_next == 3
     assert sim.command("drop_rate 0.5") == "ok"
     assert sim.faults.drop_probability == 0.5
-    assert "unknown command" in sim.command("fire")
+    assert sim.command("fire").startswith("error fire: unknown verb")
     assert "bad arguments" in sim.command("noise_rate lots")
-    assert "mode=init" in sim.command("status")
+    assert json.loads(sim.command("state")[3:])["mode"] == "init"
+    assert sim.command("nack on").startswith("error nack: not applicable")
+    assert sim.command("fault 1").startswith("error fault: not applicable")
+    assert sim.command("clear") == "ok"
+    assert sim.faults.corrupt_next == 0 and sim.faults.drop_probability == 0.0
+
+
+def test_sim_process_ready_line_and_shared_verbs_over_the_pty() -> None:
+    """The ucamera_sim process: its JSON ready line names the pty; drop, silence and
+    garbage from its TCP console act on the serial link a client reads."""
+    proc = subprocess.Popen([sys.executable, "-m", "ucamera_driver.sim", "--init-time", "0.1"],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True)
+    try:
+        ready = read_ready_line(proc.stdout, "ucamera_sim")
+        with ControlClient(ready["control_port"]) as control, \
+                serial.Serial(ready["pty"], 115200, timeout=0.2) as port:
+            def received(seconds: float) -> bytes:
+                data, deadline = b"", time.monotonic() + seconds
+                while time.monotonic() < deadline:
+                    data += port.read(4096)
+                return data
+
+            assert len(received(0.3)) > 0  # telemetry streams
+            marker = "c0ffee00deadbeef5aa5"
+            assert control.command(f"garbage hex {marker}") == "ok 10 bytes"
+            wait_for(lambda: bytes.fromhex(marker) in received(0.2), 10, "the garbage bytes")
+            assert control.command("silence on") == "ok"
+            received(0.2)  # what was already under way
+            assert received(0.5) == b""
+            assert control.command("silence off") == "ok"
+            wait_for(lambda: received(0.2), 10, "telemetry again")
+            assert control.command("drop 0.5") == "ok"
+            with pytest.raises(serial.SerialException):
+                for _ in range(50):
+                    port.read(4096)
+        wait_for(lambda: os.path.exists(ready["pty"]), 10, "the pty to come back")
+        assert control_state(ready["control_port"])["axes"]["pan"]["position"] == 0.0
+    finally:
+        proc.terminate()
+        proc.wait(10)
 
 
 def test_cli_defaults() -> None:

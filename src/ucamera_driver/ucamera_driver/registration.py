@@ -19,7 +19,6 @@ SPEC = DriverSpec(
     move_goal=(0.4, -0.3),
     sim_arguments=('--link', '{link}'),
     node_parameters={'serial_port': '{link}', 'telemetry_rate': 50, 'gps_feed': 'external'},
-    ready_text='{link}',
     sim_handle='ucamera_driver.sim_handle:UCameraSimHandle',
     demo=DemoSettings(
         jog_velocity=0.3,

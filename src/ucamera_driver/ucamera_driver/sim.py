@@ -16,13 +16,16 @@ The device model follows chapter 4 and 5 of the user manual:
   (5.5.1.1) and stores telemetry rate, antenna position, GPS feed and palette
   (``nv``); Save FFC is counted (IR only).
 
-Motion: each axis accelerates at ``acceleration`` up to ``max_rate`` and stops
-at its mechanical limits (pan +-180 deg, tilt -90..+90 deg: the manual gives no
+Motion: each axis runs on the shared trapezoidal model
+(``gimbal_driver_common.sim_motion``), accelerating at ``acceleration`` up to ``max_rate``,
+and stops at its mechanical limits (pan +-180 deg, tilt -90..+90 deg: the manual gives no
 figures, these are simulator assumptions, see the README).
 
-Faults (API, CLI flags and stdin commands): noise bytes, silence, corrupted
-bytes in outgoing frames, dropped outgoing frames, link drop (pty destroyed and
-recreated behind the same path).
+Faults (API, CLI flags, and the shared control verbs of
+``gimbal_driver_common.sim_control`` on stdin and the TCP console): garbage/noise bytes,
+silence, corrupted bytes in outgoing frames, dropped outgoing frames, link drop (pty
+destroyed and recreated behind the same path). UCSP has no NACK and no fault register:
+``nack`` and ``fault`` answer why.
 """
 
 from __future__ import annotations
@@ -30,14 +33,14 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import os
 import random
-import signal
 import sys
 import threading
 import time
 from dataclasses import dataclass, field
 
+from gimbal_driver_common.sim_control import SimControl, run_simulator
+from gimbal_driver_common.sim_motion import AxisMotion
 from gimbal_driver_common.sim_server import PtySimServer
 
 from .protocol import (
@@ -111,48 +114,6 @@ class SimConfig:
     )
 
 
-@dataclass
-class Axis:
-    """One gimbal axis with speed and acceleration limits."""
-
-    position: float = 0.0
-    velocity: float = 0.0
-    low: float = -math.pi
-    high: float = math.pi
-
-    def clamp(self, value: float) -> float:
-        return min(max(value, self.low), self.high)
-
-    def toward_velocity(self, wanted: float, acceleration: float, dt: float) -> None:
-        step = acceleration * dt
-        self.velocity += max(-step, min(step, wanted - self.velocity))
-
-    def integrate(self, dt: float) -> None:
-        new = self.position + self.velocity * dt
-        if new != self.clamp(new):  # hit the mechanical stop
-            new = self.clamp(new)
-            self.velocity = 0.0
-        self.position = new
-
-    def slew_to(self, target: float, max_rate: float, acceleration: float, dt: float) -> None:
-        target = self.clamp(target)
-        error = target - self.position
-        if abs(error) < 1e-5 and abs(self.velocity) < acceleration * dt:
-            self.position, self.velocity = target, 0.0
-            return
-        # Highest speed from which per-step decelerations of acceleration*dt stop
-        # exactly within |error| (discrete form of sqrt(2*a*e)).
-        step_speed = acceleration * dt
-        steps = (-1.0 + math.sqrt(1.0 + 8.0 * abs(error) / (step_speed * dt))) / 2.0
-        braking_speed = steps * step_speed
-        wanted = math.copysign(min(max_rate, braking_speed), error)
-        self.toward_velocity(wanted, acceleration, dt)
-        before = self.position
-        self.integrate(dt)
-        if (before - target) * (self.position - target) < 0:  # overshot within a step
-            self.position, self.velocity = target, 0.0
-
-
 class UCameraModel:
     """Device state and behaviour, independent of the link (survives link drops)."""
 
@@ -160,8 +121,11 @@ class UCameraModel:
         self.config = config or SimConfig()
         self._clock = clock
         self.lock = threading.RLock()
-        self.pan = Axis(low=PAN_LIMITS[0], high=PAN_LIMITS[1])
-        self.tilt = Axis(low=TILT_LIMITS[0], high=TILT_LIMITS[1])
+        cfg = self.config
+        self.pan = AxisMotion(cfg.max_rate, cfg.acceleration, min_position=PAN_LIMITS[0],
+                              max_position=PAN_LIMITS[1])
+        self.tilt = AxisMotion(cfg.max_rate, cfg.acceleration, min_position=TILT_LIMITS[0],
+                               max_position=TILT_LIMITS[1])
         self.mode = GimbalMode.INIT
         self.mode_since = clock()
         self.angles_target = (0.0, 0.0)
@@ -275,13 +239,12 @@ class UCameraModel:
             cfg = self.config
             if self.mode == GimbalMode.RATES:
                 for axis, rate in zip((self.pan, self.tilt), self.commanded_rates, strict=True):
-                    wanted = max(-cfg.max_rate, min(cfg.max_rate, rate))
-                    axis.toward_velocity(wanted, cfg.acceleration, dt)
-                    axis.integrate(dt)
+                    axis.jog(rate)
             else:
-                target = self._mode_target()
-                for axis, goal in zip((self.pan, self.tilt), target, strict=True):
-                    axis.slew_to(goal, cfg.max_rate, cfg.acceleration, dt)
+                for axis, goal in zip((self.pan, self.tilt), self._mode_target(), strict=True):
+                    axis.move_to(goal)
+            for axis in (self.pan, self.tilt):
+                axis.step(dt)
             self._finish_automatic_mode(now)
             zoom_step = cfg.zoom_speed * dt
             self.zoom += max(-zoom_step, min(zoom_step, self.zoom_target - self.zoom))
@@ -415,6 +378,7 @@ class UCameraSim:
         self.server = PtySimServer(lambda: UCameraSession(self), link_path=link_path,
                                    poll_interval=0.002)
         self._noise_rate = 0.0
+        self._controls: SimControl | None = None
         self._noise_thread: threading.Thread | None = None
         self._stop = threading.Event()
 
@@ -475,63 +439,59 @@ class UCameraSim:
             if self._noise_rate > 0:
                 self.inject_noise(max(1, int(self._noise_rate * 0.1)))
 
-    # --- runtime commands (stdin) ---------------------------------------
-    def command(self, line: str) -> str:
-        """Run one text command (``help`` lists them); return the answer line."""
-        words = line.split()
-        if not words:
-            return ""
-        verb, args = words[0].lower(), words[1:]
-        try:
-            if verb == "noise":
-                self.inject_noise(int(args[0]) if args else 64)
-            elif verb == "noise_rate":
-                self.set_noise_rate(float(args[0]))
-            elif verb == "silence":
-                self.set_silent(True)
-                if args:
-                    threading.Timer(float(args[0]), self.set_silent, (False,)).start()
-            elif verb == "resume":
-                self.set_silent(False)
-            elif verb == "corrupt":
-                self.corrupt(int(args[0]) if args else 1)
-            elif verb == "corrupt_rate":
-                self.corrupt(probability=float(args[0]))
-            elif verb == "drop_rate":
-                self.drop_frames(float(args[0]))
-            elif verb == "drop_link":
-                self.drop_link(float(args[0]) if args else 0.0)
-            elif verb == "status":
-                return self.status()
-            elif verb == "help":
-                return ("commands: noise [N] | noise_rate B/s | silence [s] | resume | "
-                        "corrupt [N] | corrupt_rate P | drop_rate P | drop_link [s] | status")
-            else:
-                return f"unknown command {verb!r} (try help)"
-        except (IndexError, ValueError) as exc:
-            return f"bad arguments for {verb}: {exc}"
-        return "ok"
+    # --- control verbs (shared protocol + U-Camera's own) -----------------
+    @property
+    def controls(self) -> SimControl:
+        if self._controls is None:
+            control = SimControl(
+                "ucamera_sim", self.state, links=[self.server],
+                no_nack="UCSP has no acknowledge or negative acknowledge",
+                no_fault="UCSP reports no fault register (and has no fault reset)",
+                clear_device=self._clear_injected)
+            control.add_verb("noise", lambda a: self.inject_noise(int(a[0]) if a else 64),
+                             "noise [N] (random bytes with false 0xCC syncs)")
+            control.add_verb("noise_rate", lambda a: self.set_noise_rate(float(a[0])),
+                             "noise_rate BYTES_PER_S")
+            control.add_verb("corrupt", lambda a: self.corrupt(int(a[0]) if a else 1),
+                             "corrupt [N] (flip a bit in the next N frames)")
+            control.add_verb("corrupt_rate", lambda a: self.corrupt(probability=float(a[0])),
+                             "corrupt_rate P")
+            control.add_verb("drop_rate", lambda a: self.drop_frames(float(a[0])),
+                             "drop_rate P (lose sent frames)")
+            self._controls = control
+        return self._controls
 
-    def status(self) -> str:
+    def command(self, line: str) -> str:
+        """Run one control request (``help`` lists the verbs); return the answer line."""
+        return self.controls.execute(line)
+
+    def _clear_injected(self) -> None:
+        self.set_noise_rate(0.0)
+        self.faults.corrupt_next = 0
+        self.faults.corrupt_probability = 0.0
+        self.faults.drop_probability = 0.0
+
+    def state(self) -> dict:
+        """The ``state`` answer: axes in radians (device frame: pan positive clockwise)."""
         model = self.model
         with model.lock:
-            return (
-                f"mode={mode_name(model.mode)} pan={math.degrees(model.pan.position):.2f}deg "
-                f"tilt={math.degrees(model.tilt.position):.2f}deg zoom={model.zoom:.3f} "
-                f"rate={model.telemetry_rate}Hz silent={self.server.silent} "
-                f"bad_packets={self.bad_packets} checksum_errors={self.checksum_errors} "
-                f"nv_saves={model.nv_saves} ffc_saves={model.ffc_saves} "
-                f"gps_feed={model.gps_feed.name.lower()} vehicle_angles_deg="
-                + ("none" if model.vehicle_angles is None else
-                   ",".join(f"{math.degrees(v):.1f}" for v in model.vehicle_angles))
-            )
+            return {
+                "axes": {"pan": model.pan.snapshot(), "tilt": model.tilt.snapshot()},
+                "mode": mode_name(model.mode), "zoom": model.zoom,
+                "telemetry_rate": model.telemetry_rate, "silent": self.server.silent,
+                "bad_packets": self.bad_packets, "checksum_errors": self.checksum_errors,
+                "nv_saves": model.nv_saves, "ffc_saves": model.ffc_saves,
+                "gps_feed": model.gps_feed.name.lower(),
+                "vehicle_angles": model.vehicle_angles, "received": dict(model.received),
+            }
 
 
 def build_arg_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="ucamera_sim",
         description="Airelectronics U-Camera simulator on a pseudo-terminal (UCSP, 115200 8N1). "
-        "Prints the serial port path to open; reads fault commands on stdin (type help).",
+        "Prints a JSON ready line with the serial port path to open; reads control verbs on "
+        "stdin and on a TCP console (type help).",
     )
     parser.add_argument("--link", default=None,
                         help="stable symlink to create for the pty (default: a temp path)")
@@ -549,8 +509,9 @@ def build_arg_parser() -> argparse.ArgumentParser:
                         help="probability that a sent frame gets one bit flipped")
     parser.add_argument("--drop-rate", type=float, default=0.0,
                         help="probability that a sent frame is lost")
-    parser.add_argument("--control-fifo", default=None,
-                        help="also read fault commands from this named pipe (created if absent)")
+    parser.add_argument("--control-port", type=int, default=0,
+                        help="control console on 127.0.0.1 (0 = any free port, -1 = none); "
+                             "the same verbs are read on stdin")
     parser.add_argument("--log-level", default="INFO")
     return parser
 
@@ -580,38 +541,14 @@ def main(argv: list[str] | None = None) -> int:
     sim.set_noise_rate(args.noise_rate)
     sim.corrupt(probability=args.corrupt_rate)
     sim.drop_frames(args.drop_rate)
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
     try:
         sim.start()
     except OSError as exc:
         raise SystemExit(f"ucamera_sim: cannot create the pseudo-terminal link "
                          f"{args.link or ''}: {exc}") from exc
-    print(sim.port_name, flush=True)
     LOG.info("U-Camera simulator serving on %s", sim.port_name)
-
-    def read_commands(lines) -> None:
-        for line in lines:
-            answer = sim.command(line)
-            if answer:
-                print(answer, flush=True)
-
-    def read_fifo(path: str) -> None:
-        while not stop.is_set():
-            with open(path, encoding="utf-8") as fifo:  # blocks until a writer opens it
-                read_commands(fifo)
-
-    threading.Thread(target=read_commands, args=(sys.stdin,), daemon=True,
-                     name="ucamera-sim-stdin").start()
-    if args.control_fifo:
-        if not os.path.exists(args.control_fifo):
-            os.mkfifo(args.control_fifo)
-        threading.Thread(target=read_fifo, args=(args.control_fifo,), daemon=True,
-                         name="ucamera-sim-fifo").start()
     try:
-        while not stop.wait(0.2):
-            pass
+        run_simulator(sim.controls, {"pty": sim.port_name}, args.control_port)
     finally:
         sim.stop()
     return 0
