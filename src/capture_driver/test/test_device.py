@@ -183,7 +183,7 @@ def test_faulted_and_off_axes_are_refused_with_the_reason_and_nothing_sent(tcp_r
 
 
 def test_device_nack_is_a_refusal_carrying_the_devices_reason(tcp_rig):
-    assert tcp_rig.sim.control('nack A6 MOT_Update') == 'ok'
+    assert tcp_rig.sim.control('nack MOT_Update 1 A6') == 'ok'
     with pytest.raises(DeviceNack) as info:
         tcp_rig.motion.start_move(['tilt'], [0.05])
     assert isinstance(info.value, DeviceRefused)

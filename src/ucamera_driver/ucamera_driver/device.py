@@ -136,6 +136,7 @@ class UCameraDevice(Device):
         self._ramp: dict[str, tuple[float, float]] = {}  # joint -> (target, speed)
         self._ramp_time = 0.0
         self._jog_rates: dict[str, float] = {}
+        self._rates_check_pending = False
         self.capabilities.homing = PilotHoming(self)
         self.capabilities.status = UCameraStatus(self)
 
@@ -169,19 +170,15 @@ class UCameraDevice(Device):
         self._forget_motion()
         try:
             self._apply_connect_settings()
-            # the mode decides the safety stop below: wait for the first report that carries
-            # it (up to connect_timeout; under load the first report can take over a second)
-            deadline = time.monotonic() + self.settings.connect_timeout
-            while (client.state().gimbal_type is None or client.state().mode is None) \
+            # a jog may have been running when the link was lost and the gimbal keeps its last
+            # rates: stop it before anything else. The mode decides it; wait briefly for the
+            # first report that carries it, else the first read() after connect decides.
+            deadline = time.monotonic() + 1.0
+            while (client.state().mode is None or client.state().gimbal_type is None) \
                     and time.monotonic() < deadline:
                 time.sleep(0.02)
-            if client.state().mode == GimbalMode.RATES:
-                # a jog may have been running when the link was lost: the gimbal keeps its
-                # last rates, so stop it before anything else (safety on (re)connect)
-                client.set_rates(0.0, 0.0)
-                with self._lock:
-                    self._jog_rates = dict.fromkeys(self.joint_names, 0.0)
-                self.log.warning("gimbal was in rates mode at connect: rates set to zero")
+            self._rates_check_pending = True
+            self._stop_rates_left_running()
         except Exception:
             client.stop()
             raise
@@ -227,7 +224,23 @@ class UCameraDevice(Device):
                 f"U-Camera link down: {self.client.last_error or 'no telemetry'}")
         return True
 
+    def _stop_rates_left_running(self) -> None:
+        """Once the mode after a connect is known: in rates mode, set the rates to zero
+        (unless this driver has commanded a jog since; safety on (re)connect)."""
+        mode = self.client.state().mode
+        if not self._rates_check_pending or mode is None:
+            return
+        self._rates_check_pending = False
+        with self._lock:
+            jogging = any(self._jog_rates.values())
+        if mode == GimbalMode.RATES and not jogging:
+            self.client.set_rates(0.0, 0.0)
+            with self._lock:
+                self._jog_rates = dict.fromkeys(self.joint_names, 0.0)
+            self.log.warning("gimbal was in rates mode at connect: rates set to zero")
+
     def read(self) -> JointSample | None:
+        self._stop_rates_left_running()
         state = self.client.state()
         if state.pan is None or state.tilt is None:
             return None
