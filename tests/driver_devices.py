@@ -167,20 +167,42 @@ class CaptureDevice(SimDevice):
 # ----------------------------------------------------------------------------- CANaerospace
 class TurretDevice(SimDevice):
     """The turret's CANaerospace command messages (every one acts: set-points, stops, modes,
-    controls); node services (identification, parameters) are not commands."""
+    controls) and node-service requests; identification (IDS) and data upload (DUS, a read
+    of node memory) only read."""
 
     MOTION_SUFFIXES = ('_position_setpoint', '_velocity_setpoint', '_relative_setpoint',
                        '_actuator_mode')
     MOTION_KEYS = ('stop_actuators', 'restore_position')
+    READ_SERVICES = ('service IDS', 'service DUS')
 
     def __init__(self, workdir: Path) -> None:
         super().__init__()
+        from canaero_turret_driver.protocol import nodeservice
+        from canaero_turret_driver.protocol.message import CanAerospaceMessage
         from canaero_turret_driver.sim import SimConfig, SlcanSession, TurretSimulator
         from gimbal_driver_common.sim_server import PtySimServer
 
         # the turret's set-points have no speed field (it moves at its own profile): a slow
         # yaw drive makes the takeover test's far move last
         simulator = self.simulator = TurretSimulator(SimConfig(yaw_max_velocity=11.5))
+        handle = simulator.handle
+
+        def recorded(frame):
+            commands = len(simulator.received_commands)
+            replies = handle(frame)
+            for key, value in simulator.received_commands[commands:]:
+                self.record(f'{key} {value}')
+            service = nodeservice.service_channel_of(frame.arbitration_id)
+            if service is not None and service[1]:  # a request
+                try:
+                    code = CanAerospaceMessage.from_frame(frame.arbitration_id,
+                                                          frame.data).service_code
+                    self.record(f'service {nodeservice.ServiceCode(code).name}')
+                except ValueError:
+                    self.record(f'service {frame.data.hex()}')
+            return replies
+
+        simulator.handle = recorded
         link = str(workdir / 'turret_tty')
         self.server = PtySimServer(lambda: SlcanSession(simulator), link_path=link).start()
         self._watch(self.server)
@@ -191,12 +213,8 @@ class TurretDevice(SimDevice):
             "can_options:=['sleep_after_open=0']", 'service_timeout:=0.3',
             'node_timeout:=0.6', 'stale_timeout:=0.6']
 
-    def requests(self) -> list[str]:
-        # the simulator keeps its own receive log of commands (key, value)
-        return [f'{key} {value}' for key, value in list(self.simulator.received_commands)]
-
     def changing(self, request: str) -> bool:
-        return True
+        return request not in self.READ_SERVICES
 
     def motion(self, request: str) -> bool:
         key = request.split()[0]
