@@ -19,7 +19,7 @@ import enum
 import math
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 
@@ -359,8 +359,6 @@ class Driver:
     #: for presets the device keeps itself (clearing an empty Capture slot is a no-op; turret
     #: preset 0 is its remembered position, recalled as it is)
     valid_preset_calls: tuple[tuple[str, int | None], ...] = ()
-    #: extra ``-p`` node parameters
-    parameters: list[str] = field(default_factory=list)
 
     def preset_call_valid(self, service: str, index: int) -> bool:
         return any(name == service and slot in (None, index)

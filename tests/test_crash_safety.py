@@ -43,7 +43,7 @@ TOLERANCE = 0.02  # rad
 
 
 def start_node(driver: Driver, device: SimDevice, domain: int, workdir: Path) -> ManagedProcess:
-    params = [*device.node_parameters, *driver.parameters, 'reconnect_period:=0.2',
+    params = [*device.node_parameters, 'reconnect_period:=0.2',
               'publish_rate:=20.0', f'presets_file:={workdir / "presets.yaml"}']
     return ManagedProcess.ros(driver.package, driver.executable, domain,
                               ['--ros-args', *[x for p in params for x in ('-p', p)]])

@@ -112,7 +112,7 @@ def rig(request, tmp_path_factory):
     device = driver.start_device(workdir)
     lease = DomainLease()
     domain = lease.acquire()
-    params = [*device.node_parameters, *driver.parameters,
+    params = [*device.node_parameters,
               f'presets_file:={workdir / "presets.yaml"}', 'publish_rate:=10.0']
     node = ManagedProcess.ros(driver.package, driver.executable, domain,
                               ['--ros-args', *[x for p in params for x in ('-p', p)]])
