@@ -29,6 +29,7 @@ import os
 import random
 import re
 import shutil
+import subprocess
 import sys
 import tempfile
 import threading
@@ -58,6 +59,10 @@ from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, Sta
 
 #: a service call or action step not answered within this is a failure
 ANSWER_TIMEOUT_S = 10.0
+#: the slowest answers the report lists (what, when, seconds)
+SLOWEST_LISTED = 5
+#: unanswered calls that get a py-spy dump of the node's threads in the report
+STACK_DUMPS = 3
 RECONNECT_PERIOD_S = 1.0
 #: allowed growth of the node between the start and the end of a soak (a 10 min soak
 #: stays far below; a leak of one reconnect's worth of buffers or threads per fault does not)
@@ -87,6 +92,7 @@ class Counters:
         self.lock = threading.Lock()
         self.values: dict[str, int] = {}
         self.unanswered: list[str] = []
+        self.slowest: list[tuple[float, str, float]] = []  # (seconds, what, soak time)
 
     def add(self, key: str, count: int = 1) -> None:
         with self.lock:
@@ -95,6 +101,12 @@ class Counters:
     def missed(self, what: str) -> None:
         with self.lock:
             self.unanswered.append(what)
+
+    def answered_in(self, seconds: float, what: str, at: float) -> None:
+        with self.lock:
+            self.slowest.append((seconds, what, at))
+            self.slowest.sort(reverse=True)
+            del self.slowest[SLOWEST_LISTED:]
 
 
 class Soak:
@@ -122,6 +134,8 @@ class Soak:
         self.node_inactive = threading.Event()
         self._service_clients: dict[str, Any] = {}
         self._action_clients: dict[str, ActionClient] = {}
+        self.started = time.monotonic()
+        self.stack_dumps: list[str] = []
 
     # ------------------------------------------------------------------ set-up
     @property
@@ -186,13 +200,46 @@ class Soak:
 
     # ------------------------------------------------------------------ calls
     def answered(self, future: Any, what: str) -> bool:
-        """Wait for ``future``; one not done within ANSWER_TIMEOUT_S counts as unanswered."""
+        """Wait for ``future``; one not done within ANSWER_TIMEOUT_S counts as unanswered
+        (and the first few get a dump of the node's threads: what they were busy with)."""
+        sent = time.monotonic()
         try:
             wait_for(future.done, ANSWER_TIMEOUT_S, what, interval=0.005)
-            return True
         except TimeoutError:
-            self.counters.missed(f'{what}: no answer within {ANSWER_TIMEOUT_S:g} s')
+            self.counters.missed(f'{what}: no answer within {ANSWER_TIMEOUT_S:g} s '
+                                 f'(sent at soak time {sent - self.started:.1f} s)')
+            if len(self.stack_dumps) < STACK_DUMPS:
+                self.stack_dumps.append(self.dump_node_threads(what))
             return False
+        done = time.monotonic()
+        self.counters.answered_in(round(done - sent, 3), what, round(sent - self.started, 1))
+        return True
+
+    def dump_node_threads(self, what: str) -> str:
+        """py-spy's stack dump of every node thread, to a file beside the node log."""
+        assert self.node is not None
+        path = Path(f'{self.node.log_path}.stacks-{len(self.stack_dumps) + 1}.txt')
+        spy = Path(sys.executable).parent / 'py-spy'
+        try:
+            dump = subprocess.run([str(spy), 'dump', '--pid', str(self.node.process.pid)],
+                                  capture_output=True, text=True, timeout=30, check=False)
+            text = dump.stdout + dump.stderr
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            text = f'py-spy dump failed: {exc}'
+        path.write_text(f'{what}: unanswered\n{text}', encoding='utf-8')
+        return str(path)
+
+    def on_spin_thread(self, request: Callable[[], Any], what: str) -> Any | None:
+        """Run an ActionClient ``*_async`` on the client's spin thread (rclpy#1123: called
+        from this traffic thread, an answer the spin thread takes before the call has
+        stored its future is dropped, and the future never completes: a lost answer that
+        the node did send). None (and counted) if the spin thread does not run it in time."""
+        try:
+            return self.ros._on_spin_thread(request, ANSWER_TIMEOUT_S, what)
+        except TimeoutError:
+            self.counters.missed(f'{what}: the client executor did not send it within '
+                                 f'{ANSWER_TIMEOUT_S:g} s')
+            return None
 
     def call(self, srv_type: type, name: str, request: Any) -> Any | None:
         """Call a service; None (and counted) when it is not answered in time."""
@@ -224,21 +271,24 @@ class Soak:
         if not client.wait_for_server(timeout_sec=ANSWER_TIMEOUT_S):
             self.counters.missed(f'{name}: action server not available')
             return None
-        sent = client.send_goal_async(goal)
-        if not self.answered(sent, f'{name} goal response'):
+        sent = self.on_spin_thread(lambda: client.send_goal_async(goal), f'{name} goal')
+        if sent is None or not self.answered(sent, f'{name} goal response'):
             return None
         handle = sent.result()
         if not handle.accepted:
             self.counters.add('goals_rejected')
             return None
-        result = handle.get_result_async()
+        result = self.on_spin_thread(handle.get_result_async, f'{name} result request')
+        if result is None:
+            return None
         if cancel_after is not None:
             deadline = time.monotonic() + cancel_after
             while time.monotonic() < deadline and not result.done():
                 time.sleep(0.02)
             if not result.done():
                 self.counters.add('cancels')
-                if not self.answered(handle.cancel_goal_async(), f'{name} cancel'):
+                cancel = self.on_spin_thread(handle.cancel_goal_async, f'{name} cancel')
+                if cancel is None or not self.answered(cancel, f'{name} cancel'):
                     return None
         if not self.answered(result, f'{name} result'):
             return None
@@ -585,6 +635,10 @@ class Soak:
                                      'pass': expected <= set(self.faults_done)},
             'unanswered_calls': {'value': len(self.counters.unanswered),
                                  'detail': self.counters.unanswered[:10],
+                                 'node_thread_dumps': self.stack_dumps,
+                                 'slowest_answers_s': [
+                                     {'what': what, 'at_s': at, 'seconds': seconds}
+                                     for seconds, what, at in self.counters.slowest],
                                  'pass': not self.counters.unanswered},
             'node_crashes': {'value': 0 if alive else 1, 'exit_code': exit_code,
                              'pass': alive and exit_code == 0},

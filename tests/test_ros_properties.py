@@ -3,10 +3,12 @@
 Hypothesis generates invalid service requests, MoveTo goals and joint_command JointStates
 (each built with at least one defect: unknown or repeated joint, NaN/inf, out-of-limit value,
 mismatched array lengths, empty, unknown scan pattern, unstored preset, ...). They go to one
-running reference node (virtual gimbal, the shared base node's behaviour; one node process
-for the module, reused across examples). Every service/goal must answer success=false with a
-reason, and the simulator's receive side (its server's receive hook and the request lines of
-the device model) must show no command that moves, stops or changes the device.
+running node per driver (the virtual gimbal, Capture, the CANaerospace turret, Kessler kOS and
+U-Camera; one node process per driver for the module, reused across examples), built from
+that node's own joint names and limits (read back from its parameters). Every service/goal
+must answer success=false with a reason, and the simulator's receive side (``driver_devices``:
+the requests its device model handled) must show no command that moves, stops or changes the
+device.
 
 A joint_command has no answer; the node logs ``joint_command rejected, nothing sent: <why>``,
 so the test waits for that line (one per message) and then checks the device side.
@@ -15,150 +17,117 @@ so the test waits for that line (one per message) and then checks the device sid
 from __future__ import annotations
 
 import math
-import threading
-from collections.abc import Callable
+from dataclasses import dataclass
 
 import pytest
+from driver_devices import DRIVERS, Driver, SimDevice
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 
 from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
-from gimbal_driver_common.virtual_gimbal import make_server
+from gimbal_driver_common.testing import DomainLease, ManagedProcess
+from gimbal_driver_common.testing import wait_for as wait_until
 from gimbal_msgs.action import MoveTo
-from gimbal_msgs.srv import ClearPreset, GotoPreset, SetPreset, StartScan
+from gimbal_msgs.srv import ClearPreset, DeviceCommand, GotoPreset, SetMode, SetPreset, StartScan
 
 pytestmark = pytest.mark.ros
 
-PKG = 'gimbal_driver_common'
-JOINTS = ('pan', 'tilt')
-LIMITS = {'pan': (-math.pi, math.pi), 'tilt': (-math.pi / 2, math.pi / 2)}
-VELOCITY_MAX = 1.5  # virtual_gimbal_node's default velocity_max
-#: the device verbs that move, stop or change the device (ID and GET only read)
-DEVICE_CHANGING = ('MOVE', 'JOG', 'STOP', 'HOME', 'RESET', 'FAULT')
 REJECTED = 'joint_command rejected, nothing sent'
-PROPERTY_SETTINGS = settings(max_examples=25, deadline=None, derandomize=True,
+#: every pattern any driver knows (the base node's, Capture's device scans)
+KNOWN_PATTERNS = ('sector', 'zigzag', 'square', 'snake')
+PROPERTY_SETTINGS = settings(max_examples=20, deadline=None, derandomize=True,
                              suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                     HealthCheck.too_slow])
 
 
-class DeviceSide:
-    """What reached the simulated device: every request (a line of the virtual gimbal, a
-    command name of the Capture controller), plus a receive-hook count of the server."""
+@dataclass(frozen=True)
+class JointSpace:
+    """A running node's joints and limits (from its parameters), what the strategies need."""
 
-    def __init__(self, server, changing: Callable[[str], bool]) -> None:
-        self._lock = threading.Lock()
-        self._changing = changing
-        self.requests: list[str] = []
-        self.receptions = 0
+    joints: tuple[str, ...]
+    limits: dict[str, tuple[float, float]]
+    velocity_max: dict[str, float]
+    scan_pan: str
 
-        def received() -> None:
-            with self._lock:
-                self.receptions += 1
-
-        server.add_receive_hook(received)
-
-    def record(self, request: str) -> None:
-        with self._lock:
-            self.requests.append(request)
-
-    def mark(self) -> int:
-        with self._lock:
-            return len(self.requests)
-
-    def changes_since(self, mark: int) -> list[str]:
-        with self._lock:
-            return [r for r in self.requests[mark:] if self._changing(r)]
-
-
-def virtual_gimbal_device():
-    """The reference simulator; changing = MOVE/JOG/STOP/HOME/RESET/FAULT lines."""
-    server, device = make_server(0)
-    side = DeviceSide(server, lambda line: line.split()[:1] != [] and
-                      line.split()[0].upper() in DEVICE_CHANGING)
-    handle = device.handle
-
-    def recorded(line: str) -> str:
-        side.record(line.strip())
-        return handle(line)
-
-    device.handle = recorded
-    return side, ['port:=' + str(server.port)], server.stop
-
-
-def capture_reads(name: str) -> bool:
-    """Capture commands that only read: no argument and a returned value (queries such as
-    MOT_GetLoadPosition, COM_SysState), and the COM_Connect handshake."""
-    from capture_driver.protocol import COMMANDS, DataType
-
-    command = COMMANDS.get(name)
-    return name == 'COM_Connect' or (command is not None and command.arg is DataType.NONE
-                                      and command.ret is not DataType.NONE)
-
-
-def capture_device():
-    """The Capture simulator over TCP; changing = any command that is not a query."""
-    from capture_driver.protocol import BY_OPCODE
-    from capture_driver.sim import CaptureSimulator, PedestalModel
-
-    sim = CaptureSimulator(PedestalModel(), tcp_port=0).start()
-    side = DeviceSide(sim.tcp, lambda name: not capture_reads(name))
-    handle = sim.model.handle
-
-    def recorded(frame, session):
-        known = BY_OPCODE.get(frame.opcode)
-        side.record(known.name if known is not None else f'0x{frame.opcode:04X}')
-        return handle(frame, session)
-
-    sim.model.handle = recorded
-    return side, ['transport:=tcp', 'host:=127.0.0.1', f'port:={sim.tcp.port}',
-                           'status_period:=0.5'], sim.stop
-
-
-#: rig name -> (package, executable, node name, simulator factory)
-RIGS = {
-    'virtual_gimbal': (PKG, 'virtual_gimbal_node', 'virtual_gimbal', virtual_gimbal_device),
-    'capture': ('capture_driver', 'capture_driver_node', 'capture_driver', capture_device),
-}
+    def inside(self, joint: str) -> st.SearchStrategy[float]:
+        low, high = self.limits[joint]
+        return st.floats(low, high)
 
 
 class Rig:
-    def __init__(self, name: str, ros: RosTestClient, node: ManagedProcess,
-                 device: DeviceSide) -> None:
-        self.name, self.ros, self.node, self.device = name, ros, node, device
+    def __init__(self, driver: Driver, ros: RosTestClient, node: ManagedProcess,
+                 device: SimDevice, space: JointSpace) -> None:
+        self.driver, self.ros, self.node, self.device, self.space = (driver, ros, node,
+                                                                     device, space)
 
     def service(self, name: str) -> str:
-        return f'/{self.name}/{name}'
+        return f'/{self.driver.node_name}/{name}'
 
     def rejections(self) -> int:
         return self.node.output().count(REJECTED)
 
 
-@pytest.fixture(scope='module', params=sorted(RIGS))
+def joint_space(ros: RosTestClient, node_name: str) -> JointSpace:
+    def parameter(name: str) -> list:
+        return list(ros.get_parameter(node_name, name, timeout=30))
+
+    joints = tuple(parameter('joint_names'))
+    low, high, speed = (parameter(n) for n in ('position_min', 'position_max', 'velocity_max'))
+    scan_pan = 'pan' if {'pan', 'tilt'} <= set(joints) else joints[0]  # base node's rule
+    return JointSpace(joints, {j: (low[i], high[i]) for i, j in enumerate(joints)},
+                      {j: speed[i] for i, j in enumerate(joints)}, scan_pan)
+
+
+def quiet(ros: RosTestClient, device: SimDevice, samples: int = 20) -> bool:
+    """True when ``samples`` more joint_states came and the device saw no change meanwhile
+    (the node has finished configuring the device at start-up)."""
+    mark = device.mark()
+    ros.wait_for_message('/joint_states', JointState, timeout=30)
+    states = ros.subscribe('/joint_states', JointState)
+    count = len(states)
+    wait_until(lambda: len(states) >= count + samples, 30, f'{samples} joint_states')
+    return device.changes_since(mark) == []
+
+
+def receive_side_sees_a_valid_move(ros: RosTestClient, device: SimDevice,
+                                   driver: Driver) -> None:
+    """The check can fail: a valid joint_command shows on the device's receive side as a
+    change. Then the axes settle and the node is quiet again."""
+    mark = device.mark()
+    ros.publish('/joint_command', JointState(name=list(driver.goal),
+                                             position=list(driver.goal.values())))
+    wait_until(lambda: device.changes_since(mark), 30, 'the valid move on the device')
+    wait_until(lambda: not any(device.moving(j) for j in driver.goal), 60, 'the axes to stop')
+    wait_until(lambda: quiet(ros, device), 60, 'the node to be quiet after the move')
+
+
+@pytest.fixture(scope='module', params=sorted(DRIVERS))
 def rig(request, tmp_path_factory):
-    package, executable, name, make_device = RIGS[request.param]
-    side, device_params, stop_device = make_device()
-    presets = tmp_path_factory.mktemp('presets') / 'presets.yaml'
+    driver = DRIVERS[request.param]
+    workdir = tmp_path_factory.mktemp(request.param)
+    device = driver.start_device(workdir)
     lease = DomainLease()
     domain = lease.acquire()
-    low, high = zip(*(LIMITS[j] for j in JOINTS), strict=True)
-    params = [*device_params, f'presets_file:={presets}', 'publish_rate:=10.0',
-              f'position_min:={list(low)}', f'position_max:={list(high)}',
-              f'velocity_max:=[{VELOCITY_MAX}, {VELOCITY_MAX}]']
-    node = ManagedProcess.ros(package, executable, domain,
+    params = [*device.node_parameters,
+              f'presets_file:={workdir / "presets.yaml"}', 'publish_rate:=10.0']
+    node = ManagedProcess.ros(driver.package, driver.executable, domain,
                               ['--ros-args', *[x for p in params for x in ('-p', p)]])
     ros = RosTestClient(domain, 'property_client')
     try:
         ros.wait_for_message('/joint_states', JointState, timeout=60)
-        assert side.receptions > 0  # the hook sees the node's polls
-        yield Rig(name, ros, node, side)
+        assert device.receptions > 0  # the hook sees the node's polls
+        space = joint_space(ros, driver.node_name)
+        wait_until(lambda: quiet(ros, device), 60, 'the node to finish its start-up commands')
+        receive_side_sees_a_valid_move(ros, device, driver)
+        yield Rig(driver, ros, node, device, space)
     finally:
         ros.close()
         node.stop()
-        stop_device()
+        device.stop()
         lease.release()
     assert 'Traceback' not in node.output(), node.output()[-3000:]
 
@@ -166,27 +135,31 @@ def rig(request, tmp_path_factory):
 # ------------------------------------------------------------------------- strategies
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
 non_finite = st.sampled_from([math.nan, math.inf, -math.inf])
-unknown_name = st.text(min_size=0, max_size=12).filter(lambda s: s not in JOINTS)
+
+
+def unknown_name(space: JointSpace) -> st.SearchStrategy[str]:
+    return st.text(min_size=0, max_size=12).filter(lambda s: s not in space.joints)
 
 
 @st.composite
-def out_of_limit(draw, joint: str) -> float:
-    low, high = LIMITS[joint]
+def out_of_limit(draw, space: JointSpace, joint: str) -> float:
+    low, high = space.limits[joint]
     return draw(st.one_of(st.floats(min_value=high + 1e-3, max_value=1e300),
                           st.floats(min_value=-1e300, max_value=low - 1e-3)))
 
 
 @st.composite
-def invalid_joint_command(draw) -> JointState:
+def invalid_joint_command(draw, space: JointSpace) -> JointState:
     """A JointState with at least one defect the node must reject as a whole."""
-    names = draw(st.lists(st.sampled_from(JOINTS), min_size=1, max_size=2, unique=True))
-    positions = [draw(st.floats(*LIMITS[n])) for n in names]
+    names = draw(st.lists(st.sampled_from(space.joints), min_size=1,
+                          max_size=len(space.joints), unique=True))
+    positions = [draw(space.inside(n)) for n in names]
     velocities: list[float] = []
     defect = draw(st.sampled_from(('unknown', 'repeated', 'non_finite_position',
                                    'out_of_limit', 'position_length', 'velocity_length',
                                    'nothing_given', 'jog_too_fast', 'empty')))
     if defect == 'unknown':
-        names.insert(draw(st.integers(0, len(names))), draw(unknown_name))
+        names.insert(draw(st.integers(0, len(names))), draw(unknown_name(space)))
         positions.insert(0, draw(finite))
     elif defect == 'repeated':
         names.append(names[0])
@@ -196,64 +169,70 @@ def invalid_joint_command(draw) -> JointState:
             [math.inf, -math.inf]))
     elif defect == 'out_of_limit':
         index = draw(st.integers(0, len(names) - 1))
-        positions[index] = draw(out_of_limit(names[index]))
+        positions[index] = draw(out_of_limit(space, names[index]))
     elif defect == 'position_length':
         extra = draw(st.lists(finite, min_size=1, max_size=3))
         positions = positions + extra if draw(st.booleans()) or len(names) == 1 \
             else positions[:-1]
     elif defect == 'velocity_length':
-        velocities = [0.1] * draw(st.sampled_from([n for n in range(1, 5) if n != len(names)]))
+        velocities = [0.01] * draw(st.sampled_from([n for n in range(1, 5) if n != len(names)]))
     elif defect == 'nothing_given':
         positions[0] = math.nan
     elif defect == 'jog_too_fast':
         positions = [math.nan] * len(names)
-        velocities = [draw(st.one_of(non_finite, st.floats(VELOCITY_MAX + 1e-3, 1e300)))
-                      for _ in names]
+        velocities = [draw(st.one_of(non_finite, st.floats(space.velocity_max[n] + 1e-3,
+                                                           1e300)))
+                      for n in names]
     else:
         names, positions = [], draw(st.lists(finite, max_size=2))
     return JointState(name=names, position=positions, velocity=velocities)
 
 
 @st.composite
-def invalid_move_goal(draw) -> MoveTo.Goal:
-    names = list(JOINTS)
-    positions = [draw(st.floats(*LIMITS[n])) for n in names]
+def invalid_move_goal(draw, space: JointSpace) -> MoveTo.Goal:
+    names = list(space.joints)
+    positions = [draw(space.inside(n)) for n in names]
     defect = draw(st.sampled_from(('unknown', 'non_finite', 'out_of_limit', 'length',
                                    'empty')))
+    index = draw(st.integers(0, len(names) - 1))
     if defect == 'unknown':
-        names[draw(st.integers(0, 1))] = draw(unknown_name)
+        names[index] = draw(unknown_name(space))
     elif defect == 'non_finite':
-        positions[draw(st.integers(0, 1))] = draw(non_finite)
+        positions[index] = draw(non_finite)
     elif defect == 'out_of_limit':
-        index = draw(st.integers(0, 1))
-        positions[index] = draw(out_of_limit(names[index]))
+        positions[index] = draw(out_of_limit(space, names[index]))
     elif defect == 'length':
-        positions = positions[:1] if draw(st.booleans()) else [*positions, 0.0]
+        positions = positions[:-1] if draw(st.booleans()) else [*positions, 0.0]
     else:
         names, positions = [], []
     return MoveTo.Goal(joint_names=names, positions=positions)
 
 
 @st.composite
-def invalid_scan(draw) -> StartScan.Request:
-    request = StartScan.Request(pattern='sector', pan_min=-0.2, pan_max=0.2, tilt_min=0.0,
-                                tilt_max=0.1, speed=0.5, tilt_step=0.1, dwell=0.0)
+def invalid_scan(draw, space: JointSpace) -> StartScan.Request:
+    """A scan with one defect; the rest is a small sector around the middle of the pan
+    range."""
+    low, high = space.limits[space.scan_pan]
+    middle = (low + high) / 2
+    request = StartScan.Request(pattern='sector', pan_min=middle - 0.2, pan_max=middle + 0.2,
+                                tilt_min=0.0, tilt_max=0.1, speed=0.1, tilt_step=0.1,
+                                dwell=0.0)
     defect = draw(st.sampled_from(('pattern', 'non_finite', 'speed', 'out_of_limit')))
     if defect == 'pattern':
         request.pattern = draw(st.text(max_size=10).filter(
-            lambda s: s not in ('sector', 'zigzag', 'square', 'snake')))
+            lambda s: s not in KNOWN_PATTERNS))
     elif defect == 'non_finite':
         setattr(request, draw(st.sampled_from(('pan_min', 'pan_max', 'speed'))),
                 draw(non_finite))
     elif defect == 'speed':
         request.speed = draw(st.floats(max_value=0.0, allow_nan=False))
     else:
-        request.pan_max = draw(out_of_limit('pan'))
+        request.pan_max = draw(out_of_limit(space, space.scan_pan))
     return request
 
 
 @st.composite
-def invalid_preset_request(draw):
+def invalid_preset_request(draw, space: JointSpace):
     """(service type, name, request) of a preset request that must be refused; no preset is
     ever stored, so every goto/clear of an index is invalid too."""
     kind = draw(st.sampled_from(('set', 'goto', 'clear')))
@@ -262,15 +241,16 @@ def invalid_preset_request(draw):
         return GotoPreset, 'goto_preset', GotoPreset.Request(index=index, speed=draw(finite))
     if kind == 'clear':
         return ClearPreset, 'clear_preset', ClearPreset.Request(index=index, all=False)
-    names = list(JOINTS)
-    positions = [0.1, 0.1]
+    names = list(space.joints)
+    positions = [(low + high) / 2 for low, high in (space.limits[n] for n in names)]
     defect = draw(st.sampled_from(('unknown', 'non_finite', 'length', 'empty')))
+    which = draw(st.integers(0, len(names) - 1))
     if defect == 'unknown':
-        names[0] = draw(unknown_name)
+        names[which] = draw(unknown_name(space))
     elif defect == 'non_finite':
-        positions[draw(st.integers(0, 1))] = draw(non_finite)
+        positions[which] = draw(non_finite)
     elif defect == 'length':
-        positions = positions[:1]
+        positions = positions[:-1]
     else:
         names, positions = [], []
     return SetPreset, 'set_preset', SetPreset.Request(
@@ -278,19 +258,90 @@ def invalid_preset_request(draw):
         joint_names=names, positions=positions)
 
 
+# ------------------------------------------------- the drivers' own services: refused requests
+#: names of out-of-scope (weapon) functions: never encoded, so unknown to every command table
+OUT_OF_SCOPE_NAMES = ('WCU_Fire', 'WCU_Trigger', 'WCU_SetSafety', 'WCU_GetShotCounter',
+                      'CapSnap', 'fire', 'arm')
+IDENTIFIER_TEXT = st.text(alphabet='abcdefghijklmnopqrstuvwxyz_0123456789', max_size=14)
+
+
+def device_command(service: str, names: st.SearchStrategy[str]) -> st.SearchStrategy:
+    """DeviceCommand requests with any axis and any argument texts."""
+    return st.builds(lambda name, axis, arguments: (DeviceCommand, service, DeviceCommand.Request(
+        command=name, axis=axis, arguments=arguments)),
+        names, st.integers(0, 255), st.lists(st.text(max_size=12), max_size=3))
+
+
+def unknown(known: set[str]) -> st.SearchStrategy[str]:
+    return st.one_of(st.sampled_from(OUT_OF_SCOPE_NAMES), st.text(max_size=16)).filter(
+        lambda name: name.strip() not in known)
+
+
+def capture_refused() -> st.SearchStrategy:
+    """~/command: unknown names, and every table command gated behind an opt-in parameter
+    (non-volatile writes, reboots, network settings) or one that starts motion without the
+    driver's limit checks."""
+    from capture_driver.node import ALLOWED_MOTION
+    from capture_driver.protocol import COMMANDS, Safety
+
+    gated = sorted(name for name, command in COMMANDS.items()
+                   if command.safety in (Safety.NV_WRITE, Safety.REBOOT, Safety.NETWORK)
+                   or (command.safety is Safety.MOTION and name not in ALLOWED_MOTION))
+    return device_command('command', st.one_of(st.sampled_from(gated), unknown(set(COMMANDS))))
+
+
+def turret_refused() -> st.SearchStrategy:
+    """~/device_command: unknown names, and the node-id change, flash programming and data
+    download (each behind its opt-in); ~/set_actuator_mode with an unknown mode."""
+    from canaero_turret_driver.node import MODE_NAMES
+
+    known = {'identify', 'set_interval', 'upload', 'download', 'set_node_id',
+             'store_configuration'}
+    gated = st.sampled_from(('set_node_id', 'store_configuration', 'download'))
+    mode = IDENTIFIER_TEXT.filter(lambda m: m not in MODE_NAMES)
+    return st.one_of(device_command('device_command', st.one_of(gated, unknown(known))),
+                     mode.map(lambda m: (SetMode, 'set_actuator_mode', SetMode.Request(mode=m))))
+
+
+def kessler_refused() -> st.SearchStrategy:
+    """~/command: unknown names, and SetSoftwareID (behind allow_software_id_write)."""
+    known = {'GetLEDStatus', 'SetLEDStatus', 'GetSoftwareID', 'SetSoftwareID'}
+    return device_command('command', st.one_of(st.just('SetSoftwareID'), unknown(known)))
+
+
+def ucamera_refused() -> st.SearchStrategy:
+    """~/save_configuration and ~/save_ffc (non-volatile writes, behind allow_nv_write);
+    ~/set_mode with an unknown mode."""
+    from ucamera_driver.node import MODE_NAMES
+
+    saves = st.sampled_from(('save_configuration', 'save_ffc')).map(
+        lambda name: (Trigger, name, Trigger.Request()))
+    mode = st.text(max_size=16).filter(lambda m: m.strip().lower() not in MODE_NAMES)
+    return st.one_of(saves, mode.map(lambda m: (SetMode, 'set_mode', SetMode.Request(mode=m))))
+
+
+#: driver -> its own services' requests that must be refused (the virtual gimbal has none)
+REFUSED_DRIVER_REQUESTS = {'capture_driver': capture_refused,
+                           'canaero_turret_driver': turret_refused,
+                           'kessler_kos_driver': kessler_refused,
+                           'ucamera_driver': ucamera_refused}
+
+
 # ------------------------------------------------------------------------- properties
 @PROPERTY_SETTINGS
-@given(msg=invalid_joint_command())
-def test_invalid_joint_commands_are_rejected_and_send_nothing(rig, msg) -> None:
+@given(data=st.data())
+def test_invalid_joint_commands_are_rejected_and_send_nothing(rig, data) -> None:
+    msg = data.draw(invalid_joint_command(rig.space), label='joint_command')
     mark, rejected = rig.device.mark(), rig.rejections()
     rig.ros.publish('/joint_command', msg)
-    wait_for(lambda: rig.rejections() > rejected, 20, f'the rejection of {msg}')
+    wait_until(lambda: rig.rejections() > rejected, 20, f'the rejection of {msg}')
     assert rig.device.changes_since(mark) == []
 
 
 @PROPERTY_SETTINGS
-@given(goal=invalid_move_goal())
-def test_invalid_move_goals_fail_with_a_reason_and_send_nothing(rig, goal) -> None:
+@given(data=st.data())
+def test_invalid_move_goals_fail_with_a_reason_and_send_nothing(rig, data) -> None:
+    goal = data.draw(invalid_move_goal(rig.space), label='goal')
     mark = rig.device.mark()
     try:
         result, _, _ = rig.ros.run_action(MoveTo, rig.service('move_to'), goal, timeout=20)
@@ -303,8 +354,9 @@ def test_invalid_move_goals_fail_with_a_reason_and_send_nothing(rig, goal) -> No
 
 
 @PROPERTY_SETTINGS
-@given(request=invalid_scan())
-def test_invalid_scans_are_refused_with_a_reason_and_send_nothing(rig, request) -> None:
+@given(data=st.data())
+def test_invalid_scans_are_refused_with_a_reason_and_send_nothing(rig, data) -> None:
+    request = data.draw(invalid_scan(rig.space), label='request')
     mark = rig.device.mark()
     reply = rig.ros.call(StartScan, rig.service('start_scan'), request, timeout=20)
     assert not reply.success, request
@@ -313,11 +365,11 @@ def test_invalid_scans_are_refused_with_a_reason_and_send_nothing(rig, request) 
 
 
 @PROPERTY_SETTINGS
-@given(call=invalid_preset_request())
-def test_invalid_preset_requests_are_refused_with_a_reason_and_send_nothing(rig, call) -> None:
-    srv_type, name, request = call
-    # the Capture controller stores presets itself: clearing an empty slot is a valid no-op
-    assume(not (rig.name == 'capture_driver' and name == 'clear_preset'))
+@given(data=st.data())
+def test_invalid_preset_requests_are_refused_with_a_reason_and_send_nothing(rig, data) -> None:
+    srv_type, name, request = data.draw(invalid_preset_request(rig.space), label='call')
+    # presets a device keeps itself (Driver.valid_preset_calls) are valid with nothing stored
+    assume(not rig.driver.preset_call_valid(name, request.index))
     mark = rig.device.mark()
     reply = rig.ros.call(srv_type, rig.service(name), request, timeout=20)
     assert not reply.success, request
@@ -344,5 +396,21 @@ def test_impossible_lifecycle_transitions_are_refused_and_the_node_lives_on(
     reply = rig.ros.call(ChangeState, rig.service('change_state'), request, timeout=20)
     assert not reply.success
     assert rig.node.running
-    assert rig.ros.lifecycle_state(rig.name) == 'active'
+    assert rig.ros.lifecycle_state(rig.driver.node_name) == 'active'
+    assert rig.device.changes_since(mark) == []
+
+
+@PROPERTY_SETTINGS
+@given(data=st.data())
+def test_refused_driver_requests_answer_with_a_reason_and_send_nothing(rig, data) -> None:
+    """Each driver's own services: unknown commands and modes, out-of-scope (weapon) names,
+    and commands that can cut off or brick the device without their opt-in parameter."""
+    refused = REFUSED_DRIVER_REQUESTS.get(rig.driver.node_name)
+    if refused is None:
+        pytest.skip(f'{rig.driver.node_name} has no services of its own')
+    srv_type, name, request = data.draw(refused(), label='call')
+    mark = rig.device.mark()
+    reply = rig.ros.call(srv_type, rig.service(name), request, timeout=20)
+    assert not reply.success, request
+    assert reply.message
     assert rig.device.changes_since(mark) == []
