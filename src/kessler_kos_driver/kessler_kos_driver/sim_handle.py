@@ -31,7 +31,8 @@ class KesslerSimHandle(SimHandle):
         """The motor's target (rotations) in rad: every joint is 2π rad per rotation."""
         addresses = dict(zip(self.spec.joints, self.spec.node_parameters['motor_addresses'],
                              strict=True))
-        return self.sim.device.motors[addresses[joint]].target * math.tau
+        target = self.sim.device.motors[addresses[joint]].target  # None: no move since rest
+        return None if target is None else target * math.tau
 
     def malformed_frames(self, rng: random.Random) -> None:
         from kessler_kos_driver.protocol import MotorInfo, MotorInfoEntry
