@@ -11,6 +11,8 @@ one of these variables is set, and Python imports this module at start-up:
   (validation, the client lock) and the protocol's own round trips.
 * ``BENCH_EXECUTOR=events``: ``run_driver`` spins ``rclpy.experimental.EventsExecutor``
   instead of ``MultiThreadedExecutor(num_threads=4)`` (an experiment; see bench/README.md).
+* ``BENCH_EXECUTOR=single``: ``rclpy.executors.SingleThreadedExecutor`` (an experiment:
+  it serialises the blocking action callbacks, so ``~/stop`` waits behind a ``move_to``).
 * ``BENCH_SWITCH_INTERVAL_S``: the GIL switch interval instead of the driver's 1 ms.
 """
 
@@ -27,16 +29,20 @@ def _install() -> None:
     from pathlib import Path
 
     from gimbal_driver_common import transport
-    from gimbal_driver_common.ros import base_node
+    from gimbal_driver_common.ros import base_node, run
 
     executor = os.environ.get('BENCH_EXECUTOR', '')
     if executor == 'events':
         from rclpy.experimental import EventsExecutor
 
-        base_node.MultiThreadedExecutor = lambda num_threads=None: EventsExecutor()
+        run.MultiThreadedExecutor = lambda num_threads=None: EventsExecutor()
+    elif executor == 'single':
+        from rclpy.executors import SingleThreadedExecutor
+
+        run.MultiThreadedExecutor = lambda num_threads=None: SingleThreadedExecutor()
     interval = os.environ.get('BENCH_SWITCH_INTERVAL_S')
     if interval:
-        base_node.GIL_SWITCH_INTERVAL_S = float(interval)   # run_driver applies it
+        run.GIL_SWITCH_INTERVAL_S = float(interval)   # run_driver applies it
 
     trace_dir = os.environ.get('BENCH_TRACE_DIR')
     if not trace_dir:

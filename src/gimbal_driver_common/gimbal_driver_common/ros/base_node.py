@@ -237,9 +237,12 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
         self._joint_pub = self.create_publisher(JointState, 'joint_states', state_qos)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._status_pub = self.create_publisher(GimbalStatus, '~/status', 10)
-        # keep-last 1 (interfaces.md): newest wins; the callback never waits on the device
+        # keep-last 1 (interfaces.md): newest wins; the callback never waits on the device,
+        # so run_driver's executor runs it inline (ros/run.py InlineGroupExecutor)
+        command_group = MutuallyExclusiveCallbackGroup()
+        command_group.inline = True
         self.create_subscription(JointState, 'joint_command', self._on_joint_command, 1,
-                                 callback_group=MutuallyExclusiveCallbackGroup())
+                                 callback_group=command_group)
         services = [
             (Trigger, '~/stop', self._on_stop),
             (Trigger, '~/reset_faults', self._on_reset_faults),
