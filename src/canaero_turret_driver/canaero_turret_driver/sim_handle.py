@@ -8,7 +8,8 @@ import time
 from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
-from gimbal_driver_common.sim_handle import SILENCE_S, SimHandle
+from gimbal_driver_common.sim_control import SimControl
+from gimbal_driver_common.sim_handle import SimHandle
 
 
 class CanaeroSimHandle(SimHandle):
@@ -37,9 +38,15 @@ class CanaeroSimHandle(SimHandle):
     def __init__(self, spec: DriverSpec, workdir: Path, process_tests: bool = False) -> None:
         super().__init__(spec, workdir, process_tests)
         self.simulator = None
+        self._controls: SimControl | None = None
 
     def start(self) -> None:
-        from canaero_turret_driver.sim import SimConfig, SlcanSession, TurretSimulator
+        from canaero_turret_driver.sim import (
+            SimConfig,
+            SlcanSession,
+            TurretSimulator,
+            make_control,
+        )
         from gimbal_driver_common.sim_server import PtySimServer
 
         config = SimConfig(yaw_max_velocity=self.SLOW_YAW_DEG_S) if self.process_tests \
@@ -47,7 +54,12 @@ class CanaeroSimHandle(SimHandle):
         self.simulator = simulator = TurretSimulator(config)
         simulator.handle = self._recording(simulator)
         server = PtySimServer(lambda: SlcanSession(simulator), link_path=self.link).start()
+        # its silence verb quiets the CAN nodes; the slcan adapter keeps answering
+        self._controls = make_control(simulator, server)
         self._started(server, server)
+
+    def controls(self) -> SimControl:
+        return self._controls
 
     def _recording(self, simulator):
         """The simulator's frame handler, logging the commands and service requests."""
@@ -82,10 +94,6 @@ class CanaeroSimHandle(SimHandle):
 
     def moving(self, joint: str) -> bool:
         return self.simulator.state()['axes'][joint]['velocity'] != 0.0
-
-    def silence(self, rng: random.Random) -> None:
-        self.simulator.silence_all(SILENCE_S)
-        time.sleep(SILENCE_S)
 
     def lost_frames(self, rng: random.Random) -> None:
         self.simulator.lose_frames(rng.choice(('yaw_position', 'pitch_position')),

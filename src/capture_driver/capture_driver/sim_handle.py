@@ -7,6 +7,7 @@ import random
 from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
+from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.sim_handle import SimHandle, Takeover
 
 #: commands that move or stop a Capture axis
@@ -62,6 +63,9 @@ class CaptureSimHandle(SimHandle):
         model = self.sim.model
         with model.lock:
             return model.axes[AXIS_IDS[joint]].velocity != 0.0 or model.scan is not None
+
+    def controls(self) -> SimControl:
+        return self.sim.controls
 
     def lost_frames(self, rng: random.Random) -> None:
         self.sim.model.lose_replies(rng.randrange(1, 4))

@@ -17,7 +17,10 @@ each classified by the subclass as
   redirect or stop the move where the protocol lets it stay silent).
 
 A fault is a method that injects it and returns when the fault has *healed* (the link is
-back, the device answers again); the soak times joint_states from that moment. ``link``
+back, the device answers again); the soak times joint_states from that moment. The shared
+faults (link drop, silence, garbage) go through the simulator's control protocol
+(:mod:`gimbal_driver_common.sim_control`, :meth:`SimHandle.control`), the same verbs its
+console and TCP control port take. ``link``
 marks faults that interrupt joint_states (link drop, silence, restart). Faults a protocol
 cannot carry are listed in ``not_applicable`` with the reason.
 """
@@ -34,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from gimbal_driver_common.registry import DriverSpec, parameter_text, resolve
+from gimbal_driver_common.sim_control import ControlError, SimControl
 
 #: seconds a link stays down / silent; long enough for each driver's link watchdog to notice
 LINK_DOWN_S = 2.0
@@ -125,6 +129,17 @@ class SimHandle:
     def server(self) -> Any:  # TcpSimServer | PtySimServer
         return self._server
 
+    def controls(self) -> SimControl:
+        """The running simulator's control verbs (:mod:`gimbal_driver_common.sim_control`)."""
+        raise NotImplementedError
+
+    def control(self, line: str) -> str:
+        """Run one control request; the answer after ``ok`` (ControlError on ``error``)."""
+        answer = self.controls().execute(line)
+        if answer != 'ok' and not answer.startswith('ok '):
+            raise ControlError(answer)
+        return answer[3:]
+
     def add_receive_hook(self, hook: Callable[[], None]) -> None:
         """A hook on this and every later (restarted) server."""
         self._hooks.append(hook)
@@ -205,19 +220,20 @@ class SimHandle:
     # faults every server has
     def drop_link(self, seconds: float) -> None:
         """Cut the link to the node and refuse a new one for ``seconds`` (returns at once)."""
-        self.server.drop_link(seconds)
+        self.control(f'drop {seconds}')
 
     def link_drop(self, rng: random.Random) -> None:
         self.drop_link(LINK_DOWN_S)
         time.sleep(LINK_DOWN_S)
 
     def silence(self, rng: random.Random) -> None:
-        self.server.set_silent(True)
+        self.control('silence on')
         time.sleep(SILENCE_S)
-        self.server.set_silent(False)
+        self.control('silence off')
 
     def garbage(self, rng: random.Random) -> None:
-        self.server.inject(bytes(rng.randrange(256) for _ in range(rng.randrange(16, 200))))
+        data = bytes(rng.randrange(256) for _ in range(rng.randrange(16, 200)))
+        self.control(f'garbage hex {data.hex()}')
 
     def faults(self) -> list[Fault]:
         """The faults every server has, plus those the subclass implements (a method named
@@ -258,9 +274,10 @@ class VirtualGimbalSim(SimHandle):
     def __init__(self, spec: DriverSpec, workdir: Path, process_tests: bool = False) -> None:
         super().__init__(spec, workdir, process_tests)
         self.device: Any = None
+        self._controls: SimControl | None = None
 
     def start(self) -> None:
-        from gimbal_driver_common.virtual_gimbal import make_server
+        from gimbal_driver_common.virtual_gimbal import make_control, make_server
 
         server, self.device = make_server(self.port)
         handle = self.device.handle
@@ -270,6 +287,7 @@ class VirtualGimbalSim(SimHandle):
             return handle(line)
 
         self.device.handle = recorded
+        self._controls = make_control(server, self.device)
         self.port = server.port
         self._started(server, server)
 
@@ -289,6 +307,9 @@ class VirtualGimbalSim(SimHandle):
             self.device.step()  # the model integrates lazily: bring it up to now
             return self.device.axes[joint].moving
 
+    def controls(self) -> SimControl:
+        return self._controls
+
     def device_target(self, joint: str) -> float | None:
         # a MOVE line sets the target as it is handled
         return self.device.axes[joint].target
@@ -298,5 +319,4 @@ class VirtualGimbalSim(SimHandle):
         self.server.inject(b'POS nan x')
 
     def fault_bits(self, rng: random.Random) -> None:
-        with self.device.lock:
-            self.device.faults = 1  # FAULT_OVERTEMP
+        self.control('fault overtemp')

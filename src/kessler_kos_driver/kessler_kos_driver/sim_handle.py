@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
+from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.sim_handle import SimHandle
 
 
@@ -49,6 +50,9 @@ class KesslerSimHandle(SimHandle):
         self.sim.start()
         self.port = self.sim.port
         self._started(self.sim.server, self.sim)
+
+    def controls(self) -> SimControl:
+        return self.sim.controls
 
     def changing(self, request: str) -> bool:
         return not (request.startswith('Get') or request in self.READS)

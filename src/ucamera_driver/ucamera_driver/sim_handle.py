@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
+from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.sim_handle import SimHandle, Takeover
 
 
@@ -76,8 +77,12 @@ class UCameraSimHandle(SimHandle):
         """The last commanded angle (rad) of ``joint``, as the gimbal model holds it."""
         return self.sim.model.commanded_angles[self.spec.joints.index(joint)]
 
+    def controls(self) -> SimControl:
+        return self.sim.controls
+
     def garbage(self, rng: random.Random) -> None:
-        self.sim.inject_noise(rng.randrange(16, 200))
+        # noise with false 0xCC syncs (a random run rarely looks like a frame start)
+        self.control(f'noise {rng.randrange(16, 200)}')
 
     def lost_frames(self, rng: random.Random) -> None:
         self.sim.drop_frames(0.3)
