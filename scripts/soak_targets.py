@@ -9,17 +9,12 @@ runs as a separate process with the spec's link parameters.
 
 from __future__ import annotations
 
-from pathlib import Path
+from gimbal_driver_common.registry import DriverSpec, drivers
+from gimbal_driver_common.sim_handle import make_handle
 
-from gimbal_driver_common.registry import DriverSpec, drivers, resolve
-from gimbal_driver_common.sim_handle import SimHandle
+__all__ = ['make_handle', 'soak_targets']
 
 
 def soak_targets() -> dict[str, DriverSpec]:
     """Driver name -> spec, for every registered driver with a simulator handle."""
     return {spec.name: spec for spec in drivers() if spec.sim_handle}
-
-
-def make_handle(spec: DriverSpec, workdir: Path) -> SimHandle:
-    """The driver's in-process simulator handle (not started yet)."""
-    return resolve(spec.sim_handle)(spec, workdir)

@@ -1,14 +1,14 @@
 """Crash safety: a node started while the device is mid-motion takes over cleanly.
 
-For every driver (one parametrised test): the simulator runs in this process
-(``driver_devices``: the test sees every request its device model receives); a node moves one
+For every registered driver (one parametrised test): the simulator runs in this process (the
+registry's ``SimHandle``: the test sees every request its device model receives); a node moves one
 axis slowly toward a far target and is killed with SIGKILL part way. A new node is then
 started: it must come up active, its joint_states must resume with the live positions (from
 where the killed node's last sample was, short of the target, no jump to zero or to the
 target, successive samples no faster than the axis moves, never back), and ~/stop and a new
 move that converges must work.
 
-What happens to the running move depends on the device (``driver_devices.Takeover``): the
+What happens to the running move depends on the device (``SimHandle.takeover``): the
 virtual gimbal, the turret and Kessler run it on and the new node sends no motion command of
 its own; Capture runs it on until the new node's COM_Connect handshake sets speed 0 (spec
 4.6.2); U-Camera's slow move is the driver's own ramp of angle set-points, so the gimbal stops
@@ -24,11 +24,12 @@ import time
 from pathlib import Path
 
 import pytest
-from driver_devices import DRIVERS, Driver, SimDevice, Takeover
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from gimbal_driver_common.registry import DriverSpec, drivers
 from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
+from gimbal_driver_common.sim_handle import SimHandle, Takeover, make_handle
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 from gimbal_msgs.action import MoveTo
 
@@ -42,10 +43,11 @@ STEP_FACTOR = 3.0
 TOLERANCE = 0.02  # rad
 
 
-def start_node(driver: Driver, device: SimDevice, domain: int, workdir: Path) -> ManagedProcess:
-    params = [*device.node_parameters, 'reconnect_period:=0.2',
+def start_node(driver: DriverSpec, device: SimHandle, domain: int,
+               workdir: Path) -> ManagedProcess:
+    params = [*device.link_parameters(), 'reconnect_period:=0.2',
               'publish_rate:=20.0', f'presets_file:={workdir / "presets.yaml"}']
-    return ManagedProcess.ros(driver.package, driver.executable, domain,
+    return ManagedProcess.ros(driver.package, driver.node_executable, domain,
                               ['--ros-args', *[x for p in params for x in ('-p', p)]])
 
 
@@ -53,11 +55,13 @@ def stamp_s(msg: JointState) -> float:
     return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
 
 
-@pytest.mark.parametrize('name', sorted(DRIVERS))
-def test_new_node_takes_over_a_device_in_motion_after_sigkill(name: str, tmp_path: Path) -> None:
-    driver = DRIVERS[name]
-    joint, far, slow = driver.far_move
-    device = driver.start_device(tmp_path)
+@pytest.mark.parametrize('driver', [spec for spec in drivers() if spec.sim_handle],
+                         ids=lambda spec: spec.name)
+def test_new_node_takes_over_a_device_in_motion_after_sigkill(driver: DriverSpec,
+                                                              tmp_path: Path) -> None:
+    device = make_handle(driver, tmp_path, process_tests=True)
+    joint, far, slow = device.far_move
+    device.start()
     first = second = None
     with DomainLease() as domain, RosTestClient(domain) as ros:
         states = ros.subscribe('/joint_states', JointState)
@@ -77,7 +81,7 @@ def test_new_node_takes_over_a_device_in_motion_after_sigkill(name: str, tmp_pat
             first.send_signal(signal.SIGKILL)
             first.process.wait(10)
             last_before, killed_at = joint_positions(states[-1])[joint], time.monotonic()
-            if driver.takeover is Takeover.STOPS_WITH_NODE:
+            if device.takeover is Takeover.STOPS_WITH_NODE:
                 wait_for(lambda: not device.moving(joint), 20, 'the last set-point reached')
             else:
                 assert device.moving(joint), 'the device keeps moving without a node'
@@ -102,7 +106,7 @@ def test_new_node_takes_over_a_device_in_motion_after_sigkill(name: str, tmp_pat
                 step = (joint_positions(after)[joint] - joint_positions(before)[joint]) \
                     * direction
                 assert -TOLERANCE <= step <= STEP_FACTOR * slow * gap + TOLERANCE, (step, gap)
-            if driver.takeover is Takeover.RUNS_ON:
+            if device.takeover is Takeover.RUNS_ON:
                 # the device still runs the old move: the new node sent nothing that moves
                 # or stops an axis on its own
                 assert device.motions_since(mark) == []
@@ -111,16 +115,16 @@ def test_new_node_takes_over_a_device_in_motion_after_sigkill(name: str, tmp_pat
             stopped = ros.call(Trigger, f'/{driver.node_name}/stop', Trigger.Request())
             assert stopped.success, stopped.message
             wait_for(lambda: not device.moving(joint), 20, f'{joint} to stop')
-            if driver.takeover is Takeover.RUNS_ON:
+            if device.takeover is Takeover.RUNS_ON:
                 assert device.motions_since(mark), 'the stop reached the device'
+            goal = device.takeover_goal
             result, _, _ = ros.run_action(MoveTo, f'/{driver.node_name}/move_to', MoveTo.Goal(
-                joint_names=list(driver.goal), positions=list(driver.goal.values())),
-                timeout=120)
+                joint_names=list(goal), positions=list(goal.values())), timeout=120)
             assert result.success, result.message
             reached = joint_positions(ros.wait_for_message('/joint_states', JointState,
                                                            timeout=30))
-            for goal_joint, goal in driver.goal.items():
-                assert reached[goal_joint] == pytest.approx(goal, abs=TOLERANCE), goal_joint
+            for goal_joint, target in goal.items():
+                assert reached[goal_joint] == pytest.approx(target, abs=TOLERANCE), goal_joint
         finally:
             for node in (first, second):
                 if node is not None:

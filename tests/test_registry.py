@@ -92,6 +92,34 @@ def test_references_load(spec: DriverSpec) -> None:
         assert spec.bench.stream_joint in spec.joints
 
 
+#: what every simulator handle implements itself (the base raises NotImplementedError)
+HANDLE_CONTRACT = ('start', 'controls', 'changing', 'motion', 'moving')
+
+
+@pytest.mark.parametrize('spec', drivers(), ids=lambda spec: spec.name)
+def test_sim_handle_carries_the_receive_side_and_takeover_facts(spec: DriverSpec,
+                                                                tmp_path: Path) -> None:
+    """The one in-process handle serves the soak, the benchmark, the conformance suite and
+    the property/crash-safety tests: it classifies what its device receives, reports
+    motion, reaches the simulator's control verbs, and names a far move and a goal on its
+    own joints."""
+    handle_class = resolve(spec.sim_handle)
+    missing = [name for name in HANDLE_CONTRACT
+               if getattr(handle_class, name) is getattr(SimHandle, name)]
+    assert not missing, f'{handle_class.__name__} does not implement {missing}'
+    handle = handle_class(spec, tmp_path, process_tests=True)
+    assert handle.far_move[0] in spec.joints
+    assert set(handle.takeover_goal) <= set(spec.joints)
+    handle.start()
+    try:
+        assert handle.control('state').startswith('{')
+        assert all(not handle.moving(joint) for joint in spec.joints)
+        assert handle.requests() == [] and handle.motion_received() == 0
+        assert all(':=' in parameter for parameter in handle.link_parameters())
+    finally:
+        handle.close()
+
+
 @pytest.mark.parametrize('spec', drivers(), ids=lambda spec: spec.name)
 def test_placeholders_fill(spec: DriverSpec, tmp_path: Path) -> None:
     """Every placeholder a spec names exists; a password goes to a 0600 file, never onto the

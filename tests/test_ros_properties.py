@@ -6,9 +6,9 @@ mismatched array lengths, empty, unknown scan pattern, unstored preset, ...). Th
 running node per driver (the virtual gimbal, Capture, the CANaerospace turret, Kessler kOS and
 U-Camera; one node process per driver for the module, reused across examples), built from
 that node's own joint names and limits (read back from its parameters). Every service/goal
-must answer success=false with a reason, and the simulator's receive side (``driver_devices``:
-the requests its device model handled) must show no command that moves, stops or changes the
-device.
+must answer success=false with a reason, and the simulator's receive side (the registry's
+in-process ``SimHandle``: the requests its device model handled) must show no command that
+moves, stops or changes the device.
 
 A joint_command has no answer; the node logs ``joint_command rejected, nothing sent: <why>``,
 so the test waits for that line (one per message) and then checks the device side.
@@ -20,7 +20,6 @@ import math
 from dataclasses import dataclass
 
 import pytest
-from driver_devices import DRIVERS, Driver, SimDevice
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from lifecycle_msgs.msg import Transition
@@ -28,7 +27,9 @@ from lifecycle_msgs.srv import ChangeState
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from gimbal_driver_common.registry import DriverSpec, drivers
 from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.sim_handle import SimHandle, make_handle
 from gimbal_driver_common.testing import DomainLease, ManagedProcess
 from gimbal_driver_common.testing import wait_for as wait_until
 from gimbal_msgs.action import MoveTo
@@ -59,10 +60,15 @@ class JointSpace:
 
 
 class Rig:
-    def __init__(self, driver: Driver, ros: RosTestClient, node: ManagedProcess,
-                 device: SimDevice, space: JointSpace) -> None:
+    def __init__(self, driver: DriverSpec, ros: RosTestClient, node: ManagedProcess,
+                 device: SimHandle, space: JointSpace) -> None:
         self.driver, self.ros, self.node, self.device, self.space = (driver, ros, node,
                                                                      device, space)
+
+    def preset_call_valid(self, service: str, index: int) -> bool:
+        """A preset call the device accepts with nothing stored (``valid_preset_calls``)."""
+        return any(name == service and slot in (None, index)
+                   for name, slot in self.device.valid_preset_calls)
 
     def service(self, name: str) -> str:
         return f'/{self.driver.node_name}/{name}'
@@ -82,7 +88,7 @@ def joint_space(ros: RosTestClient, node_name: str) -> JointSpace:
                       {j: speed[i] for i, j in enumerate(joints)}, scan_pan)
 
 
-def quiet(ros: RosTestClient, device: SimDevice, samples: int = 20) -> bool:
+def quiet(ros: RosTestClient, device: SimHandle, samples: int = 20) -> bool:
     """True when ``samples`` more joint_states came and the device saw no change meanwhile
     (the node has finished configuring the device at start-up)."""
     mark = device.mark()
@@ -93,28 +99,29 @@ def quiet(ros: RosTestClient, device: SimDevice, samples: int = 20) -> bool:
     return device.changes_since(mark) == []
 
 
-def receive_side_sees_a_valid_move(ros: RosTestClient, device: SimDevice,
-                                   driver: Driver) -> None:
+def receive_side_sees_a_valid_move(ros: RosTestClient, device: SimHandle) -> None:
     """The check can fail: a valid joint_command shows on the device's receive side as a
     change. Then the axes settle and the node is quiet again."""
+    goal = device.takeover_goal
     mark = device.mark()
-    ros.publish('/joint_command', JointState(name=list(driver.goal),
-                                             position=list(driver.goal.values())))
+    ros.publish('/joint_command', JointState(name=list(goal), position=list(goal.values())))
     wait_until(lambda: device.changes_since(mark), 30, 'the valid move on the device')
-    wait_until(lambda: not any(device.moving(j) for j in driver.goal), 60, 'the axes to stop')
+    wait_until(lambda: not any(device.moving(j) for j in goal), 60, 'the axes to stop')
     wait_until(lambda: quiet(ros, device), 60, 'the node to be quiet after the move')
 
 
-@pytest.fixture(scope='module', params=sorted(DRIVERS))
+@pytest.fixture(scope='module', params=[spec for spec in drivers() if spec.sim_handle],
+                ids=lambda spec: spec.name)
 def rig(request, tmp_path_factory):
-    driver = DRIVERS[request.param]
-    workdir = tmp_path_factory.mktemp(request.param)
-    device = driver.start_device(workdir)
+    driver: DriverSpec = request.param
+    workdir = tmp_path_factory.mktemp(driver.name)
+    device = make_handle(driver, workdir, process_tests=True)
+    device.start()
     lease = DomainLease()
     domain = lease.acquire()
-    params = [*device.node_parameters,
+    params = [*device.link_parameters(),
               f'presets_file:={workdir / "presets.yaml"}', 'publish_rate:=10.0']
-    node = ManagedProcess.ros(driver.package, driver.executable, domain,
+    node = ManagedProcess.ros(driver.package, driver.node_executable, domain,
                               ['--ros-args', *[x for p in params for x in ('-p', p)]])
     ros = RosTestClient(domain, 'property_client')
     try:
@@ -122,7 +129,7 @@ def rig(request, tmp_path_factory):
         assert device.receptions > 0  # the hook sees the node's polls
         space = joint_space(ros, driver.node_name)
         wait_until(lambda: quiet(ros, device), 60, 'the node to finish its start-up commands')
-        receive_side_sees_a_valid_move(ros, device, driver)
+        receive_side_sees_a_valid_move(ros, device)
         yield Rig(driver, ros, node, device, space)
     finally:
         ros.close()
@@ -281,7 +288,7 @@ def capture_refused() -> st.SearchStrategy:
     """~/command: unknown names, and every table command gated behind an opt-in parameter
     (non-volatile writes, reboots, network settings) or one that starts motion without the
     driver's limit checks."""
-    from capture_driver.node import ALLOWED_MOTION
+    from capture_driver.device import ALLOWED_MOTION
     from capture_driver.protocol import COMMANDS, Safety
 
     gated = sorted(name for name, command in COMMANDS.items()
@@ -312,7 +319,7 @@ def kessler_refused() -> st.SearchStrategy:
 def ucamera_refused() -> st.SearchStrategy:
     """~/save_configuration and ~/save_ffc (non-volatile writes, behind allow_nv_write);
     ~/set_mode with an unknown mode."""
-    from ucamera_driver.node import MODE_NAMES
+    from ucamera_driver.protocol.packets import MODE_NAMES
 
     saves = st.sampled_from(('save_configuration', 'save_ffc')).map(
         lambda name: (Trigger, name, Trigger.Request()))
@@ -368,8 +375,8 @@ def test_invalid_scans_are_refused_with_a_reason_and_send_nothing(rig, data) -> 
 @given(data=st.data())
 def test_invalid_preset_requests_are_refused_with_a_reason_and_send_nothing(rig, data) -> None:
     srv_type, name, request = data.draw(invalid_preset_request(rig.space), label='call')
-    # presets a device keeps itself (Driver.valid_preset_calls) are valid with nothing stored
-    assume(not rig.driver.preset_call_valid(name, request.index))
+    # presets a device keeps itself (SimHandle.valid_preset_calls) are valid with nothing stored
+    assume(not rig.preset_call_valid(name, request.index))
     mark = rig.device.mark()
     reply = rig.ros.call(srv_type, rig.service(name), request, timeout=20)
     assert not reply.success, request

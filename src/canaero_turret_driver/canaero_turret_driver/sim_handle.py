@@ -1,4 +1,5 @@
-"""The turret simulator behind an slcan pty in the caller's process, with its faults (soak)."""
+"""The turret simulator behind an slcan pty in the caller's process: its faults (soak) and
+its receive side (the cross-driver process tests)."""
 
 from __future__ import annotations
 
@@ -7,29 +8,92 @@ import time
 from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
-from gimbal_driver_common.sim_handle import SILENCE_S, SimHandle
+from gimbal_driver_common.sim_control import SimControl
+from gimbal_driver_common.sim_handle import SimHandle
 
 
 class CanaeroSimHandle(SimHandle):
+    """The receive side logs the turret's CANaerospace command messages (every one acts:
+    set-points, stops, modes, controls) and node-service requests; identification (IDS) and
+    data upload (DUS, a read of node memory) only read."""
+
     not_applicable = {'nack': 'CANaerospace services have no negative acknowledge the turret '
                               'sends; its error path is the EED event, injected as fault_bits'}
+    far_move = ('yaw', 2.5, 0.2)
+    takeover_goal = {'yaw': 0.2, 'pitch': 0.1}
+    # preset 0 is the turret's remembered position, recalled (and cleared) as it is
+    valid_preset_calls = (('clear_preset', 0), ('goto_preset', 0))
+    # actuator_mode stays unset: a node that sets it at activate re-initialises the drives,
+    # which stops a move in progress (see the README); quick link-loss detection
+    process_test_parameters = {'actuator_mode': None, 'transmission_intervals': None,
+                            'node_timeout': 0.6, 'stale_timeout': 0.6}
+    #: the turret's set-points have no speed field (it moves at its own profile): a slow yaw
+    #: drive (11.5 deg/s = 0.2 rad/s) makes the far move last
+    SLOW_YAW_DEG_S = 11.5
+    MOTION_SUFFIXES = ('_position_setpoint', '_velocity_setpoint', '_relative_setpoint',
+                       '_actuator_mode')
+    MOTION_KEYS = ('stop_actuators', 'restore_position')
+    READ_SERVICES = ('service IDS', 'service DUS')
 
-    def __init__(self, spec: DriverSpec, workdir: Path) -> None:
-        super().__init__(spec, workdir)
+    def __init__(self, spec: DriverSpec, workdir: Path, process_tests: bool = False) -> None:
+        super().__init__(spec, workdir, process_tests)
         self.simulator = None
+        self._controls: SimControl | None = None
 
     def start(self) -> None:
-        from canaero_turret_driver.sim import SimConfig, SlcanSession, TurretSimulator
+        from canaero_turret_driver.sim import (
+            SimConfig,
+            SlcanSession,
+            TurretSimulator,
+            make_control,
+        )
         from gimbal_driver_common.sim_server import PtySimServer
 
-        self.simulator = TurretSimulator(SimConfig())
-        simulator = self.simulator
+        config = SimConfig(yaw_max_velocity=self.SLOW_YAW_DEG_S) if self.process_tests \
+            else SimConfig()
+        self.simulator = simulator = TurretSimulator(config)
+        simulator.handle = self._recording(simulator)
         server = PtySimServer(lambda: SlcanSession(simulator), link_path=self.link).start()
+        # its silence verb quiets the CAN nodes; the slcan adapter keeps answering
+        self._controls = make_control(simulator, server)
         self._started(server, server)
 
-    def silence(self, rng: random.Random) -> None:
-        self.simulator.silence_all(SILENCE_S)
-        time.sleep(SILENCE_S)
+    def controls(self) -> SimControl:
+        return self._controls
+
+    def _recording(self, simulator):
+        """The simulator's frame handler, logging the commands and service requests."""
+        from canaero_turret_driver.protocol import nodeservice
+        from canaero_turret_driver.protocol.message import CanAerospaceMessage
+
+        handle = simulator.handle
+
+        def recorded(frame):
+            commands = len(simulator.received_commands)
+            replies = handle(frame)
+            for key, value in simulator.received_commands[commands:]:
+                self.record(f'{key} {value}')
+            service = nodeservice.service_channel_of(frame.arbitration_id)
+            if service is not None and service[1]:  # a request
+                try:
+                    code = CanAerospaceMessage.from_frame(frame.arbitration_id,
+                                                          frame.data).service_code
+                    self.record(f'service {nodeservice.ServiceCode(code).name}')
+                except ValueError:
+                    self.record(f'service {frame.data.hex()}')
+            return replies
+
+        return recorded
+
+    def changing(self, request: str) -> bool:
+        return request not in self.READ_SERVICES
+
+    def motion(self, request: str) -> bool:
+        key = request.split()[0]
+        return key.endswith(self.MOTION_SUFFIXES) or key in self.MOTION_KEYS
+
+    def moving(self, joint: str) -> bool:
+        return self.simulator.state()['axes'][joint]['velocity'] != 0.0
 
     def lost_frames(self, rng: random.Random) -> None:
         self.simulator.lose_frames(rng.choice(('yaw_position', 'pitch_position')),

@@ -1,4 +1,5 @@
-"""The Capture simulator in the caller's process, with the faults it can inject (soak)."""
+"""The Capture simulator in the caller's process: its faults (soak) and its receive side
+(the cross-driver process tests)."""
 
 from __future__ import annotations
 
@@ -6,20 +7,65 @@ import random
 from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
-from gimbal_driver_common.sim_handle import SimHandle
+from gimbal_driver_common.sim_control import SimControl
+from gimbal_driver_common.sim_handle import SimHandle, Takeover
+
+#: commands that move or stop a Capture axis
+MOTION_COMMANDS = ('MOT_SendPosition', 'MOT_Update', 'MOT_SetSpeed', 'MOT_SetSpeedMode',
+                   'PRST_GoToPreset', 'PRST_StopPresetLooping', 'SCN_StartScanZigZag',
+                   'SCN_StartScanSnake', 'SCN_StopScan', 'DG_GoToCamera', 'MOT_Home',
+                   'GPS_StopTargetLooping')
+AXIS_IDS = {'pan': 1, 'tilt': 2}
 
 
 class CaptureSimHandle(SimHandle):
-    def __init__(self, spec: DriverSpec, workdir: Path) -> None:
-        super().__init__(spec, workdir)
+    """The receive side logs command names; a query (no argument, a returned value) and the
+    COM_Connect handshake only read."""
+
+    far_move = ('pan', 2.5, 0.1)
+    takeover = Takeover.STOPS_ON_CONNECT
+    # clearing an empty slot is a no-op on the device
+    valid_preset_calls = (('clear_preset', None),)
+    process_test_parameters = {'status_period': 0.5}
+
+    def __init__(self, spec: DriverSpec, workdir: Path, process_tests: bool = False) -> None:
+        super().__init__(spec, workdir, process_tests)
         self.sim = None
 
     def start(self) -> None:
+        from capture_driver.protocol import BY_OPCODE
         from capture_driver.sim import CaptureSimulator, PedestalModel
 
         self.sim = CaptureSimulator(PedestalModel(), tcp_port=self.port).start()
+        handle = self.sim.model.handle
+
+        def recorded(frame, session):
+            known = BY_OPCODE.get(frame.opcode)
+            self.record(known.name if known is not None else f'0x{frame.opcode:04X}')
+            return handle(frame, session)
+
+        self.sim.model.handle = recorded
         self.port = self.sim.tcp.port
         self._started(self.sim.tcp, self.sim)
+
+    def changing(self, request: str) -> bool:
+        from capture_driver.protocol import COMMANDS, DataType
+
+        command = COMMANDS.get(request)
+        reads = command is not None and command.arg is DataType.NONE \
+            and command.ret is not DataType.NONE
+        return not (request == 'COM_Connect' or reads)
+
+    def motion(self, request: str) -> bool:
+        return request in MOTION_COMMANDS
+
+    def moving(self, joint: str) -> bool:
+        model = self.sim.model
+        with model.lock:
+            return model.axes[AXIS_IDS[joint]].velocity != 0.0 or model.scan is not None
+
+    def controls(self) -> SimControl:
+        return self.sim.controls
 
     def lost_frames(self, rng: random.Random) -> None:
         self.sim.model.lose_replies(rng.randrange(1, 4))

@@ -10,9 +10,9 @@ demo (``scripts/demo.py``), the soak (``scripts/soak.py``), the benchmarks (``be
 and the cross-package tests in ``tests/``. A package that is not built (installed) is not
 found, so it is left out everywhere.
 
-ROS-free: a spec is plain data. What needs code (a demo step, the in-process simulator
-with its faults) is named by a dotted reference (``module:attribute``) and imported only by
-the tool that uses it.
+ROS-free: a spec is plain data. What needs code (a demo step, the one in-process simulator
+handle of :mod:`gimbal_driver_common.sim_handle`) is named by a dotted reference
+(``module:attribute``) and imported only by the tool that uses it.
 """
 
 from __future__ import annotations

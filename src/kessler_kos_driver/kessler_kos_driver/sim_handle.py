@@ -1,4 +1,5 @@
-"""The kOS simulator in the caller's process, with the faults it can inject (soak)."""
+"""The kOS simulator in the caller's process: its faults (soak) and its receive side (the
+cross-driver process tests)."""
 
 from __future__ import annotations
 
@@ -8,24 +9,62 @@ import time
 from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
+from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.sim_handle import SimHandle
 
 
 class KesslerSimHandle(SimHandle):
+    """The receive side logs kOS message types; Get* requests and the password handshake
+    only read, every Action (moves, stops, playback, resets) is motion."""
+
     not_applicable = {'nack': 'kOS answers a bad request with ErrorStatus, injected as '
                               'fault_bits (device error broadcast)'}
+    far_move = ('pan', 600.0, 5.0)
+    takeover_goal = {'pan': 20.0, 'tilt': -20.0}
+    READS = ('UserPassword', 'DevicePassword')
+    #: the simulator's time scale with ``process_tests`` (their moves settle sooner)
+    PROCESS_TESTS_TIME_SCALE = 2.0
 
-    def __init__(self, spec: DriverSpec, workdir: Path) -> None:
-        super().__init__(spec, workdir)
+    def __init__(self, spec: DriverSpec, workdir: Path, process_tests: bool = False) -> None:
+        super().__init__(spec, workdir, process_tests)
         self.sim = None
+        self.actions: set[str] = set()
 
     def start(self) -> None:
+        from kessler_kos_driver.protocol import messages
         from kessler_kos_driver.sim import KosSimulator, SimSettings
 
-        self.sim = KosSimulator(SimSettings(password=self.spec.password, precalibrated=True),
-                                port=self.port, discovery_port=0).start()
+        self.actions = {name for name, value in vars(messages).items()
+                        if isinstance(value, type) and issubclass(value, messages.Action)}
+        time_scale = self.PROCESS_TESTS_TIME_SCALE if self.process_tests else 1.0
+        self.sim = KosSimulator(SimSettings(password=self.spec.password, precalibrated=True,
+                                            time_scale=time_scale),
+                                port=self.port, discovery_port=0)
+        handle = self.sim.device.handle
+
+        def recorded(message, frame, session):
+            self.record(type(message).__name__)
+            return handle(message, frame, session)
+
+        self.sim.device.handle = recorded
+        self.sim.start()
         self.port = self.sim.port
         self._started(self.sim.server, self.sim)
+
+    def controls(self) -> SimControl:
+        return self.sim.controls
+
+    def changing(self, request: str) -> bool:
+        return not (request.startswith('Get') or request in self.READS)
+
+    def motion(self, request: str) -> bool:
+        return request in self.actions
+
+    def moving(self, joint: str) -> bool:
+        device = self.sim.device
+        with device.lock:
+            motor = next(m for m in device.motors.values() if m.role == joint)
+            return motor.moving or abs(motor.velocity) > 1e-9
 
     def device_target(self, joint: str) -> float | None:
         """The motor's target (rotations) in rad: every joint is 2π rad per rotation."""

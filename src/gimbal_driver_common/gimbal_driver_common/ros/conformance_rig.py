@@ -5,7 +5,6 @@ Split from :mod:`conformance_testing` (the tests themselves) so each stays short
 
 from __future__ import annotations
 
-import abc
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -15,6 +14,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
+from gimbal_driver_common.sim_handle import SimHandle
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 from gimbal_msgs.action import MoveTo
 
@@ -35,29 +35,9 @@ class GoalStatus:
     STATUS_ABORTED = 6
 
 
-class SimulatorHandle(abc.ABC):
-    """A running simulator as the suite sees it: link parameters, faults and the device side."""
-
-    @abc.abstractmethod
-    def link_parameters(self) -> list[str]:
-        """``name:=value`` node parameters that point the driver at this simulator."""
-
-    @abc.abstractmethod
-    def motion_received(self) -> object:
-        """A snapshot of the motion commands the device has received so far; two equal
-        snapshots mean nothing that moves an axis reached the device in between."""
-
-    @abc.abstractmethod
-    def moving(self, joint: str) -> bool:
-        """Whether the device itself (not the driver's view) has ``joint`` in motion."""
-
-    @abc.abstractmethod
-    def drop_link(self, seconds: float) -> None:
-        """Cut the link to the driver and refuse a new one for ``seconds``."""
-
-    @abc.abstractmethod
-    def close(self) -> None:
-        """Stop the simulator."""
+#: the simulator as the suite sees it: the driver's registry handle (link parameters, the
+#: receive side's motion_received, moving, drop_link, close), started in the test process
+SimulatorHandle = SimHandle
 
 
 class ConformanceRig:

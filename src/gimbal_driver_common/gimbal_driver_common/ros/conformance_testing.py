@@ -1,11 +1,10 @@
 """One conformance suite for the common driver contract, subclassed once per driver.
 
 Like python-can's ``test/back2back_test.py``: the tests live here once; each driver's
-``test/test_conformance.py`` subclasses :class:`DriverConformance`, names its package,
-node, joints and a few safe motions, and says how to start its simulator
-(:meth:`DriverConformance.start_simulator`, returning a :class:`SimulatorHandle` that also
-observes what reached the device). The subclass sets ``__test__ = True``; this base is
-not collected.
+``test/test_conformance.py`` subclasses :class:`DriverConformance`, names its registry
+spec (``driver``: the node, and the simulator handle that runs in the test process and
+observes what reached the device), joints and a few safe motions. The subclass sets
+``__test__ = True``; this base is not collected.
 
 One simulator serves a whole class. The shared node runs with the test-speed parameters
 of :meth:`DriverConformance.node_parameters` (``publish_rate`` stays at its default, so
@@ -28,6 +27,7 @@ from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from gimbal_driver_common import registry
 from gimbal_driver_common.ros.conformance_rig import (
     ERROR,
     OK,
@@ -38,6 +38,7 @@ from gimbal_driver_common.ros.conformance_rig import (
     GoalStatus,
     SimulatorHandle,
 )
+from gimbal_driver_common.sim_handle import make_handle
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import GimbalStatus
@@ -49,14 +50,14 @@ __all__ = ['ConformanceRig', 'DriverConformance', 'GoalStatus', 'SimulatorHandle
 class DriverConformance(ConformanceHelpers):
     """The common contract of every gimbal driver node, tested through the real transport.
 
-    Subclasses set the attributes below and implement :meth:`start_simulator`.
+    Subclasses set the attributes below; the package, node and simulator come from the
+    registry spec ``driver`` names.
     """
 
     __test__ = False  # a subclass per driver sets True
 
-    package: str = ''
-    node_executable: str = ''
-    node_name: str = ''
+    #: the driver's registry name (gimbal_driver_common.registry)
+    driver: str = ''
     joints: Sequence[str] = ()
     #: absolute joint positions every axis reaches quickly from anywhere (rad / m)
     small_move: dict[str, float] = {}
@@ -80,8 +81,27 @@ class DriverConformance(ConformanceHelpers):
     link_lost_text: str = 'disconnected'
 
     # ------------------------------------------------------------------ hooks
+    @property
+    def spec(self) -> registry.DriverSpec:
+        return registry.driver(self.driver)
+
+    @property
+    def package(self) -> str:
+        return self.spec.package
+
+    @property
+    def node_executable(self) -> str:
+        return self.spec.node_executable
+
+    @property
+    def node_name(self) -> str:
+        return self.spec.node_name
+
     def start_simulator(self, workdir: Path, domain: int) -> SimulatorHandle:
-        raise NotImplementedError
+        """The registry spec's simulator handle with the process tests' settings, started."""
+        handle = make_handle(self.spec, workdir, process_tests=True)
+        handle.start()
+        return handle
 
     def check_jog_running(self, rig: ConformanceRig) -> None:
         """Device-specific checks while a jog runs (e.g. the mode the device reports)."""
@@ -94,7 +114,7 @@ class DriverConformance(ConformanceHelpers):
     @pytest.fixture(scope='class')
     @classmethod
     def conformance_rig(cls, tmp_path_factory) -> Iterator[ConformanceRig]:
-        rig = ConformanceRig(cls(), tmp_path_factory.mktemp(f'{cls.package}-conformance'))
+        rig = ConformanceRig(cls(), tmp_path_factory.mktemp(f'{cls.driver}-conformance'))
         try:
             yield rig
         finally:
