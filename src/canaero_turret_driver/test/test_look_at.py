@@ -14,13 +14,7 @@ import pytest
 pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (make build)")
 
 from canaero_turret_driver.sim import ControlClient
-from gimbal_driver_common.ros.look_at_testing import (
-    LookAtCheck,
-    LookAtRig,
-    LookAtSuite,
-    installed_description,
-    node_against_sim,
-)
+from gimbal_driver_common.ros.look_at_testing import LookAtRig, LookAtSuite, look_at_rig_against
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 
 pytestmark = pytest.mark.ros
@@ -50,10 +44,10 @@ def look_at_rig(tmp_path_factory):
                                       ["--ros-args", *[x for p in params for x in ("-p", p)]])
 
         try:
-            with node_against_sim(domain, sim, start_node) as ros:
-                control = controls[0]
-                yield LookAtRig(LookAtCheck(ros, PKG, installed_description(PKG)),
-                                lambda: control.state()["commands_received"], control)
+            with look_at_rig_against(PKG, domain, sim, start_node,
+                                     lambda: controls[0].state()["commands_received"]) as rig:
+                rig.simulator = controls[0]
+                yield rig
         finally:
             for control in controls:
                 control.close()

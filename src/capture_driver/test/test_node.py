@@ -19,7 +19,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from capture_driver.sim import console_state as sim_state
 from capture_driver.sim import control
-from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
+from gimbal_driver_common.ros.testing import driver_rig, joint_positions
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import GimbalStatus
@@ -45,29 +45,16 @@ def srv(name: str) -> str:
 
 @pytest.fixture(scope='module')
 def rig():
-    lease = DomainLease()
-    domain = lease.acquire()
     port, control_port = free_tcp_port(), free_tcp_port()
-    sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
-        '--port', str(port), '--control-port', str(control_port), '--time-scale', '4'])
-    sim.wait_for_output('capture_sim ready')
-    node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
-        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
-        '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',
-        '-p', 'diagnostics_period:=0.25', '-p', 'status_period:=0.2',
-        '-p', 'command_timeout:=0.4', '-p', 'imu_rate:=5.0', '-p', 'fix_rate:=2.0',
-        '-p', 'default_speed:=1.0', '-p', 'acceleration:=6.0'])
-    ros = RosTestClient(domain)
-    logs = ros.subscribe('/rosout', Log)
-    try:
-        ros.wait_for_message('joint_states', JointState, timeout=30)
-        yield ros, control_port, node, logs
-    finally:
-        ros.close()
-        node.stop()
-        sim.stop()
-        lease.release()
-        print('--- node log (tail) ---\n' + node.output()[-4000:])
+    with driver_rig(
+            PKG, 'capture_sim',
+            ['--port', str(port), '--control-port', str(control_port), '--time-scale', '4'],
+            'capture_sim ready', 'capture_driver_node',
+            ['host:=127.0.0.1', f'port:={port}', 'publish_rate:=20.0', 'reconnect_period:=0.3',
+             'diagnostics_period:=0.25', 'status_period:=0.2', 'command_timeout:=0.4',
+             'imu_rate:=5.0', 'fix_rate:=2.0', 'default_speed:=1.0', 'acceleration:=6.0'],
+            record=[('/rosout', Log)], node_log_tail=4000) as started:
+        yield started.ros, control_port, started.node, started.recorded['/rosout']
 
 
 

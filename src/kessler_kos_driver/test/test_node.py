@@ -23,7 +23,12 @@ from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from gimbal_driver_common.ros.testing import RosTestClient, find_diagnostic, joint_positions
+from gimbal_driver_common.ros.testing import (
+    RosTestClient,
+    driver_rig,
+    find_diagnostic,
+    joint_positions,
+)
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import AxisTrajectory, BezierSegment, GimbalStatus, PlaybackStatus
@@ -48,27 +53,17 @@ def srv(name: str) -> str:
 
 @pytest.fixture(scope='module')
 def rig():
-    lease = DomainLease()
-    domain = lease.acquire()
     port, control_port = free_tcp_port(), free_tcp_port()
-    sim = ManagedProcess.ros(PKG, 'kessler_kos_sim', domain, [
-        '--port', str(port), '--control-port', str(control_port), '--discovery-port', '0',
-        '--password', PASSWORD, '--precalibrated', '--time-scale', '2'])
-    sim.wait_for_output('listening')
-    node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain, [
-        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
-        '-p', f'password:={PASSWORD}', '-p', 'reconnect_period:=0.2',
-        '-p', 'diagnostics_period:=0.25', '-p', 'command_timeout:=0.4'])   # publish_rate: default
-    ros = RosTestClient(domain)
-    logs = ros.subscribe('/rosout', Log)
-    try:
-        ros.wait_for_message('joint_states', JointState, timeout=30)
-        yield ros, control_port, node, logs
-    finally:
-        ros.close()
-        node.stop()
-        sim.stop()
-        lease.release()
+    with driver_rig(
+            PKG, 'kessler_kos_sim',
+            ['--port', str(port), '--control-port', str(control_port), '--discovery-port', '0',
+             '--password', PASSWORD, '--precalibrated', '--time-scale', '2'],
+            'listening', 'kessler_kos_driver_node',
+            ['host:=127.0.0.1', f'port:={port}', f'password:={PASSWORD}',
+             'reconnect_period:=0.2', 'diagnostics_period:=0.25',
+             'command_timeout:=0.4'],  # publish_rate: default
+            record=[('/rosout', Log)]) as started:
+        yield started.ros, control_port, started.node, started.recorded['/rosout']
 
 
 

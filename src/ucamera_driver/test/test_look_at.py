@@ -14,13 +14,7 @@ import pytest
 pytest.importorskip("rclpy", reason="node tests need the ROS environment")
 pytest.importorskip("gimbal_msgs", reason="node tests need the built workspace (make build)")
 
-from gimbal_driver_common.ros.look_at_testing import (
-    LookAtCheck,
-    LookAtRig,
-    LookAtSuite,
-    installed_description,
-    node_against_sim,
-)
+from gimbal_driver_common.ros.look_at_testing import LookAtRig, LookAtSuite, look_at_rig_against
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 
 pytestmark = pytest.mark.ros
@@ -56,9 +50,9 @@ def look_at_rig(tmp_path_factory):
             return ManagedProcess.ros(PKG, "ucamera_driver_node", domain, [
                 "--ros-args", *[x for k, v in params.items() for x in ("-p", f"{k}:={v}")]])
 
-        with node_against_sim(domain, sim, start_node) as ros:
-            check = LookAtCheck(ros, PKG, installed_description(PKG))
-            yield LookAtRig(check, lambda: device_angles_deg(sim, fifo))
+        with look_at_rig_against(PKG, domain, sim, start_node,
+                                 lambda: device_angles_deg(sim, fifo)) as rig:
+            yield rig
 
 
 class TestLookAt(LookAtSuite):
