@@ -15,7 +15,7 @@ pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (mak
 
 from canaero_turret_driver.sim import ControlClient
 from gimbal_driver_common.ros.look_at_testing import LookAtRig, LookAtSuite, look_at_rig_against
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments, wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -41,7 +41,7 @@ def look_at_rig(tmp_path_factory):
                 "transmission_intervals:=['yaw_position=20','pitch_position=20']",
             ]
             return ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain,
-                                      ["--ros-args", *[x for p in params for x in ("-p", p)]])
+                                      ros_arguments(params))
 
         try:
             with look_at_rig_against(PKG, domain, sim, start_node,

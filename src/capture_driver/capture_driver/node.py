@@ -28,6 +28,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from gimbal_driver_common.device import Device
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest, LinkError
+from gimbal_driver_common.orientation import quaternion_from_euler
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.heading import heading_imu
 from gimbal_driver_common.ros.parameters import ParameterError
@@ -42,14 +43,6 @@ T = TypeVar('T')
 #: parameters the adapter reads at run time (``ros2 param set`` updates its settings)
 DEVICE_RUNTIME_PARAMETERS = ('default_speed', 'acceleration', 'status_period',
                              'gps_target_slot', 'home_timeout')
-
-
-def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
 
 
 class CaptureDriverNode(GimbalDriverNode):
@@ -295,7 +288,7 @@ class CaptureDriverNode(GimbalDriverNode):
         msg = Imu()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.header.frame_id = self.imu_frame_id
-        x, y, z, w = _quaternion(reading.roll, reading.pitch, reading.yaw)
+        x, y, z, w = quaternion_from_euler(reading.roll, reading.pitch, reading.yaw)
         msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = x, y, z, w
         (msg.angular_velocity.x, msg.angular_velocity.y,
          msg.angular_velocity.z) = reading.rates

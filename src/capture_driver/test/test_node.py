@@ -19,8 +19,8 @@ from std_srvs.srv import SetBool, Trigger
 
 from capture_driver.sim import console_state as sim_state
 from capture_driver.sim import control
-from gimbal_driver_common.ros.testing import driver_rig, joint_positions
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
+from gimbal_driver_common.ros.testing import joint_positions, node_refusing_to_start
+from gimbal_driver_common.testing import wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import GimbalStatus
 from gimbal_msgs.srv import (
@@ -44,16 +44,13 @@ def srv(name: str) -> str:
 
 
 @pytest.fixture(scope='module')
-def rig():
-    port, control_port = free_tcp_port(), free_tcp_port()
-    with driver_rig(
-            PKG, 'capture_sim',
-            ['--port', str(port), '--control-port', str(control_port), '--time-scale', '4'],
-            'capture_sim ready', 'capture_driver_node',
-            ['host:=127.0.0.1', f'port:={port}', 'publish_rate:=20.0', 'reconnect_period:=0.3',
-             'diagnostics_period:=0.25', 'status_period:=0.2', 'command_timeout:=0.4',
-             'imu_rate:=5.0', 'fix_rate:=2.0', 'default_speed:=1.0', 'acceleration:=6.0'],
-            record=[('/rosout', Log)], node_log_tail=4000) as started:
+def rig(capture_rig):
+    with capture_rig(
+            ['--time-scale', '4'],
+            ['publish_rate:=20.0', 'reconnect_period:=0.3', 'diagnostics_period:=0.25',
+             'status_period:=0.2', 'command_timeout:=0.4', 'imu_rate:=5.0', 'fix_rate:=2.0',
+             'default_speed:=1.0', 'acceleration:=6.0'],
+            record=[('/rosout', Log)], node_log_tail=4000) as (started, control_port):
         yield started.ros, control_port, started.node, started.recorded['/rosout']
 
 
@@ -351,12 +348,5 @@ def test_motion_on_faulted_or_off_axis_is_refused_and_reset_quotes_device(rig):
     ('tracker_camera:=4', 'tracker_camera'),
 ])
 def test_invalid_parameters_are_refused_naming_them(override, name):
-    with DomainLease() as domain:
-        node = ManagedProcess.ros(PKG, 'capture_driver_node', domain,
-                                  ['--ros-args', '-p', override])
-        try:
-            node.process.wait(30)
-        finally:
-            node.stop()
-        assert node.process.returncode != 0
-        assert name in node.output()
+    output = node_refusing_to_start(PKG, 'capture_driver_node', [override])
+    assert name in output

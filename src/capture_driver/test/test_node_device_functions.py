@@ -23,8 +23,8 @@ from std_srvs.srv import SetBool, Trigger
 
 from capture_driver.sim import console_state as sim_state
 from capture_driver.sim import control
-from gimbal_driver_common.ros.testing import driver_rig, joint_positions
-from gimbal_driver_common.testing import free_tcp_port, wait_for
+from gimbal_driver_common.ros.testing import joint_positions
+from gimbal_driver_common.testing import wait_for
 from gimbal_msgs.action import Home
 from gimbal_msgs.msg import AxisState, GimbalStatus
 from gimbal_msgs.srv import DeviceCommand, SetMode, StartScan
@@ -41,20 +41,17 @@ def srv(name: str) -> str:
 
 
 @pytest.fixture(scope='module')
-def rig():
-    port, control_port = free_tcp_port(), free_tcp_port()
-    with driver_rig(
-            PKG, 'capture_sim',
-            ['--port', str(port), '--control-port', str(control_port), '--time-scale', '4'],
-            'capture_sim ready', 'capture_driver_node',
-            ['host:=127.0.0.1', f'port:={port}', 'publish_rate:=20.0', 'reconnect_period:=0.3',
-             'diagnostics_period:=0.25', 'status_period:=0.2', 'default_speed:=1.0',
-             'acceleration:=6.0', f'position_min:=[{-PAN_LIMIT}, {-math.pi / 2}]',
+def rig(capture_rig):
+    with capture_rig(
+            ['--time-scale', '4'],
+            ['publish_rate:=20.0', 'reconnect_period:=0.3', 'diagnostics_period:=0.25',
+             'status_period:=0.2', 'default_speed:=1.0', 'acceleration:=6.0',
+             f'position_min:=[{-PAN_LIMIT}, {-math.pi / 2}]',
              f'position_max:=[{PAN_LIMIT}, {math.pi / 2}]', 'range_rate:=5.0',
              'range_min:=2.0', 'range_max:=3000.0', 'range_field_of_view:=0.003',
              'tracking_rate:=4.0', 'digital_outputs:=[1, 2]', 'digital_io_rate:=4.0',
              'fix_rate:=4.0', 'gyro_drift_time:=2.0', 'command_timeout:=3.0'],
-            node_log_tail=4000) as started:
+            node_log_tail=4000) as (started, control_port):
         yield started.ros, control_port
 
 
@@ -342,16 +339,12 @@ def test_ranging_restarts_after_a_reconnect(rig):
     assert ros.call(SetBool, srv('set_ranging'), SetBool.Request(data=False)).success
 
 
-def test_controller_without_digital_io_is_not_polled_for_it():
+def test_controller_without_digital_io_is_not_polled_for_it(capture_rig):
     """Firmware before 2.22.0: no ~/digital_io, and setting an output names the NACK."""
-    port, control_port = free_tcp_port(), free_tcp_port()
     dio_topic, status_topic = f'/{NODE}/digital_io', f'/{NODE}/status'
-    with driver_rig(PKG, 'capture_sim',
-                    ['--port', str(port), '--control-port', str(control_port), '--no-digital-io'],
-                    'capture_sim ready', 'capture_driver_node',
-                    ['host:=127.0.0.1', f'port:={port}', 'digital_io_rate:=10.0',
-                     'status_period:=0.2'],
-                    record=[(dio_topic, UInt8MultiArray), (status_topic, GimbalStatus)]) as started:
+    with capture_rig(['--no-digital-io'], ['digital_io_rate:=10.0', 'status_period:=0.2'],
+                     record=[(dio_topic, UInt8MultiArray), (status_topic, GimbalStatus)]
+                     ) as (started, control_port):
         ros = started.ros
         dio, statuses = started.recorded[dio_topic], started.recorded[status_topic]
         wait_for(lambda: len(statuses) >= 20, 30.0, '~/status messages (2 s)')

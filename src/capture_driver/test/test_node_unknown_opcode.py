@@ -20,8 +20,7 @@ pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.ros.testing import RosTestClient, driver_rig
-from gimbal_driver_common.testing import free_tcp_port
+from gimbal_driver_common.ros.testing import RosTestClient
 
 pytestmark = pytest.mark.ros
 
@@ -40,15 +39,16 @@ def sim_state(port: int) -> dict:
     return json.loads(answer[3:])
 
 
-@contextlib.contextmanager
-def default_node(sim_args: list[str]) -> Iterator[tuple[RosTestClient, int]]:
+@pytest.fixture
+def default_node(capture_rig):
     """Simulator with ``sim_args`` and a node with default parameters (but host/port)."""
-    port, control_port = free_tcp_port(), free_tcp_port()
-    with driver_rig(PKG, 'capture_sim',
-                    ['--port', str(port), '--control-port', str(control_port), *sim_args],
-                    'capture_sim ready', 'capture_driver_node',
-                    ['host:=127.0.0.1', f'port:={port}'], node_log_tail=4000) as started:
-        yield started.ros, control_port
+
+    @contextlib.contextmanager
+    def start(sim_args: list[str]) -> Iterator[tuple[RosTestClient, int]]:
+        with capture_rig(sim_args, node_log_tail=4000) as (started, control_port):
+            yield started.ros, control_port
+
+    return start
 
 
 def all_ok(array: DiagnosticArray) -> bool:
@@ -62,7 +62,7 @@ def device_status(array: DiagnosticArray):
     return next(s for s in array.status if s.name == f'{NODE}: device')
 
 
-def test_healthy_device_with_default_parameters_is_all_ok():
+def test_healthy_device_with_default_parameters_is_all_ok(default_node):
     with default_node([]) as (ros, control_port):
         ros.wait_for_message('joint_states', JointState, timeout=30)
         array = ros.wait_for_message('/diagnostics', DiagnosticArray, all_ok, timeout=30)
@@ -73,7 +73,7 @@ def test_healthy_device_with_default_parameters_is_all_ok():
         assert counts.get('GPS_GetLatitude', 0) >= 1  # the fix poll runs
 
 
-def test_device_without_gps_latitude_stops_that_poll_and_stays_ok():
+def test_device_without_gps_latitude_stops_that_poll_and_stays_ok(default_node):
     """GPS_GetLatitude (low confidence) and COM_GetHw unknown to the device."""
     with default_node(
         ['--unknown', 'GPS_GetLatitude', '--unknown', 'COM_GetHw']) as (ros, control_port):

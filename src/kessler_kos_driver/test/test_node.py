@@ -28,6 +28,7 @@ from gimbal_driver_common.ros.testing import (
     driver_rig,
     find_diagnostic,
     joint_positions,
+    node_refusing_to_start,
 )
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
@@ -353,15 +354,8 @@ def test_axis_fault_offline_motor_and_reset(rig):
 
 
 def test_usb_transport_parameters_are_checked_at_startup():
-    with DomainLease() as domain:
-        node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain,
-                                  ['--ros-args', '-p', 'transport:=usb'])
-        try:
-            node.process.wait(30)
-        finally:
-            node.stop()
-        assert node.process.returncode != 0
-        assert 'usb_vendor_id' in node.output()
+    output = node_refusing_to_start(PKG, 'kessler_kos_driver_node', ['transport:=usb'])
+    assert 'usb_vendor_id' in output
 
 
 def test_usb_transport_without_a_device_reports_it():

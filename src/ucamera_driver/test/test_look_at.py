@@ -15,7 +15,7 @@ pytest.importorskip("rclpy", reason="node tests need the ROS environment")
 pytest.importorskip("gimbal_msgs", reason="node tests need the built workspace (make build)")
 
 from gimbal_driver_common.ros.look_at_testing import LookAtRig, LookAtSuite, look_at_rig_against
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments, wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -44,11 +44,9 @@ def look_at_rig(tmp_path_factory):
 
         def start_node() -> ManagedProcess:
             sim.wait_for_output(link)
-            params = {"serial_port": link, "reconnect_period": "0.3",
-                      "presets_file": str(tmp / "presets.yaml"),
-                      "position_min": f"[{-math.pi}, -0.8]"}
-            return ManagedProcess.ros(PKG, "ucamera_driver_node", domain, [
-                "--ros-args", *[x for k, v in params.items() for x in ("-p", f"{k}:={v}")]])
+            return ManagedProcess.ros(PKG, "ucamera_driver_node", domain, ros_arguments([
+                f"serial_port:={link}", "reconnect_period:=0.3",
+                f"presets_file:={tmp / 'presets.yaml'}", f"position_min:=[{-math.pi}, -0.8]"]))
 
         with look_at_rig_against(PKG, domain, sim, start_node,
                                  lambda: device_angles_deg(sim, fifo)) as rig:

@@ -22,7 +22,7 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments, wait_for
 
 
 def joint_positions(msg: JointState) -> dict[str, float]:
@@ -294,8 +294,7 @@ def driver_rig(
             else:
                 sim_ready(sim)
             parameters = node_parameters(sim) if callable(node_parameters) else node_parameters
-            node = ManagedProcess.ros(package, node_executable, domain, [
-                '--ros-args', *[x for p in parameters for x in ('-p', p)]])
+            node = ManagedProcess.ros(package, node_executable, domain, ros_arguments(parameters))
             ros = RosTestClient(domain, client_name)
             recorded = {topic: ros.subscribe(topic, msg_type) for topic, msg_type in record}
             ros.wait_for_message('joint_states', JointState, timeout=40.0)
@@ -308,3 +307,19 @@ def driver_rig(
                 if node_log_tail:
                     print('--- node log (tail) ---\n' + node.output()[-node_log_tail:])
             sim.stop()
+
+
+def node_refusing_to_start(package: str, node_executable: str, node_parameters: Sequence[str],
+                           timeout: float = 30.0) -> str:
+    """Start the node with ``name:=value`` parameters that it must refuse, wait until it
+    has exited with a failure, and return what it printed (to look for the name)."""
+    with DomainLease() as domain:
+        node = ManagedProcess.ros(package, node_executable, domain,
+                                  ros_arguments(node_parameters))
+        try:
+            wait_for(lambda: not node.running, timeout,
+                     f'{node_executable} to refuse {list(node_parameters)}')
+        finally:
+            node.stop()
+    assert node.process.returncode != 0, f'{node_executable} exited with 0:\n{node.output()}'
+    return node.output()
