@@ -19,8 +19,6 @@ from collections.abc import Callable, Sequence
 from typing import TypeVar
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
 from std_msgs.msg import MultiArrayDimension, UInt8MultiArray
@@ -57,14 +55,13 @@ class CaptureDriverNode(GimbalDriverNode):
     def __init__(self, **kwargs: object) -> None:
         self._guarded = threading.Lock()  # one levelling/drift run at a time
         super().__init__('capture_driver', **kwargs)
-        group = ReentrantCallbackGroup()  # own group: services may wait on device I/O
         self._imu_pub = self.create_publisher(Imu, '~/imu', 10)
         self._fix_pub = self.create_publisher(NavSatFix, '~/fix', 10)
         self._range_pub = self.create_publisher(Range, '~/range', 10)
         self._tracking_pub = self.create_publisher(DiagnosticStatus, '~/tracking_state', 10)
         self._dio_pub = self.create_publisher(UInt8MultiArray, '~/digital_io', 10)
         self._heading_pub = self.create_publisher(Imu, '~/heading', 10)
-        services = (
+        self.create_services([
             (SetBool, '~/set_stabilization', self._on_stabilization),
             (Trigger, '~/start_preset_loop', self._on_start_loop),
             (Trigger, '~/stop_preset_loop', self._on_stop_loop),
@@ -76,21 +73,15 @@ class CaptureDriverNode(GimbalDriverNode):
             (Trigger, '~/start_target_loop', self._on_start_target_loop),
             (Trigger, '~/stop_target_loop', self._on_stop_target_loop),
             (Trigger, '~/reset_gyro_drift', self._on_reset_gyro_drift),
-        )
-        for srv_type, name, callback in services:
-            self.create_service(srv_type, name, callback, callback_group=group)
-        for number in self.digital_outputs:
-            self.create_service(
-                SetBool, f'~/set_digital_output_{number}',
-                lambda request, response, n=number: self._on_set_output(n, request, response),
-                callback_group=group)
+            *[(SetBool, f'~/set_digital_output_{number}',
+               lambda request, response, n=number: self._on_set_output(n, request, response))
+              for number in self.digital_outputs],
+        ])
         self.create_subscription(NavSatFix, '~/goto_lla', self._on_goto_lla, 1,
-                                 callback_group=group)
-        for name, callback in (('~/level', self._execute_level),
-                               ('~/compensate_gyro_drift', self._execute_gyro_drift)):
-            ActionServer(self, Home, name, execute_callback=callback,
-                         goal_callback=lambda _: GoalResponse.ACCEPT,
-                         cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=group)
+                                 callback_group=self.service_group)
+        self.create_accepting_action_server(Home, '~/level', self._execute_level)
+        self.create_accepting_action_server(Home, '~/compensate_gyro_drift',
+                                            self._execute_gyro_drift)
 
     # ------------------------------------------------------------ parameters
     def declare_device_parameters(self) -> None:
