@@ -630,12 +630,7 @@ class TurretClient:
             raise CommandError(f"DDS: {exc}") from exc
         timeout = self.config.service_timeout
         with self._service_lock, self._exchange_for(start) as exchange:
-            self.send(start)
-            reply = exchange.wait_next(timeout)
-            if reply is None:
-                raise ServiceTimeout(f"no DDS response from node {node} within "
-                                   f"{timeout * 1000:.0f} ms")
-            flow = ns.response_status(reply)
+            flow = ns.response_status(self._start_transfer(exchange, start, "DDS", node))
             final = None
             for message in messages:
                 while flow != ns.ServiceStatus.XON:
@@ -673,6 +668,18 @@ class TurretClient:
                                f"{last}: {self._numbering_hint()}")
         return expected
 
+    def _start_transfer(self, exchange: _Exchange, start: CanAerospaceMessage, service: str,
+                        node: int) -> CanAerospaceMessage:
+        """Send a DDS/DUS start request (no retry: a repeated start would restart the
+        transfer) and return the node's first response."""
+        self.send(start)
+        timeout = self.config.service_timeout
+        reply = exchange.wait_next(timeout)
+        if reply is None:
+            raise ServiceTimeout(f"no {service} response from node {node} within "
+                                 f"{timeout * 1000:.0f} ms")
+        return reply
+
     def _numbering_hint(self) -> str:
         first = self.config.transfer_first_number
         return (f"this client counts DDS/DUS data messages from {first}; the node may count "
@@ -705,12 +712,7 @@ class TurretClient:
         timeout = self.config.service_timeout
         received: dict[int, bytes] = {}
         with self._service_lock, self._exchange_for(start) as exchange:
-            self.send(start)
-            reply = exchange.wait_next(timeout)
-            if reply is None:
-                raise ServiceTimeout(f"no DUS response from node {node} within "
-                                   f"{timeout * 1000:.0f} ms")
-            status = ns.response_status(reply)
+            status = ns.response_status(self._start_transfer(exchange, start, "DUS", node))
             if status != ns.ServiceStatus.OK:
                 raise ServiceRefused(f"node {node} refused the upload of memory {memory_id}: "
                                    f"{ns.status_text(ns.ServiceCode.DUS, status)}")

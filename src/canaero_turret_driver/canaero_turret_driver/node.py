@@ -259,20 +259,17 @@ class CanaeroTurretNode(GimbalDriverNode):
 
     # ------------------------------------------------------------------ services
     def _create_device_interfaces(self) -> None:
-        group = self.service_group
         self._fix_pub = self.create_publisher(NavSatFix, "~/fix", 10)
         self._heading_pub = self.create_publisher(Imu, "~/heading", 10)
         self._global_yaw_pub = self.create_publisher(Imu, "~/global_yaw", 10)
         self._time_pub = self.create_publisher(TimeReference, "~/time_reference", 10)
         self._inclination_pub = self.create_publisher(Vector3Stamped, "~/inclination", 10)
         self._zoom_pub = self.create_publisher(Float64, "~/zoom", 10)
-        self.create_service(SetMode, "~/set_actuator_mode", self._on_set_mode,
-                            callback_group=group)
-        for name in SWITCHES:
-            self.create_service(SetBool, f"~/{name}", self._switch_service(name),
-                                callback_group=group)
-        self.create_service(DeviceCommand, "~/device_command", self._on_device_command,
-                            callback_group=group)
+        self.create_services([
+            (SetMode, "~/set_actuator_mode", self._on_set_mode),
+            *[(SetBool, f"~/{name}", self._switch_service(name)) for name in SWITCHES],
+            (DeviceCommand, "~/device_command", self._on_device_command),
+        ])
 
     def _on_set_mode(self, request, response):
         return self.serve_request(

@@ -146,7 +146,7 @@ def _sim_and_node(tmp_path, node_params, sim_args=()):
     """
     from canaero_turret_driver.sim import ControlClient
     from gimbal_driver_common.ros.testing import RosTestClient
-    from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+    from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments, wait_for
 
     tty, ready = tmp_path / "tty", tmp_path / "ready.json"
     with DomainLease() as domain:
@@ -158,8 +158,7 @@ def _sim_and_node(tmp_path, node_params, sim_args=()):
             control = ControlClient(json.loads(ready.read_text())["control_port"])
             params = node_params(str(tty))
             node = ManagedProcess.ros("canaero_turret_driver", "canaero_turret_driver_node",
-                                      domain, ["--ros-args", *[x for p in params
-                                                               for x in ("-p", p)]])
+                                      domain, ros_arguments(params))
             ros = RosTestClient(domain)
             yield ros, control, node
         finally:

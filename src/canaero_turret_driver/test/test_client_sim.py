@@ -1,7 +1,6 @@
 """Client against the simulator on a python-can virtual bus (one process)."""
 
 import math
-import time
 
 import can
 import pytest
@@ -19,36 +18,29 @@ from canaero_turret_driver.client import (
 from canaero_turret_driver.protocol import ActuatorMode, AxisStatus, CanAerospaceMessage
 from canaero_turret_driver.protocol.identifiers import DEFAULT_ZOOM_POSITION_ID
 from canaero_turret_driver.sim import BusSimRunner, EedCode, SimConfig, TurretSimulator
+from gimbal_driver_common.testing import wait_for
 
 
-def wait_for(condition, timeout=5.0, interval=0.01):
-    """Wait *up to* `timeout` s for `condition()` to be truthy; returns its last value."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = condition()
-        if value or time.monotonic() > deadline:
-            return value
-        time.sleep(interval)
+def _latest(client, key, field):
+    """``field(sample)`` of the latest sample of ``key``, None before the first one."""
+    sample = client.latest(key)
+    return None if sample is None else field(sample)
 
 
 def _si(client, key):
-    sample = client.latest(key)
-    return None if sample is None else sample.si
+    return _latest(client, key, lambda sample: sample.si)
 
 
 def _enabled(client, key):
-    sample = client.latest(key)
-    return None if sample is None else AxisStatus.decode(sample.value).enabled
+    return _latest(client, key, lambda sample: AxisStatus.decode(sample.value).enabled)
 
 
 def _value(client, key):
-    sample = client.latest(key)
-    return None if sample is None else sample.value
+    return _latest(client, key, lambda sample: sample.value)
 
 
 def _target(client, key):
-    sample = client.latest(key)
-    return None if sample is None else AxisStatus.decode(sample.value).target_name
+    return _latest(client, key, lambda sample: AxisStatus.decode(sample.value).target_name)
 
 
 def test_identify_and_data_arrive(client):

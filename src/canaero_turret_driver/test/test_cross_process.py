@@ -11,7 +11,6 @@ import json
 import os
 import pathlib
 import sys
-import time
 
 import pytest
 
@@ -20,17 +19,7 @@ import gimbal_driver_common
 from canaero_turret_driver.client import ClientConfig, ServiceError, TurretClient
 from canaero_turret_driver.sim import ControlClient
 from gimbal_driver_common.sim_control import parse_ready_line
-from gimbal_driver_common.testing import ManagedProcess
-
-
-def wait_for(condition, timeout=8.0, interval=0.02):
-    """Wait *up to* `timeout` s for `condition()` to be truthy; returns its last value."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = condition()
-        if value or time.monotonic() > deadline:
-            return value
-        time.sleep(interval)
+from gimbal_driver_common.testing import ManagedProcess, wait_for
 
 
 def _python_path() -> str:

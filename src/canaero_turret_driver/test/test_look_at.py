@@ -14,14 +14,8 @@ import pytest
 pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (make build)")
 
 from canaero_turret_driver.sim import ControlClient
-from gimbal_driver_common.ros.look_at_testing import (
-    LookAtCheck,
-    LookAtRig,
-    LookAtSuite,
-    installed_description,
-    node_against_sim,
-)
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.ros.look_at_testing import LookAtRig, LookAtSuite, look_at_rig_against
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments, wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -47,13 +41,13 @@ def look_at_rig(tmp_path_factory):
                 "transmission_intervals:=['yaw_position=20','pitch_position=20']",
             ]
             return ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain,
-                                      ["--ros-args", *[x for p in params for x in ("-p", p)]])
+                                      ros_arguments(params))
 
         try:
-            with node_against_sim(domain, sim, start_node) as ros:
-                control = controls[0]
-                yield LookAtRig(LookAtCheck(ros, PKG, installed_description(PKG)),
-                                lambda: control.state()["commands_received"], control)
+            with look_at_rig_against(PKG, domain, sim, start_node,
+                                     lambda: controls[0].state()["commands_received"]) as rig:
+                rig.simulator = controls[0]
+                yield rig
         finally:
             for control in controls:
                 control.close()

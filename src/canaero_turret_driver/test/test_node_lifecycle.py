@@ -10,18 +10,14 @@ pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (mak
 
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.ros.testing import RosTestClient, node_refusing_to_start
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments
 from gimbal_msgs.srv import DeviceCommand
 
 pytestmark = pytest.mark.ros
 
 PKG = "canaero_turret_driver"
 NODE = "canaero_turret_driver"
-
-
-def ros_args(*params: str) -> list[str]:
-    return ["--ros-args", *[x for p in params for x in ("-p", p)]]
 
 
 @pytest.mark.parametrize(("param", "expected"), [
@@ -33,15 +29,9 @@ def ros_args(*params: str) -> list[str]:
     ("transfer_first_number:=2", "transfer_first_number"),
 ])
 def test_invalid_parameters_are_refused_at_start(param, expected):
-    with DomainLease() as domain:
-        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain,
-                                  ros_args("can_interface:=virtual", param))
-        try:
-            wait_for(lambda: not node.running, 30, "the node to refuse the parameter")
-            assert node.process.returncode != 0
-            assert expected in node.output()
-        finally:
-            node.stop()
+    output = node_refusing_to_start(PKG, "canaero_turret_driver_node",
+                                    ["can_interface:=virtual", param])
+    assert expected in output
 
 
 @pytest.fixture(scope="module")
@@ -92,10 +82,10 @@ def test_opt_in_services_when_enabled(managed):
 def test_node_waits_for_an_absent_device_then_connects(tmp_path):
     tty, ready = tmp_path / "tty", tmp_path / "ready.json"
     with DomainLease() as domain:
-        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain, ros_args(
+        node = ManagedProcess.ros(PKG, "canaero_turret_driver_node", domain, ros_arguments([
             "can_interface:=slcan", f"can_channel:={tty}",
             "can_options:=['sleep_after_open=0']", "reconnect_period:=0.3",
-            "service_timeout:=0.3"))
+            "service_timeout:=0.3"]))
         sim = None
         ros = RosTestClient(domain)
         try:

@@ -19,8 +19,6 @@ from collections.abc import Callable, Sequence
 from typing import TypeVar
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
 from std_msgs.msg import MultiArrayDimension, UInt8MultiArray
@@ -28,6 +26,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from gimbal_driver_common.device import Device
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest, LinkError
+from gimbal_driver_common.orientation import quaternion_from_euler
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.heading import heading_imu
 from gimbal_driver_common.ros.parameters import ParameterError
@@ -44,14 +43,6 @@ DEVICE_RUNTIME_PARAMETERS = ('default_speed', 'acceleration', 'status_period',
                              'gps_target_slot', 'home_timeout')
 
 
-def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
-
-
 class CaptureDriverNode(GimbalDriverNode):
     """Capture pan-tilt pedestal driver (TCP port 4949 or RS-232/422/485)."""
 
@@ -64,14 +55,13 @@ class CaptureDriverNode(GimbalDriverNode):
     def __init__(self, **kwargs: object) -> None:
         self._guarded = threading.Lock()  # one levelling/drift run at a time
         super().__init__('capture_driver', **kwargs)
-        group = ReentrantCallbackGroup()  # own group: services may wait on device I/O
         self._imu_pub = self.create_publisher(Imu, '~/imu', 10)
         self._fix_pub = self.create_publisher(NavSatFix, '~/fix', 10)
         self._range_pub = self.create_publisher(Range, '~/range', 10)
         self._tracking_pub = self.create_publisher(DiagnosticStatus, '~/tracking_state', 10)
         self._dio_pub = self.create_publisher(UInt8MultiArray, '~/digital_io', 10)
         self._heading_pub = self.create_publisher(Imu, '~/heading', 10)
-        services = (
+        self.create_services([
             (SetBool, '~/set_stabilization', self._on_stabilization),
             (Trigger, '~/start_preset_loop', self._on_start_loop),
             (Trigger, '~/stop_preset_loop', self._on_stop_loop),
@@ -83,21 +73,15 @@ class CaptureDriverNode(GimbalDriverNode):
             (Trigger, '~/start_target_loop', self._on_start_target_loop),
             (Trigger, '~/stop_target_loop', self._on_stop_target_loop),
             (Trigger, '~/reset_gyro_drift', self._on_reset_gyro_drift),
-        )
-        for srv_type, name, callback in services:
-            self.create_service(srv_type, name, callback, callback_group=group)
-        for number in self.digital_outputs:
-            self.create_service(
-                SetBool, f'~/set_digital_output_{number}',
-                lambda request, response, n=number: self._on_set_output(n, request, response),
-                callback_group=group)
+            *[(SetBool, f'~/set_digital_output_{number}',
+               lambda request, response, n=number: self._on_set_output(n, request, response))
+              for number in self.digital_outputs],
+        ])
         self.create_subscription(NavSatFix, '~/goto_lla', self._on_goto_lla, 1,
-                                 callback_group=group)
-        for name, callback in (('~/level', self._execute_level),
-                               ('~/compensate_gyro_drift', self._execute_gyro_drift)):
-            ActionServer(self, Home, name, execute_callback=callback,
-                         goal_callback=lambda _: GoalResponse.ACCEPT,
-                         cancel_callback=lambda _: CancelResponse.ACCEPT, callback_group=group)
+                                 callback_group=self.service_group)
+        self.create_accepting_action_server(Home, '~/level', self._execute_level)
+        self.create_accepting_action_server(Home, '~/compensate_gyro_drift',
+                                            self._execute_gyro_drift)
 
     # ------------------------------------------------------------ parameters
     def declare_device_parameters(self) -> None:
@@ -295,7 +279,7 @@ class CaptureDriverNode(GimbalDriverNode):
         msg = Imu()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.header.frame_id = self.imu_frame_id
-        x, y, z, w = _quaternion(reading.roll, reading.pitch, reading.yaw)
+        x, y, z, w = quaternion_from_euler(reading.roll, reading.pitch, reading.yaw)
         msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = x, y, z, w
         (msg.angular_velocity.x, msg.angular_velocity.y,
          msg.angular_velocity.z) = reading.rates

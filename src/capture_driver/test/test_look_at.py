@@ -14,13 +14,7 @@ pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
 
 from capture_driver.sim import console_state
-from gimbal_driver_common.ros.look_at_testing import (
-    LookAtCheck,
-    LookAtRig,
-    LookAtSuite,
-    installed_description,
-    node_against_sim,
-)
+from gimbal_driver_common.ros.look_at_testing import LookAtRig, LookAtSuite, look_at_rig_against
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
 
 pytestmark = pytest.mark.ros
@@ -43,9 +37,9 @@ def look_at_rig():
                 '-p', 'default_speed:=1.0', '-p', 'acceleration:=6.0',
                 '-p', f'position_min:=[{-math.pi}, -0.8]'])
 
-        with node_against_sim(domain, sim, start_node) as ros:
-            check = LookAtCheck(ros, PKG, installed_description(PKG))
-            yield LookAtRig(check, lambda: console_state(control_port)['axes'])
+        with look_at_rig_against(PKG, domain, sim, start_node,
+                                 lambda: console_state(control_port)['axes']) as rig:
+            yield rig
 
 
 class TestLookAt(LookAtSuite):

@@ -19,8 +19,8 @@ from std_srvs.srv import SetBool, Trigger
 
 from capture_driver.sim import console_state as sim_state
 from capture_driver.sim import control
-from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
+from gimbal_driver_common.ros.testing import joint_positions, node_refusing_to_start
+from gimbal_driver_common.testing import wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import GimbalStatus
 from gimbal_msgs.srv import (
@@ -44,30 +44,14 @@ def srv(name: str) -> str:
 
 
 @pytest.fixture(scope='module')
-def rig():
-    lease = DomainLease()
-    domain = lease.acquire()
-    port, control_port = free_tcp_port(), free_tcp_port()
-    sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
-        '--port', str(port), '--control-port', str(control_port), '--time-scale', '4'])
-    sim.wait_for_output('{"ready": "capture_sim"')
-    node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
-        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
-        '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',
-        '-p', 'diagnostics_period:=0.25', '-p', 'status_period:=0.2',
-        '-p', 'command_timeout:=0.4', '-p', 'imu_rate:=5.0', '-p', 'fix_rate:=2.0',
-        '-p', 'default_speed:=1.0', '-p', 'acceleration:=6.0'])
-    ros = RosTestClient(domain)
-    logs = ros.subscribe('/rosout', Log)
-    try:
-        ros.wait_for_message('joint_states', JointState, timeout=30)
-        yield ros, control_port, node, logs
-    finally:
-        ros.close()
-        node.stop()
-        sim.stop()
-        lease.release()
-        print('--- node log (tail) ---\n' + node.output()[-4000:])
+def rig(capture_rig):
+    with capture_rig(
+            ['--time-scale', '4'],
+            ['publish_rate:=20.0', 'reconnect_period:=0.3', 'diagnostics_period:=0.25',
+             'status_period:=0.2', 'command_timeout:=0.4', 'imu_rate:=5.0', 'fix_rate:=2.0',
+             'default_speed:=1.0', 'acceleration:=6.0'],
+            record=[('/rosout', Log)], node_log_tail=4000) as (started, control_port):
+        yield started.ros, control_port, started.node, started.recorded['/rosout']
 
 
 
@@ -364,12 +348,5 @@ def test_motion_on_faulted_or_off_axis_is_refused_and_reset_quotes_device(rig):
     ('tracker_camera:=4', 'tracker_camera'),
 ])
 def test_invalid_parameters_are_refused_naming_them(override, name):
-    with DomainLease() as domain:
-        node = ManagedProcess.ros(PKG, 'capture_driver_node', domain,
-                                  ['--ros-args', '-p', override])
-        try:
-            node.process.wait(30)
-        finally:
-            node.stop()
-        assert node.process.returncode != 0
-        assert name in node.output()
+    output = node_refusing_to_start(PKG, 'capture_driver_node', [override])
+    assert name in output

@@ -23,8 +23,8 @@ from std_srvs.srv import SetBool, Trigger
 
 from capture_driver.sim import console_state as sim_state
 from capture_driver.sim import control
-from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
+from gimbal_driver_common.ros.testing import joint_positions
+from gimbal_driver_common.testing import wait_for
 from gimbal_msgs.action import Home
 from gimbal_msgs.msg import AxisState, GimbalStatus
 from gimbal_msgs.srv import DeviceCommand, SetMode, StartScan
@@ -41,34 +41,18 @@ def srv(name: str) -> str:
 
 
 @pytest.fixture(scope='module')
-def rig():
-    lease = DomainLease()
-    domain = lease.acquire()
-    port, control_port = free_tcp_port(), free_tcp_port()
-    sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
-        '--port', str(port), '--control-port', str(control_port), '--time-scale', '4'])
-    sim.wait_for_output('{"ready": "capture_sim"')
-    node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
-        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
-        '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',
-        '-p', 'diagnostics_period:=0.25', '-p', 'status_period:=0.2',
-        '-p', 'default_speed:=1.0', '-p', 'acceleration:=6.0',
-        '-p', f'position_min:=[{-PAN_LIMIT}, {-math.pi / 2}]',
-        '-p', f'position_max:=[{PAN_LIMIT}, {math.pi / 2}]',
-        '-p', 'range_rate:=5.0', '-p', 'range_min:=2.0', '-p', 'range_max:=3000.0',
-        '-p', 'range_field_of_view:=0.003', '-p', 'tracking_rate:=4.0',
-        '-p', 'digital_outputs:=[1, 2]', '-p', 'digital_io_rate:=4.0', '-p', 'fix_rate:=4.0',
-        '-p', 'gyro_drift_time:=2.0', '-p', 'command_timeout:=3.0'])
-    ros = RosTestClient(domain)
-    try:
-        ros.wait_for_message('joint_states', JointState, timeout=30)
-        yield ros, control_port
-    finally:
-        ros.close()
-        node.stop()
-        sim.stop()
-        lease.release()
-        print('--- node log (tail) ---\n' + node.output()[-4000:])
+def rig(capture_rig):
+    with capture_rig(
+            ['--time-scale', '4'],
+            ['publish_rate:=20.0', 'reconnect_period:=0.3', 'diagnostics_period:=0.25',
+             'status_period:=0.2', 'default_speed:=1.0', 'acceleration:=6.0',
+             f'position_min:=[{-PAN_LIMIT}, {-math.pi / 2}]',
+             f'position_max:=[{PAN_LIMIT}, {math.pi / 2}]', 'range_rate:=5.0',
+             'range_min:=2.0', 'range_max:=3000.0', 'range_field_of_view:=0.003',
+             'tracking_rate:=4.0', 'digital_outputs:=[1, 2]', 'digital_io_rate:=4.0',
+             'fix_rate:=4.0', 'gyro_drift_time:=2.0', 'command_timeout:=3.0'],
+            node_log_tail=4000) as (started, control_port):
+        yield started.ros, control_port
 
 
 def command(ros, name: str, axis: int = 0, args=()) -> DeviceCommand.Response:
@@ -355,31 +339,17 @@ def test_ranging_restarts_after_a_reconnect(rig):
     assert ros.call(SetBool, srv('set_ranging'), SetBool.Request(data=False)).success
 
 
-def test_controller_without_digital_io_is_not_polled_for_it():
+def test_controller_without_digital_io_is_not_polled_for_it(capture_rig):
     """Firmware before 2.22.0: no ~/digital_io, and setting an output names the NACK."""
-    with DomainLease() as domain:
-        port, control_port = free_tcp_port(), free_tcp_port()
-        sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
-            '--port', str(port), '--control-port', str(control_port), '--no-digital-io'])
-        node = None
-        ros = None
-        try:
-            sim.wait_for_output('{"ready": "capture_sim"')
-            node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
-                '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
-                '-p', 'digital_io_rate:=10.0', '-p', 'status_period:=0.2'])
-            ros = RosTestClient(domain)
-            dio = ros.subscribe(f'/{NODE}/digital_io', UInt8MultiArray)
-            statuses = ros.subscribe(f'/{NODE}/status', GimbalStatus)
-            wait_for(lambda: len(statuses) >= 20, 30.0, '~/status messages (2 s)')
-            assert dio == []
-            polled = int(control(control_port, 'count COM_getDigitalIO').split()[1])
-            assert polled == 1  # the probe at connect, nothing after
-            reply = ros.call(SetBool, srv('set_digital_output_1'), SetBool.Request(data=True))
-            assert not reply.success and 'NACK 0xA6' in reply.message
-        finally:
-            if ros is not None:
-                ros.close()
-            if node is not None:
-                node.stop()
-            sim.stop()
+    dio_topic, status_topic = f'/{NODE}/digital_io', f'/{NODE}/status'
+    with capture_rig(['--no-digital-io'], ['digital_io_rate:=10.0', 'status_period:=0.2'],
+                     record=[(dio_topic, UInt8MultiArray), (status_topic, GimbalStatus)]
+                     ) as (started, control_port):
+        ros = started.ros
+        dio, statuses = started.recorded[dio_topic], started.recorded[status_topic]
+        wait_for(lambda: len(statuses) >= 20, 30.0, '~/status messages (2 s)')
+        assert dio == []
+        polled = int(control(control_port, 'count COM_getDigitalIO').split()[1])
+        assert polled == 1  # the probe at connect, nothing after
+        reply = ros.call(SetBool, srv('set_digital_output_1'), SetBool.Request(data=True))
+        assert not reply.success and 'NACK 0xA6' in reply.message

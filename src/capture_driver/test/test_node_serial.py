@@ -10,9 +10,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
 from capture_driver.sim import control
-from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.ros.testing import driver_rig
 from gimbal_driver_common.sim_control import wait_for_ready
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
+from gimbal_driver_common.testing import ManagedProcess, free_tcp_port
 from gimbal_msgs.action import MoveTo
 
 pytestmark = pytest.mark.ros
@@ -27,22 +27,21 @@ def connection_level(array: DiagnosticArray) -> bytes | None:
     return None
 
 
+def serial_node_parameters(sim: ManagedProcess) -> list[str]:
+    """The node on the pseudo-terminal the simulator announced in its ready line."""
+    tty = wait_for_ready(sim, 'capture_sim')['pty']
+    return ['transport:=serial', f'serial_port:={tty}', 'publish_rate:=20.0',
+            'reconnect_period:=0.3', 'diagnostics_period:=0.25', 'imu_rate:=0.0',
+            'fix_rate:=0.0']
+
+
 def test_node_over_serial_moves_and_survives_unplugging():
-    lease = DomainLease()
-    domain = lease.acquire()
     control_port = free_tcp_port()
-    sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
-        '--port', '-1', '--pty', '--control-port', str(control_port), '--time-scale', '4'])
-    node = None
-    ros = None
-    try:
-        tty = wait_for_ready(sim, 'capture_sim')['pty']
-        node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
-            '--ros-args', '-p', 'transport:=serial', '-p', f'serial_port:={tty}',
-            '-p', 'publish_rate:=20.0', '-p', 'reconnect_period:=0.3',
-            '-p', 'diagnostics_period:=0.25', '-p', 'imu_rate:=0.0', '-p', 'fix_rate:=0.0'])
-        ros = RosTestClient(domain)
-        ros.wait_for_message('joint_states', JointState, timeout=30)
+    with driver_rig(PKG, 'capture_sim', ['--port', '-1', '--pty', '--control-port',
+                                         str(control_port), '--time-scale', '4'],
+                    '{"ready": "capture_sim"', 'capture_driver_node',
+                    serial_node_parameters) as started:
+        ros = started.ros
         goal = MoveTo.Goal(joint_names=['pan', 'tilt'], positions=[0.2, 0.1])
         result, _, _ = ros.run_action(MoveTo, '/capture_driver/move_to', goal, timeout=40)
         assert result.success, result.message
@@ -54,10 +53,3 @@ def test_node_over_serial_moves_and_survives_unplugging():
         msg = ros.wait_for_message('joint_states', JointState, timeout=15)
         assert dict(zip(msg.name, msg.position, strict=True))['pan'] == pytest.approx(
             0.2, abs=2e-3)
-    finally:
-        if ros is not None:
-            ros.close()
-        if node is not None:
-            node.stop()
-        sim.stop()
-        lease.release()

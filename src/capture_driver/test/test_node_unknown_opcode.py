@@ -8,8 +8,10 @@ Node and simulator run as processes; waits are "up to a timeout", never timing a
 
 from __future__ import annotations
 
+import contextlib
 import json
 import socket
+from collections.abc import Iterator
 
 import pytest
 
@@ -19,7 +21,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
 
 pytestmark = pytest.mark.ros
 
@@ -38,26 +39,16 @@ def sim_state(port: int) -> dict:
     return json.loads(answer[3:])
 
 
-def run_default_node(sim_args: list[str]):
+@pytest.fixture
+def default_node(capture_rig):
     """Simulator with ``sim_args`` and a node with default parameters (but host/port)."""
-    lease = DomainLease()
-    domain = lease.acquire()
-    port, control_port = free_tcp_port(), free_tcp_port()
-    sim = ManagedProcess.ros(PKG, 'capture_sim', domain, [
-        '--port', str(port), '--control-port', str(control_port), *sim_args])
-    sim.wait_for_output('{"ready": "capture_sim"')
-    node = ManagedProcess.ros(PKG, 'capture_driver_node', domain, [
-        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}'])
-    ros = RosTestClient(domain)
 
-    def close() -> None:
-        ros.close()
-        node.stop()
-        sim.stop()
-        lease.release()
-        print('--- node log (tail) ---\n' + node.output()[-4000:])
+    @contextlib.contextmanager
+    def start(sim_args: list[str]) -> Iterator[tuple[RosTestClient, int]]:
+        with capture_rig(sim_args, node_log_tail=4000) as (started, control_port):
+            yield started.ros, control_port
 
-    return ros, control_port, close
+    return start
 
 
 def all_ok(array: DiagnosticArray) -> bool:
@@ -71,9 +62,8 @@ def device_status(array: DiagnosticArray):
     return next(s for s in array.status if s.name == f'{NODE}: device')
 
 
-def test_healthy_device_with_default_parameters_is_all_ok():
-    ros, control_port, close = run_default_node([])
-    try:
+def test_healthy_device_with_default_parameters_is_all_ok(default_node):
+    with default_node([]) as (ros, control_port):
         ros.wait_for_message('joint_states', JointState, timeout=30)
         array = ros.wait_for_message('/diagnostics', DiagnosticArray, all_ok, timeout=30)
         device = device_status(array)
@@ -81,15 +71,12 @@ def test_healthy_device_with_default_parameters_is_all_ok():
         assert 'does not know' not in device.message
         counts = sim_state(control_port)['requests_by_command']
         assert counts.get('GPS_GetLatitude', 0) >= 1  # the fix poll runs
-    finally:
-        close()
 
 
-def test_device_without_gps_latitude_stops_that_poll_and_stays_ok():
+def test_device_without_gps_latitude_stops_that_poll_and_stays_ok(default_node):
     """GPS_GetLatitude (low confidence) and COM_GetHw unknown to the device."""
-    ros, control_port, close = run_default_node(
-        ['--unknown', 'GPS_GetLatitude', '--unknown', 'COM_GetHw'])
-    try:
+    with default_node(
+        ['--unknown', 'GPS_GetLatitude', '--unknown', 'COM_GetHw']) as (ros, control_port):
         ros.wait_for_message('joint_states', JointState, timeout=30)
         array = ros.wait_for_message(
             '/diagnostics', DiagnosticArray,
@@ -113,5 +100,3 @@ def test_device_without_gps_latitude_stops_that_poll_and_stays_ok():
         assert first['GPS_GetLatitude'] == later['GPS_GetLatitude'] == 1
         assert later.get('GPS_PositionReady', 0) == first.get('GPS_PositionReady', 0)
         assert later['MOT_GetLoadPosition'] > first['MOT_GetLoadPosition']  # still polling
-    finally:
-        close()

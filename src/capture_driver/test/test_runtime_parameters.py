@@ -12,9 +12,6 @@ pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
 from sensor_msgs.msg import Imu, NavSatFix
 
-from gimbal_driver_common.ros.testing import driver_rig
-from gimbal_driver_common.testing import free_tcp_port
-
 pytestmark = pytest.mark.ros
 
 PKG = 'capture_driver'
@@ -22,14 +19,11 @@ NODE = 'capture_driver'
 
 
 @pytest.fixture(scope='module')
-def rig():
-    port = free_tcp_port()
-    with driver_rig(PKG, 'capture_sim', ['--port', str(port), '--control-port',
-                                         str(free_tcp_port()), '--time-scale', '4'],
-                    '{"ready": "capture_sim"', 'capture_driver_node',
-                    ['host:=127.0.0.1', f'port:={port}', 'publish_rate:=20.0',
-                     'reconnect_period:=0.3', 'imu_rate:=5.0', 'fix_rate:=0.0']) as rig:
-        yield rig.ros, rig.node
+def rig(capture_rig):
+    with capture_rig(['--time-scale', '4'],
+                     ['publish_rate:=20.0', 'reconnect_period:=0.3', 'imu_rate:=5.0',
+                      'fix_rate:=0.0']) as (started, _):
+        yield started.ros, started.node
 
 
 def test_frame_id_and_rate_take_effect_when_set(rig) -> None:

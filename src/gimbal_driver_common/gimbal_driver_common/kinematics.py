@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 from urdf_parser_py.urdf import URDF
 
+from gimbal_driver_common.orientation import wrap_angle
+
 #: joint types whose position is a rotation about ``axis``
 REVOLUTE_TYPES = ('revolute', 'continuous')
 #: joint types that move at all
@@ -82,12 +84,6 @@ def _origin(xyz: object, rpy: object) -> np.ndarray:
     matrix[:3, :3] = rotation
     matrix[:3, 3] = xyz or (0.0, 0.0, 0.0)
     return matrix
-
-
-def wrap_angle(angle: float) -> float:
-    """``angle`` in (-pi, pi]."""
-    wrapped = math.remainder(angle, 2.0 * math.pi)
-    return math.pi if wrapped == -math.pi else wrapped
 
 
 class AimingChain:

@@ -16,7 +16,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TypeVar
 
@@ -95,6 +95,11 @@ def find_executable(package: str, executable: str) -> str:
         f'{package}/{executable} not found in AMENT_PREFIX_PATH; build and source the '
         'workspace (make build; source scripts/ros_env.sh)'
     )
+
+
+def ros_arguments(parameters: Iterable[str]) -> list[str]:
+    """Command-line arguments that set a node's ``name:=value`` parameters."""
+    return ['--ros-args', *[x for p in parameters for x in ('-p', p)]]
 
 
 class ManagedProcess:

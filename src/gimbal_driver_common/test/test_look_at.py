@@ -10,11 +10,10 @@ pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (mak
 from lifecycle_msgs.msg import Transition
 
 from gimbal_driver_common.ros.look_at_testing import (
-    LookAtCheck,
     LookAtRig,
     LookAtSuite,
     installed_description,
-    node_against_sim,
+    look_at_rig_against,
 )
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
 from gimbal_driver_common.virtual_gimbal import VirtualGimbalClient
@@ -49,9 +48,10 @@ def look_at_rig():
                 '--ros-args', '-p', f'port:={port}', '-p', 'reconnect_period:=0.2',
                 '-p', f'position_min:=[{-math.pi}, -0.8]'])
 
-        with node_against_sim(domain, sim, start_node) as ros:
-            description = installed_description(PKG, 'virtual_gimbal.urdf')
-            yield LookAtRig(LookAtCheck(ros, NODE, description), lambda: device_state(port))
+        with look_at_rig_against(PKG, domain, sim, start_node, lambda: device_state(port),
+                                 node=NODE, description=installed_description(
+                                     PKG, 'virtual_gimbal.urdf')) as rig:
+            yield rig
 
 
 class TestLookAt(LookAtSuite):

@@ -24,7 +24,6 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import Joy
@@ -97,12 +96,11 @@ class KosDriverNode(GimbalDriverNode):
         package_logger.addHandler(_RosLogHandler(self))
         package_logger.setLevel(logging.INFO)
         package_logger.propagate = False
-        group = ReentrantCallbackGroup()
         self._playback_pub = self.create_publisher(PlaybackStatusMsg, '~/playback_status', 10)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._aux_pub = self.create_publisher(Joy, '~/aux_inputs', latched)
         self._slave_pub = self.create_publisher(Bool, '~/slave_controller_present', latched)
-        services = [
+        self.create_services([
             (DeviceCommand, '~/command', self._on_command),
             (LoadTrajectory, '~/load_trajectory', self._on_load_trajectory),
             (Trigger, '~/setup_playback', self._on_setup_playback),
@@ -110,9 +108,7 @@ class KosDriverNode(GimbalDriverNode):
             (Trigger, '~/stop_playback', self._on_stop_playback),
             (Calibrate, '~/calibrate', self._on_calibrate),
             (Trigger, '~/take_picture', self._on_take_picture),
-        ]
-        for srv_type, name, callback in services:
-            self.create_service(srv_type, name, callback, callback_group=group)
+        ])
 
     # ------------------------------------------------------------ parameters
     def declare_device_parameters(self) -> None:

@@ -15,13 +15,7 @@ import pytest
 pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
 
-from gimbal_driver_common.ros.look_at_testing import (
-    LookAtCheck,
-    LookAtRig,
-    LookAtSuite,
-    installed_description,
-    node_against_sim,
-)
+from gimbal_driver_common.ros.look_at_testing import LookAtRig, LookAtSuite, look_at_rig_against
 from gimbal_driver_common.sim_control import control_state
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
 
@@ -54,9 +48,9 @@ def look_at_rig():
                 '-p', f'joint_scales:=[{TWO_PI}, {TWO_PI}, {-TWO_PI}]',
                 '-p', 'position_min:=[-1000.0, -1000.0, -0.8]'])
 
-        with node_against_sim(domain, sim, start_node) as ros:
-            check = LookAtCheck(ros, PKG, installed_description(PKG))
-            yield LookAtRig(check, lambda: motor_rotations(control_port))
+        with look_at_rig_against(PKG, domain, sim, start_node,
+                                 lambda: motor_rotations(control_port)) as rig:
+            yield rig
 
 
 class TestLookAt(LookAtSuite):

@@ -23,7 +23,13 @@ from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from gimbal_driver_common.ros.testing import RosTestClient, find_diagnostic, joint_positions
+from gimbal_driver_common.ros.testing import (
+    RosTestClient,
+    driver_rig,
+    find_diagnostic,
+    joint_positions,
+    node_refusing_to_start,
+)
 from gimbal_driver_common.sim_control import control_state
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
@@ -49,27 +55,17 @@ def srv(name: str) -> str:
 
 @pytest.fixture(scope='module')
 def rig():
-    lease = DomainLease()
-    domain = lease.acquire()
     port, control_port = free_tcp_port(), free_tcp_port()
-    sim = ManagedProcess.ros(PKG, 'kessler_kos_sim', domain, [
-        '--port', str(port), '--control-port', str(control_port), '--discovery-port', '0',
-        '--password', PASSWORD, '--precalibrated', '--time-scale', '2'])
-    sim.wait_for_output('{"ready": "kessler_kos_sim"')
-    node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain, [
-        '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
-        '-p', f'password:={PASSWORD}', '-p', 'reconnect_period:=0.2',
-        '-p', 'diagnostics_period:=0.25', '-p', 'command_timeout:=0.4'])   # publish_rate: default
-    ros = RosTestClient(domain)
-    logs = ros.subscribe('/rosout', Log)
-    try:
-        ros.wait_for_message('joint_states', JointState, timeout=30)
-        yield ros, control_port, node, logs
-    finally:
-        ros.close()
-        node.stop()
-        sim.stop()
-        lease.release()
+    with driver_rig(
+            PKG, 'kessler_kos_sim',
+            ['--port', str(port), '--control-port', str(control_port), '--discovery-port', '0',
+             '--password', PASSWORD, '--precalibrated', '--time-scale', '2'],
+            '{"ready": "kessler_kos_sim"', 'kessler_kos_driver_node',
+            ['host:=127.0.0.1', f'port:={port}', f'password:={PASSWORD}',
+             'reconnect_period:=0.2', 'diagnostics_period:=0.25',
+             'command_timeout:=0.4'],  # publish_rate: default
+            record=[('/rosout', Log)]) as started:
+        yield started.ros, control_port, started.node, started.recorded['/rosout']
 
 
 
@@ -359,15 +355,8 @@ def test_axis_fault_offline_motor_and_reset(rig):
 
 
 def test_usb_transport_parameters_are_checked_at_startup():
-    with DomainLease() as domain:
-        node = ManagedProcess.ros(PKG, 'kessler_kos_driver_node', domain,
-                                  ['--ros-args', '-p', 'transport:=usb'])
-        try:
-            node.process.wait(30)
-        finally:
-            node.stop()
-        assert node.process.returncode != 0
-        assert 'usb_vendor_id' in node.output()
+    output = node_refusing_to_start(PKG, 'kessler_kos_driver_node', ['transport:=usb'])
+    assert 'usb_vendor_id' in output
 
 
 def test_usb_transport_without_a_device_reports_it():

@@ -29,7 +29,6 @@ from ucamera_driver.device import (
     UCameraDevice,
     UCameraSettings,
     enu_flu_to_ned_frd,
-    quaternion_to_euler,
 )
 from ucamera_driver.protocol import GimbalMode, ZoomReport
 from ucamera_driver.sim import UCameraSim
@@ -287,20 +286,8 @@ def test_link_drop_then_the_supervisor_reconnects(rig: Rig, caplog) -> None:
     assert rig.move(-0.2, 0.1).success
 
 
-# --- external-feed frame conversions (moved here from test_node_helpers.py) ---
-def quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
-
-
-@pytest.mark.parametrize("angles", [(0.1, -0.2, 0.3), (-1.0, 0.5, -2.5), (0.0, 0.0, 0.0)])
-def test_quaternion_to_euler_round_trip(angles) -> None:
-    assert quaternion_to_euler(*quaternion(*angles)) == pytest.approx(angles, abs=1e-9)
-
-
+# --- external-feed frame conversions (moved here from test_node_helpers.py; the
+# quaternion <-> Euler round trip is in gimbal_driver_common/test/test_orientation.py) ---
 @pytest.mark.parametrize(
     ("enu", "ned"),
     [

@@ -13,15 +13,9 @@ import pytest
 pytest.importorskip("rclpy", reason="node tests need the ROS environment")
 pytest.importorskip("gimbal_msgs", reason="node tests need the built workspace (make build)")
 
-from gimbal_driver_common.ros.look_at_testing import (
-    LookAtCheck,
-    LookAtRig,
-    LookAtSuite,
-    installed_description,
-    node_against_sim,
-)
+from gimbal_driver_common.ros.look_at_testing import LookAtRig, LookAtSuite, look_at_rig_against
 from gimbal_driver_common.sim_control import control_state, wait_for_ready
-from gimbal_driver_common.testing import DomainLease, ManagedProcess
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments
 
 pytestmark = pytest.mark.ros
 
@@ -44,15 +38,13 @@ def look_at_rig(tmp_path_factory):
         control_port = wait_for_ready(sim, "ucamera_sim")["control_port"]
 
         def start_node() -> ManagedProcess:
-            params = {"serial_port": link, "reconnect_period": "0.3",
-                      "presets_file": str(tmp / "presets.yaml"),
-                      "position_min": f"[{-math.pi}, -0.8]"}
-            return ManagedProcess.ros(PKG, "ucamera_driver_node", domain, [
-                "--ros-args", *[x for k, v in params.items() for x in ("-p", f"{k}:={v}")]])
+            return ManagedProcess.ros(PKG, "ucamera_driver_node", domain, ros_arguments([
+                f"serial_port:={link}", "reconnect_period:=0.3",
+                f"presets_file:={tmp / 'presets.yaml'}", f"position_min:=[{-math.pi}, -0.8]"]))
 
-        with node_against_sim(domain, sim, start_node) as ros:
-            check = LookAtCheck(ros, PKG, installed_description(PKG))
-            yield LookAtRig(check, lambda: device_angles_deg(control_port))
+        with look_at_rig_against(PKG, domain, sim, start_node,
+                                 lambda: device_angles_deg(control_port)) as rig:
+            yield rig
 
 
 class TestLookAt(LookAtSuite):

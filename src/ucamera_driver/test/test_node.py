@@ -29,7 +29,7 @@ from sensor_msgs.msg import Imu, JointState, NavSatFix, NavSatStatus  # noqa: E4
 from std_msgs.msg import Float64, UInt16  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from gimbal_driver_common.ros.testing import RosTestClient  # noqa: E402
+from gimbal_driver_common.ros.testing import RosTestClient, node_refusing_to_start  # noqa: E402
 from gimbal_driver_common.sim_control import (  # noqa: E402
     control_request,
     control_state,
@@ -370,15 +370,9 @@ def test_real_hardware_yaml_loads_and_nv_write_needs_opt_in() -> None:
 
 
 def test_invalid_parameter_is_refused_at_start_up() -> None:
-    with DomainLease() as domain:
-        node = ManagedProcess.ros("ucamera_driver", "ucamera_driver_node", domain,
-                                  ["--ros-args", "-p", "telemetry_rate:=500"])
-        try:
-            wait_for(lambda: not node.running, 20.0, "the node to exit")
-            assert node.process.returncode != 0
-            assert "telemetry_rate" in node.output()
-        finally:
-            node.stop()
+    output = node_refusing_to_start("ucamera_driver", "ucamera_driver_node",
+                                    ["telemetry_rate:=500"])
+    assert "telemetry_rate" in output
 
 
 def test_managed_lifecycle_and_configure_failure() -> None:

@@ -45,6 +45,7 @@ from .protocol import (
     IrPaletteReport,
     ModeReport,
     Packet,
+    ParserStats,
     PayloadError,
     ProtocolError,
     RatesReport,
@@ -111,13 +112,10 @@ class GimbalState:
 
 
 @dataclass
-class ClientStats:
-    """Counters for diagnostics."""
+class ClientStats(ParserStats):
+    """Counters for diagnostics: the stream parser's (copied from it as bytes arrive;
+    ``frames`` here counts the packets decoded) and the session's own."""
 
-    frames: int = 0
-    checksum_errors: int = 0
-    length_errors: int = 0
-    discarded_bytes: int = 0
     unknown_packets: int = 0
     bad_payloads: int = 0
     reconnects: int = 0  # start() after an earlier session (the supervisor reopening)

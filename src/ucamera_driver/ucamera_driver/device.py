@@ -48,6 +48,7 @@ from gimbal_driver_common.controller import Logger
 from gimbal_driver_common.device import Device, DeviceInfo, Homing, JointSample, Moves, StatusReport
 from gimbal_driver_common.diagnostics import Level, StatusPart
 from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, InvalidRequest, Unsupported
+from gimbal_driver_common.orientation import euler_from_quaternion, wrap_angle
 
 from .client import NotConnectedError, UCameraClient
 from .protocol import (
@@ -67,25 +68,13 @@ SELF_ENDING_MODES = (GimbalMode.GYRO_AUTOALIGN, GimbalMode.FULL_AUTOALIGN,
                      GimbalMode.FFC_CALIBRATION, GimbalMode.INIT)
 
 
-def _wrap(angle: float) -> float:
-    return math.atan2(math.sin(angle), math.cos(angle))
-
-
-def quaternion_to_euler(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
-    """ZYX Euler angles (roll, pitch, yaw) of a unit quaternion."""
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return roll, pitch, yaw
-
-
 def enu_flu_to_ned_frd(roll: float, pitch: float, yaw: float) -> tuple[float, float, float]:
     """REP-103 attitude (ENU world, FLU body) -> aerospace yaw, pitch, roll (NED/FRD).
 
     Roll keeps its sign, pitch flips (FLU nose-down positive, FRD nose-up
     positive) and yaw turns from "east, counter-clockwise" to "north, clockwise".
     """
-    return _wrap(math.pi / 2 - yaw), -pitch, roll
+    return wrap_angle(math.pi / 2 - yaw), -pitch, roll
 
 
 @dataclass
@@ -425,7 +414,7 @@ class UCameraDevice(Device):
         if not 0.9 < norm < 1.1:
             raise InvalidRequest(f"quaternion norm {norm:.3f} is not 1")
         yaw, pitch, roll = enu_flu_to_ned_frd(
-            *quaternion_to_euler(x / norm, y / norm, z / norm, w / norm))
+            *euler_from_quaternion(x / norm, y / norm, z / norm, w / norm))
         self.client.send_vehicle_angles(yaw, pitch, roll)
 
     def send_external_body_rates(self, x: float, y: float, z: float) -> None:

@@ -26,7 +26,6 @@ import time
 from collections.abc import Callable, Sequence
 
 from geometry_msgs.msg import TwistStamped
-from rclpy.callback_groups import ReentrantCallbackGroup
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
 from std_msgs.msg import Float64, UInt16
 from std_srvs.srv import Trigger
@@ -89,11 +88,12 @@ class UCameraDriverNode(GimbalDriverNode):
         self._zoom_pub = self.create_publisher(Float64, "~/zoom", 10)
         self._fix_pub = self.create_publisher(NavSatFix, "~/fix", 10)
         self._palette_pub = self.create_publisher(UInt16, "~/ir_palette", 10)
-        group = ReentrantCallbackGroup()  # own group: services may wait on the device
-        self.create_service(SetMode, "~/set_mode", self._on_set_mode, callback_group=group)
-        self.create_service(Trigger, "~/save_configuration", self._on_save_configuration,
-                            callback_group=group)
-        self.create_service(Trigger, "~/save_ffc", self._on_save_ffc, callback_group=group)
+        self.create_services([
+            (SetMode, "~/set_mode", self._on_set_mode),
+            (Trigger, "~/save_configuration", self._on_save_configuration),
+            (Trigger, "~/save_ffc", self._on_save_ffc),
+        ])
+        group = self.service_group  # the inputs may wait on the device too
         self.create_subscription(Float64, "~/zoom_command", self._on_zoom_command, 1,
                                  callback_group=group)
         self.create_subscription(UInt16, "~/ir_palette_command", self._on_palette_command, 1,

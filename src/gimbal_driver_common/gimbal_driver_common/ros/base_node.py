@@ -18,7 +18,8 @@ from __future__ import annotations
 import math
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -98,6 +99,21 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
         """Called after configure connected: start the driver's own periodic jobs etc."""
 
     # --------------------------------------------------------------- helpers
+    def create_services(self, services: Iterable[tuple[type, str, Callable[..., Any]]]) -> None:
+        """(type, name, callback) services in the reentrant service group: a service that
+        waits on the device does not hold up ``~/stop`` or the others."""
+        for srv_type, name, callback in services:
+            self.create_service(srv_type, name, callback, callback_group=self.service_group)
+
+    def create_accepting_action_server(self, action_type: type, name: str,
+                                       execute: Callable[..., Any]) -> ActionServer:
+        """An action server in the service group that accepts every goal and every cancel
+        request; ``execute`` refuses a goal by aborting it with a message saying why."""
+        return ActionServer(self, action_type, name, execute_callback=execute,
+                            goal_callback=lambda _goal: GoalResponse.ACCEPT,
+                            cancel_callback=lambda _goal: CancelResponse.ACCEPT,
+                            callback_group=self.service_group)
+
     def declare_param(self, name: str, default: object, description: str, **kwargs):
         """Declare a parameter with a descriptor; see :func:`ros.parameters.declare`."""
         return declare(self, name, default, description, **kwargs)
@@ -253,14 +269,9 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
             (StartScan, '~/start_scan', self._on_start_scan),
             (Trigger, '~/stop_scan', self._on_stop_scan),
         ]
-        for srv_type, name, callback in services:
-            self.create_service(srv_type, name, callback, callback_group=self.service_group)
-        for action_type, name, execute in ((MoveTo, '~/move_to', self._execute_move),
-                                           (Home, '~/home', self._execute_home)):
-            ActionServer(self, action_type, name, execute_callback=execute,
-                         goal_callback=lambda goal: GoalResponse.ACCEPT,
-                         cancel_callback=lambda goal: CancelResponse.ACCEPT,
-                         callback_group=self.service_group)
+        self.create_services(services)
+        self.create_accepting_action_server(MoveTo, '~/move_to', self._execute_move)
+        self.create_accepting_action_server(Home, '~/home', self._execute_home)
         self._setup_look_at()  # ~/look_at (ros/look_at.py) runs through _execute_move
         self.periodic.add(self.diagnostics_period, self._publish_diagnostics)
         self.periodic.add(self._status_period(), self._publish_status)

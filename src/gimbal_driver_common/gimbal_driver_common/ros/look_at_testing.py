@@ -1,7 +1,7 @@
 """The ~/look_at checks every driver's process-level tests run against its simulator.
 
 A driver's tests subclass :class:`LookAtSuite` as ``TestLookAt`` and give a
-``look_at_rig`` fixture (simulator and node processes, see :func:`node_against_sim`)
+``look_at_rig`` fixture (simulator and node processes, see :func:`look_at_rig_against`)
 that yields a :class:`LookAtRig`.
 
 Target points are made from the package's URDF by forward kinematics (the point 5 m
@@ -138,6 +138,18 @@ class LookAtRig:
     check: LookAtCheck
     device_state: Callable[[], object]
     simulator: object = None  # the simulator's control handle, for the driver's own checks
+
+
+@contextlib.contextmanager
+def look_at_rig_against(package: str, domain: int, sim: ManagedProcess,
+                        start_node: Callable[[], ManagedProcess],
+                        device_state: Callable[[], object], node: str | None = None,
+                        description: Path | None = None) -> Iterator[LookAtRig]:
+    """The rig a driver's ``look_at_rig`` fixture yields: the node against its simulator
+    (:func:`node_against_sim`), checked against the package's installed URDF."""
+    with node_against_sim(domain, sim, start_node) as ros:
+        check = LookAtCheck(ros, node or package, description or installed_description(package))
+        yield LookAtRig(check, device_state)
 
 
 class LookAtSuite:

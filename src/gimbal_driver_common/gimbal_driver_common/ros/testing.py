@@ -6,7 +6,7 @@ import contextlib
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import rclpy
@@ -22,7 +22,7 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments, wait_for
 
 
 def joint_positions(msg: JointState) -> dict[str, float]:
@@ -265,17 +265,26 @@ class DriverRig:
     node: ManagedProcess
     sim: ManagedProcess
     domain: int
+    recorded: dict[str, list[Any]] = field(default_factory=dict)  # topic -> messages
 
 
 @contextlib.contextmanager
 def driver_rig(
     package: str, sim_executable: str, sim_arguments: Sequence[str],
     sim_ready: str | Callable[[ManagedProcess], None], node_executable: str,
-    node_parameters: Sequence[str], client_name: str = 'gimbal_test_client',
+    node_parameters: Sequence[str] | Callable[[ManagedProcess], Sequence[str]],
+    client_name: str = 'gimbal_test_client', record: Sequence[tuple[str, type]] = (),
+    node_log_tail: int = 0,
 ) -> Iterator[DriverRig]:
     """Start the simulator, wait until it is ready (``sim_ready``: a text it prints, or a
-    function that waits), start the node with ``name:=value`` parameters, and yield once
-    the first joint_states arrived; stops everything on exit."""
+    function that waits), start the node with ``name:=value`` parameters (or a function of
+    the ready simulator that gives them, e.g. the pty it printed), and yield once the first
+    joint_states arrived; stops everything on exit.
+
+    ``record``: (topic, type) pairs subscribed before the first joint_states, so what the
+    node says while it starts is kept (``DriverRig.recorded``). ``node_log_tail``: that many
+    characters of the node's output are printed at the end (pytest shows them on failure).
+    """
     with DomainLease() as domain:
         sim = ManagedProcess.ros(package, sim_executable, domain, sim_arguments)
         node = ros = None
@@ -284,14 +293,33 @@ def driver_rig(
                 sim.wait_for_output(sim_ready, timeout=30.0)
             else:
                 sim_ready(sim)
-            node = ManagedProcess.ros(package, node_executable, domain, [
-                '--ros-args', *[x for p in node_parameters for x in ('-p', p)]])
+            parameters = node_parameters(sim) if callable(node_parameters) else node_parameters
+            node = ManagedProcess.ros(package, node_executable, domain, ros_arguments(parameters))
             ros = RosTestClient(domain, client_name)
+            recorded = {topic: ros.subscribe(topic, msg_type) for topic, msg_type in record}
             ros.wait_for_message('joint_states', JointState, timeout=40.0)
-            yield DriverRig(ros, node, sim, domain)
+            yield DriverRig(ros, node, sim, domain, recorded)
         finally:
             if ros is not None:
                 ros.close()
             if node is not None:
                 node.stop()
+                if node_log_tail:
+                    print('--- node log (tail) ---\n' + node.output()[-node_log_tail:])
             sim.stop()
+
+
+def node_refusing_to_start(package: str, node_executable: str, node_parameters: Sequence[str],
+                           timeout: float = 30.0) -> str:
+    """Start the node with ``name:=value`` parameters that it must refuse, wait until it
+    has exited with a failure, and return what it printed (to look for the name)."""
+    with DomainLease() as domain:
+        node = ManagedProcess.ros(package, node_executable, domain,
+                                  ros_arguments(node_parameters))
+        try:
+            wait_for(lambda: not node.running, timeout,
+                     f'{node_executable} to refuse {list(node_parameters)}')
+        finally:
+            node.stop()
+    assert node.process.returncode != 0, f'{node_executable} exited with 0:\n{node.output()}'
+    return node.output()
