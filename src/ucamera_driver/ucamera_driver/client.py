@@ -210,6 +210,8 @@ class UCameraClient:
         with self._write_lock:
             self._stream, self._link_broken = stream, False
         self._parser.reset()
+        with self._lock:  # the mode may have changed while the link was down: unknown again
+            self._state = replace(self._state, mode=None)
         self._last_rx = time.monotonic()
         self._next_refresh = 0.0
         self.last_error = ""
