@@ -41,7 +41,8 @@ from harness import (
     wire_limit_frames_per_s,
 )
 
-from gimbal_driver_common.registry import DriverSpec, parameter_arguments, resolve
+from gimbal_driver_common.registry import DriverSpec, parameter_arguments
+from gimbal_driver_common.sim_handle import make_handle
 from gimbal_driver_common.testing import ManagedProcess, wait_for
 
 # Bytes a TCP segment adds to its payload on 100BASE-TX Ethernet: preamble+SFD 8, MAC header
@@ -283,7 +284,7 @@ def generic_run(spec: DriverSpec, domain: int) -> dict:
     settings = spec.bench
     joint = settings.stream_joint or spec.joints[0]
     with tempfile.TemporaryDirectory(prefix=f'bench-{spec.name}-') as workdir:
-        handle = resolve(spec.sim_handle)(spec, Path(workdir))
+        handle = make_handle(spec, Path(workdir))
         handle.start()
         results: dict = {'transport': f'in-process {type(handle).__name__}'}
         try:
