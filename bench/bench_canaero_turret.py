@@ -26,7 +26,7 @@ from driver_bench import (
     explain_latency,
     node_figures,
 )
-from harness import can_frame_bits, rclpy_reference, wire_limit_frames_per_s
+from harness import can_frame_bits, wire_limit_frames_per_s
 
 from canaero_turret_driver.protocol import CanAerospaceMessage, DataType
 from canaero_turret_driver.sim import (
@@ -144,11 +144,6 @@ def run(domain: int) -> dict:
     finally:
         server.stop()
         tmp.cleanup()
-    reference = rclpy_reference(domain, DEFAULT_PUBLISH_RATE)
-    results['rclpy_publisher_cpu_percent_at_publish_rate'] = reference['cpu_percent']
-    if reference['cpu_percent'] > 0:
-        results['cpu_vs_rclpy_publisher_at_publish_rate'] = round(
-            results.get('cpu_percent', 0.0) / reference['cpu_percent'], 2)
     results['slcan_reception'] = slcan_reception_cost(chunked=True)
     results['slcan_reception_python_can'] = slcan_reception_cost(chunked=False)
     explain_latency(results, (

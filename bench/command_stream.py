@@ -21,6 +21,7 @@ bytes and ``~/stop`` answered while that move runs.
 
 from __future__ import annotations
 
+import bisect
 import itertools
 import json
 import os
@@ -381,4 +382,25 @@ def trace_figures(directory: Path, pid: int) -> dict:
         'writes_per_command_median': statistics.median(len(r['writes']) for r in written)
         if written else 0,
         'callback_duration': percentiles([r['returned'] - r['entry'] for r in records]),
+        'publish_to_callback_by_phase': delivery_by_phase(records, data.get('joint_states', [])),
     }
+
+
+def delivery_by_phase(records: list[dict], joint_states: list[list[float]]) -> dict:
+    """publish -> callback grouped by the command's phase in the node's cycle: the time
+    since the node last started publishing joint_states. A command stream at the node's own
+    rate keeps one phase for the whole run, so a slow phase shows as a slow p50."""
+    starts = sorted(start for start, _ in joint_states)
+    if not starts:
+        return {}
+    buckets: dict[str, list[float]] = {}
+    edges = (0.001, 0.002, 0.005, 0.010, 0.020)
+    for record in records:
+        k = bisect.bisect_right(starts, record['published']) - 1
+        if k < 0:
+            continue
+        phase = record['published'] - starts[k]
+        label = next((f'< {edge * 1e3:g} ms' for edge in edges if phase < edge), '>= 20 ms')
+        buckets.setdefault(label, []).append(record['entry'] - record['published'])
+    order = [f'< {edge * 1e3:g} ms' for edge in edges] + ['>= 20 ms']
+    return {label: percentiles(buckets[label]) for label in order if label in buckets}

@@ -136,7 +136,7 @@ def node_figures(
     parameters: dict[str, object],
     stream: StreamSpec | None = None,
     recorder: DeviceRecorder | None = None,
-    window_seconds: float = 5.0,
+    window_seconds: float = 10.0,
     settle_seconds: float = 2.0,
     startup_timeout: float = 40.0,
     observe: Callable[[float, float], dict] | None = None,
@@ -147,6 +147,7 @@ def node_figures(
     ``observe(start, end)`` (monotonic times of the window) may add simulator-side figures.
     """
     results: dict = {'publish_rate': parameters.get('publish_rate'),
+                     'cpu_publish_rate': parameters.get('publish_rate'),
                      'bench_gil_switch_interval_ms': BENCH_SWITCH_INTERVAL_S * 1e3}
     switch_interval = sys.getswitchinterval()
     sys.setswitchinterval(BENCH_SWITCH_INTERVAL_S)

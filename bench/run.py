@@ -73,10 +73,43 @@ def main() -> int:
             except Exception as exc:  # noqa: BLE001 - one failing bench must not hide the others
                 traceback.print_exc()
                 results[name] = {'error': f'{type(exc).__name__}: {exc}'}
+        add_publisher_cpu_reference(results, domain)
     output.parent.mkdir(exist_ok=True)
     output.write_text(json.dumps(results, indent=2))
     print(json.dumps(results, indent=2))
     return 0 if not any('error' in v for v in results.values() if isinstance(v, dict)) else 1
+
+
+#: issue 12: a node uses at most this multiple of a bare rclpy publisher's CPU at its rate
+CPU_RATIO_TARGET = 1.5
+
+
+def add_publisher_cpu_reference(results: dict, domain: int, seconds: float = 10.0) -> None:
+    """The bare rclpy publisher's CPU at each rate a node's CPU was measured at (same run),
+    and per driver the ratio and the target ``CPU_RATIO_TARGET``.
+
+    The publisher is the floor for the part of a node that is ROS (a timer publishing
+    JointState to one subscriber); the same 10 s window as the nodes, since /proc counts
+    CPU in 10 ms ticks.
+    """
+    rates = sorted({data['cpu_publish_rate'] for data in results.values()
+                    if isinstance(data, dict) and data.get('cpu_publish_rate')})
+    by_rate = {rate: rclpy_reference(domain, rate, seconds)['cpu_percent'] for rate in rates}
+    results['reference']['rclpy_publisher_cpu_percent'] = {f'{r:g}': c for r, c in
+                                                            by_rate.items()}
+    for data in results.values():
+        if not isinstance(data, dict) or 'cpu_percent' not in data:
+            continue
+        floor = by_rate.get(data.get('cpu_publish_rate'))
+        if not floor:
+            continue
+        ratio = round(data['cpu_percent'] / floor, 2)
+        data['rclpy_publisher_cpu_percent_at_publish_rate'] = floor
+        data['cpu_vs_rclpy_publisher_at_publish_rate'] = ratio
+        data.setdefault('targets', {})[
+            f'node CPU <= {CPU_RATIO_TARGET:g}x the rclpy publisher at the same rate'] = {
+            'measured': ratio, 'met': ratio <= CPU_RATIO_TARGET,
+            'margin': round(CPU_RATIO_TARGET - ratio, 3)}
 
 
 def markdown(results: dict) -> str:
@@ -108,9 +141,22 @@ def markdown(results: dict) -> str:
                         f'{ref["achieved_hz"]} Hz at {ref["rate_hz"]:g} Hz | '
                         f'{data.get("rate_target", "")} |')
         if 'cpu_percent' in data:
-            rows.append(f'| {name} | node CPU at default rate | {data["cpu_percent"]} % | rclpy '
-                        f'publisher {ref["cpu_percent"]} % at {ref["rate_hz"]:g} Hz | < 10 % |')
+            rows.append(cpu_row(name, data))
     return '\n'.join(rows)
+
+
+def cpu_row(name: str, data: dict) -> str:
+    """Node CPU at its default rate beside the bare publisher at the same rate."""
+    rate = data.get('cpu_publish_rate')
+    floor = data.get('rclpy_publisher_cpu_percent_at_publish_rate')
+    ratio = data.get('cpu_vs_rclpy_publisher_at_publish_rate')
+    missed = [target for target, figures in data.get('targets', {}).items()
+              if 'CPU' in target and not figures['met']]
+    reference = (f'rclpy publisher {floor} % at {rate:g} Hz; ratio {ratio}' if floor else
+                 'rclpy publisher not measured')
+    return (f'| {name} | node CPU at default rate ({rate:g} Hz) | {data["cpu_percent"]} % | '
+            f'{reference} | {"met" if not missed else "missed: " + "; ".join(missed)} '
+            f'(< 10 %, <= {CPU_RATIO_TARGET:g}x) |')
 
 
 def stream_rows(name: str, data: dict) -> list[str]:

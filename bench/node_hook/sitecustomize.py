@@ -8,7 +8,9 @@ one of these variables is set, and Python imports this module at start-up:
   each device write made inside it (``gimbal_driver_common.transport`` streams and
   python-can's slcan ``send``); written as JSON to ``<dir>/trace_<pid>.json`` when the node exits.
   Splits the command path into rclpy delivery, the driver's work before its first byte
-  (validation, the client lock) and the protocol's own round trips.
+  (validation, the client lock) and the protocol's own round trips. Each joint_states
+  publication (start, end) is recorded too, to relate a command's delay to its phase in
+  the node's device cycle.
 * ``BENCH_EXECUTOR=events``: ``run_driver`` spins ``rclpy.experimental.EventsExecutor``
   instead of ``MultiThreadedExecutor(num_threads=4)`` (an experiment; see bench/README.md).
 * ``BENCH_EXECUTOR=single``: ``rclpy.executors.SingleThreadedExecutor`` (an experiment:
@@ -84,10 +86,22 @@ def _install() -> None:
 
     base_node.GimbalDriverNode._on_joint_command = traced_on_joint_command
 
+    publish_joint_state = base_node.GimbalDriverNode._publish_joint_state
+    joint_states: list[tuple[float, float]] = []
+
+    def traced_publish_joint_state(self, sample):
+        start = time.time()
+        try:
+            return publish_joint_state(self, sample)
+        finally:
+            joint_states.append((start, time.time()))
+
+    base_node.GimbalDriverNode._publish_joint_state = traced_publish_joint_state
+
     def dump() -> None:
         path = Path(trace_dir, f'trace_{os.getpid()}.json')
         path.write_text(json.dumps({'executor': executor or 'MultiThreadedExecutor(4)',
-                                    'records': records}))
+                                    'records': records, 'joint_states': joint_states}))
 
     atexit.register(dump)
 
