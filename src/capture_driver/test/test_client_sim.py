@@ -521,11 +521,16 @@ def test_repeated_absolute_moves_send_only_what_changed(client, sim):
                                         'MOT_SendPosition': 1, 'MOT_Update': 1}
     settle(client, 1, -5.0)
     before = _counts(sim)
-    client.move_absolute(1, 3.0, 40.0, 300.0)  # a new acceleration is sent
+    client.move_absolute(1, 3.0, 40.0, 300.0)  # a new acceleration is sent, the speed is not
     assert _sent_since(sim, before) == {'MOT_SetTum': 1, 'MOT_SetAcceleration': 1,
-                                        'MOT_SetSpeed': 1, 'MOT_SendPosition': 1,
-                                        'MOT_Update': 1}
+                                        'MOT_SendPosition': 1, 'MOT_Update': 1}
     settle(client, 1, 3.0)
+    before = _counts(sim)
+    client.move_absolute(1, 7.0, 40.0, 300.0)  # a stream at one speed: TUM, position, update
+    assert _sent_since(sim, before) == {'MOT_SetTum': 1, 'MOT_SendPosition': 1,
+                                        'MOT_Update': 1}
+    settle(client, 1, 7.0)
+    assert sim.model.axes[1].speed == 40.0  # the speed register kept the last value
 
 
 def test_anything_else_commanded_brings_back_the_full_setup(client, sim):
