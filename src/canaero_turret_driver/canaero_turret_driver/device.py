@@ -31,6 +31,9 @@ from .protocol.identifiers import ActuatorMode, AxisStatus, TargetState
 from .status import TurretStatus
 
 MODE_NAMES = {mode.name.lower(): mode for mode in ActuatorMode}
+#: how long activation waits for both axes to report their actuator mode (the simulator's
+#: status byte comes every 100 ms, its mode state every 500 ms)
+MODE_REPORT_WAIT_S = 1.0
 POSITION_KEYS = frozenset(f"{axis}_position" for axis in AXES)
 MIN_TIS_INTERVAL_MS = 1  # TIS counts whole milliseconds
 PRESET_DEVICE_INDEX = 0  # the turret's own remember/restore position
@@ -387,14 +390,45 @@ class TurretDevice(Device):
             self.client.set_transmission_interval(key, interval)
 
     # ------------------------------------------------------------------ extras
-    def apply_actuator_mode(self) -> str:
-        """Send the configured actuator mode to both axes ('' in the settings: nothing)."""
+    def apply_actuator_mode(self, wait: float = MODE_REPORT_WAIT_S) -> str:
+        """Send the configured actuator mode to each axis that does not report it already.
+
+        A mode command re-initialises a drive (the simulator does so; the ICD is silent),
+        which would stop a move a previous node left running, and would quietly re-enable a
+        drive that a fault disabled. So an axis that reports the configured mode (its status
+        byte or its actuator mode state, fresh) is left alone; one that has not reported
+        within ``wait`` s after the connect gets the command. '' in the settings: nothing.
+        """
         if not self.settings.actuator_mode:
             return "no actuator_mode configured"
         mode = MODE_NAMES[self.settings.actuator_mode]
+        deadline = time.monotonic() + wait
+        while (any(self.reported_mode(axis) is None for axis in AXES)
+               and time.monotonic() < deadline):
+            time.sleep(0.02)
+        sent, kept = [], []
         for axis in AXES:
-            self.client.set_actuator_mode(axis, mode)
-        return f"actuator mode {self.settings.actuator_mode} on both axes"
+            if self.reported_mode(axis) == mode:
+                kept.append(self.joint_of[axis])
+            else:
+                self.client.set_actuator_mode(axis, mode)
+                sent.append(self.joint_of[axis])
+        parts = [f"actuator mode {self.settings.actuator_mode} sent to {', '.join(sent)}"
+                 if sent else "", f"already reported by {', '.join(kept)}" if kept else ""]
+        return "; ".join(part for part in parts if part)
+
+    def reported_mode(self, axis: str) -> ActuatorMode | None:
+        """The actuator mode ``axis`` reports: its actuator mode state, else the mode in its
+        status byte (sent more often); None when neither is fresh."""
+        for key in (f"{axis}_actuator_mode_state", f"{axis}_status"):
+            sample = self.client.latest(key)
+            if sample is None or self.client.is_stale(key):
+                continue
+            value = sample.value if key.endswith("_state") else \
+                AxisStatus.decode(sample.value).actuator_mode
+            if value in tuple(ActuatorMode):
+                return ActuatorMode(value)
+        return None
 
     def set_mode(self, text: str) -> str:
         """`~/set_actuator_mode`: "auto_brake" for both joints or "yaw=free_run, pitch=...".

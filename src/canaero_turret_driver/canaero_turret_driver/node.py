@@ -252,7 +252,7 @@ class CanaeroTurretNode(GimbalDriverNode):
         device = self.device
         if self.settings.actuator_mode and device is not None and self.connected:
             try:
-                self.controller.call(device.apply_actuator_mode)
+                self.get_logger().info(self.controller.call(device.apply_actuator_mode))
             except GimbalError as exc:  # activation goes on, the log says why
                 self.get_logger().error(f"setting actuator mode at activate failed: {exc}")
         return result

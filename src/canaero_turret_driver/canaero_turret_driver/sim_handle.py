@@ -23,10 +23,10 @@ class CanaeroSimHandle(SimHandle):
     takeover_goal = {'yaw': 0.2, 'pitch': 0.1}
     # preset 0 is the turret's remembered position, recalled (and cleared) as it is
     valid_preset_calls = (('clear_preset', 0), ('goto_preset', 0))
-    # actuator_mode stays unset: a node that sets it at activate re-initialises the drives,
-    # which stops a move in progress (see the README); quick link-loss detection
-    process_test_parameters = {'actuator_mode': None, 'transmission_intervals': None,
-                            'node_timeout': 0.6, 'stale_timeout': 0.6}
+    # quick link-loss detection. actuator_mode stays 'auto_brake' (the registration's): the
+    # node sends it only to an axis that does not report it, so a takeover keeps the move
+    process_test_parameters = {'transmission_intervals': None,
+                               'node_timeout': 0.6, 'stale_timeout': 0.6}
     #: the turret's set-points have no speed field (it moves at its own profile): a slow yaw
     #: drive (11.5 deg/s = 0.2 rad/s) makes the far move last
     SLOW_YAW_DEG_S = 11.5

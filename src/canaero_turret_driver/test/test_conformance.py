@@ -24,8 +24,3 @@ class TestCanaeroTurretConformance(DriverConformance):
     home_refusal = "no homing routine"
     scan = dict(pattern="sector", pan_min=-0.2, pan_max=0.2, speed=0.5)
     scan_joint = "yaw"
-
-    def node_parameters(self) -> list[str]:
-        # the suite's node brakes the drives when they stop (the handle's process-test
-        # parameters leave actuator_mode unset for the takeover test)
-        return [*super().node_parameters(), "actuator_mode:=auto_brake"]

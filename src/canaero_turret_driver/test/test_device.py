@@ -15,8 +15,8 @@ import pytest
 
 from canaero_turret_driver.client import ClientConfig, TurretClient
 from canaero_turret_driver.device import TurretDevice, TurretSettings
-from canaero_turret_driver.protocol.identifiers import STOP_PITCH_BIT
-from canaero_turret_driver.sim import SimConfig, SlcanSession, TurretSimulator
+from canaero_turret_driver.protocol.identifiers import STOP_PITCH_BIT, ActuatorMode
+from canaero_turret_driver.sim import YAW, SimConfig, SlcanSession, TurretSimulator
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest
 from gimbal_driver_common.policies import Motion
@@ -245,6 +245,31 @@ def test_extras_modes_switches_and_node_services(rig):
     with pytest.raises(InvalidRequest, match="unknown command"):
         call(lambda: rig.device.device_command("format_disk", []))
     assert rig.simulator.state()["node_ids"]["turret"] == 1
+
+
+def test_configured_actuator_mode_goes_only_to_an_axis_not_reporting_it(tmp_path,
+                                                                     controller_config):
+    """A mode command re-initialises a drive (stopping its move), so activation leaves an
+    axis that already reports the configured mode alone."""
+    rig = Rig(tmp_path, controller_config(), TurretSettings(actuator_mode="auto_brake"))
+    rig.simulator.axes[YAW].actuator_mode = ActuatorMode.WITHOUT_BRAKE
+    try:
+        rig.start()
+        wait_for(lambda: rig.samples > 0, 30, "joint samples")
+        answer = rig.controller.call(rig.device.apply_actuator_mode)
+        assert answer == "actuator mode auto_brake sent to yaw; already reported by pitch"
+        wait_for(lambda: rig.sim_axis("yaw")["actuator_mode"] == 2, 30, "yaw in auto brake")
+        modes = [key for key, _ in rig.simulator.state()["recent_commands"]
+                 if key.endswith("_actuator_mode")]
+        assert modes == ["yaw_actuator_mode"]
+        wait_for(lambda: rig.device.reported_mode("yaw") == ActuatorMode.AUTO_BRAKE, 30,
+                 "yaw to report auto brake")
+        before = rig.commands_received()
+        assert rig.controller.call(rig.device.apply_actuator_mode) == (
+            "already reported by yaw, pitch")
+        assert rig.commands_received() == before
+    finally:
+        rig.close()
 
 
 def test_readings_are_handed_out_once_per_frame(rig):
