@@ -3,9 +3,10 @@
 A closed loop (visual servoing, a joystick, topic_based_ros2_control) publishes a
 joint_command every cycle. :func:`stream_figures` runs ``stream_publisher.py`` (its own
 process, timer-paced, a new target every command) against the driver node and, fed by the
-same publisher, ``reference_subscriber.py`` (a bare rclpy subscriber writing one byte per
-message to a loopback socket). Every command ``i`` targets ``base + step * i``, so each one
-is recognised where it lands:
+same publisher half a period later on its own topic, ``reference_subscriber.py`` (a bare
+rclpy subscriber writing one byte per message to a loopback socket; interleaved, the two
+never race each other for the cores on the same message). Every command ``i`` targets
+``base + step * i``, so each one is recognised where it lands:
 
 * ``received``: the command bytes reaching the simulator (its server's receive hook, the
   time taken as the hook runs right after the bytes were read and handled);
@@ -214,7 +215,7 @@ def run_stream(domain: int, spec: StreamSpec, recorder: DeviceRecorder, rate_hz:
         output = Path(tmp, 'publish_times.json')
         publisher = ManagedProcess([
             sys.executable, str(ROOT / 'bench' / 'stream_publisher.py'), repr(rate_hz),
-            str(count), spec.joint, repr(spec.base), repr(spec.step), '2', str(output)],
+            str(count), spec.joint, repr(spec.base), repr(spec.step), '1', str(output)],
             env, name='stream_publisher')
         try:
             extra = profile(count / rate_hz) if profile is not None else {}
@@ -223,14 +224,16 @@ def run_stream(domain: int, spec: StreamSpec, recorder: DeviceRecorder, rate_hz:
             if not output.exists():
                 raise RuntimeError(f'stream publisher failed:\n{publisher.output()[-2000:]}')
             time.sleep(LOST_AFTER_S + 0.5)   # the last commands still count
-            publish_times = json.loads(output.read_text())['publish_times']
+            published = json.loads(output.read_text())
+            publish_times = published['publish_times']
+            reference_times = published['reference_publish_times']
         finally:
             publisher.stop(timeout=5.0)
             reference.stop(timeout=5.0)
             sink.close()
     events = recorder.take()
     intervals = [b - a for a, b in itertools.pairwise(publish_times)]
-    ref = delivery_figures(publish_times, reference_indices(sink.take(), count))
+    ref = delivery_figures(reference_times, reference_indices(sink.take(), count))
     figures: dict = {
         'rate_hz': rate_hz,
         'publish_interval': percentiles(intervals),

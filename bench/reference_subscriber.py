@@ -1,6 +1,7 @@
 """Reference for the command stream: a bare rclpy subscriber writing one byte per message.
 
-It subscribes to ``joint_command`` like a driver node (keep-last 1) and, for each message,
+It subscribes to ``reference_command`` (the stream publisher's copy of each ``joint_command``,
+half a period later) like a driver node (keep-last 1) and, for each message,
 writes one byte (the command index from ``header.frame_id``, modulo 256) to a TCP socket on
 127.0.0.1 with Nagle off: publish -> byte on the socket, the path a driver takes without
 any driver code in it.
@@ -28,7 +29,7 @@ def main() -> int:
     def on_command(msg: JointState) -> None:
         link.sendall(bytes([int(msg.header.frame_id or 0) & 0xFF]))
 
-    node.create_subscription(JointState, 'joint_command', on_command, 1)
+    node.create_subscription(JointState, 'reference_command', on_command, 1)
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):

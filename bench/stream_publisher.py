@@ -1,10 +1,14 @@
 """A user's closed loop: publishes ``joint_command`` at a steady timer-paced rate.
 
 Command ``i`` moves ``joint`` to ``base + step * i`` (a new, distinguishable target every
-command) and carries ``i`` in ``header.frame_id``. The publisher waits until
-``subscribers`` subscriptions (the driver node and the reference subscriber) have matched,
-then publishes ``count`` commands from an rclpy timer and writes the wall-clock time of each
-``publish()`` call as JSON (``{"publish_times": [...]}``) to ``output``.
+command) and carries ``i`` in ``header.frame_id``. The same message goes to the bare-rclpy
+reference on ``reference_command`` half a period later: interleaved, the driver node and the
+reference subscriber never wake on the same message and race each other for the cores (on
+2 cores that race decided which of the two p50s came out slow). The publisher waits until
+``subscribers`` subscriptions on ``joint_command`` (the driver node) and one on
+``reference_command`` have matched, then publishes ``count`` commands on each from one rclpy
+timer at twice the rate and writes the wall-clock time of each ``publish()`` call as JSON
+(``{"publish_times": [...], "reference_publish_times": [...]}``) to ``output``.
 
 Usage: stream_publisher.py RATE_HZ COUNT JOINT BASE STEP SUBSCRIBERS OUTPUT
 """
@@ -31,8 +35,10 @@ def main() -> int:
     rclpy.init()
     node = rclpy.create_node('bench_stream_publisher')
     publisher = node.create_publisher(JointState, 'joint_command', 10)
+    reference = node.create_publisher(JointState, 'reference_command', 10)
     deadline = time.monotonic() + 30.0
-    while publisher.get_subscription_count() < subscribers:
+    while (publisher.get_subscription_count() < subscribers
+           or reference.get_subscription_count() < 1):
         if time.monotonic() > deadline:
             graph = [f'{info.node_namespace}/{info.node_name}'
                      for info in node.get_subscriptions_info_by_topic('/joint_command')]
@@ -43,9 +49,13 @@ def main() -> int:
         time.sleep(0.05)
     time.sleep(DISCOVERY_SETTLE_S)
     publish_times: list[float] = []
+    reference_times: list[float] = []
 
     def tick() -> None:
-        index = len(publish_times)
+        # even ticks: the driver's command; odd ticks: the same one to the reference
+        to_driver = len(publish_times) == len(reference_times)
+        times = publish_times if to_driver else reference_times
+        index = len(times)
         if index >= count:
             return
         msg = JointState(name=[joint], position=[base + step * index])
@@ -53,13 +63,14 @@ def main() -> int:
         now = time.time()
         msg.header.stamp.sec = int(now)
         msg.header.stamp.nanosec = int((now - int(now)) * 1e9)
-        publish_times.append(now)
-        publisher.publish(msg)
+        times.append(now)
+        (publisher if to_driver else reference).publish(msg)
 
-    node.create_timer(1.0 / rate_hz, tick)
-    while rclpy.ok() and len(publish_times) < count:
+    node.create_timer(0.5 / rate_hz, tick)
+    while rclpy.ok() and len(reference_times) < count:
         rclpy.spin_once(node, timeout_sec=0.1)
-    output.write_text(json.dumps({'rate_hz': rate_hz, 'publish_times': publish_times}))
+    output.write_text(json.dumps({'rate_hz': rate_hz, 'publish_times': publish_times,
+                                  'reference_publish_times': reference_times}))
     node.destroy_node()
     rclpy.try_shutdown()
     return 0
