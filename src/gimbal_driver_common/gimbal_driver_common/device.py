@@ -80,7 +80,13 @@ class Homing(abc.ABC):
     def home(
         self, joints: Sequence[str], report: Callable[[str], None], cancelled: threading.Event
     ) -> str:
-        """Run it for ``joints``; report progress; return a message or raise GimbalError."""
+        """Run it for ``joints``; report progress; return a message or raise GimbalError.
+
+        ``cancelled`` is set when the wait must end: the goal was cancelled or a newer
+        motion command (``~/stop``, a move, a preset, a scan) superseded the homing. Stop
+        waiting then, but send nothing: the caller stops the axes on a cancel, and after a
+        supersession a stop would undo the newer command.
+        """
 
 
 class DevicePresets(abc.ABC):

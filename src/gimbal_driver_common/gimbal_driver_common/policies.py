@@ -27,6 +27,13 @@ DRIVER_SCAN_PATTERNS = ('sector', 'zigzag', 'square')
 MOVE_CHECK_S = 0.02
 
 
+class HomingSuperseded(DeviceRefused):
+    """A homing ended by a newer motion command (``~/stop``, a move, a preset, a scan)."""
+
+    def __init__(self) -> None:
+        super().__init__('homing stopped (~/stop or a new command)')
+
+
 @dataclass
 class MoveOutcome:
     """How a move ended: ``state`` is reached, cancelled, stopped, failed."""
@@ -145,8 +152,16 @@ class Motion:
 
     # ---------------------------------------------------------------- homing
     def home(
-        self, joints: Sequence[str], report: Callable[[str], None], cancelled: threading.Event
+        self, joints: Sequence[str], report: Callable[[str], None], cancelled: threading.Event,
+        cancel_requested: Callable[[], bool] = lambda: False,
     ) -> str:
+        """Home ``joints``; ``cancelled`` is set (and the device's wait ends) when
+        ``cancel_requested()`` turns true or a newer motion command supersedes the homing.
+
+        Raises :class:`HomingSuperseded` in the second case, so the caller ends the goal
+        without stopping the axes the newer command moves; after a cancel request it raises
+        DeviceRefused('homing cancelled') and the caller stops the axes.
+        """
         ctl = self.controller
         joints = list(joints) or list(ctl.config.joint_names)
         unknown = [j for j in joints if j not in ctl.config.limits]
@@ -159,7 +174,33 @@ class Motion:
             raise Unsupported('this device has no homing routine')
         self.preempt()
         ctl.watchdog.cancel(joints)
-        return ctl.call(lambda: homing.home(joints, report, cancelled)) or 'homed'
+        generation = ctl.motion_generation
+        done = threading.Event()
+
+        def superseded() -> bool:
+            return ctl.motion_generation != generation
+
+        def watch() -> None:
+            # a device's wait sees only the Event: cancel and supersession both set it
+            while not done.wait(MOVE_CHECK_S):
+                if cancel_requested() or superseded():
+                    cancelled.set()
+                    return
+
+        threading.Thread(target=watch, name='home-watch', daemon=True).start()
+        try:
+            answer = ctl.call(lambda: homing.home(joints, report, cancelled)) or 'homed'
+        except DeviceRefused as exc:
+            if superseded():
+                raise HomingSuperseded() from exc
+            raise
+        finally:
+            done.set()
+        if superseded():
+            raise HomingSuperseded()
+        if cancel_requested():
+            raise DeviceRefused('homing cancelled')
+        return answer
 
     # ----------------------------------------------------------------- scans
     def scan_joints(self) -> list[str]:

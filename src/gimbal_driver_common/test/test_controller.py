@@ -30,7 +30,7 @@ from gimbal_driver_common.errors import (
     device_boundary,
 )
 from gimbal_driver_common.joint_command import JointLimits
-from gimbal_driver_common.policies import Motion
+from gimbal_driver_common.policies import HomingSuperseded, Motion
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.scan import ScanRequest
 from gimbal_driver_common.testing import wait_for
@@ -119,6 +119,19 @@ class FakeHoming(Homing):
             report('seeking index')
             cancelled.wait(0.005)
         return 'homed'
+
+
+class WaitingHoming(Homing):
+    """A routine that reports once and then only waits (like Kessler's wait at the begin
+    marks): it ends when ``cancelled`` is set, or after ``seconds``."""
+
+    def __init__(self, seconds: float = 30.0) -> None:
+        self.seconds = seconds
+
+    def home(self, joints, report, cancelled) -> str:
+        report('moving to the index')
+        cancelled.wait(self.seconds)
+        return 'at the index'
 
 
 class SlotZeroPresets(DevicePresets):
@@ -381,6 +394,51 @@ def test_home_runs_the_device_routine(motion, device) -> None:
     assert motion.home(['pan'], states.append, threading.Event()) == 'homed'
     with pytest.raises(InvalidRequest, match='unknown joint'):
         motion.home(['roll'], states.append, threading.Event())
+
+
+def _home_in_thread(motion, cancel_requested=lambda: False):
+    ended: dict = {}
+    cancelled = threading.Event()
+
+    def run() -> None:
+        try:
+            ended['answer'] = motion.home(['pan'], lambda state: None, cancelled,
+                                          cancel_requested)
+        except Exception as exc:  # noqa: BLE001 - the test reads it
+            ended['error'] = exc
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    return thread, ended, cancelled
+
+
+def test_a_cancel_request_ends_a_homing_that_only_waits(motion, device) -> None:
+    """The cancel reaches the device's wait even when the routine never reports again."""
+    device.capabilities.homing = WaitingHoming()
+    requested = threading.Event()
+    thread, ended, cancelled = _home_in_thread(motion, requested.is_set)
+    wait_for(lambda: thread.is_alive(), 2.0, 'the homing to run')
+    requested.set()
+    thread.join(5.0)
+    assert not thread.is_alive() and cancelled.is_set()
+    assert str(ended.get('error')) == 'homing cancelled'  # the action layer stops the axes
+
+
+@pytest.mark.parametrize('newer', ['stop', 'move'])
+def test_a_newer_motion_command_supersedes_a_homing(motion, controller, device,
+                                                    newer) -> None:
+    device.capabilities.homing = WaitingHoming()
+    thread, ended, cancelled = _home_in_thread(motion)
+    wait_for(lambda: thread.is_alive(), 2.0, 'the homing to run')
+    if newer == 'stop':
+        controller.stop()
+    else:
+        motion.start_move(['pan'], [0.2])
+    thread.join(5.0)
+    assert not thread.is_alive() and cancelled.is_set()
+    assert isinstance(ended.get('error'), HomingSuperseded)
+    if newer == 'move':  # nothing after the newer move: the homing sent no stop
+        assert device.kinds()[-1] == 'move'
 
 
 # ------------------------------------------------------------------ scans

@@ -15,10 +15,10 @@ import threading
 import pytest
 
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
-from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
+from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest, LinkError
 from gimbal_driver_common.errors import DeviceTimeout as CoreDeviceTimeout
 from gimbal_driver_common.joint_command import JointLimits
-from gimbal_driver_common.policies import Motion
+from gimbal_driver_common.policies import HomingSuperseded, Motion
 from gimbal_driver_common.testing import wait_for
 from kessler_kos_driver.client import (
     CommandRejected,
@@ -240,6 +240,42 @@ def test_home_moves_calibrated_joints_to_their_begin_mark(rig):
     assert message == "at the begin mark: ['pan', 'tilt']"
     assert rig.motor_position('pan') == pytest.approx(0.0, abs=1e-3)
     assert rig.motor_position('tilt') == pytest.approx(0.0, abs=1e-3)
+
+
+@pytest.mark.parametrize('end', ['cancel', 'stop'])
+def test_a_homing_on_its_way_ends_at_a_cancel_request_or_a_stop(rig, end):
+    """kOS homing reports once and then waits for the begin marks: a cancel request or a
+    ~/stop must end that wait at once (it used to run on until move_timeout)."""
+    outcome = rig.motion.wait_move(rig.motion.start_move(['pan'], [15.0]))
+    assert outcome.success, outcome.message
+    with rig.sim.device.lock:
+        rig.sim.device.settings.time_scale = 0.2  # a homing move that lasts
+    states, requested, ended = [], threading.Event(), {}
+
+    def run() -> None:
+        try:
+            ended['answer'] = rig.motion.home(['pan'], states.append, threading.Event(),
+                                              requested.is_set)
+        except GimbalError as exc:
+            ended['error'] = exc
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    wait_for(lambda: rig.controller.positions()['pan'] < 14.0, TIMEOUT,
+             'the homing move to start')
+    if end == 'cancel':
+        requested.set()
+    else:
+        rig.controller.stop()
+    thread.join(TIMEOUT)
+    assert not thread.is_alive()
+    if end == 'cancel':
+        assert str(ended['error']) == 'homing cancelled'
+        rig.controller.stop_joints(['pan'])  # what the action does on a cancel
+    else:
+        assert isinstance(ended['error'], HomingSuperseded)
+    wait_for(lambda: not rig.controller.moving('pan'), TIMEOUT, 'pan to stop')
+    assert rig.controller.positions()['pan'] > 1.0  # stopped short of the begin mark
 
 
 def test_link_drop_then_reconnect(rig):

@@ -454,8 +454,7 @@ class PilotHoming(Homing):
         timeout = device.settings.home_timeout
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            if cancelled.is_set():
-                client.hold()
+            if cancelled.is_set():  # the caller stops the gimbal on a cancel
                 raise DeviceRefused("homing cancelled")
             state = client.state()
             tolerance = device.tolerance()

@@ -10,6 +10,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode
 
 from gimbal_driver_common.errors import DeviceRefused, GimbalError
+from gimbal_driver_common.policies import HomingSuperseded
 from gimbal_msgs.action import Home, MoveTo
 
 
@@ -55,19 +56,22 @@ class MotionActions:
         feedback = Home.Feedback()
 
         def report(state: str) -> None:
-            if goal_handle.is_cancel_requested:
-                cancelled.set()
             feedback.state = state
             goal_handle.publish_feedback(feedback)
 
+        superseded = False
         try:
             if self.motion is None:
                 raise DeviceRefused(self.command_refusal())
             self.controller.require()
-            result.message, result.success = self.motion.home(joints, report, cancelled), True
+            result.message = self.motion.home(joints, report, cancelled,
+                                              lambda: goal_handle.is_cancel_requested)
+            result.success = True
+        except HomingSuperseded as exc:
+            superseded, result.success, result.message = True, False, str(exc)
         except GimbalError as exc:
             result.success, result.message = False, str(exc)
-        if goal_handle.is_cancel_requested or cancelled.is_set():
+        if goal_handle.is_cancel_requested and not superseded:
             self.controller.stop_joints(joints)
             goal_handle.canceled()
             result.success, result.message = False, 'homing cancelled'
