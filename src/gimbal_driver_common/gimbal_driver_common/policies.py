@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 from gimbal_driver_common.controller import ControllerConfig, GimbalController, is_moving
 from gimbal_driver_common.device import Moves
-from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, Unsupported
+from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest, Unsupported
 from gimbal_driver_common.joint_command import resolve_targets, validate_joint_command
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.scan import ScanRequest, plan_scan
@@ -190,7 +190,7 @@ class Motion:
         threading.Thread(target=watch, name='home-watch', daemon=True).start()
         try:
             answer = ctl.call(lambda: homing.home(joints, report, cancelled)) or 'homed'
-        except DeviceRefused as exc:
+        except GimbalError as exc:  # e.g. "homing cancelled" from a wait the Event ended
             if superseded():
                 raise HomingSuperseded() from exc
             raise
