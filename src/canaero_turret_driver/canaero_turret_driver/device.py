@@ -346,12 +346,11 @@ class TurretDevice(Device):
         client = self.client
         sent = []
         for axis in AXES:
-            sample = client.latest(f"{axis}_actuator_mode_state")
-            mode = ActuatorMode.AUTO_BRAKE
-            if sample is not None and sample.value in tuple(ActuatorMode):
-                mode = ActuatorMode(sample.value)
             if self.settings.actuator_mode:
                 mode = MODE_NAMES[self.settings.actuator_mode]
+            else:  # the mode it reports (free run is 0: not a missing report)
+                reported = self.reported_mode(axis)
+                mode = ActuatorMode.AUTO_BRAKE if reported is None else reported
             client.set_actuator_mode(axis, mode)
             sent.append(f"{self.joint_of[axis]}={mode.name.lower()}")
         client.events.clear()

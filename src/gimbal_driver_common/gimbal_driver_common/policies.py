@@ -152,10 +152,10 @@ class Motion:
 
     # ---------------------------------------------------------------- homing
     def home(
-        self, joints: Sequence[str], report: Callable[[str], None], cancelled: threading.Event,
+        self, joints: Sequence[str], report: Callable[[str], None],
         cancel_requested: Callable[[], bool] = lambda: False,
     ) -> str:
-        """Home ``joints``; ``cancelled`` is set (and the device's wait ends) when
+        """Home ``joints``; the device's wait ends (its ``cancelled`` Event is set) when
         ``cancel_requested()`` turns true or a newer motion command supersedes the homing.
 
         Raises :class:`HomingSuperseded` in the second case, so the caller ends the goal
@@ -175,7 +175,7 @@ class Motion:
         self.preempt()
         ctl.watchdog.cancel(joints)
         generation = ctl.motion_generation
-        done = threading.Event()
+        cancelled, done = threading.Event(), threading.Event()
 
         def superseded() -> bool:
             return ctl.motion_generation != generation

@@ -127,8 +127,10 @@ class WaitingHoming(Homing):
 
     def __init__(self, seconds: float = 30.0) -> None:
         self.seconds = seconds
+        self.cancelled: threading.Event | None = None  # the Event the last homing waited on
 
     def home(self, joints, report, cancelled) -> str:
+        self.cancelled = cancelled
         report('moving to the index')
         cancelled.wait(self.seconds)
         return 'at the index'
@@ -384,58 +386,56 @@ def test_move_refusals_send_nothing(motion, device) -> None:
 # ----------------------------------------------------------------- homing
 def test_home_without_the_capability_says_so(motion) -> None:
     with pytest.raises(Unsupported, match='no homing'):
-        motion.home([], lambda state: None, threading.Event())
+        motion.home([], lambda state: None)
 
 
 def test_home_runs_the_device_routine(motion, device) -> None:
     device.capabilities.homing = FakeHoming(device)
     device.positions['pan'] = 0.3
     states = []
-    assert motion.home(['pan'], states.append, threading.Event()) == 'homed'
+    assert motion.home(['pan'], states.append) == 'homed'
     with pytest.raises(InvalidRequest, match='unknown joint'):
-        motion.home(['roll'], states.append, threading.Event())
+        motion.home(['roll'], states.append)
 
 
-def _home_in_thread(motion, cancel_requested=lambda: False):
+def _home_in_thread(motion, homing: WaitingHoming, cancel_requested=lambda: False):
+    """Start a homing with ``homing`` in a thread; return once it waits in the device."""
     ended: dict = {}
-    cancelled = threading.Event()
 
     def run() -> None:
         try:
-            ended['answer'] = motion.home(['pan'], lambda state: None, cancelled,
-                                          cancel_requested)
+            ended['answer'] = motion.home(['pan'], lambda state: None, cancel_requested)
         except Exception as exc:  # noqa: BLE001 - the test reads it
             ended['error'] = exc
 
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
-    return thread, ended, cancelled
+    wait_for(lambda: homing.cancelled is not None, 2.0, 'the homing to wait in the device')
+    return thread, ended
 
 
 def test_a_cancel_request_ends_a_homing_that_only_waits(motion, device) -> None:
     """The cancel reaches the device's wait even when the routine never reports again."""
-    device.capabilities.homing = WaitingHoming()
+    device.capabilities.homing = homing = WaitingHoming()
     requested = threading.Event()
-    thread, ended, cancelled = _home_in_thread(motion, requested.is_set)
-    wait_for(lambda: thread.is_alive(), 2.0, 'the homing to run')
+    thread, ended = _home_in_thread(motion, homing, requested.is_set)
     requested.set()
     thread.join(5.0)
-    assert not thread.is_alive() and cancelled.is_set()
+    assert not thread.is_alive() and homing.cancelled.is_set()
     assert str(ended.get('error')) == 'homing cancelled'  # the action layer stops the axes
 
 
 @pytest.mark.parametrize('newer', ['stop', 'move'])
 def test_a_newer_motion_command_supersedes_a_homing(motion, controller, device,
                                                     newer) -> None:
-    device.capabilities.homing = WaitingHoming()
-    thread, ended, cancelled = _home_in_thread(motion)
-    wait_for(lambda: thread.is_alive(), 2.0, 'the homing to run')
+    device.capabilities.homing = homing = WaitingHoming()
+    thread, ended = _home_in_thread(motion, homing)
     if newer == 'stop':
         controller.stop()
     else:
         motion.start_move(['pan'], [0.2])
     thread.join(5.0)
-    assert not thread.is_alive() and cancelled.is_set()
+    assert not thread.is_alive() and homing.cancelled.is_set()
     assert isinstance(ended.get('error'), HomingSuperseded)
     if newer == 'move':  # nothing after the newer move: the homing sent no stop
         assert device.kinds()[-1] == 'move'

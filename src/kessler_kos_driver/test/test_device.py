@@ -236,7 +236,7 @@ def test_playback_owns_the_motors(rig):
 def test_home_moves_calibrated_joints_to_their_begin_mark(rig):
     outcome = rig.motion.wait_move(rig.motion.start_move(['pan', 'tilt'], [15.0, 15.0]))
     assert outcome.success, outcome.message
-    message = rig.motion.home(['pan', 'tilt'], lambda state: None, threading.Event())
+    message = rig.motion.home(['pan', 'tilt'], lambda state: None)
     assert message == "at the begin mark: ['pan', 'tilt']"
     assert rig.motor_position('pan') == pytest.approx(0.0, abs=1e-3)
     assert rig.motor_position('tilt') == pytest.approx(0.0, abs=1e-3)
@@ -254,8 +254,7 @@ def test_a_homing_on_its_way_ends_at_a_cancel_request_or_a_stop(rig, end):
 
     def run() -> None:
         try:
-            ended['answer'] = rig.motion.home(['pan'], states.append, threading.Event(),
-                                              requested.is_set)
+            ended['answer'] = rig.motion.home(['pan'], states.append, requested.is_set)
         except GimbalError as exc:
             ended['error'] = exc
 

@@ -232,7 +232,7 @@ def test_refusals_send_nothing(rig: Rig) -> None:
 def test_home_goes_to_pilot(rig: Rig) -> None:
     assert rig.move(0.3, -0.3).success
     progress: list[str] = []
-    message = rig.motion.home([], progress.append, threading.Event())
+    message = rig.motion.home([], progress.append)
     assert "pilot" in message
     assert progress
     assert rig.device.mode() == "pilot"

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import threading
 
 from lifecycle_msgs.srv import ChangeState
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -52,7 +51,6 @@ class MotionActions:
     def _execute_home(self, goal_handle):
         joints = list(goal_handle.request.joint_names) or list(self.joint_names)
         result = Home.Result()
-        cancelled = threading.Event()
         feedback = Home.Feedback()
 
         def report(state: str) -> None:
@@ -64,7 +62,7 @@ class MotionActions:
             if self.motion is None:
                 raise DeviceRefused(self.command_refusal())
             self.controller.require()
-            result.message = self.motion.home(joints, report, cancelled,
+            result.message = self.motion.home(joints, report,
                                               lambda: goal_handle.is_cancel_requested)
             result.success = True
         except HomingSuperseded as exc:
