@@ -378,6 +378,13 @@ def trace_figures(directory: Path, pid: int) -> dict:
         'commands_handled': len(records),
         'callback_threads': threads,
         'publish_to_callback': percentiles([r['entry'] - r['published'] for r in records]),
+        # the executor thread's last rcl_wait return before the callback: publish -> wait
+        # return is DDS and the wake-up (GIL included), wait return -> callback is rclpy's
+        # Python (ready-entity scan, take, deserialise)
+        'publish_to_wait_return': percentiles([r['waited'] - r['published'] for r in records
+                                               if r.get('waited', 0) > r['published']]),
+        'wait_return_to_callback': percentiles([r['entry'] - r['waited'] for r in records
+                                                if r.get('waited', 0) > r['published']]),
         'callback_to_first_write': percentiles([r['writes'][0] - r['entry']
                                                 for r in written]),
         'first_to_last_write': percentiles([r['writes'][-1] - r['writes'][0]

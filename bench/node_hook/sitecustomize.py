@@ -69,6 +69,19 @@ def _install() -> None:
     except ImportError:
         pass
 
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+    wait = _rclpy.WaitSet.wait
+    last_wait_return = [0.0]
+
+    def traced_wait(self, *args):
+        try:
+            return wait(self, *args)
+        finally:
+            last_wait_return[0] = time.time()
+
+    _rclpy.WaitSet.wait = traced_wait
+
     on_joint_command = base_node.GimbalDriverNode._on_joint_command
 
     def traced_on_joint_command(self, msg):
@@ -80,7 +93,8 @@ def _install() -> None:
             records.append({
                 'index': msg.header.frame_id,
                 'published': msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9,
-                'entry': entry, 'writes': local.writes, 'returned': time.time(),
+                'waited': last_wait_return[0], 'entry': entry, 'writes': local.writes,
+                'returned': time.time(),
                 'thread': threading.current_thread().name})
             local.writes = None
 

@@ -397,6 +397,8 @@ class CaptureDevice(Device):
             status['emergency_stop'] = bool(client.request('MOT_GetEmgStopAxes'))
         except (DeviceNack, DeviceTimeout) as exc:
             status['problems'].append(f'system: {exc}')
+        status['refusals'] = {joint: self._axis_refusal(joint, registers)
+                              for joint, registers in status['axes'].items()}
         sys_state = status.get('system', {}).get('SYS', 0)
         self.device_scanning = bool(sys_state & (1 << 2))
         self.preset_looping = bool(sys_state & (1 << 3))
@@ -491,24 +493,26 @@ class CaptureDevice(Device):
 
         The device ACKs position commands to an axis that is off and then does not move;
         the registers polled every ``status_period`` say why, so the driver refuses first.
+        Each reason is decoded once per register poll (:meth:`refresh_status`), not per
+        command: every joint_command asks.
         """
-        axes = self.status_snapshot().get('axes', {})
-        reasons = []
-        for joint in joints:
-            registers = axes.get(joint)
-            if registers is None:
-                continue
-            active = axis_flags(registers)
-            names = {a.flag.name for a in active}
-            faults = sorted({a.key for a in active if a.flag.level >= Level.ERROR})
-            if 'fault' in names or faults:
-                reasons.append(f'{joint} is faulted ({", ".join(faults) or "fault"})')
-            elif 'axis_off' in names:
-                reasons.append(f'{joint} drive is off (SRL axis_off); switch it on with '
-                               '~/enable')
+        refusals = self.status_snapshot().get('refusals', {})
+        reasons = [refusals[joint] for joint in joints if refusals.get(joint)]
         if not reasons:
             return None
         return '; '.join(reasons) + '; ~/reset_faults clears faults (MOT_ResetFaults + MOT_AxisOn)'
+
+    @staticmethod
+    def _axis_refusal(joint: str, registers: dict[str, int]) -> str | None:
+        """Why one axis cannot move, from its registers (a fault, the drive off), or None."""
+        active = axis_flags(registers)
+        names = {a.flag.name for a in active}
+        faults = sorted({a.key for a in active if a.flag.level >= Level.ERROR})
+        if 'fault' in names or faults:
+            return f'{joint} is faulted ({", ".join(faults) or "fault"})'
+        if 'axis_off' in names:
+            return f'{joint} drive is off (SRL axis_off); switch it on with ~/enable'
+        return None
 
     def program_running(self) -> str | None:
         """Why the device is busy with a motion program of its own (scan, loop), or None."""

@@ -20,6 +20,7 @@ from typing import TypeVar
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
+from rclpy.publisher import Publisher
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus, Range
 from std_msgs.msg import MultiArrayDimension, UInt8MultiArray
 from std_srvs.srv import SetBool, Trigger
@@ -256,11 +257,19 @@ class CaptureDriverNode(GimbalDriverNode):
         rate = getattr(self, rate_name)
         return 1.0 / rate if rate > 0 else 1.0  # at rate 0 the job looks once a second
 
-    def _read_sensor(self, name: str, available: Callable[[CaptureDevice], bool],
+    def _read_sensor(self, name: str, publisher: Publisher,
+                     available: Callable[[CaptureDevice], bool],
                      rate: float, read: Callable[[CaptureDevice], T]) -> T | None:
-        """One sensor read while active, connected and the device has the sensor; a
-        failed read is a throttled warning, never an exception."""
+        """One sensor read while active, connected, the device has the sensor and someone
+        subscribes to its topic; a failed read is a throttled warning, never an exception.
+
+        Without a subscriber the read is skipped: each is one or more request/reply
+        transactions (the IMU six) that would take the link from commands and polls, and
+        measured, a third of an idle node's CPU (bench/README.md).
+        """
         if rate <= 0 or not self.active or not self.connected:
+            return None
+        if publisher.get_subscription_count() == 0:
             return None
         device = self.controller.device
         if not available(device):
@@ -272,7 +281,7 @@ class CaptureDriverNode(GimbalDriverNode):
             return None
 
     def _publish_imu(self) -> None:
-        reading = self._read_sensor('IMU', lambda d: d.has_imu, self.imu_rate,
+        reading = self._read_sensor('IMU', self._imu_pub, lambda d: d.has_imu, self.imu_rate,
                                     lambda d: d.imu())
         if reading is None:
             return
@@ -287,7 +296,7 @@ class CaptureDriverNode(GimbalDriverNode):
         self._imu_pub.publish(msg)
 
     def _publish_fix(self) -> None:
-        fix = self._read_sensor('GPS', lambda d: d.has_gps, self.fix_rate,
+        fix = self._read_sensor('GPS', self._fix_pub, lambda d: d.has_gps, self.fix_rate,
                                 lambda d: d.gps_fix())
         if fix is None:  # also: the device refused a GPS getter, the poll stops
             return
@@ -301,7 +310,7 @@ class CaptureDriverNode(GimbalDriverNode):
         self._fix_pub.publish(msg)
 
     def _publish_heading(self) -> None:
-        read = self._read_sensor('heading', lambda d: d.has_gps, self.fix_rate,
+        read = self._read_sensor('heading', self._heading_pub, lambda d: d.has_gps, self.fix_rate,
                                  lambda d: (d.gps_heading(),))
         if read is None:
             return
@@ -316,7 +325,7 @@ class CaptureDriverNode(GimbalDriverNode):
         self._heading_pub.publish(msg)
 
     def _publish_range(self) -> None:
-        distance = self._read_sensor('range', lambda d: d.ranging, self.range_rate,
+        distance = self._read_sensor('range', self._range_pub, lambda d: d.ranging, self.range_rate,
                                      lambda d: d.range_m())
         if distance is None:
             return
@@ -330,7 +339,8 @@ class CaptureDriverNode(GimbalDriverNode):
         self._range_pub.publish(msg)
 
     def _publish_tracking(self) -> None:
-        state = self._read_sensor('tracking', lambda d: d.has_tracker, self.tracking_rate,
+        state = self._read_sensor('tracking', self._tracking_pub,
+                                  lambda d: d.has_tracker, self.tracking_rate,
                                   lambda d: d.tracking_state())
         if state is None:
             return
@@ -347,7 +357,7 @@ class CaptureDriverNode(GimbalDriverNode):
         ))
 
     def _publish_digital_io(self) -> None:
-        states = self._read_sensor('digital_io', lambda d: d.has_digital_io,
+        states = self._read_sensor('digital_io', self._dio_pub, lambda d: d.has_digital_io,
                                    self.digital_io_rate, lambda d: d.digital_io())
         if states is None:
             return

@@ -227,6 +227,34 @@ def test_imu_and_fix_topics(rig):
     assert fix.longitude == pytest.approx(34.8915, abs=1e-6)
 
 
+def test_sensor_reads_only_while_someone_subscribes(rig):
+    """~/imu (imu_rate 5 Hz) reads the IMU only while its topic has a subscriber: six
+    request/reply transactions per reading that would otherwise take the link."""
+    ros, control_port, *_ = rig
+    topic = f'/{NODE}/imu'
+
+    def imu_reads() -> int:
+        return int(control(control_port, 'count IMU_GetRoll').split()[1])
+
+    def reads_over(states: int) -> int:
+        """IMU reads while the node publishes ``states`` more joint_states (20 Hz)."""
+        before = imu_reads()
+        ros.wait_for_message('joint_states', JointState)
+        seen = ros.subscribe('joint_states', JointState)
+        start = len(seen)
+        wait_for(lambda: len(seen) >= start + states, 15.0, f'{states} joint_states')
+        return imu_reads() - before
+
+    ros.unsubscribe(topic)  # whatever an earlier test left
+    # discovery tells the node the subscriber left; then no read for 1 s (5 IMU periods)
+    wait_for(lambda: reads_over(10) == 0, 15.0, 'IMU reads to stop without a subscriber')
+    assert reads_over(20) == 0
+    ros.wait_for_message(topic, Imu, timeout=15)
+    assert reads_over(20) > 0
+    ros.unsubscribe(topic)
+    wait_for(lambda: reads_over(10) == 0, 15.0, 'IMU reads to stop again')
+
+
 def test_goto_lla_points_at_target(rig):
     ros, *_ = rig
     # ~100 m north-east of the simulated GPS position, same altitude.

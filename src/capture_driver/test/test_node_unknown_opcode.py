@@ -18,9 +18,10 @@ import pytest
 pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
 from diagnostic_msgs.msg import DiagnosticArray
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import JointState, NavSatFix
 
 from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.testing import wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -46,6 +47,8 @@ def default_node(capture_rig):
     @contextlib.contextmanager
     def start(sim_args: list[str]) -> Iterator[tuple[RosTestClient, int]]:
         with capture_rig(sim_args, node_log_tail=4000) as (started, control_port):
+            # the GPS fix is read only while ~/fix has a subscriber, as a user's would be
+            started.ros.subscribe(f'/{NODE}/fix', NavSatFix)
             yield started.ros, control_port
 
     return start
@@ -69,8 +72,10 @@ def test_healthy_device_with_default_parameters_is_all_ok(default_node):
         device = device_status(array)
         assert not any(kv.key.startswith('unsupported.') for kv in device.values)
         assert 'does not know' not in device.message
-        counts = sim_state(control_port)['requests_by_command']
-        assert counts.get('GPS_GetLatitude', 0) >= 1  # the fix poll runs
+        wait_for(lambda: sim_state(control_port)['requests_by_command'].get(
+            'GPS_GetLatitude', 0) >= 1, 15.0, 'the fix poll (fix_rate 1 Hz) to read the GPS')
+        array = ros.wait_for_message('/diagnostics', DiagnosticArray, timeout=30)
+        assert all_ok(array), [(s.name, s.level, s.message) for s in array.status]
 
 
 def test_device_without_gps_latitude_stops_that_poll_and_stays_ok(default_node):
@@ -80,7 +85,7 @@ def test_device_without_gps_latitude_stops_that_poll_and_stays_ok(default_node):
         ros.wait_for_message('joint_states', JointState, timeout=30)
         array = ros.wait_for_message(
             '/diagnostics', DiagnosticArray,
-            lambda a: all_ok(a) and 'does not know' in device_status(a).message, timeout=30)
+            lambda a: all_ok(a) and 'GPS_GetLatitude' in device_status(a).message, timeout=30)
         device = device_status(array)
         mentions = [kv for kv in device.values if 'GPS_GetLatitude' in kv.key]
         assert [kv.key for kv in mentions] == ['unsupported.GPS_GetLatitude']

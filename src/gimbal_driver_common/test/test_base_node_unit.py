@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 import rclpy
+from rclpy.event_handler import EventHandler
 from rclpy.parameter import Parameter
 
 from gimbal_driver_common.policies import scan_joints
@@ -144,3 +145,18 @@ def test_axis_state_code_in_axis_details() -> None:
     msg = messages.gimbal_status(ctl, ['pan', 'tilt'])
     assert [a.state for a in msg.axes] == [AxisState.STATE_FAULT, AxisState.STATE_PLAYBACK]
     assert all(a.calibrated for a in msg.axes)
+
+
+def test_publishers_carry_no_qos_event_handlers_subscriptions_keep_theirs(context) -> None:
+    """rclpy's executor checks every Python waitable after each wake-up, before it reaches
+    the joint_command subscription; the node's publishers add none (base_node
+    ``create_publisher``), while joint_command keeps its incompatible-QoS warnings."""
+    node = make(context)
+    try:
+        handlers = [w for w in node.waitables if isinstance(w, EventHandler)]
+        publishers, subscriptions = list(node.publishers), list(node.subscriptions)
+        assert publishers and subscriptions
+        # two per subscription (incompatible QoS, incompatible type), none per publisher
+        assert len(handlers) == 2 * len(subscriptions)
+    finally:
+        node.destroy_node()

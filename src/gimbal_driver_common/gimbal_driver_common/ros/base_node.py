@@ -24,6 +24,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -246,6 +247,21 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
         return 1.0 / min(self.config.publish_rate, 10.0)
 
     # --------------------------------------------------------- ROS interfaces
+    def create_publisher(self, *args: Any, event_callbacks: PublisherEventCallbacks | None = None,
+                         **kwargs: Any):
+        """rclpy's ``create_publisher`` without its default QoS-event handlers.
+
+        rclpy gives every publisher two Python waitables (incompatible QoS, incompatible
+        type) that its executor checks one by one after every wake-up, before it reaches
+        the ``joint_command`` subscription: measured (bench node trace, Capture's 10
+        publishers), wait return -> callback 0.29 -> 0.22 ms. A mismatch is still logged
+        by the subscriber's own default handler (``ros2 topic echo``, rosbag) and by ours
+        for what this node subscribes to.
+        """
+        if event_callbacks is None:
+            event_callbacks = PublisherEventCallbacks(use_default_callbacks=False)
+        return super().create_publisher(*args, event_callbacks=event_callbacks, **kwargs)
+
     def _create_ros_interfaces(self) -> None:
         guard_change_state_service(self)
         state_qos = QoSProfile(

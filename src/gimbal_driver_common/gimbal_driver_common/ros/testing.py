@@ -58,6 +58,7 @@ class RosTestClient:
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
         self._messages: dict[str, list[Any]] = {}
+        self._subscriptions: dict[str, Any] = {}
         self._lock = threading.Lock()
         self._publishers: dict[str, Any] = {}
         self._clients: dict[tuple[type, str], Any] = {}
@@ -97,8 +98,17 @@ class RosTestClient:
                 received.append(msg)
 
         with _TYPE_SUPPORT_LOCK:
-            self.node.create_subscription(msg_type, topic, record, qos)
+            self._subscriptions[topic] = self.node.create_subscription(
+                msg_type, topic, record, qos)
         return received
+
+    def unsubscribe(self, topic: str) -> None:
+        """Stop recording ``topic`` and destroy the subscription (no-op if none)."""
+        with self._lock:
+            self._messages.pop(topic, None)
+            subscription = self._subscriptions.pop(topic, None)
+        if subscription is not None:
+            self.node.destroy_subscription(subscription)
 
     def wait_for_message(
         self, topic: str, msg_type: type, predicate: Callable[[Any], bool] | None = None,
