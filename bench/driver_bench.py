@@ -18,6 +18,8 @@ While the node runs, this process' GIL switch interval is lowered (see
 
 from __future__ import annotations
 
+import contextlib
+import json
 import os
 import sys
 import tempfile
@@ -36,8 +38,10 @@ from harness import (
     ROOT,
     JointStateProbe,
     ProbeClient,
-    cpu_percent,
+    cpu_percents,
     percentiles,
+    reference_publisher,
+    thread_cpu_seconds,
     wire_limit_frames_per_s,
 )
 
@@ -119,7 +123,8 @@ def start_node(domain: int, package: str, parameters: dict[str, object],
 
 
 #: bench/node_hook/sitecustomize.py instruments the node process when one of these is set
-NODE_HOOK_VARIABLES = ('BENCH_TRACE_DIR', 'BENCH_EXECUTOR', 'BENCH_SWITCH_INTERVAL_S')
+NODE_HOOK_VARIABLES = ('BENCH_TRACE_DIR', 'BENCH_EXECUTOR', 'BENCH_SWITCH_INTERVAL_S',
+                       'BENCH_THREAD_CPU_DIR')
 
 
 def node_hook_env() -> dict[str, str] | None:
@@ -128,6 +133,21 @@ def node_hook_env() -> dict[str, str] | None:
         return None
     paths = [str(ROOT / 'bench' / 'node_hook'), os.environ.get('PYTHONPATH', '')]
     return {'PYTHONPATH': os.pathsep.join(p for p in paths if p)}
+
+
+def cpu_by_thread(pid: int, before: dict[int, float], wall: float) -> dict[str, float]:
+    """The node's CPU over the window (% of a core) per Python thread name (node hook's
+    ``threads_<pid>.json``); threads without one (DDS, rcl) are summed as ``native``."""
+    after = thread_cpu_seconds(pid)
+    path = Path(os.environ['BENCH_THREAD_CPU_DIR'], f'threads_{pid}.json')
+    names = {int(k): v for k, v in json.loads(path.read_text()).items()} if path.exists() \
+        else {}
+    shares: dict[str, float] = {}
+    for tid, seconds in after.items():
+        name = names.get(tid, 'native').rstrip('0123456789_-') or 'native'
+        shares[name] = shares.get(name, 0.0) + 100.0 * (seconds - before.get(tid, 0.0)) / wall
+    return {name: round(share, 2) for name, share in sorted(shares.items(),
+                                                           key=lambda kv: -kv[1])}
 
 
 def node_figures(
@@ -141,8 +161,13 @@ def node_figures(
     startup_timeout: float = 40.0,
     observe: Callable[[float, float], dict] | None = None,
     executable: str = '',
+    cpu_reference: bool = True,
 ) -> dict:
     """Start the node; in one window CPU, joint_states rate and latency; then commands.
+
+    With ``cpu_reference`` the bare rclpy publisher runs at the node's ``publish_rate``
+    during that window and its CPU is measured beside the node's (not for the windows
+    that poll flat out: a 1000 Hz reference would take the CPU the node is measured on).
 
     ``observe(start, end)`` (monotonic times of the window) may add simulator-side figures.
     """
@@ -160,15 +185,30 @@ def node_figures(
                          f'joint_states from {package}_node')
             except TimeoutError as exc:
                 raise RuntimeError(f'{exc}; node output:\n{node.output()[-2000:]}') from exc
-            # let the start-up transient pass (DDS discovery of this subscriber slows the
-            # node and the simulator for a second or two on a loaded machine)
-            time.sleep(settle_seconds)
-            states.clear()
-            # one window: CPU of the node, and the joint_states received meanwhile
-            start = time.monotonic()
-            results['cpu_percent'] = cpu_percent(node.process.pid, window_seconds)
+            # the bare rclpy publisher at the node's rate runs beside the node, so both CPU
+            # figures come from one window of the same machine
+            reference_rate = parameters.get('publish_rate') if cpu_reference else None
+            with (reference_publisher(ros, domain, float(reference_rate)) if reference_rate
+                  else contextlib.nullcontext((None, None))) as (reference, _):
+                # let the start-up transient pass (DDS discovery of this subscriber slows
+                # the node and the simulator for a second or two on a loaded machine)
+                time.sleep(settle_seconds)
+                states.clear()
+                # one window: CPU of the node and the reference, and the joint_states
+                # received meanwhile
+                start = time.monotonic()
+                pids = [node.process.pid] + ([reference.process.pid] if reference else [])
+                threads_before = thread_cpu_seconds(node.process.pid)
+                cpu = cpu_percents(pids, window_seconds)
+                end = time.monotonic()
+                if os.environ.get('BENCH_THREAD_CPU_DIR'):
+                    results['node_cpu_by_thread'] = cpu_by_thread(
+                        node.process.pid, threads_before, end - start)
+                results['cpu_percent'] = cpu[0]
+                if reference:
+                    results['rclpy_publisher_cpu_percent_at_publish_rate'] = cpu[1]
             if observe is not None:
-                results.update(observe(start, time.monotonic()))
+                results.update(observe(start, end))
             results['joint_states_hz'] = received_rate(states)
             results['sim_to_subscriber'] = percentiles(states.stamp_latencies())
             results.update(report_freshness(states))
@@ -308,7 +348,8 @@ def generic_run(spec: DriverSpec, domain: int) -> dict:
             if settings.max_rate:
                 fast = node_figures(domain, spec.package,
                                     {**base, 'publish_rate': settings.max_rate},
-                                    window_seconds=3.0, executable=spec.node_executable)
+                                    window_seconds=3.0, executable=spec.node_executable,
+                                    cpu_reference=False)
                 results['max_rate_test'] = {'publish_rate': settings.max_rate,
                                             'joint_states_hz': fast['joint_states_hz']}
         finally:

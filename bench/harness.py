@@ -109,15 +109,49 @@ def loopback_rtt_us(samples: int = 200) -> float:
 
 
 def cpu_percent(pid: int, seconds: float) -> float:
-    """CPU use of a process over ``seconds``, in % of one core (from /proc)."""
-    def ticks() -> int:
-        fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-        return int(fields[11]) + int(fields[12])  # utime + stime
+    """CPU use of a process over ``seconds``, in % of one core."""
+    return cpu_percents([pid], seconds)[0]
 
-    hz = os.sysconf('SC_CLK_TCK')
-    start_ticks, start = ticks(), time.monotonic()
+
+def process_cpu_seconds(pid: int) -> float:
+    """CPU time of a whole process (all threads), in s, from the kernel's per-process CPU
+    clock: nanoseconds of run time, not /proc's 10 ms ticks.
+
+    Tick accounting charges a whole tick to whichever task runs when the tick fires, so a
+    node that is busy 0.1-0.3 ms at a time 50 times a second was charged at random: the
+    same bare publisher read 2.1 to 4.3 % between windows. The clock id of another process
+    is ``(~pid << 3) | CPUCLOCK_SCHED`` (Linux ``clock_getcpuclockid``); /proc ticks are the
+    fallback where that clock cannot be read.
+    """
+    try:
+        return time.clock_gettime((~pid << 3) | 2)
+    except OSError:
+        fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')  # utime+stime
+
+
+def cpu_percents(pids: list[int], seconds: float) -> list[float]:
+    """CPU use of each process over one and the same window of ``seconds``, in % of one
+    core: a node and its reference measured side by side see the same machine."""
+    begin, start = [process_cpu_seconds(pid) for pid in pids], time.monotonic()
     time.sleep(seconds)
-    return round(100.0 * (ticks() - start_ticks) / hz / (time.monotonic() - start), 1)
+    end, wall = [process_cpu_seconds(pid) for pid in pids], time.monotonic() - start
+    return [round(100.0 * (after - before) / wall, 2)
+            for before, after in zip(begin, end, strict=True)]
+
+
+def thread_cpu_seconds(pid: int) -> dict[int, float]:
+    """CPU time (s) of each thread of a process, from /proc ticks (a per-thread CPU clock
+    can only be read from inside its process): for shares over a 10 s window."""
+    hz = os.sysconf('SC_CLK_TCK')
+    times = {}
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        try:
+            fields = (task / 'stat').read_text().rsplit(')', 1)[1].split()
+        except OSError:
+            continue   # the thread ended meanwhile
+        times[int(task.name)] = (int(fields[11]) + int(fields[12])) / hz
+    return times
 
 
 class ProbeClient:
@@ -200,23 +234,31 @@ class JointStateProbe:
             return round((len(self.arrivals) - 1) / (self.arrivals[-1][0] - self.arrivals[0][0]), 1)
 
 
-def rclpy_reference(domain: int, rate_hz: float = 100.0, seconds: float = 5.0) -> dict:
-    """A bare rclpy JointState publisher (another process) and subscriber: latency and CPU."""
+@contextlib.contextmanager
+def reference_publisher(ros: ProbeClient, domain: int, rate_hz: float):
+    """A bare rclpy JointState publisher process at ``rate_hz`` with ``ros`` subscribed to
+    it (as a node's joint_states have the bench's probe); yields (process, its probe)."""
     script = ROOT / 'bench' / 'reference_publisher.py'
     publisher = ManagedProcess([sys.executable, str(script), str(rate_hz)], ros_env(domain),
                                name='reference_publisher')
     try:
-        with ProbeClient(domain, 'bench_reference') as ros:
-            probe = JointStateProbe(ros, 'reference_joint_states')
-            wait_for(lambda: len(probe.arrivals) > 5, 30, 'the reference publisher')
-            # skip the start-up transient (discovery), as the driver benchmarks do
-            time.sleep(2.0)
-            probe.clear()
-            cpu = cpu_percent(publisher.process.pid, seconds)
-            latencies = probe.stamp_latencies()[-int(rate_hz * seconds):]
-            achieved = probe.achieved_rate(2.0)
+        probe = JointStateProbe(ros, 'reference_joint_states')
+        wait_for(lambda: len(probe.arrivals) > 5, 30, 'the reference publisher')
+        yield publisher, probe
     finally:
         publisher.stop()
+
+
+def rclpy_reference(domain: int, rate_hz: float = 100.0, seconds: float = 5.0) -> dict:
+    """A bare rclpy JointState publisher (another process) and subscriber: latency and CPU."""
+    with ProbeClient(domain, 'bench_reference') as ros, \
+            reference_publisher(ros, domain, rate_hz) as (publisher, probe):
+        # skip the start-up transient (discovery), as the driver benchmarks do
+        time.sleep(2.0)
+        probe.clear()
+        cpu = cpu_percent(publisher.process.pid, seconds)
+        latencies = probe.stamp_latencies()[-int(rate_hz * seconds):]
+        achieved = probe.achieved_rate(2.0)
     return {'rate_hz': rate_hz, 'achieved_hz': achieved, 'latency': percentiles(latencies),
             'cpu_percent': cpu}
 

@@ -16,6 +16,8 @@ one of these variables is set, and Python imports this module at start-up:
 * ``BENCH_EXECUTOR=single``: ``rclpy.executors.SingleThreadedExecutor`` (an experiment:
   it serialises the blocking action callbacks, so ``~/stop`` waits behind a ``move_to``).
 * ``BENCH_SWITCH_INTERVAL_S``: the GIL switch interval instead of the driver's 1 ms.
+* ``BENCH_THREAD_CPU_DIR``: the node writes ``<dir>/threads_<pid>.json`` (native thread id
+  -> Python thread name) every 0.5 s, so the bench can split the node's CPU by thread.
 """
 
 from __future__ import annotations
@@ -45,6 +47,18 @@ def _install() -> None:
     interval = os.environ.get('BENCH_SWITCH_INTERVAL_S')
     if interval:
         run.GIL_SWITCH_INTERVAL_S = float(interval)   # run_driver applies it
+
+    thread_dir = os.environ.get('BENCH_THREAD_CPU_DIR')
+    if thread_dir:
+        def write_thread_names() -> None:
+            path = Path(thread_dir, f'threads_{os.getpid()}.json')
+            while True:
+                names = {t.native_id: t.name for t in threading.enumerate() if t.native_id}
+                path.write_text(json.dumps(names))
+                time.sleep(0.5)
+
+        threading.Thread(target=write_thread_names, name='bench-thread-names',
+                         daemon=True).start()
 
     trace_dir = os.environ.get('BENCH_TRACE_DIR')
     if not trace_dir:
@@ -120,6 +134,6 @@ def _install() -> None:
     atexit.register(dump)
 
 
-if os.environ.get('BENCH_TRACE_DIR') or os.environ.get('BENCH_EXECUTOR') or os.environ.get(
-        'BENCH_SWITCH_INTERVAL_S'):
+if any(os.environ.get(name) for name in ('BENCH_TRACE_DIR', 'BENCH_EXECUTOR',
+                                          'BENCH_SWITCH_INTERVAL_S', 'BENCH_THREAD_CPU_DIR')):
     _install()

@@ -300,10 +300,14 @@ class CanaeroTurretNode(GimbalDriverNode):
 
     # ------------------------------------------------------------------ topics
     def _publish_sensors(self) -> None:
+        """Each sensor topic's newest frame, built only while the topic has a subscriber
+        (the frames arrive anyway; building and publishing six messages ten times a
+        second for nobody was a third of the housekeeping thread's CPU). The newest value
+        waits for a subscriber that comes later."""
         device = self.device
         if device is None or not self.active or not self.connected:
             return
-        fix = device.new_fix()
+        fix = device.new_fix() if self._fix_pub.get_subscription_count() else None
         if fix is not None:
             msg = NavSatFix()
             msg.header.stamp = self._stamp(fix.stamp)
@@ -320,23 +324,26 @@ class CanaeroTurretNode(GimbalDriverNode):
             else:
                 msg.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
             self._fix_pub.publish(msg)
-        self._publish_heading(device.new_heading("rover_heading"), self._heading_pub)
-        self._publish_heading(device.new_heading("global_yaw"), self._global_yaw_pub)
-        utc = device.new_utc()
+        for key, publisher in (("rover_heading", self._heading_pub),
+                               ("global_yaw", self._global_yaw_pub)):
+            if publisher.get_subscription_count():
+                self._publish_heading(device.new_heading(key), publisher)
+        utc = device.new_utc() if self._time_pub.get_subscription_count() else None
         if utc is not None:
             reference = TimeReference()
             reference.header.stamp = self._stamp(utc[0])
             reference.time_ref = self._stamp(utc[1])
             reference.source = "base_gnss"
             self._time_pub.publish(reference)
-        inclination = device.inclination()
+        inclination = (device.inclination() if self._inclination_pub.get_subscription_count()
+                       else None)
         if inclination is not None:
             msg = Vector3Stamped()
             msg.header.stamp = self._stamp(inclination.stamp)
             msg.header.frame_id = self.inclination_frame_id
             msg.vector.x, msg.vector.y = inclination.roll, inclination.pitch
             self._inclination_pub.publish(msg)
-        zoom = device.zoom()
+        zoom = device.zoom() if self._zoom_pub.get_subscription_count() else None
         if zoom is not None:
             self._zoom_pub.publish(Float64(data=zoom))
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import abc
 import contextlib
+import select
 import socket
 import threading
 import time
@@ -195,19 +196,34 @@ class SerialStream(ByteStream):
                 raise LinkClosed(f'{self.description}: write failed: {exc}') from exc
 
     def read(self, max_bytes: int, timeout: float) -> bytes:
+        """Whatever is buffered (up to ``max_bytes``), waiting up to ``timeout`` for the
+        first byte.
+
+        The wait is a select() on the port, not pyserial's ``timeout``: assigning that
+        re-applies the whole termios set-up (tcgetattr + tcsetattr) to the port on every
+        call, 50-100 times a second for a streaming reader, and a request/reply client
+        passes a different timeout each time. (On the pty the CPU cost is within noise;
+        a USB adapter's driver may act on each tcsetattr.)
+        """
         port = self._require()
         try:
-            port.timeout = max(timeout, 0.0)
-            # Block for the first byte, then take whatever else is already buffered.
-            data = port.read(1)
-            if data:
+            waiting = port.in_waiting
+            if not waiting:
+                if timeout <= 0:
+                    return b''
+                ready, _, _ = select.select([port.fileno()], [], [], timeout)
+                if not ready:
+                    return b''
                 waiting = port.in_waiting
-                if waiting:
-                    data += port.read(min(waiting, max_bytes - 1))
-            return data
-        except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+                if not waiting:
+                    # readable with nothing buffered: pyserial's read raises for a USB
+                    # adapter or pty that went away (or returns the byte that just came)
+                    return port.read(1)
+            return port.read(min(waiting, max_bytes))
+        except (serial.SerialException, OSError, TypeError, AttributeError, ValueError) as exc:
             # pyserial raises SerialException("device reports readiness to read but
-            # returned no data") when a USB adapter or pty disappears.
+            # returned no data") when a USB adapter or pty disappears; a port closed by
+            # another thread has no descriptor (ValueError/TypeError from select).
             raise LinkClosed(f'{self.description}: read failed: {exc}') from exc
 
 

@@ -209,10 +209,21 @@ class UCameraDriverNode(GimbalDriverNode):
 
     # ------------------------------------------------------ reports -> topics
     def _on_report(self, packet: Packet, stamp: float) -> None:
-        """Runs on the client's I/O thread for every received packet."""
+        """Runs on the client's I/O thread for every received packet: zoom, palette and
+        position reports become ~/zoom, ~/ir_palette and ~/fix while they have a
+        subscriber, at most ``report_publish_rate``."""
         if not self.active or not self.context.ok():
             return
-        if not isinstance(packet, ZoomReport | IrPaletteReport | SystemPositionReport):
+        if isinstance(packet, ZoomReport):
+            publisher = self._zoom_pub
+        elif isinstance(packet, IrPaletteReport):
+            publisher = self._palette_pub
+        elif isinstance(packet, SystemPositionReport):
+            publisher = self._fix_pub
+        else:
+            return
+        # nobody listening: no message is built (the reports keep coming either way)
+        if not publisher.get_subscription_count():
             return
         if not self._report_limiter.allow(type(packet).__name__):
             return
