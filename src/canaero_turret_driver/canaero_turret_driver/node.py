@@ -302,8 +302,8 @@ class CanaeroTurretNode(GimbalDriverNode):
     def _publish_sensors(self) -> None:
         """Each sensor topic's newest frame, built only while the topic has a subscriber
         (the frames arrive anyway; building and publishing six messages ten times a
-        second for nobody was a third of the housekeeping thread's CPU). The newest value
-        waits for a subscriber that comes later."""
+        second for nobody: skipping it took the housekeeping thread from 0.9 to 0.5 % of a
+        core). The newest value waits for a subscriber that comes later."""
         device = self.device
         if device is None or not self.active or not self.connected:
             return
