@@ -126,8 +126,13 @@ def process_cpu_seconds(pid: int) -> float:
     try:
         return time.clock_gettime((~pid << 3) | 2)
     except OSError:
-        fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')  # utime+stime
+        return proc_stat_cpu_seconds(Path(f'/proc/{pid}/stat'))
+
+
+def proc_stat_cpu_seconds(stat: Path) -> float:
+    """utime + stime of a /proc ``stat`` file (a process or one of its tasks), in s."""
+    fields = stat.read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def cpu_percents(pids: list[int], seconds: float) -> list[float]:
@@ -143,14 +148,12 @@ def cpu_percents(pids: list[int], seconds: float) -> list[float]:
 def thread_cpu_seconds(pid: int) -> dict[int, float]:
     """CPU time (s) of each thread of a process, from /proc ticks (a per-thread CPU clock
     can only be read from inside its process): for shares over a 10 s window."""
-    hz = os.sysconf('SC_CLK_TCK')
     times = {}
     for task in Path(f'/proc/{pid}/task').iterdir():
         try:
-            fields = (task / 'stat').read_text().rsplit(')', 1)[1].split()
+            times[int(task.name)] = proc_stat_cpu_seconds(task / 'stat')
         except OSError:
             continue   # the thread ended meanwhile
-        times[int(task.name)] = (int(fields[11]) + int(fields[12])) / hz
     return times
 
 

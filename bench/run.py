@@ -73,7 +73,7 @@ def main() -> int:
             except Exception as exc:  # noqa: BLE001 - one failing bench must not hide the others
                 traceback.print_exc()
                 results[name] = {'error': f'{type(exc).__name__}: {exc}'}
-        add_publisher_cpu_reference(results, domain)
+        add_cpu_ratio_targets(results)
     output.parent.mkdir(exist_ok=True)
     output.write_text(json.dumps(results, indent=2))
     print(json.dumps(results, indent=2))
@@ -84,30 +84,22 @@ def main() -> int:
 CPU_RATIO_TARGET = 1.5
 
 
-def add_publisher_cpu_reference(results: dict, domain: int, seconds: float = 10.0) -> None:
+def add_cpu_ratio_targets(results: dict) -> None:
     """Per driver the ratio of its CPU to the bare rclpy publisher's at the same rate, and
-    the target ``CPU_RATIO_TARGET``; also the publisher alone at each rate (same run).
+    the target ``CPU_RATIO_TARGET``.
 
     The publisher is the floor for the part of a node that is ROS (a timer publishing
-    JointState to one subscriber). The ratio uses the publisher measured *beside* the node,
-    in the node's own window (``driver_bench.node_figures``): measured minutes apart, the
-    publisher alone read 3.1 to 4.3 % at 50 Hz between runs, which moved a ratio by a
-    third. Both windows are 10 s, since /proc counts CPU in 10 ms ticks.
+    JointState to one subscriber). It runs *beside* the node, in the node's own 10 s window
+    (``driver_bench.node_figures``): measured minutes apart, the same publisher read 3.1 to
+    4.3 % at 50 Hz between runs, which moved a ratio by a third.
     """
-    rates = sorted({data['cpu_publish_rate'] for data in results.values()
-                    if isinstance(data, dict) and data.get('cpu_publish_rate')})
-    by_rate = {rate: rclpy_reference(domain, rate, seconds)['cpu_percent'] for rate in rates}
-    results['reference']['rclpy_publisher_cpu_percent'] = {f'{r:g}': c for r, c in
-                                                            by_rate.items()}
     for data in results.values():
-        if not isinstance(data, dict) or 'cpu_percent' not in data:
+        if not isinstance(data, dict):
             continue
-        floor = (data.get('rclpy_publisher_cpu_percent_at_publish_rate')
-                 or by_rate.get(data.get('cpu_publish_rate')))
-        if not floor:
+        floor = data.get('rclpy_publisher_cpu_percent_at_publish_rate')
+        if 'cpu_percent' not in data or not floor:
             continue
         ratio = round(data['cpu_percent'] / floor, 2)
-        data['rclpy_publisher_cpu_percent_at_publish_rate'] = floor
         data['cpu_vs_rclpy_publisher_at_publish_rate'] = ratio
         data.setdefault('targets', {})[
             f'node CPU <= {CPU_RATIO_TARGET:g}x the rclpy publisher at the same rate'] = {
