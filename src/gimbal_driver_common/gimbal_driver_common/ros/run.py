@@ -66,10 +66,13 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
     while not stop.wait(1.0):
         pass
     node.on_shutdown(None)
-    node.destroy_node()
+    # The executor stops before the node is destroyed: destroying it under a spinning
+    # executor raced the wait-set build (InvalidHandle from an event handler's
+    # add_to_wait_set, a traceback the U-Camera soak caught at shutdown).
     executor.shutdown(timeout_sec=1.0)
-    rclpy.try_shutdown()
     spinner.join(timeout=2.0)
+    node.destroy_node()
+    rclpy.try_shutdown()
     return 0
 
 
