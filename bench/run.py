@@ -188,8 +188,16 @@ def stream_rows(name: str, data: dict) -> list[str]:
         rows.append(f'| {name} | highest sustained joint_states, 2 axes, TCP | '
                     f'{tcp["measured"]["joint_states_hz"]} Hz at publish_rate '
                     f'{tcp["measured"]["publish_rate"]:g} | request/reply limit '
-                    f'{tcp["request_reply_limit_hz"]:,.0f} Hz ({tcp["requests_per_cycle"]} x '
-                    f'loopback RTT {tcp["loopback_tcp_rtt_us"]} µs) | |')
+                    f'{tcp["request_reply_limit_hz"]:,.0f} Hz ({tcp["requests_per_cycle"]} '
+                    f'getters in one write: 1 x loopback RTT {tcp["loopback_tcp_rtt_us"]} µs) | |')
+        alone = tcp.get('measured_one_at_a_time')
+        if alone:
+            rows.append(
+                f'| {name} | the same, batch_reads false | {alone["joint_states_hz"]} Hz, node '
+                f'CPU {alone["node_cpu_percent"]} % (batched: '
+                f'{tcp["measured"]["node_cpu_percent"]} %) | request/reply limit '
+                f'{tcp["request_reply_limit_hz_one_at_a_time"]:,.0f} Hz '
+                f'({tcp["requests_per_cycle"]} x loopback RTT) | |')
     if 'serial_115200' in limits:
         serial = limits['serial_115200']
         rows.append(f'| {name} | highest sustained joint_states, 2 axes, pty | '

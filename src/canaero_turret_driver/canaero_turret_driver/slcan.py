@@ -7,7 +7,8 @@ CANaerospace frame is a 14..22 byte record). That was most of the node's CPU at 
 default rate. `ChunkedSlcanBus` keeps everything else of `slcanBus` (open/close and
 bitrate commands, frame parsing, send) and replaces only the reading: it sleeps in
 select() on the port's file descriptor until bytes arrive (or the timeout ends), reads
-all waiting bytes at once and splits them into records at CR (OK) or BEL (error).
+all waiting bytes at once with one read() on the descriptor and splits them into records
+at CR (OK) or BEL (error).
 
 Written against python-can 4.6.1 (pinned in requirements.txt): it overrides the
 private `_read` and `flush` of `slcanBus`; re-check both when upgrading python-can.
@@ -15,6 +16,7 @@ private `_read` and `flush` of `slcanBus`; re-check both when upgrading python-c
 
 from __future__ import annotations
 
+import os
 import re
 import select
 from collections import deque
@@ -38,18 +40,27 @@ class ChunkedSlcanBus(slcanBus):
         self._pending = bytearray()
         super().__init__(channel, **kwargs)
 
-    def _wait_readable(self, timeout: float | None) -> bool:
-        """Block until the port has bytes (True) or `timeout` s passed (False)."""
+    def _receive(self, timeout: float | None) -> bytes:
+        """The bytes waiting on the port, after up to `timeout` s for the first (b"" if
+        none came): one select() and one read() on the port's descriptor. pyserial's
+        `in_waiting` + `read(n)` would cost an ioctl and a second select() on top, and the
+        wake-up per burst of frames is most of the receive thread's CPU."""
         port = self.serialPortOrig
         try:
             fd = port.fileno()
         except (AttributeError, OSError, ValueError, NotImplementedError):
             # A URL port without a descriptor (socket://, loop://): wait in its own read.
-            data = port.read(1)
-            self._split(data)
-            return bool(data)
+            return port.read(1)
         readable, _, _ = select.select([fd], [], [], timeout)
-        return bool(readable)
+        if not readable:
+            return b""
+        try:
+            data = os.read(fd, 4096)
+        except BlockingIOError:
+            return b""
+        if not data:  # readable and empty: the adapter (or pty) went away
+            raise serial.SerialException("device reports readiness to read but returned no data")
+        return data
 
     def _split(self, data: bytes) -> None:
         """Append bytes and move every complete record (terminator included) to the queue."""
@@ -65,17 +76,12 @@ class ChunkedSlcanBus(slcanBus):
 
     def _read(self, timeout: float | None) -> str | None:
         expiry = serial.Timeout(timeout)
-        port = self.serialPortOrig
         with error_check("Could not read from serial device"):
             while not self._records:
-                waiting = port.in_waiting
-                if waiting:
-                    self._split(port.read(waiting))
-                    continue
-                left = expiry.time_left()
-                if left is not None and left <= 0:
-                    return None
-                if not self._wait_readable(left):
+                data = self._receive(expiry.time_left())
+                if data:
+                    self._split(data)
+                elif expiry.expired():
                     return None
             return self._records.popleft()
 

@@ -105,6 +105,7 @@ class CaptureSettings:
     group_id: int = 0
     request_timeout: float = 0.5
     keepalive_period: float = 0.5
+    batch_reads: bool = True
     default_speed: float = 0.5  # rad/s
     acceleration: float = 3.0  # rad/s^2
     status_period: float = 0.5
@@ -257,7 +258,7 @@ class CaptureDevice(Device):
         self.client = CaptureClient(
             settings.open_stream, group=settings.group_id, timeout=settings.request_timeout,
             expect_greeting=settings.transport == 'tcp',
-            keepalive_period=settings.keepalive_period)
+            keepalive_period=settings.keepalive_period, pipeline_reads=settings.batch_reads)
         #: called with the joint targets of motions the device runs to a known pose
         #: (device presets, go-to-target, levelling): the node points it at
         #: ``controller.commanded_targets.update`` (AxisState.target_position)
@@ -356,18 +357,19 @@ class CaptureDevice(Device):
         (the SRL motion-complete bit is read only every ``status_period``), so the
         controller's one rule applies.
         """
-        client = self.client
-        positions, velocities = {}, {}
+        joints = self.joint_names
         try:
-            for joint in self.joint_names:
-                axis = self.axis(joint)
-                positions[joint] = self.from_device(
-                    joint, client.request('MOT_GetLoadPosition', axis))
-                velocities[joint] = self.from_device(
-                    joint, client.request('MOT_GetMotorSpeed', axis))
+            # one write for every axis: see CaptureClient.read_many
+            values = self.client.read_many([
+                (name, self.axis(joint)) for joint in joints
+                for name in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')])
         except (DeviceNack, DeviceTimeout) as exc:
             self._warn('poll', f'poll skipped: {exc}', 5.0)
             return None
+        positions = {joint: self.from_device(joint, values[2 * i])
+                     for i, joint in enumerate(joints)}
+        velocities = {joint: self.from_device(joint, values[2 * i + 1])
+                      for i, joint in enumerate(joints)}
         stamp = time.time()
         if time.monotonic() >= self._next_status:
             self.refresh_status()
@@ -1034,7 +1036,10 @@ class CaptureStatus(StatusReport):
                    for name, answer in unsupported.items()]
         values += [('link', client.description)] + [
             (f'link.{k}', str(v)) for k, v in client.stats.items()
-        ] + [('link.garbage_bytes', str(client.garbage_bytes))]
+        ] + [('link.garbage_bytes', str(client.garbage_bytes)),
+             ('link.reads', 'batched (one write per poll)' if client.pipelined else
+              'one request at a time' + (' (batched reads came back incomplete)'
+                                         if client.pipeline_reads else ''))]
         part = StatusPart.from_flags('device', active, values)
         if status.get('emergency_stop'):
             part.level = max(part.level, Level.WARN)

@@ -109,6 +109,10 @@ class CaptureDriverNode(GimbalDriverNode):
                               value_range=(1e-3, 1000.0))
         self.request_timeout = p('request_timeout', 0.5, 's to wait for each reply',
                                  value_range=(0.01, 30.0))
+        self.batch_reads = p('batch_reads', True,
+                             'send the poll\'s getters (position and speed of every axis, '
+                             'status registers) in one write and match the replies by opcode '
+                             'and axis; false: one request at a time')
         self.keepalive_period = p('keepalive_period', 0.5,
                                   's; the controller stops the axes after 3 silent periods '
                                   '(0 disables the controller keep-alive)',
@@ -148,7 +152,8 @@ class CaptureDriverNode(GimbalDriverNode):
             transport=self.transport, host=self.host, port=self.port,
             serial_port=self.serial_port, baudrate=self.baudrate, group_id=self.group_id,
             request_timeout=self.request_timeout, keepalive_period=self.keepalive_period,
-            default_speed=self.default_speed, acceleration=self.acceleration,
+            batch_reads=self.batch_reads, default_speed=self.default_speed,
+            acceleration=self.acceleration,
             status_period=self.status_period, home_timeout=self.home_timeout,
             gps_target_slot=self.gps_target_slot, tracker_camera=self.tracker_camera,
             gyro_drift_sensor=self.gyro_drift_sensor, allow_nv_write=self.allow_nv_write,

@@ -330,6 +330,9 @@ class PedestalModel:
         self.nack_queue: deque[tuple[ReplyCode, int | None]] = deque()
         self.nack_all: ReplyCode | None = None  # NACK every request with this code
         self.drop_replies = 0
+        #: play a controller that takes one packet per receive and drops the rest (the
+        #: worst case for the client's batched reads; see CaptureClient.read_many)
+        self.one_request_per_read = False
         self.requests: list[Frame] = []  # every request received (tests inspect it)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -1242,8 +1245,12 @@ class CaptureSession:
 
     def on_bytes(self, data: bytes) -> bytes:
         out = bytearray()
+        handled = False
         for item in self.decoder.feed(data):
             if isinstance(item, Frame):
+                if handled and self.model.one_request_per_read:
+                    continue
+                handled = True
                 out += self.model.handle(item, self)
             elif isinstance(item, ReplyByte):
                 continue  # the host never sends reply bytes; ignore
@@ -1438,6 +1445,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--unknown', action='append', default=[], metavar='COMMAND',
                         help='play a device that does not know this table command: it '
                              'answers 0xA6 "Opcode not Recognized" (repeatable)')
+    parser.add_argument('--one-request-per-read', action='store_true',
+                        help='play a controller that drops every packet after the first in '
+                             'one receive (the driver then reads one request at a time)')
     parser.add_argument('--log-level', default='INFO')
     args = parser.parse_args(argv)
     for name in args.unknown:
@@ -1448,6 +1458,7 @@ def main(argv: list[str] | None = None) -> int:
                           gear_ratio=args.gear_ratio, time_scale=args.time_scale,
                           unknown_commands=args.unknown)
     model.digital_io_present = not args.no_digital_io
+    model.one_request_per_read = args.one_request_per_read
     sim = CaptureSimulator(model, tcp_port=None if args.port < 0 else args.port,
                            pty=args.pty, pty_link=args.pty_link)
     sim.start()

@@ -13,7 +13,7 @@ import pytest
 from capture_driver.client import CaptureClient, DeviceNack, DeviceTimeout, NotConnected
 from capture_driver.protocol import COMMANDS, GeoPoint, ProtocolError, ReplyCode
 from capture_driver.protocol.geometry import aim_at
-from capture_driver.protocol.registers import CMER, SRL
+from capture_driver.protocol.registers import CMER, REGISTERS, SRL
 from capture_driver.sim import CaptureSimulator, PedestalModel
 from gimbal_driver_common.sim_control import read_ready_line
 from gimbal_driver_common.testing import wait_for
@@ -569,3 +569,135 @@ def test_a_jog_stream_sends_speed_and_update_only(client, sim):
     assert _sent_since(sim, before) == {'MOT_SetSpeedMode': 1, 'MOT_SetSpeed': 1,
                                         'MOT_Update': 1}
     wait_for(lambda: client.read_axis(1)[1] == 0.0, 5.0, 'stopped')
+
+
+POLL = [(name, axis) for axis in (1, 2) for name in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')]
+
+
+class CountingWrites:
+    """Wraps a client's stream factory: counts the writes the client makes."""
+
+    def __init__(self, factory) -> None:
+        self.factory = factory
+        self.writes = 0
+
+    def __call__(self):
+        stream = self.factory()
+        write = stream.write
+
+        def counted(data: bytes) -> None:
+            self.writes += 1
+            write(data)
+
+        stream.write = counted
+        return stream
+
+
+def batched_client(sim, transport: str, **kwargs) -> tuple[CaptureClient, CountingWrites]:
+    if transport == 'tcp':
+        writes = CountingWrites(lambda: TcpStream('127.0.0.1', sim.tcp.port))
+        c = CaptureClient(writes, timeout=0.3, **kwargs)
+    else:
+        writes = CountingWrites(lambda: SerialStream(sim.pty.port_name))
+        c = CaptureClient(writes, timeout=0.3, expect_greeting=False, **kwargs)
+    c.connect()
+    return c, writes
+
+
+@pytest.mark.parametrize('transport', ['tcp', 'pty'])
+def test_batched_poll_is_one_write_with_the_same_values(sim, transport):
+    c, writes = batched_client(sim, transport)
+    try:
+        c.move_absolute(1, 12.0, 60.0, 200.0)
+        c.move_absolute(2, -7.5, 60.0, 200.0)
+        settle(c, 1, 12.0)
+        settle(c, 2, -7.5)
+        before = writes.writes
+        values = c.read_many(POLL)
+        assert writes.writes == before + 1  # four getters, one write
+        assert values == [c.request(name, axis) for name, axis in POLL]
+        assert values[0] == pytest.approx(12.0) and values[2] == pytest.approx(-7.5)
+        before = writes.writes
+        registers = c.registers(1)
+        assert writes.writes == before + 1
+        assert registers == {register.name: c.request(register.command, 1)
+                             for register in REGISTERS.values() if register.per_axis}
+        assert c.pipelined and c.stats['timeouts'] == c.stats['incomplete_batches'] == 0
+    finally:
+        c.stop()
+
+
+def test_a_nacked_read_in_a_batch_is_sent_again_alone(sim):
+    c, _ = batched_client(sim, 'tcp')
+    try:
+        sim.model.nack_next(0xF6, COMMANDS['MOT_GetMotorSpeed'].opcode)  # checksum: resend
+        assert c.read_many(POLL) == [0.0] * 4
+        assert c.stats['nacks'] == 1 and c.pipelined
+        sim.model.nack_next(0x16, COMMANDS['MOT_GetLoadPosition'].opcode)
+        assert c.read_many(POLL) == [0.0] * 4  # refused once in the batch, then answered
+        sim.model.nack_all = ReplyCode(0x16)  # refused every time: the poll fails with it
+        with pytest.raises(DeviceNack, match='Pedestal unavailable'):
+            c.read_many(POLL)
+        sim.model.nack_all = None
+        assert c.read_many(POLL) == [0.0] * 4  # and the next poll is whole again
+    finally:
+        c.stop()
+
+
+def test_a_lost_reply_in_a_batch_is_read_again_alone(sim):
+    c, writes = batched_client(sim, 'tcp')
+    try:
+        sim.model.lose_replies(1)
+        assert c.read_many(POLL) == [0.0] * 4
+        assert c.pipelined and c.connected and c.stats['incomplete_batches'] == 1
+        before = writes.writes
+        assert c.read_many(POLL) == [0.0] * 4
+        assert writes.writes == before + 1  # one bad batch does not end batching
+    finally:
+        c.stop()
+
+
+@pytest.mark.parametrize('transport', ['tcp', 'pty'])
+def test_a_controller_that_drops_queued_requests_is_read_one_at_a_time(sim, transport):
+    sim.model.one_request_per_read = True
+    c, writes = batched_client(sim, transport)
+    try:
+        c.move_absolute(1, 4.0, 60.0, 200.0)
+        settle(c, 1, 4.0)
+        for _ in range(3):  # every batch comes back with one reply: the rest read alone
+            assert c.read_many(POLL)[0] == pytest.approx(4.0)
+        assert not c.pipelined
+        before = writes.writes
+        assert c.read_many(POLL)[0] == pytest.approx(4.0)
+        assert writes.writes == before + 4
+        assert c.connected and c.stats['incomplete_batches'] == 3
+        c.connect()  # a new connection tries batches again
+        assert c.pipelined
+    finally:
+        c.stop()
+
+
+def test_batched_reads_off_reads_one_at_a_time(sim):
+    c, writes = batched_client(sim, 'tcp', pipeline_reads=False)
+    try:
+        before = writes.writes
+        assert c.read_many(POLL) == [0.0] * 4
+        assert writes.writes == before + 4 and not c.pipelined
+        with pytest.raises(ProtocolError, match='not a getter'):
+            c.read_many([('MOT_Update', 1), ('MOT_GetLoadPosition', 1)])
+    finally:
+        c.stop()
+
+
+def test_silent_device_during_batched_reads_closes_the_link(sim):
+    c = tcp_client(sim, timeout=0.1, max_timeouts=3)
+    c.connect()
+    sim.set_silent(True)
+    # the silent batch counts once, then the first read alone and its retry: link closed
+    with pytest.raises(NotConnected, match='device silent'):
+        c.read_many(POLL)
+    assert not c.connected and c.stats['timeouts'] == 3
+    sim.set_silent(False)
+    c.connect()
+    assert c.read_many(POLL) == [0.0] * 4
+    c.close()

@@ -321,11 +321,13 @@ class GimbalController:
                 next_tick = time.monotonic()
                 continue
             if self.device.streamed:
-                # each new sample as it arrives, at most publish_rate (10 % slack for jitter)
+                # each new sample as it arrives, at most publish_rate (10 % slack for jitter):
+                # wait for data first, then hold back only a sample that came too soon, so a
+                # device streaming at publish_rate wakes this thread once per sample, not twice
+                self.device.wait_for_data(STREAM_WAIT_S)
                 hold = last_publish + 0.9 * period - time.monotonic()
                 if hold > 0 and self._sleep(hold):
                     continue
-                self.device.wait_for_data(STREAM_WAIT_S)
             try:
                 with device_boundary():
                     if not self.device.link_healthy():

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import abc
 import contextlib
+import os
 import select
 import socket
 import threading
@@ -78,10 +79,12 @@ class ByteStream(abc.ABC):
 class TcpStream(ByteStream):
     """TCP client link (e.g. a Capture pedestal on port 4949)."""
 
-    def __init__(self, host: str, port: int, connect_timeout: float = 2.0) -> None:
+    def __init__(self, host: str, port: int, connect_timeout: float = 2.0,
+                 write_timeout: float = 2.0) -> None:
         self.host = host
         self.port = int(port)
         self.connect_timeout = connect_timeout
+        self.write_timeout = write_timeout
         self._sock: socket.socket | None = None
         self._write_lock = threading.Lock()
 
@@ -101,6 +104,8 @@ class TcpStream(ByteStream):
             raise TransportError(f'cannot connect to {self.description}: {exc}') from exc
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+        # Non-blocking for good: read and write wait in poll() themselves (see read).
+        sock.setblocking(False)
         self._sock = sock
 
     def close(self) -> None:
@@ -117,28 +122,64 @@ class TcpStream(ByteStream):
         return sock
 
     def write(self, data: bytes) -> None:
+        """Send everything, waiting up to ``write_timeout`` for room in the send buffer
+        (a device that stops reading fills it; the link is then reported lost)."""
         sock = self._require()
         with self._write_lock:
+            pending = memoryview(data)
+            deadline = None
             try:
-                sock.sendall(data)
+                while pending:
+                    try:
+                        pending = pending[sock.send(pending):]
+                    except BlockingIOError:
+                        now = time.monotonic()
+                        deadline = deadline or now + self.write_timeout
+                        if now >= deadline or not _wait_ready(sock, select.POLLOUT,
+                                                              deadline - now):
+                            raise LinkClosed(
+                                f'{self.description}: send stalled for '
+                                f'{self.write_timeout:g} s (the device does not read)'
+                            ) from None
             except OSError as exc:
                 raise LinkClosed(f'{self.description}: send failed: {exc}') from exc
 
     def read(self, max_bytes: int, timeout: float) -> bytes:
+        """Wait in poll() for data, then recv without blocking.
+
+        The socket stays non-blocking, so neither call goes through Python's socket
+        timeout: ``settimeout`` costs an ioctl on every call, and a request/reply client
+        reads with a new timeout each time (and drains with timeout 0 before each
+        request). Per Capture transaction that was six system calls and an exception;
+        now it is four and none.
+        """
         sock = self._require()
         try:
-            # settimeout too: it raises EBADF when another thread closed the socket.
-            sock.settimeout(max(timeout, 0.0))
+            if not _wait_ready(sock, select.POLLIN, timeout):
+                return b''
             data = sock.recv(max_bytes)
-        except (TimeoutError, BlockingIOError):
+        except BlockingIOError:
             return b''
-        except OSError as exc:
+        except (OSError, ValueError) as exc:
+            # A socket closed by another thread: poll() reports POLLNVAL (or its fileno is
+            # -1: ValueError) and recv raises EBADF.
             if self._sock is None:
                 raise LinkClosed(f'{self.description} was closed') from exc
             raise LinkClosed(f'{self.description}: receive failed: {exc}') from exc
         if not data:
             raise LinkClosed(f'{self.description}: peer closed the connection')
         return data
+
+
+def _wait_ready(sock: socket.socket, event: int, timeout: float) -> bool:
+    """True when ``sock`` is ready for ``event`` (or in error/hang-up) within ``timeout``.
+
+    A poll object per call: one shared object would refuse concurrent use from two
+    threads, and select() cannot take descriptors above FD_SETSIZE.
+    """
+    poller = select.poll()
+    poller.register(sock, event)
+    return bool(poller.poll(max(timeout, 0.0) * 1000.0))
 
 
 class SerialStream(ByteStream):
@@ -197,34 +238,29 @@ class SerialStream(ByteStream):
 
     def read(self, max_bytes: int, timeout: float) -> bytes:
         """Whatever is buffered (up to ``max_bytes``), waiting up to ``timeout`` for the
-        first byte.
+        first byte: one select() and one read() on the port's descriptor.
 
-        The wait is a select() on the port, not pyserial's ``timeout``: assigning that
-        re-applies the whole termios set-up (tcgetattr + tcsetattr) to the port on every
-        call, 50-100 times a second for a streaming reader, and a request/reply client
-        passes a different timeout each time. (On the pty the CPU cost is within noise;
-        a USB adapter's driver may act on each tcsetattr.)
+        Not pyserial's ``timeout`` and ``read``: assigning the timeout re-applies the whole
+        termios set-up (tcgetattr + tcsetattr) on every call, and ``in_waiting`` +
+        ``read(n)`` add an ioctl and a second select() per wake-up. A streaming reader
+        wakes 50-350 times a second, so the system calls per wake-up are its CPU.
         """
         port = self._require()
         try:
-            waiting = port.in_waiting
-            if not waiting:
-                if timeout <= 0:
-                    return b''
-                ready, _, _ = select.select([port.fileno()], [], [], timeout)
-                if not ready:
-                    return b''
-                waiting = port.in_waiting
-                if not waiting:
-                    # readable with nothing buffered: pyserial's read raises for a USB
-                    # adapter or pty that went away (or returns the byte that just came)
-                    return port.read(1)
-            return port.read(min(waiting, max_bytes))
+            ready, _, _ = select.select([port.fileno()], [], [], max(timeout, 0.0))
+            if not ready:
+                return b''
+            data = os.read(port.fileno(), max_bytes)
+        except BlockingIOError:
+            return b''
         except (serial.SerialException, OSError, TypeError, AttributeError, ValueError) as exc:
-            # pyserial raises SerialException("device reports readiness to read but
-            # returned no data") when a USB adapter or pty disappears; a port closed by
-            # another thread has no descriptor (ValueError/TypeError from select).
+            # A USB adapter or pty that disappears raises EIO; a port closed by another
+            # thread has no descriptor (ValueError/TypeError from select).
             raise LinkClosed(f'{self.description}: read failed: {exc}') from exc
+        if not data:  # readable and empty: the device went away
+            raise LinkClosed(f'{self.description}: device reports readiness to read but '
+                             'returned no data')
+        return data
 
 
 def stream_from_url(url: str, connect_timeout: float = 2.0) -> ByteStream:

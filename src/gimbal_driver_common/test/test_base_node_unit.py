@@ -6,15 +6,18 @@ from pathlib import Path
 
 import pytest
 import rclpy
+import rclpy.executors
 from rclpy.event_handler import EventHandler
 from rclpy.parameter import Parameter
 
 from gimbal_driver_common.policies import scan_joints
+from gimbal_driver_common.ros import messages
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.look_at import LookAtRefused
 from gimbal_driver_common.ros.parameters import ParameterError
-from gimbal_driver_common.testing import DomainLease
+from gimbal_driver_common.testing import DomainLease, wait_for
 from gimbal_msgs.action import LookAt
+from gimbal_msgs.msg import GimbalStatus
 
 pytestmark = pytest.mark.ros
 
@@ -158,5 +161,35 @@ def test_publishers_carry_no_qos_event_handlers_subscriptions_keep_theirs(contex
         assert publishers and subscriptions
         # two per subscription (incompatible QoS, incompatible type), none per publisher
         assert len(handlers) == 2 * len(subscriptions)
+    finally:
+        node.destroy_node()
+
+
+def test_status_is_built_only_while_someone_subscribes(context, monkeypatch) -> None:
+    """~/status (10 Hz) is built and published only while the topic has a subscriber."""
+    node = make(context)
+    built: list[GimbalStatus] = []
+
+    def counted(*args: object) -> GimbalStatus:
+        built.append(real(*args))
+        return built[-1]
+
+    real = messages.gimbal_status
+    monkeypatch.setattr(messages, 'gimbal_status', counted)
+    received: list[GimbalStatus] = []
+    try:
+        node._publish_status()
+        assert built == []
+        node.create_subscription(GimbalStatus, '~/status', received.append, 10)
+        wait_for(lambda: node._status_pub.get_subscription_count() == 1, 10.0,
+                 'the subscription to match')
+        node._publish_status()
+        assert len(built) == 1
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        wait_for(lambda: executor.spin_once(timeout_sec=0.1) or received, 10.0,
+                 'the status message')
+        assert received[0].connection == built[0].connection
+        executor.shutdown()
     finally:
         node.destroy_node()

@@ -178,3 +178,38 @@ def test_tcp_close_from_another_thread_raises_link_closed() -> None:
     finally:
         stream.close()
         server.close()
+
+
+def test_tcp_write_to_a_device_that_stops_reading_fails_after_write_timeout() -> None:
+    listener = socket.create_server(('127.0.0.1', 0))
+    accepted: list[socket.socket] = []
+    threading.Thread(target=lambda: accepted.append(listener.accept()[0]), daemon=True).start()
+    stream = TcpStream('127.0.0.1', listener.getsockname()[1], write_timeout=0.2)
+    try:
+        stream.open()
+        chunk = b'x' * 65536
+        with pytest.raises(LinkClosed, match='send stalled'):
+            for _ in range(10_000):  # the peer never reads: the buffers fill, then it stalls
+                stream.write(chunk)
+    finally:
+        stream.close()
+        for sock in [*accepted, listener]:
+            sock.close()
+
+
+def test_tcp_large_write_waits_for_room_and_arrives_whole() -> None:
+    server = EchoServer()
+    stream = TcpStream('127.0.0.1', server.port)
+    try:
+        stream.open()
+        payload = bytes(range(256)) * 8192  # 2 MiB: more than the socket buffers hold
+        received = bytearray()
+        reader = threading.Thread(target=lambda: received.extend(
+            read_exactly(stream, len(payload), 10.0)), daemon=True)
+        reader.start()
+        stream.write(payload)
+        reader.join(15.0)
+        assert bytes(received) == payload
+    finally:
+        stream.close()
+        server.close()

@@ -358,6 +358,11 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
             self.get_name(), self.get_clock().now().to_msg(), hardware_id, parts))
 
     def _publish_status(self) -> None:
+        # Built only while someone listens (ros2 topic echo, rosbag, a supervisor): a
+        # GimbalStatus at 10 Hz that nobody reads was most of the housekeeping thread's
+        # CPU. A new subscriber gets its first message within one status period.
+        if not self._status_pub.get_subscription_count():
+            return
         msg = messages.gimbal_status(self.controller, self.joint_names)
         msg.header.stamp = self.get_clock().now().to_msg()
         self._status_pub.publish(msg)
