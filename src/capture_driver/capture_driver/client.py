@@ -134,9 +134,10 @@ class CaptureClient:
         self._connect_opcode = command('COM_Connect').opcode
         self._last_activity = 0.0
         self._consecutive_timeouts = 0
-        # axis -> (mode, acceleration, speed) this client's last motion set-up left on the
-        # device; forgotten on connect and on any other command that changes something
-        self._setups: dict[int, tuple[str, float | None, float | None]] = {}
+        # axis -> (mode, acceleration, speed, TUM armed) this client's last motion set-up
+        # left on the device (armed: a TUM was sent for the next absolute move, see
+        # move_absolute); forgotten on connect and on any other command that changes something
+        self._setups: dict[int, tuple[str, float | None, float | None, bool]] = {}
         self._in_setup = False
         #: input may hold a reply to an earlier request (see :meth:`_drain`)
         self._stale_possible = True
@@ -554,12 +555,18 @@ class CaptureClient:
 
         When this client's last set-up of the axis was an absolute move and nothing else was
         commanded since, the mode commands (SetPositionMode, SetPositionAbsolute) and an
-        unchanged acceleration and speed are left out: a stream of position commands at one
-        speed costs 3 round trips instead of 7. 4.2.14: without TUM "the motion profile will
-        use the last parameters", and TUM builds the new profile from the acceleration, speed
-        and position registers, so an unchanged register need not be written again. TUM
-        ("advisable before each command session"), the position and MOT_Update are always
-        sent.
+        unchanged acceleration and speed are left out. 4.2.14: without TUM "the motion
+        profile will use the last parameters", and TUM builds the new profile from the
+        acceleration, speed and position registers, so an unchanged register need not be
+        written again.
+
+        TUM is sent before every session ("advisable before each command session", 4.2.14),
+        but for a stream of moves it is sent for the *next* session right after this one's
+        MOT_Update: the 7.1 sequence already puts register writes between TUM and
+        MOT_Update, and only reads (the poll) come between them here. A stream at one speed
+        then costs SendPosition and MOT_Update before the device acts, and TUM after it:
+        the same 3 transactions, one less round trip on the way to MOT_Update. Anything else
+        commanded on the link forgets the armed TUM, and the next move sends it first again.
         """
         speed = abs(speed_deg_s)
         with self._lock:
@@ -568,7 +575,8 @@ class CaptureClient:
             steps: list[tuple[str, Any]] = []
             if not same_mode:
                 steps.append(('MOT_SetPositionMode', None))
-            steps.append(('MOT_SetTum', None))
+            if not (same_mode and known[3]):  # no TUM armed for this session
+                steps.append(('MOT_SetTum', None))
             if not same_mode:
                 steps.append(('MOT_SetPositionAbsolute', None))
             if not same_mode or known[1] != acceleration:
@@ -577,7 +585,18 @@ class CaptureClient:
                 steps.append(('MOT_SetSpeed', speed))
             steps += [('MOT_SendPosition', position_deg), ('MOT_Update', None)]
             self._run_setup(axis, steps)
-            self._setups[axis] = ('absolute', acceleration, speed)
+            self._setups[axis] = ('absolute', acceleration, speed, self._arm_tum(axis))
+
+    def _arm_tum(self, axis: int) -> bool:
+        """MOT_SetTum for the axis' next session (see :meth:`move_absolute`); False when it
+        failed, so that session sends it itself. The move already happened: a failure here
+        is not the move's."""
+        try:
+            self._run_setup(axis, [('MOT_SetTum', None)])
+        except CaptureError as exc:
+            LOG.debug('TUM for the next move of axis %d: %s', axis, exc)
+            return False
+        return True
 
     def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:
         """Speed mode (4.2.9): the axis turns at ``velocity_deg_s`` until told otherwise.
@@ -596,7 +615,7 @@ class CaptureClient:
                 steps.append(('MOT_SetAcceleration', acceleration))
             steps += [('MOT_SetSpeed', velocity_deg_s), ('MOT_Update', None)]
             self._run_setup(axis, steps)
-            self._setups[axis] = ('speed', acceleration, velocity_deg_s)
+            self._setups[axis] = ('speed', acceleration, velocity_deg_s, False)
 
     def stop_axis(self, axis: int) -> None:
         """Decelerate to rest: speed mode with speed 0 (works from position or speed mode).
@@ -605,7 +624,7 @@ class CaptureClient:
             known = self._setups.pop(axis, None)
             self._run_setup(axis, [('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
                                    ('MOT_Update', None)])
-            self._setups[axis] = ('speed', known[1] if known else None, 0.0)
+            self._setups[axis] = ('speed', known[1] if known else None, 0.0, False)
 
     def _run_setup(self, axis: int, steps: list[tuple[str, Any]]) -> None:
         """Send one axis' motion set-up under the lock; the setters in it do not count as

@@ -11,7 +11,7 @@ import threading
 import pytest
 
 from capture_driver.client import CaptureClient, DeviceNack, DeviceTimeout, NotConnected
-from capture_driver.protocol import COMMANDS, GeoPoint, ProtocolError, ReplyCode
+from capture_driver.protocol import BY_OPCODE, COMMANDS, GeoPoint, ProtocolError, ReplyCode
 from capture_driver.protocol.geometry import aim_at
 from capture_driver.protocol.registers import CMER, REGISTERS, SRL
 from capture_driver.sim import CaptureSimulator, PedestalModel
@@ -534,9 +534,10 @@ def test_repeated_absolute_moves_send_only_what_changed(client, sim):
 
 
 def test_anything_else_commanded_brings_back_the_full_setup(client, sim):
-    full = dict.fromkeys(('MOT_SetPositionMode', 'MOT_SetTum', 'MOT_SetPositionAbsolute',
-                          'MOT_SetAcceleration', 'MOT_SetSpeed', 'MOT_SendPosition',
-                          'MOT_Update'), 1)
+    # the whole 7.1 set-up, then the TUM armed for the next move
+    full = {**dict.fromkeys(('MOT_SetPositionMode', 'MOT_SetPositionAbsolute',
+                             'MOT_SetAcceleration', 'MOT_SetSpeed', 'MOT_SendPosition',
+                             'MOT_Update'), 1), 'MOT_SetTum': 2}
     client.move_absolute(2, 5.0, 60.0, 200.0)
     settle(client, 2, 5.0)
     client.request('STB_StabilizationOff')  # any other setter: the mode may have changed
@@ -555,6 +556,44 @@ def test_anything_else_commanded_brings_back_the_full_setup(client, sim):
     client.move_absolute(2, 0.0, 60.0, 200.0)
     assert _sent_since(sim, before) == full
     settle(client, 2, 0.0)
+
+
+def test_every_update_of_a_move_stream_has_its_own_tum_sent_after_the_previous_one(
+        client, sim):
+    """4.2.14: TUM before each command session. In a stream it is sent right after the
+    previous MOT_Update (armed for the next session), so the device acts one round trip
+    sooner; a poll between them changes nothing."""
+    start = len(sim.model.requests)
+    for i in range(6):
+        client.move_absolute(1, 2.0 + i, 60.0, 200.0)
+        client.read_many(POLL)  # the poll between two commands
+    sent = [(BY_OPCODE[f.opcode].name, f.axis) for f in list(sim.model.requests)[start:]]
+    names = [name for name, axis in sent if axis == 1 and name in SETUP_COMMANDS]
+    updates = [i for i, name in enumerate(names) if name == 'MOT_Update']
+    assert len(updates) == 6
+    previous = -1
+    for index in updates:  # exactly one TUM since the previous MOT_Update
+        assert names[previous + 1:index].count('MOT_SetTum') == 1, names
+        previous = index
+    # from the second move on: position and update, then at once the next session's TUM
+    # (before the poll), also after the last move
+    assert names[updates[1] - 1:updates[1] + 2] == ['MOT_SendPosition', 'MOT_Update',
+                                                    'MOT_SetTum']
+    after_update = [sent[i + 1] for i, request in enumerate(sent)
+                    if request == ('MOT_Update', 1)]
+    assert after_update == [('MOT_SetTum', 1)] * 6
+    settle(client, 1, 7.0)
+
+
+def test_a_failed_tum_for_the_next_move_is_sent_by_that_move(client, sim):
+    client.move_absolute(1, 3.0, 60.0, 200.0)
+    sim.model.nack_next(0x16, COMMANDS['MOT_SetTum'].opcode)  # refuses the armed TUM
+    client.move_absolute(1, 4.0, 60.0, 200.0)  # the move itself worked
+    before = _counts(sim)
+    client.move_absolute(1, 5.0, 60.0, 200.0)
+    assert _sent_since(sim, before) == {'MOT_SetTum': 2, 'MOT_SendPosition': 1,
+                                        'MOT_Update': 1}
+    settle(client, 1, 5.0)
 
 
 def test_a_jog_stream_sends_speed_and_update_only(client, sim):
