@@ -18,6 +18,7 @@ from capture_driver.protocol import COMMANDS
 from capture_driver.sim import CaptureSimulator, PedestalModel
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
 from gimbal_driver_common.device import AxisStateCode
+from gimbal_driver_common.diagnostics import Level
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.policies import Motion
@@ -112,6 +113,31 @@ def test_connect_reads_the_identity(tcp_rig):
     assert info.hardware_id == 'capture-pnCAP-PT2-SIM-sn24017-hw3.1-fw2.24.0'
     assert tcp_rig.device.description() == f'tcp://127.0.0.1:{tcp_rig.sim.tcp.port}'
     assert tcp_rig.device.has_imu and tcp_rig.device.has_gps
+
+
+def _device_part(rig):
+    return next(p for p in rig.device.capabilities.status.parts() if p.part == 'device')
+
+
+@pytest.mark.parametrize('drops_queued', [False, True])
+def test_poll_reads_batched_or_falls_back_and_says_so_without_a_warning(sim, drops_queued):
+    """A controller that drops queued requests is read one request at a time after three
+    incomplete batches; the poll goes on, and diagnostics say how it reads (level OK)."""
+    sim.model.one_request_per_read = drops_queued
+    rig = Rig(sim, 'tcp')
+    try:
+        sim.model.set_pose(1, 20.0)
+        rig.wait_positions({'pan': -math.radians(20.0)})
+        expected = ('one request at a time (batched reads came back incomplete)'
+                    if drops_queued else 'batched (one write per poll)')
+        wait_for(lambda: dict(_device_part(rig).values).get('link.reads') == expected, 10.0,
+                 f'link.reads = {expected}')
+        sim.model.set_pose(1, -5.0)
+        rig.wait_positions({'pan': math.radians(5.0)})  # still polling
+        assert _device_part(rig).level == Level.OK
+        assert rig.device.client.pipelined is not drops_queued
+    finally:
+        rig.close()
 
 
 def test_positions_convert_from_device_degrees_and_signs(tcp_rig):
