@@ -6,9 +6,10 @@ thousand select() calls per second plus one Python round trip per received byte 
 CANaerospace frame is a 14..22 byte record). That was most of the node's CPU at its
 default rate. `ChunkedSlcanBus` keeps everything else of `slcanBus` (open/close and
 bitrate commands, frame parsing, send) and replaces only the reading: it sleeps in
-select() on the port's file descriptor until bytes arrive (or the timeout ends), reads
-all waiting bytes at once with one read() on the descriptor and splits them into records
-at CR (OK) or BEL (error).
+poll() on the port's file descriptor until bytes arrive (or the timeout ends), reads
+all waiting bytes at once with one read() on the descriptor
+(`gimbal_driver_common.transport.read_ready`) and splits them into records at CR (OK) or
+BEL (error).
 
 Written against python-can 4.6.1 (pinned in requirements.txt): it overrides the
 private `_read` and `flush` of `slcanBus`; re-check both when upgrading python-can.
@@ -16,9 +17,7 @@ private `_read` and `flush` of `slcanBus`; re-check both when upgrading python-c
 
 from __future__ import annotations
 
-import os
 import re
-import select
 from collections import deque
 from typing import Any
 
@@ -27,13 +26,15 @@ import serial
 from can.exceptions import error_check
 from can.interfaces.slcan import slcanBus
 
+from gimbal_driver_common.transport import read_ready
+
 # A record ends at CR (also the adapter's bare OK) or BEL (the adapter's error reply).
 RECORD = re.compile(rb"[^\r\x07]*[\r\x07]")
 MAX_RECORD = 64  # longer than any slcan record of a classic CAN frame (T + 8 + 1 + 16)
 
 
 class ChunkedSlcanBus(slcanBus):
-    """`slcanBus` that reads whole chunks and waits in select() instead of polling."""
+    """`slcanBus` that reads whole chunks and sleeps in poll() instead of polling the port."""
 
     def __init__(self, channel: str, **kwargs: Any) -> None:
         self._records: deque[str] = deque()
@@ -42,21 +43,17 @@ class ChunkedSlcanBus(slcanBus):
 
     def _receive(self, timeout: float | None) -> bytes:
         """The bytes waiting on the port, after up to `timeout` s for the first (b"" if
-        none came): one select() and one read() on the port's descriptor. pyserial's
-        `in_waiting` + `read(n)` would cost an ioctl and a second select() on top, and the
-        wake-up per burst of frames is most of the receive thread's CPU."""
+        none came): the suite's one descriptor read (`transport.read_ready`, one poll()
+        and one read()); the wake-up per burst of frames is most of the receive thread's
+        CPU."""
         port = self.serialPortOrig
         try:
             fd = port.fileno()
         except (AttributeError, OSError, ValueError, NotImplementedError):
             # A URL port without a descriptor (socket://, loop://): wait in its own read.
             return port.read(1)
-        readable, _, _ = select.select([fd], [], [], timeout)
-        if not readable:
-            return b""
-        try:
-            data = os.read(fd, 4096)
-        except BlockingIOError:
+        data = read_ready(fd, 4096, timeout)
+        if data is None:
             return b""
         if not data:  # readable and empty: the adapter (or pty) went away
             raise serial.SerialException("device reports readiness to read but returned no data")

@@ -57,7 +57,7 @@ GPS_FIX_COMMANDS = ('GPS_PositionReady', 'GPS_GetLatitude', 'GPS_GetLongitude')
 
 #: batched reads in a row that came back incomplete before :meth:`CaptureClient.read_many`
 #: falls back to one request at a time for the connection
-PIPELINE_FAILURES = 3
+BATCH_FAILURES = 3
 
 SCAN_COMMANDS = {
     'zigzag': 'SCN_StartScanZigZag',
@@ -116,7 +116,7 @@ class CaptureClient:
         keepalive_count: int = 3,
         resync_gap: float = 0.05,
         max_timeouts: int = 3,
-        pipeline_reads: bool = True,
+        batch_reads: bool = True,
     ) -> None:
         self._stream_factory = stream_factory
         self.group = group
@@ -142,8 +142,8 @@ class CaptureClient:
         #: input may hold a reply to an earlier request (see :meth:`_drain`)
         self._stale_possible = True
         #: getters of :meth:`read_many` go out in one write (False: one at a time)
-        self.pipeline_reads = pipeline_reads
-        self.pipelined = pipeline_reads
+        self.batch_reads = batch_reads
+        self.batching = batch_reads
         self._batch_failures = 0
         self._worker: threading.Thread | None = None
         self._stop = threading.Event()
@@ -182,7 +182,7 @@ class CaptureClient:
             self._stream = stream
             self._decoder.reset()
             self._stale_possible = True
-            self.pipelined, self._batch_failures = self.pipeline_reads, 0
+            self.batching, self._batch_failures = self.batch_reads, 0
             self.unsupported = {}  # a new connection may be a different controller
             try:
                 self._handshake()
@@ -325,8 +325,8 @@ class CaptureClient:
         document shows one request at a time and says nothing of queuing, so this is our
         reading of it, with a way back: a batch that gets a NACK or misses a reply has
         the missing reads sent again one at a time (with :meth:`request`'s retry rules),
-        and after ``PIPELINE_FAILURES`` such batches in a row the client reads one at a
-        time for the rest of the connection (:attr:`pipelined` says which, in diagnostics).
+        and after ``BATCH_FAILURES`` such batches in a row the client reads one at a
+        time for the rest of the connection (:attr:`batching` says which, in diagnostics).
         """
         frames = []
         for name, axis in reads:
@@ -335,7 +335,7 @@ class CaptureClient:
                 raise ProtocolError(f'{name} is not a getter: only getters are batched')
             frames.append((cmd, axis, cmd.frame(axis, None, self.group)))
         with self._lock:
-            if not self.pipelined or len(frames) < 2:
+            if not self.batching or len(frames) < 2:
                 return [self._request_locked(cmd.name, axis, None) for cmd, axis, _ in frames]
             replies = self._transact_batch([frame for _, _, frame in frames])
             values = []
@@ -356,11 +356,7 @@ class CaptureClient:
         replies: list[Frame | None] = [None] * len(frames)
         waiting = len(frames)
         try:
-            if self._stale_possible:
-                self._drain(stream)
-            stream.write(b''.join(frame.encode() for frame in frames))
-            self._last_activity = time.monotonic()
-            self._stale_possible = True
+            self._send(stream, b''.join(frame.encode() for frame in frames))
             deadline = self._last_activity + self.timeout
             while waiting and (remaining := deadline - time.monotonic()) > 0:
                 wait = min(remaining, self.resync_gap) if self._decoder.has_partial \
@@ -384,12 +380,7 @@ class CaptureClient:
             self._link_lost(f'batched read: {exc}')
             raise NotConnected(f'batched read: link lost ({exc})') from exc
         if waiting == len(frames):  # not one answer: a timeout, as for a single request
-            self.stats['timeouts'] += 1
-            self._consecutive_timeouts += 1
-            if self._consecutive_timeouts >= self.max_timeouts:
-                self._link_lost(f'device silent: {self._consecutive_timeouts} requests '
-                                'unanswered')
-                raise NotConnected('batched read: device silent, link closed for reconnect')
+            self._count_timeout('batched read')
         if all(reply is not None for reply in replies):
             self._stale_possible = False
             self._consecutive_timeouts = 0
@@ -397,8 +388,8 @@ class CaptureClient:
         else:
             self.stats['incomplete_batches'] += 1
             self._batch_failures += 1
-            if self._batch_failures >= PIPELINE_FAILURES:
-                self.pipelined = False
+            if self._batch_failures >= BATCH_FAILURES:
+                self.batching = False
                 LOG.info('%d batched reads in a row came back incomplete: reading one '
                          'request at a time on this connection', self._batch_failures)
         return replies
@@ -409,11 +400,7 @@ class CaptureClient:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
         self.stats['requests'] += 1
         try:
-            if self._stale_possible:
-                self._drain(stream)
-            stream.write(frame.encode())
-            self._last_activity = time.monotonic()
-            self._stale_possible = True  # until the reply is in
+            self._send(stream, frame.encode())
             reply = self._await_reply(stream, name, frame, expect_data, timeout)
         except TransportError as exc:
             self._link_lost(f'{name}: {exc}')
@@ -421,6 +408,15 @@ class CaptureClient:
         self._stale_possible = False
         self._consecutive_timeouts = 0
         return reply
+
+    def _send(self, stream: ByteStream, data: bytes) -> None:
+        """Write one request (or a batch), after draining stale input if there can be any;
+        until its reply is in, input may hold a stale reply again."""
+        if self._stale_possible:
+            self._drain(stream)
+        stream.write(data)
+        self._last_activity = time.monotonic()
+        self._stale_possible = True
 
     def _drain(self, stream: ByteStream) -> None:
         """Discard stale input before a new request.
@@ -464,12 +460,17 @@ class CaptureClient:
                     if expect_data and item.opcode == frame.opcode and item.axis == frame.axis:
                         return item
                     self.stats['stale'] += 1
+        self._count_timeout(name)
+        raise DeviceTimeout(f'{self._label(name, frame)}: no reply within {timeout:g} s')
+
+    def _count_timeout(self, what: str) -> None:
+        """One more unanswered request; after ``max_timeouts`` in a row the link is closed
+        for the supervisor to reopen (raises :class:`NotConnected`)."""
         self.stats['timeouts'] += 1
         self._consecutive_timeouts += 1
         if self._consecutive_timeouts >= self.max_timeouts:
             self._link_lost(f'device silent: {self._consecutive_timeouts} requests unanswered')
-            raise NotConnected(f'{name}: device silent, link closed for reconnect')
-        raise DeviceTimeout(f'{self._label(name, frame)}: no reply within {timeout:g} s')
+            raise NotConnected(f'{what}: device silent, link closed for reconnect')
 
     @staticmethod
     def _label(name: str, frame: Frame) -> str:

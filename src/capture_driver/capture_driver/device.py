@@ -258,7 +258,7 @@ class CaptureDevice(Device):
         self.client = CaptureClient(
             settings.open_stream, group=settings.group_id, timeout=settings.request_timeout,
             expect_greeting=settings.transport == 'tcp',
-            keepalive_period=settings.keepalive_period, pipeline_reads=settings.batch_reads)
+            keepalive_period=settings.keepalive_period, batch_reads=settings.batch_reads)
         #: called with the joint targets of motions the device runs to a known pose
         #: (device presets, go-to-target, levelling): the node points it at
         #: ``controller.commanded_targets.update`` (AxisState.target_position)
@@ -1037,9 +1037,9 @@ class CaptureStatus(StatusReport):
         values += [('link', client.description)] + [
             (f'link.{k}', str(v)) for k, v in client.stats.items()
         ] + [('link.garbage_bytes', str(client.garbage_bytes)),
-             ('link.reads', 'batched (one write per poll)' if client.pipelined else
+             ('link.reads', 'batched (one write per poll)' if client.batching else
               'one request at a time' + (' (batched reads came back incomplete)'
-                                         if client.pipeline_reads else ''))]
+                                         if client.batch_reads else ''))]
         part = StatusPart.from_flags('device', active, values)
         if status.get('emergency_stop'):
             part.level = max(part.level, Level.WARN)

@@ -661,7 +661,7 @@ def test_batched_poll_is_one_write_with_the_same_values(sim, transport):
         assert writes.writes == before + 1
         assert registers == {register.name: c.request(register.command, 1)
                              for register in REGISTERS.values() if register.per_axis}
-        assert c.pipelined and c.stats['timeouts'] == c.stats['incomplete_batches'] == 0
+        assert c.batching and c.stats['timeouts'] == c.stats['incomplete_batches'] == 0
     finally:
         c.stop()
 
@@ -671,7 +671,7 @@ def test_a_nacked_read_in_a_batch_is_sent_again_alone(sim):
     try:
         sim.model.nack_next(0xF6, COMMANDS['MOT_GetMotorSpeed'].opcode)  # checksum: resend
         assert c.read_many(POLL) == [0.0] * 4
-        assert c.stats['nacks'] == 1 and c.pipelined
+        assert c.stats['nacks'] == 1 and c.batching
         sim.model.nack_next(0x16, COMMANDS['MOT_GetLoadPosition'].opcode)
         assert c.read_many(POLL) == [0.0] * 4  # refused once in the batch, then answered
         sim.model.nack_all = ReplyCode(0x16)  # refused every time: the poll fails with it
@@ -688,7 +688,7 @@ def test_a_lost_reply_in_a_batch_is_read_again_alone(sim):
     try:
         sim.model.lose_replies(1)
         assert c.read_many(POLL) == [0.0] * 4
-        assert c.pipelined and c.connected and c.stats['incomplete_batches'] == 1
+        assert c.batching and c.connected and c.stats['incomplete_batches'] == 1
         before = writes.writes
         assert c.read_many(POLL) == [0.0] * 4
         assert writes.writes == before + 1  # one bad batch does not end batching
@@ -705,23 +705,23 @@ def test_a_controller_that_drops_queued_requests_is_read_one_at_a_time(sim, tran
         settle(c, 1, 4.0)
         for _ in range(3):  # every batch comes back with one reply: the rest read alone
             assert c.read_many(POLL)[0] == pytest.approx(4.0)
-        assert not c.pipelined
+        assert not c.batching
         before = writes.writes
         assert c.read_many(POLL)[0] == pytest.approx(4.0)
         assert writes.writes == before + 4
         assert c.connected and c.stats['incomplete_batches'] == 3
         c.connect()  # a new connection tries batches again
-        assert c.pipelined
+        assert c.batching
     finally:
         c.stop()
 
 
 def test_batched_reads_off_reads_one_at_a_time(sim):
-    c, writes = batched_client(sim, 'tcp', pipeline_reads=False)
+    c, writes = batched_client(sim, 'tcp', batch_reads=False)
     try:
         before = writes.writes
         assert c.read_many(POLL) == [0.0] * 4
-        assert writes.writes == before + 4 and not c.pipelined
+        assert writes.writes == before + 4 and not c.batching
         with pytest.raises(ProtocolError, match='not a getter'):
             c.read_many([('MOT_Update', 1), ('MOT_GetLoadPosition', 1)])
     finally:

@@ -135,7 +135,7 @@ def test_poll_reads_batched_or_falls_back_and_says_so_without_a_warning(sim, dro
         sim.model.set_pose(1, -5.0)
         rig.wait_positions({'pan': math.radians(5.0)})  # still polling
         assert _device_part(rig).level == Level.OK
-        assert rig.device.client.pipelined is not drops_queued
+        assert rig.device.client.batching is not drops_queued
     finally:
         rig.close()
 

@@ -135,8 +135,8 @@ class TcpStream(ByteStream):
                     except BlockingIOError:
                         now = time.monotonic()
                         deadline = deadline or now + self.write_timeout
-                        if now >= deadline or not _wait_ready(sock, select.POLLOUT,
-                                                              deadline - now):
+                        if now >= deadline or not wait_ready(sock.fileno(), select.POLLOUT,
+                                                             deadline - now):
                             raise LinkClosed(
                                 f'{self.description}: send stalled for '
                                 f'{self.write_timeout:g} s (the device does not read)'
@@ -145,41 +145,54 @@ class TcpStream(ByteStream):
                 raise LinkClosed(f'{self.description}: send failed: {exc}') from exc
 
     def read(self, max_bytes: int, timeout: float) -> bytes:
-        """Wait in poll() for data, then recv without blocking.
-
-        The socket stays non-blocking, so neither call goes through Python's socket
-        timeout: ``settimeout`` costs an ioctl on every call, and a request/reply client
-        reads with a new timeout each time (and drains with timeout 0 before each
-        request). Per Capture transaction that was six system calls and an exception;
-        now it is four and none.
-        """
+        """:func:`read_ready` on the socket, which stays non-blocking: a request/reply
+        client reads with a new timeout each time, and ``settimeout`` would cost an ioctl
+        on every call."""
         sock = self._require()
         try:
-            if not _wait_ready(sock, select.POLLIN, timeout):
-                return b''
-            data = sock.recv(max_bytes)
-        except BlockingIOError:
-            return b''
+            data = read_ready(sock.fileno(), max_bytes, max(timeout, 0.0))
         except (OSError, ValueError) as exc:
-            # A socket closed by another thread: poll() reports POLLNVAL (or its fileno is
-            # -1: ValueError) and recv raises EBADF.
+            # A socket closed by another thread: its fileno is -1 (ValueError from poll's
+            # register) or the read fails with EBADF.
             if self._sock is None:
                 raise LinkClosed(f'{self.description} was closed') from exc
             raise LinkClosed(f'{self.description}: receive failed: {exc}') from exc
+        if data is None:
+            return b''
         if not data:
             raise LinkClosed(f'{self.description}: peer closed the connection')
         return data
 
 
-def _wait_ready(sock: socket.socket, event: int, timeout: float) -> bool:
-    """True when ``sock`` is ready for ``event`` (or in error/hang-up) within ``timeout``.
+def wait_ready(fd: int, event: int, timeout: float | None) -> bool:
+    """True when descriptor ``fd`` is ready for ``event`` (or in error/hang-up) within
+    ``timeout`` s (None: no limit).
 
     A poll object per call: one shared object would refuse concurrent use from two
     threads, and select() cannot take descriptors above FD_SETSIZE.
     """
     poller = select.poll()
-    poller.register(sock, event)
-    return bool(poller.poll(max(timeout, 0.0) * 1000.0))
+    poller.register(fd, event)
+    return bool(poller.poll(None if timeout is None else max(timeout, 0.0) * 1000.0))
+
+
+def read_ready(fd: int, max_bytes: int, timeout: float | None) -> bytes | None:
+    """Up to ``max_bytes`` bytes waiting on descriptor ``fd``, after up to ``timeout`` s
+    for the first: None when none came, b'' when the descriptor is at its end (the peer
+    or the device is gone).
+
+    One poll() and one read(), the whole cost of a reader's wake-up. Python's socket
+    timeout costs an ioctl per call, and pyserial's ``timeout`` re-applies the port's
+    termios set-up while its ``in_waiting`` + ``read(n)`` add an ioctl and a second
+    select(). Every byte reader of the suite (TCP, serial, the turret's slcan adapter)
+    reads through this. ``fd`` must be non-blocking (sockets here, pyserial's ports).
+    """
+    if not wait_ready(fd, select.POLLIN, timeout):
+        return None
+    try:
+        return os.read(fd, max_bytes)
+    except BlockingIOError:
+        return None
 
 
 class SerialStream(ByteStream):
@@ -237,26 +250,18 @@ class SerialStream(ByteStream):
                 raise LinkClosed(f'{self.description}: write failed: {exc}') from exc
 
     def read(self, max_bytes: int, timeout: float) -> bytes:
-        """Whatever is buffered (up to ``max_bytes``), waiting up to ``timeout`` for the
-        first byte: one select() and one read() on the port's descriptor.
-
-        Not pyserial's ``timeout`` and ``read``: assigning the timeout re-applies the whole
-        termios set-up (tcgetattr + tcsetattr) on every call, and ``in_waiting`` +
-        ``read(n)`` add an ioctl and a second select() per wake-up. A streaming reader
-        wakes 50-350 times a second, so the system calls per wake-up are its CPU.
-        """
+        """:func:`read_ready` on the port's descriptor, not pyserial's ``timeout`` and
+        ``read``: a streaming reader wakes 50-350 times a second, so the system calls per
+        wake-up are its CPU."""
         port = self._require()
         try:
-            ready, _, _ = select.select([port.fileno()], [], [], max(timeout, 0.0))
-            if not ready:
-                return b''
-            data = os.read(port.fileno(), max_bytes)
-        except BlockingIOError:
-            return b''
+            data = read_ready(port.fileno(), max_bytes, max(timeout, 0.0))
         except (serial.SerialException, OSError, TypeError, AttributeError, ValueError) as exc:
             # A USB adapter or pty that disappears raises EIO; a port closed by another
-            # thread has no descriptor (ValueError/TypeError from select).
+            # thread has no descriptor.
             raise LinkClosed(f'{self.description}: read failed: {exc}') from exc
+        if data is None:
+            return b''
         if not data:  # readable and empty: the device went away
             raise LinkClosed(f'{self.description}: device reports readiness to read but '
                              'returned no data')
