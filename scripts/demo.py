@@ -32,7 +32,6 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common.registry import DriverSpec, parameter_arguments
-from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import (
     DomainLease,
     ManagedProcess,
@@ -40,6 +39,7 @@ from gimbal_driver_common.testing import (
     free_tcp_port,
     wait_for,
 )
+from gimbal_driver_common.testing.ros import RosTestClient
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.srv import GotoPreset, SetPreset, StartScan
 

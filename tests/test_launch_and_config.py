@@ -20,16 +20,15 @@ import pytest
 import yaml
 from rcl_interfaces.srv import ListParameters
 
-from gimbal_driver_common.registry import drivers
-from gimbal_driver_common.ros.testing import RosTestClient
+from gimbal_driver_common.registry import REFERENCE_PACKAGE, drivers
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, find_executable
+from gimbal_driver_common.testing.ros import RosTestClient
 
 pytestmark = pytest.mark.ros
 
 SRC = Path(__file__).resolve().parent.parent / 'src'
-#: package -> node executable of every registered device driver (the reference virtual
-#: gimbal ships no launch files)
-DRIVERS = {spec.package: spec.node_executable for spec in drivers() if not spec.is_reference}
+#: package -> node executable of every registered driver (the reference virtual gimbal too)
+DRIVERS = {spec.package: spec.node_executable for spec in drivers()}
 
 
 class Recorded:
@@ -118,7 +117,8 @@ def test_every_driver_ships_launch_and_configs() -> None:
         assert list((SRC / pkg / 'launch').glob('*.launch.py')), f'{pkg} has no launch file'
         configs = [p.name for p in (SRC / pkg / 'config').glob('*.yaml')]
         assert f'{pkg}.yaml' in configs, f'{pkg}: no real-hardware YAML'
-        assert any('sim' in c for c in configs), f'{pkg}: no simulator YAML'
+        if pkg != REFERENCE_PACKAGE:  # the reference's device is its simulator
+            assert any('sim' in c for c in configs), f'{pkg}: no simulator YAML'
 
 
 @pytest.mark.parametrize(('pkg', 'path'), launch_files(), ids=lambda v: getattr(v, 'name', v))

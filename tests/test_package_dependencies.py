@@ -3,8 +3,8 @@
 `rosdep install --from-paths src` on a full ROS 2 install brings exactly what package.xml
 declares, so an import without a declaration works here (the venv has everything) and
 fails on a robot. The imports are read from the code (ast): package code and launch files
-need ``exec_depend``/``depend``, test code (``test/``, and the ``testing``/``*_testing``
-helper modules packages ship for tests) at least ``test_depend``. Third-party modules map
+need ``exec_depend``/``depend``, test code (``test/``, and the ``testing/``
+helper module trees packages ship for tests) at least ``test_depend``. Third-party modules map
 to the keys of rosdistro's rosdep/python.yaml (the README lists them); a module this table
 does not know fails the test, so a new dependency gets its key chosen on purpose.
 """
@@ -88,9 +88,8 @@ def test_package_xml_declares_every_import(package: Path):
     missing = []
     for path in sorted(package.rglob('*.py')):
         relative = path.relative_to(package)
-        # Test helpers shipped in a package (testing.py, *_testing.py) serve tests only.
-        is_test = relative.parts[0] == 'test' or path.stem == 'testing' or \
-            path.stem.endswith('_testing')
+        # Test helpers shipped in a package (a testing/ module tree) serve tests only.
+        is_test = relative.parts[0] == 'test' or 'testing' in relative.parts[:-1]
         local = {p.stem for p in path.parent.glob('*.py')}  # test helpers beside the file
         for module in sorted(imported_modules(path) - local):
             key = rosdep_key(module, workspace)

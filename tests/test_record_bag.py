@@ -21,7 +21,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 RECORDER = ROOT / 'scripts' / 'record_bag.py'
-STATUS = '/virtual_gimbal/status'
+STATUS = '/virtual_gimbal_driver/status'
 CHOSEN = {
     '/joint_states': 'sensor_msgs/msg/JointState',
     STATUS: 'gimbal_msgs/msg/GimbalStatus',
@@ -51,15 +51,16 @@ def load_recorder():
 def gimbal() -> Iterator[Gimbal]:
     """The reference simulator and node, publishing joint_states, status and diagnostics."""
     testing = pytest.importorskip('gimbal_driver_common.testing')
-    ros_testing = pytest.importorskip('gimbal_driver_common.ros.testing')
+    ros_testing = pytest.importorskip('gimbal_driver_common.testing.ros')
     from sensor_msgs.msg import JointState
 
     with testing.DomainLease() as domain:
         port = testing.free_tcp_port()
-        with testing.ManagedProcess.ros('gimbal_driver_common', 'virtual_gimbal_sim', domain,
+        with testing.ManagedProcess.ros('virtual_gimbal_driver', 'virtual_gimbal_sim', domain,
                                         ['--port', str(port)]) as sim:
             sim.wait_for_output('{"ready": "virtual_gimbal_sim"', timeout=60)
-            with testing.ManagedProcess.ros('gimbal_driver_common', 'virtual_gimbal_node', domain,
+            with testing.ManagedProcess.ros('virtual_gimbal_driver',
+                                            'virtual_gimbal_driver_node', domain,
                                             ['--ros-args', '-p', f'port:={port}']) as node, \
                     ros_testing.RosTestClient(domain, 'record_bag_test') as client:
                 try:

@@ -23,12 +23,12 @@ from gimbal_driver_common.registry import (
     parameter_arguments,
     resolve,
 )
-from gimbal_driver_common.sim_handle import SimHandle
+from gimbal_driver_common.testing.sim_handle import SimHandle
 
 ROOT = Path(__file__).resolve().parent.parent
 INSTALL = ROOT / 'install'
 #: the drivers of this workspace: the registry must find at least these
-SUITE = {'virtual_gimbal': 'gimbal_driver_common', 'capture': 'capture_driver',
+SUITE = {'virtual_gimbal': 'virtual_gimbal_driver', 'capture': 'capture_driver',
          'canaero_turret': 'canaero_turret_driver', 'kessler_kos': 'kessler_kos_driver',
          'ucamera': 'ucamera_driver'}
 

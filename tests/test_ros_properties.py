@@ -28,10 +28,10 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common.registry import DriverSpec, drivers
-from gimbal_driver_common.ros.testing import RosTestClient
-from gimbal_driver_common.sim_handle import SimHandle, make_handle
 from gimbal_driver_common.testing import DomainLease, ManagedProcess
 from gimbal_driver_common.testing import wait_for as wait_until
+from gimbal_driver_common.testing.ros import RosTestClient
+from gimbal_driver_common.testing.sim_handle import SimHandle, make_handle
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.srv import ClearPreset, DeviceCommand, GotoPreset, SetMode, SetPreset, StartScan
 

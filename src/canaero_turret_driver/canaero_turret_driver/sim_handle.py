@@ -9,7 +9,7 @@ from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.sim_control import SimControl
-from gimbal_driver_common.sim_handle import SimHandle
+from gimbal_driver_common.testing.sim_handle import SimHandle
 
 
 class CanaeroSimHandle(SimHandle):

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.sim_control import SimControl
-from gimbal_driver_common.sim_handle import SimHandle, Takeover
+from gimbal_driver_common.testing.sim_handle import SimHandle, Takeover
 
 #: commands that move or stop a Capture axis
 MOTION_COMMANDS = ('MOT_SendPosition', 'MOT_Update', 'MOT_SetSpeed', 'MOT_SetSpeedMode',

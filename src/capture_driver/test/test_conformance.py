@@ -8,7 +8,7 @@ import pytest
 
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 
-from gimbal_driver_common.ros.conformance_testing import DriverConformance
+from gimbal_driver_common.testing.conformance import DriverConformance
 
 
 class TestCaptureConformance(DriverConformance):

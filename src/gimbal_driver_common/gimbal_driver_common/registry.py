@@ -11,7 +11,7 @@ and the cross-package tests in ``tests/``. A package that is not built (installe
 found, so it is left out everywhere.
 
 ROS-free: a spec is plain data. What needs code (a demo step, the one in-process simulator
-handle of :mod:`gimbal_driver_common.sim_handle`) is named by a dotted reference
+handle of :mod:`gimbal_driver_common.testing.sim_handle`) is named by a dotted reference
 (``module:attribute``) and imported only by the tool that uses it.
 """
 
@@ -27,7 +27,7 @@ from typing import Any
 
 ENTRY_POINT_GROUP = 'gimbal_driver_common.drivers'
 #: the package of the reference driver (the virtual gimbal); every other one is a device driver
-REFERENCE_PACKAGE = 'gimbal_driver_common'
+REFERENCE_PACKAGE = 'virtual_gimbal_driver'
 
 
 class RegistryError(RuntimeError):
@@ -142,7 +142,7 @@ class DriverSpec:
 
     @property
     def is_reference(self) -> bool:
-        """The reference virtual gimbal (no device, no launch files)."""
+        """The reference virtual gimbal (an invented device, no vendor document)."""
         return self.package == REFERENCE_PACKAGE
 
     def executables(self) -> tuple[str, str]:

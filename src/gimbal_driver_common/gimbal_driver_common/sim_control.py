@@ -344,20 +344,6 @@ def read_ready_line(stream: TextIO, name: str) -> dict:
     raise RuntimeError(f'{name} ended before it was ready')
 
 
-def wait_for_ready(process: object, name: str, timeout: float = 30.0) -> dict:
-    """Wait for simulator ``name``'s ready line in a ``testing.ManagedProcess``'s output;
-    return it (raises if the process ends first or the line does not come)."""
-    from gimbal_driver_common.testing import wait_for
-
-    def ready() -> dict | None:
-        found = parse_ready_line(process.output(), name)  # type: ignore[attr-defined]
-        if found is None and not process.running:  # type: ignore[attr-defined]
-            raise RuntimeError(f'{name} ended before it was ready:\n{process.output()}')
-        return found
-
-    return wait_for(ready, timeout, f'the ready line of {name}')
-
-
 def run_simulator(control: SimControl, endpoint: dict[str, object], control_port: int = 0,
                   stdin: TextIO | None = None, ready_file: str | None = None) -> None:
     """A simulator's ``main`` loop: TCP console (``control_port`` < 0: none), the stdin

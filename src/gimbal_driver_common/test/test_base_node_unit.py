@@ -77,7 +77,9 @@ def test_invalid_parameters_name_the_parameter(context, overrides, message) -> N
 
 # ~/look_at set-up (ros/look_at.py): which description, and clear refusals. ThreeAxisNode's
 # package (this test module) installs no description.
-VIRTUAL_GIMBAL = Path(__file__).parents[1] / 'urdf' / 'virtual_gimbal.urdf'
+# the reference driver's description, from the source tree (a package beside this one)
+VIRTUAL_GIMBAL = (Path(__file__).parents[2] / 'virtual_gimbal_driver' / 'urdf'
+                  / 'virtual_gimbal_driver.urdf')
 
 
 def look_at_refusal(context, **overrides) -> str:

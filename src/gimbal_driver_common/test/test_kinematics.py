@@ -17,7 +17,9 @@ from gimbal_driver_common.kinematics import (
     wrap_angle,
 )
 
-VIRTUAL_GIMBAL = Path(__file__).parents[1] / 'urdf' / 'virtual_gimbal.urdf'
+# the reference driver's description, from the source tree (a package beside this one)
+VIRTUAL_GIMBAL = (Path(__file__).parents[2] / 'virtual_gimbal_driver' / 'urdf'
+                  / 'virtual_gimbal_driver.urdf')
 
 #: a camera mounted 0.1 m to the right of, 0.05 m above and 0.2 m ahead of the tilt axis,
 #: with the pan joint mounted yawed by 90 degrees: every offset the solver must handle

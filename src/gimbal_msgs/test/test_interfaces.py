@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 
-from gimbal_driver_common.ros.testing import RosTestClient
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_env
+from gimbal_driver_common.testing.ros import RosTestClient
 
 pytestmark = pytest.mark.ros
 

@@ -23,15 +23,15 @@ from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from gimbal_driver_common.ros.testing import (
+from gimbal_driver_common.sim_control import control_state
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
+from gimbal_driver_common.testing.ros import (
     RosTestClient,
     driver_rig,
     find_diagnostic,
     joint_positions,
     node_refusing_to_start,
 )
-from gimbal_driver_common.sim_control import control_state
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import AxisTrajectory, BezierSegment, GimbalStatus, PlaybackStatus
 from gimbal_msgs.srv import Calibrate, DeviceCommand, LoadTrajectory

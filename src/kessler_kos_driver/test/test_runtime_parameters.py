@@ -15,8 +15,8 @@ pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.ros.testing import RosTestClient, driver_rig, joint_positions
 from gimbal_driver_common.testing import free_tcp_port
+from gimbal_driver_common.testing.ros import RosTestClient, driver_rig, joint_positions
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import AxisState, AxisTrajectory, BezierSegment, GimbalStatus
 from gimbal_msgs.srv import LoadTrajectory

@@ -1,8 +1,7 @@
-"""Reference driver for the virtual gimbal: a device adapter and a node of a few lines.
+"""The virtual gimbal as a device (gimbal_driver_common.device.Device): no ROS.
 
-Copy its shape for a new driver: the adapter (ROS-free) turns the client's
-protocol into the device contract in SI units; the node declares the
-parameters and builds the adapter.
+Copy its shape for a new driver: the adapter turns the client's protocol into the device
+contract in SI units and REP-103 signs (this invented device already speaks both).
 """
 
 from __future__ import annotations
@@ -21,9 +20,17 @@ from gimbal_driver_common.device import (
 )
 from gimbal_driver_common.diagnostics import Level, RegisterFlag, StatusPart, decode_register
 from gimbal_driver_common.errors import DeviceTimeout
-from gimbal_driver_common.ros.base_node import GimbalDriverNode
-from gimbal_driver_common.ros.run import run_driver
-from gimbal_driver_common.virtual_gimbal import FAULT_OVERTEMP, JOINTS, VirtualGimbalClient
+
+from .client import VirtualGimbalClient
+from .protocol import (
+    FAULT_OVERTEMP,
+    JOINTS,
+    jog_request,
+    move_request,
+    parse_identity,
+    parse_position,
+    stop_request,
+)
 
 FAULT_FLAGS = [RegisterFlag(0, 'overtemperature', Level.ERROR, 'motor over temperature')]
 assert 1 << FAULT_FLAGS[0].bit == FAULT_OVERTEMP
@@ -43,8 +50,8 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
 
     def open(self) -> DeviceInfo:
         self.client.open()
-        _, model, serial, firmware = self.client.request('ID').split()
-        return DeviceInfo(model, serial, firmware)
+        identity = parse_identity(self.client.request('ID'))
+        return DeviceInfo(identity.model, identity.serial_number, identity.firmware_version)
 
     def close(self) -> None:
         self.client.close()
@@ -53,24 +60,22 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
         return f'tcp://{self.client.stream.host}:{self.client.stream.port}'
 
     def read(self) -> JointSample:
-        words = self.client.request('GET').split()
-        pan, tilt, vpan, vtilt = (float(w) for w in words[1:5])
-        moving, self._faults = int(words[5]), int(words[6])
-        self._latest = JointSample(
-            positions={'pan': pan, 'tilt': tilt}, velocities={'pan': vpan, 'tilt': vtilt},
-            moving={'pan': bool(moving & 1), 'tilt': bool(moving & 2)})
+        reply = parse_position(self.client.request('GET'))
+        self._faults = reply.faults
+        self._latest = JointSample(positions=reply.positions, velocities=reply.velocities,
+                                   moving=reply.moving)
         return self._latest
 
     def move(self, moves: Moves) -> None:
         for joint, (position, speed) in moves.items():
-            self.client.request(f'MOVE {joint} {position:.6f} {speed or 0.0:.6f}')
+            self.client.request(move_request(joint, position, speed))
 
     def jog(self, velocities: dict[str, float]) -> None:
         for joint, velocity in velocities.items():
-            self.client.request(f'JOG {joint} {velocity:.6f}')
+            self.client.request(jog_request(joint, velocity))
 
     def stop(self, joints: Sequence[str] | None = None) -> None:
-        self.client.request('STOP ' + ' '.join(joints or []))
+        self.client.request(stop_request(joints))
 
     def reset_faults(self) -> str:
         self.client.request('RESET')
@@ -95,23 +100,3 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
 
     def errors(self) -> list[str]:
         return [a.flag.name for a in decode_register(self._faults, FAULT_FLAGS)]
-
-
-class VirtualGimbalNode(GimbalDriverNode):
-    DEFAULT_JOINT_NAMES = JOINTS
-    DEFAULT_VELOCITY_MAX = (1.5, 1.5)
-    DESCRIPTION_NAME = 'virtual_gimbal.urdf'  # share/gimbal_driver_common/urdf/
-
-    def __init__(self) -> None:
-        super().__init__('virtual_gimbal')
-
-    def declare_device_parameters(self) -> None:
-        self.host = self.declare_param('host', '127.0.0.1', 'device address')
-        self.port = self.declare_param('port', 4950, 'device TCP port', value_range=(1, 65535))
-
-    def make_device(self) -> Device:
-        return VirtualGimbalDevice(self.host, self.port, self.config.move_timeout)
-
-
-def main(argv: list[str] | None = None) -> int:
-    return run_driver(VirtualGimbalNode, argv)

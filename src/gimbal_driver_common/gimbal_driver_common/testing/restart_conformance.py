@@ -1,6 +1,6 @@
 """The conformance tests that restart, signal or break the node: lifecycle, presets across
 a restart, link drop, signals and start-up parameters. Mixed into
-:class:`~gimbal_driver_common.ros.conformance_testing.DriverConformance` (split for size).
+:class:`~gimbal_driver_common.testing.conformance.DriverConformance` (split for size).
 """
 
 from __future__ import annotations
@@ -12,14 +12,14 @@ from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.ros.conformance_rig import (
+from gimbal_driver_common.testing import DomainLease, ManagedProcess
+from gimbal_driver_common.testing.conformance_rig import (
     ERROR,
     OK,
     STALE,
     ConformanceHelpers,
     ConformanceRig,
 )
-from gimbal_driver_common.testing import DomainLease, ManagedProcess
 from gimbal_msgs.msg import GimbalStatus
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset
 

@@ -20,6 +20,8 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TypeVar
 
+from gimbal_driver_common.sim_control import parse_ready_line
+
 T = TypeVar('T')
 
 DOMAIN_POOL = range(20, 230)
@@ -224,3 +226,15 @@ def free_tcp_port() -> int:
     with socket.socket() as sock:
         sock.bind(('127.0.0.1', 0))
         return sock.getsockname()[1]
+
+
+def wait_for_ready(process: ManagedProcess, name: str, timeout: float = 30.0) -> dict:
+    """Wait for simulator ``name``'s ready line in a process's output; return it (raises if
+    the process ends first or the line does not come)."""
+    def ready() -> dict | None:
+        found = parse_ready_line(process.output(), name)
+        if found is None and not process.running:
+            raise RuntimeError(f'{name} ended before it was ready:\n{process.output()}')
+        return found
+
+    return wait_for(ready, timeout, f'the ready line of {name}')

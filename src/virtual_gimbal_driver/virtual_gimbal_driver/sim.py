@@ -1,23 +1,9 @@
-"""A minimal virtual pan-tilt device: the reference driver for the shared base node.
+"""``virtual_gimbal_sim``: the virtual gimbal's simulator on TCP 127.0.0.1 (no ROS).
 
-It speaks a small line protocol over TCP so that the base node's behaviour
-(lifecycle, reconnect, jog watchdog, moves, presets, scans, diagnostics) is
-tested through a real transport without any vendor protocol, and so that a new
-driver has a short, complete example to copy the shape of. Protocol, one
-request line -> one reply line (ASCII, ``\\n``-terminated, SI units)::
-
-    ID                     -> ID <model> <serial> <firmware>
-    GET                    -> POS <pan> <tilt> <pan_vel> <tilt_vel> <moving_bits> <fault_bits>
-    MOVE <joint> <pos> <v> -> OK          (v = 0: default speed)
-    JOG <joint> <vel>      -> OK
-    STOP [<joint>]         -> OK
-    HOME                   -> OK          (both axes to 0 at default speed)
-    RESET                  -> OK          (clears fault bits)
-    anything else          -> ERR <reason>
-
-Motion runs on the shared trapezoidal axis model (``sim_motion.AxisMotion``); the
-simulator is driven by the shared control verbs (``sim_control``: drop, silence,
-garbage, ``nack`` = ERR replies, ``fault overtemp|BITS``, clear, state, quit).
+It answers the line protocol of :mod:`virtual_gimbal_driver.protocol`. Motion runs on the
+shared trapezoidal axis model (``sim_motion.AxisMotion``); the simulator is driven by the
+shared control verbs (``sim_control``: drop, silence, garbage, ``nack`` = ERR replies,
+``fault overtemp|BITS``, clear, state, quit).
 """
 
 from __future__ import annotations
@@ -28,19 +14,16 @@ import threading
 import time
 from collections.abc import Callable
 
-from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout
 from gimbal_driver_common.sim_control import ControlError, SimControl, run_simulator
 from gimbal_driver_common.sim_motion import AxisMotion
 from gimbal_driver_common.sim_server import TcpSimServer
-from gimbal_driver_common.transport import LinkClosed, TcpStream, TransportError
 
-JOINTS = ('pan', 'tilt')
+from .protocol import FAULT_NAMES, JOINTS, format_position, verb
+
 DEFAULT_SPEED = 0.8  # rad/s
 #: rad/s^2, accelerating and braking: DEFAULT_SPEED in 0.1 s, so moves keep nearly the
 #: timing of the earlier constant-speed model (an invented device: no spec to follow)
 DEFAULT_ACCELERATION = 8.0
-FAULT_OVERTEMP = 0x1
-FAULT_NAMES = {'overtemp': FAULT_OVERTEMP}
 
 
 class VirtualGimbal:
@@ -65,10 +48,9 @@ class VirtualGimbal:
     def handle(self, line: str) -> str:
         with self.lock:
             self.step()
-            words = line.split()
-            if not words:
+            command, args = verb(line), line.split()[1:]
+            if not command:
                 return 'ERR empty request'
-            command, args = words[0].upper(), words[1:]
             refused = self._injected_nack(command)
             if refused:
                 return refused
@@ -90,10 +72,9 @@ class VirtualGimbal:
         if command == 'ID':
             return 'ID virtual-gimbal VG-0001 1.0.0'
         if command == 'GET':
-            pan, tilt = self.axes['pan'], self.axes['tilt']
-            moving = sum(1 << i for i, a in enumerate(self.axes.values()) if a.moving)
-            return (f'POS {pan.position:.6f} {tilt.position:.6f} {pan.velocity:.6f} '
-                    f'{tilt.velocity:.6f} {moving} {self.faults}')
+            axes = [self.axes[name] for name in JOINTS]
+            return format_position([a.position for a in axes], [a.velocity for a in axes],
+                                   [a.moving for a in axes], self.faults)
         if command == 'MOVE':
             axis = self.axes[args[0]]
             speed = float(args[2])
@@ -182,39 +163,7 @@ def make_control(server: TcpSimServer, device: VirtualGimbal) -> SimControl:
                       fault_names=tuple(FAULT_NAMES), clear_device=device.control_clear)
 
 
-class VirtualGimbalClient:
-    """Request/reply client with one request in flight (thread-safe)."""
-
-    def __init__(self, host: str, port: int, timeout: float = 1.0) -> None:
-        self.stream = TcpStream(host, port)
-        self.timeout = timeout
-        self._lock = threading.Lock()
-        self._buffer = b''
-
-    def open(self) -> None:
-        self.stream.open()
-        self._buffer = b''
-
-    def close(self) -> None:
-        self.stream.close()
-
-    def request(self, line: str) -> str:
-        with self._lock:
-            self.stream.write(line.encode() + b'\n')
-            deadline = time.monotonic() + self.timeout
-            while b'\n' not in self._buffer:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    raise DeviceTimeout(f'no reply to {line.split()[0]} within {self.timeout} s')
-                self._buffer += self.stream.read(4096, remaining)
-            reply, self._buffer = self._buffer.split(b'\n', 1)
-        text = reply.decode('ascii', 'replace')
-        if text.startswith('ERR'):
-            raise DeviceRefused(f'device refused {line!r}: {text[4:]}')
-        return text
-
-
-def sim_main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     """``virtual_gimbal_sim --port N``: serve the virtual gimbal on 127.0.0.1."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--port', type=int, default=4950)
@@ -229,15 +178,5 @@ def sim_main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def node_main(argv: list[str] | None = None) -> int:
-    """``virtual_gimbal_node``: the reference driver node (imports ROS only here)."""
-    from gimbal_driver_common.virtual_gimbal_node import main
-
-    return main(argv)
-
-
 if __name__ == '__main__':
-    sys.exit(sim_main())
-
-
-__all__ = ['LinkClosed', 'TransportError', 'VirtualGimbal', 'VirtualGimbalClient', 'make_server']
+    sys.exit(main())

@@ -13,13 +13,13 @@ from typing import TYPE_CHECKING
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
-from gimbal_driver_common.sim_handle import SimHandle
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_common.testing.ros import RosTestClient, joint_positions
+from gimbal_driver_common.testing.sim_handle import SimHandle
 from gimbal_msgs.action import MoveTo
 
 if TYPE_CHECKING:
-    from gimbal_driver_common.ros.conformance_testing import DriverConformance
+    from gimbal_driver_common.testing.conformance import DriverConformance
 
 REJECTED = 'joint_command rejected, nothing sent'
 OK = 0

@@ -21,7 +21,7 @@ from gimbal_driver_common.sim_control import (
 )
 from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import LinkClosed, TcpStream, read_exactly
-from gimbal_driver_common.virtual_gimbal import make_control, make_server
+from virtual_gimbal_driver.sim import make_control, make_server
 
 
 @pytest.fixture
@@ -150,7 +150,7 @@ def test_ready_line_round_trip() -> None:
 
 def test_sim_process_ready_line_stdin_console_and_quit() -> None:
     proc = subprocess.Popen(
-        [sys.executable, '-m', 'gimbal_driver_common.virtual_gimbal', '--port', '0'],
+        [sys.executable, '-m', 'virtual_gimbal_driver.sim', '--port', '0'],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         ready = read_ready_line(proc.stdout, 'virtual_gimbal_sim')

@@ -9,20 +9,20 @@ import pytest
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 from lifecycle_msgs.msg import Transition
 
-from gimbal_driver_common.ros.look_at_testing import (
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
+from gimbal_driver_common.testing.look_at import (
     LookAtRig,
     LookAtSuite,
     installed_description,
     look_at_rig_against,
 )
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
-from gimbal_driver_common.virtual_gimbal import VirtualGimbalClient
 from gimbal_msgs.action import LookAt
+from virtual_gimbal_driver.client import VirtualGimbalClient
 
 pytestmark = pytest.mark.ros
 
-PKG = 'gimbal_driver_common'
-NODE = 'virtual_gimbal'
+PKG = 'virtual_gimbal_driver'
+NODE = 'virtual_gimbal_driver'
 GOAL_CANCELED = 5
 
 
@@ -44,13 +44,13 @@ def look_at_rig():
 
         def start_node() -> ManagedProcess:
             sim.wait_for_output('{"ready": "virtual_gimbal_sim"')
-            return ManagedProcess.ros(PKG, 'virtual_gimbal_node', domain, [
+            return ManagedProcess.ros(PKG, 'virtual_gimbal_driver_node', domain, [
                 '--ros-args', '-p', f'port:={port}', '-p', 'reconnect_period:=0.2',
                 '-p', f'position_min:=[{-math.pi}, -0.8]'])
 
         with look_at_rig_against(PKG, domain, sim, start_node, lambda: device_state(port),
                                  node=NODE, description=installed_description(
-                                     PKG, 'virtual_gimbal.urdf')) as rig:
+                                     PKG, 'virtual_gimbal_driver.urdf')) as rig:
             yield rig
 
 

@@ -12,17 +12,17 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.ros.testing import RosTestClient, find_diagnostic, joint_positions
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
-from gimbal_driver_common.virtual_gimbal import VirtualGimbalClient
+from gimbal_driver_common.testing.ros import RosTestClient, find_diagnostic, joint_positions
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import GimbalStatus
 from gimbal_msgs.srv import StartScan
+from virtual_gimbal_driver.client import VirtualGimbalClient
 
 pytestmark = pytest.mark.ros
 
-PKG = 'gimbal_driver_common'
-NODE = 'virtual_gimbal'
+PKG = 'virtual_gimbal_driver'
+NODE = 'virtual_gimbal_driver'
 
 
 def start_sim(port: int) -> ManagedProcess:
@@ -34,7 +34,7 @@ def start_sim(port: int) -> ManagedProcess:
 def start_node(domain: int, port: int, *params: str) -> ManagedProcess:
     args = ['--ros-args', '-p', f'port:={port}', '-p', 'reconnect_period:=0.2',
             '-p', 'diagnostics_period:=0.25', *[x for p in params for x in ('-p', p)]]
-    return ManagedProcess.ros(PKG, 'virtual_gimbal_node', domain, args)
+    return ManagedProcess.ros(PKG, 'virtual_gimbal_driver_node', domain, args)
 
 
 def device_state(port: int) -> list[float]:

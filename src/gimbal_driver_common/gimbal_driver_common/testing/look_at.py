@@ -23,8 +23,8 @@ from geometry_msgs.msg import Point, PointStamped
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.kinematics import AimingChain
-from gimbal_driver_common.ros.testing import RosTestClient, joint_positions
 from gimbal_driver_common.testing import ManagedProcess
+from gimbal_driver_common.testing.ros import RosTestClient, joint_positions
 from gimbal_msgs.action import LookAt
 from gimbal_msgs.msg import GimbalStatus
 

@@ -26,16 +26,16 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common import registry
-from gimbal_driver_common.ros.conformance_rig import (
+from gimbal_driver_common.testing import wait_for
+from gimbal_driver_common.testing.conformance_rig import (
     OK,
     REJECTED,
     ConformanceRig,
     GoalStatus,
     SimulatorHandle,
 )
-from gimbal_driver_common.ros.restart_conformance_testing import RestartConformance
-from gimbal_driver_common.sim_handle import make_handle
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_common.testing.restart_conformance import RestartConformance
+from gimbal_driver_common.testing.sim_handle import make_handle
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
 

@@ -11,15 +11,15 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.ros.testing import RosTestClient, driver_rig, joint_positions
 from gimbal_driver_common.testing import free_tcp_port
+from gimbal_driver_common.testing.ros import RosTestClient, driver_rig, joint_positions
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import GimbalStatus
 
 pytestmark = pytest.mark.ros
 
-PKG = 'gimbal_driver_common'
-NODE = 'virtual_gimbal'
+PKG = 'virtual_gimbal_driver'
+NODE = 'virtual_gimbal_driver'
 
 
 def tilt(ros: RosTestClient, predicate) -> JointState:
@@ -40,7 +40,7 @@ def rig():
     port = free_tcp_port()
     with driver_rig(PKG, 'virtual_gimbal_sim', ['--port', str(port)],
                     '{"ready": "virtual_gimbal_sim"',
-                    'virtual_gimbal_node', [f'port:={port}', 'reconnect_period:=0.2',
+                    'virtual_gimbal_driver_node', [f'port:={port}', 'reconnect_period:=0.2',
                                             'command_timeout:=0.4']) as rig:
         yield rig.ros, rig.node
 

@@ -5,7 +5,8 @@ process tests (``tests/test_ros_properties.py``, ``tests/test_crash_safety.py``)
 simulator in their own process so they reach its device model and fault API directly; the
 node runs as a separate process connected by :meth:`SimHandle.node_parameters`. Each driver
 package subclasses :class:`SimHandle` and names the subclass in its registry spec
-(``DriverSpec.sim_handle``); the reference virtual gimbal's is :class:`VirtualGimbalSim`.
+(``DriverSpec.sim_handle``); the reference virtual gimbal's is
+``virtual_gimbal_driver.sim_handle.VirtualGimbalSim``.
 :func:`make_handle` builds the one a spec names.
 
 The receive side is a log of every request the device model handled (:meth:`SimHandle.requests`),
@@ -256,67 +257,3 @@ class SimHandle:
 def make_handle(spec: DriverSpec, workdir: Path, process_tests: bool = False) -> SimHandle:
     """The in-process simulator handle ``spec.sim_handle`` names (not started yet)."""
     return resolve(spec.sim_handle)(spec, workdir, process_tests=process_tests)
-
-
-class VirtualGimbalSim(SimHandle):
-    """The reference virtual gimbal's line-protocol simulator on TCP. The receive side logs
-    request lines; ``ID`` and ``GET`` only read."""
-
-    READS = ('ID', 'GET')
-    MOTION = ('MOVE', 'JOG', 'STOP', 'HOME')
-
-    not_applicable = {
-        'nack': 'the line protocol answers ERR only to a request; an unsolicited ERR line '
-                'would be a framing fault (covered by garbage/malformed)',
-        'lost_frames': 'one reply per request over TCP; a lost reply is a silence (covered)',
-    }
-
-    def __init__(self, spec: DriverSpec, workdir: Path, process_tests: bool = False) -> None:
-        super().__init__(spec, workdir, process_tests)
-        self.device: Any = None
-        self._controls: SimControl | None = None
-
-    def start(self) -> None:
-        from gimbal_driver_common.virtual_gimbal import make_control, make_server
-
-        server, self.device = make_server(self.port)
-        handle = self.device.handle
-
-        def recorded(line: str) -> str:
-            self.record(line.strip())
-            return handle(line)
-
-        self.device.handle = recorded
-        self._controls = make_control(server, self.device)
-        self.port = server.port
-        self._started(server, server)
-
-    @staticmethod
-    def _verb(request: str) -> str:
-        words = request.split()
-        return words[0].upper() if words else ''
-
-    def changing(self, request: str) -> bool:
-        return self._verb(request) not in self.READS
-
-    def motion(self, request: str) -> bool:
-        return self._verb(request) in self.MOTION
-
-    def moving(self, joint: str) -> bool:
-        with self.device.lock:
-            self.device.step()  # the model integrates lazily: bring it up to now
-            return self.device.axes[joint].moving
-
-    def controls(self) -> SimControl:
-        return self._controls
-
-    def device_target(self, joint: str) -> float | None:
-        # a MOVE line sets the target as it is handled
-        return self.device.axes[joint].target
-
-    def malformed_frames(self, rng: random.Random) -> None:
-        # a reply line that does not parse (no newline: it prefixes the next real reply)
-        self.server.inject(b'POS nan x')
-
-    def fault_bits(self, rng: random.Random) -> None:
-        self.control('fault overtemp')

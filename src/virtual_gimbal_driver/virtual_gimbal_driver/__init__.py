@@ -1,0 +1,1 @@
+"""The reference driver: an invented pan-tilt device laid out like every real driver."""
