@@ -22,7 +22,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from gimbal_driver_common.controller import Logger
+from gimbal_driver_common.config import Logger
 from gimbal_driver_common.device import Device, DeviceInfo, DevicePresets, JointSample, Moves
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
 

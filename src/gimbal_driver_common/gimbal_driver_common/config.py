@@ -1,4 +1,8 @@
-"""What the controller is configured with, and the logger it writes to (no ROS)."""
+"""What the controller is configured with, and the logger it writes to (no ROS).
+
+The controller attaches both to its device (:meth:`Device.attach`), so adapters read the
+live limits and log without reaching up into the controller.
+"""
 
 from __future__ import annotations
 
@@ -30,3 +34,13 @@ class ControllerConfig:
     move_timeout: float = 60.0
     #: the (pan, tilt) joints a scan sweeps; empty: pan/tilt if named so, else the first two
     scan_joints: Sequence[str] = field(default_factory=tuple)
+
+
+def scan_joints(config: ControllerConfig) -> list[str]:
+    """The (pan, tilt) a scan sweeps: configured, else `pan`/`tilt` by name, else the first two."""
+    names = config.joint_names
+    if config.scan_joints:
+        return list(config.scan_joints)
+    if 'pan' in names and 'tilt' in names:
+        return ['pan', 'tilt']
+    return list(names[:2])

@@ -14,6 +14,7 @@ unit-tested against a fake device in ``test/test_controller.py``.
 
 from __future__ import annotations
 
+import enum
 import math
 import threading
 import time
@@ -28,12 +29,21 @@ from gimbal_driver_common.periodic import Periodic
 from gimbal_driver_common.watchdog import JogWatchdog
 
 T = TypeVar('T')
-__all__ = ['ControllerConfig', 'GimbalController', 'Logger', 'is_moving']
+__all__ = ['ControllerConfig', 'GimbalController', 'LinkState', 'Logger', 'is_moving']
 
 #: a joint without a device "moving" bit is moving when faster than this (rad/s or m/s)
 MOVING_SPEED = 1e-3
 #: longest a streamed device's thread waits for data before checking the link again
 STREAM_WAIT_S = 0.05
+
+
+class LinkState(enum.Enum):
+    """Where the connection supervisor is; ``GimbalController.link_error`` says why."""
+
+    NOT_CONFIGURED = 'not configured'   # never opened (or closed by cleanup)
+    CONNECTED = 'connected'
+    LOST = 'lost'                       # dropped while connected; reconnecting next
+    RECONNECTING = 'reconnecting'       # a reconnect attempt failed; trying again
 
 
 def is_moving(sample: JointSample | None, joint: str) -> bool:
@@ -56,11 +66,13 @@ class GimbalController:
         self.device = device
         self.config = config
         self.log = log
+        device.attach(config, log)
         self.on_sample = on_sample or (lambda sample: None)
         self.on_link_change = on_link_change or (lambda: None)
         self.device_info = DeviceInfo()
-        self.connected = False
+        self.link_state = LinkState.NOT_CONFIGURED
         self.active = False
+        #: why the link is not connected, for people ('' while connected)
         self.link_error = 'not configured'
         self.reconnects = 0
         self.latest: JointSample | None = None
@@ -81,6 +93,10 @@ class GimbalController:
         self._wake = threading.Event()
         self._threads: list[threading.Thread] = []
         self._warned: dict[str, float] = {}
+
+    @property
+    def connected(self) -> bool:
+        return self.link_state is LinkState.CONNECTED
 
     # ----------------------------------------------------------- lifecycle
     def open(self) -> None:
@@ -111,6 +127,7 @@ class GimbalController:
                 thread.join(timeout=5.0)
         self._threads = []
         self._close_device()
+        self.link_state, self.link_error = LinkState.NOT_CONFIGURED, 'closed (lifecycle cleanup)'
         self.periodic.remove(self.watchdog.check)
 
     def shutdown(self, why: str = 'shutting down') -> None:
@@ -361,26 +378,25 @@ class GimbalController:
             with device_boundary():
                 info = self.device.open()
         except GimbalError as exc:
-            self.link_error = str(exc)
             self._close_device()
+            self.link_error = str(exc)
             raise
         self.device_info = info if isinstance(info, DeviceInfo) else DeviceInfo()
-        self.connected, self.link_error = True, ''
+        self.link_state, self.link_error = LinkState.CONNECTED, ''
         self.log.info(
             f'connected to {self.device_info.model or "device"} '
             f'(serial {self.device_info.serial_number or "?"}, '
             f'firmware {self.device_info.firmware_version or "?"})')
 
     def _close_device(self) -> None:
-        self.connected = False
+        """Close the device link; the caller sets the state it leaves the link in."""
         try:
             self.device.close()
         except Exception as exc:  # noqa: BLE001 - closing must never raise out
             self.log.warning(f'closing the device link: {exc}')
 
     def _on_link_lost(self, exc: BaseException) -> None:
-        self.connected = False
-        self.link_error = f'link lost: {exc}'
+        self.link_state, self.link_error = LinkState.LOST, f'link lost: {exc}'
         self.watchdog.cancel()
         self.log.error(
             f'device link lost ({exc}); reconnecting every {self.config.reconnect_period:g} s')
@@ -393,7 +409,7 @@ class GimbalController:
         try:
             self._connect()
         except GimbalError as exc:
-            self.link_error = f'reconnecting: {exc}'
+            self.link_state, self.link_error = LinkState.RECONNECTING, f'reconnecting: {exc}'
             if self._throttle('reconnect', 10.0):
                 self.log.warning(f'reconnect failed: {exc}')
             return

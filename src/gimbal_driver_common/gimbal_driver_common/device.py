@@ -9,17 +9,24 @@ capability object in :class:`Capabilities` instead of a switch.
 The controller calls a device from more than one thread (the device thread
 polls while the command thread sends), so a device must be thread-safe; the
 clients serialise requests on their own link lock.
+
+What an adapter needs from above comes through this contract, never by importing the
+controller or the policies: the controller calls :meth:`Device.attach` with its
+configuration (joint names and the live limits, which runtime parameters change) and its
+logger before it opens the link.
 """
 
 from __future__ import annotations
 
 import abc
 import enum
+import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from gimbal_driver_common.config import ControllerConfig, Logger
 from gimbal_driver_common.diagnostics import StatusPart
 from gimbal_driver_common.errors import Unsupported
 from gimbal_driver_common.scan import ScanRequest
@@ -175,7 +182,15 @@ class Device(abc.ABC):
 
     def __init__(self) -> None:
         self.capabilities = Capabilities()
+        #: the controller's configuration (joint names, live limits, rates); see attach()
+        self.config: ControllerConfig | None = None
+        #: the node's logger once attached (a module logger until then)
+        self.log: Logger = logging.getLogger(type(self).__module__)
         self._data_arrived = threading.Event()
+
+    def attach(self, config: ControllerConfig, log: Logger) -> None:
+        """Called by the controller that runs this device, before :meth:`open`."""
+        self.config, self.log = config, log
 
     @abc.abstractmethod
     def open(self) -> DeviceInfo:

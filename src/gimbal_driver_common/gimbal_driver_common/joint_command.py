@@ -149,6 +149,20 @@ def validate_joint_command(
     return plan
 
 
+def check_positions(
+    positions: Mapping[str, float], limits: Mapping[str, JointLimits], what: str = '',
+) -> None:
+    """Raise CommandError when a pose (joint -> position) names an unknown joint or leaves
+    the limits: the one pose check of presets, device programs and targets. ``what``
+    names the pose in the message ("preset 3", "the target")."""
+    try:
+        validate_joint_command(list(positions), list(positions.values()), [], limits)
+    except CommandError as exc:
+        if not what:
+            raise
+        raise CommandError(f'{what} is outside the joint limits, not moving: {exc}') from None
+
+
 def resolve_targets(
     names: Sequence[str],
     values: Sequence[float],

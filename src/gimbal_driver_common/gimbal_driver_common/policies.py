@@ -14,10 +14,15 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from gimbal_driver_common.controller import ControllerConfig, GimbalController, is_moving
+from gimbal_driver_common.config import scan_joints
+from gimbal_driver_common.controller import GimbalController, is_moving
 from gimbal_driver_common.device import Moves
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest, Unsupported
-from gimbal_driver_common.joint_command import resolve_targets, validate_joint_command
+from gimbal_driver_common.joint_command import (
+    check_positions,
+    resolve_targets,
+    validate_joint_command,
+)
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.scan import ScanRequest, plan_scan
 
@@ -52,16 +57,6 @@ class Preset:
     index: int
     name: str
     positions: dict[str, float]
-
-
-def scan_joints(config: ControllerConfig) -> list[str]:
-    """The (pan, tilt) a scan sweeps: configured, else `pan`/`tilt` by name, else the first two."""
-    names = config.joint_names
-    if config.scan_joints:
-        return list(config.scan_joints)
-    if 'pan' in names and 'tilt' in names:
-        return ['pan', 'tilt']
-    return list(names[:2])
 
 
 class Motion:
@@ -267,8 +262,7 @@ class Motion:
         """Store a preset; ``positions`` None: the current position."""
         ctl = self.controller
         if positions is not None:
-            validate_joint_command(list(positions), list(positions.values()), [],
-                                   ctl.config.limits)
+            check_positions(positions, ctl.config.limits)
         device = self._device_slot(index)
         if device is not None:
             return ctl.call(lambda: device.set(index, name, positions))

@@ -57,17 +57,19 @@ def _check_range(label: str, low: float, high: float, limits: JointLimits) -> No
         )
 
 
-def plan_scan(
+def check_scan(
     request: ScanRequest,
     joints: Sequence[str],
-    current: Mapping[str, float],
     limits: Mapping[str, JointLimits],
     patterns: Sequence[str],
-) -> list[dict[str, float]]:
-    """Waypoints (joint -> position) for one period of the pattern; raises ScanError."""
+    device: str = 'this driver',
+) -> tuple[str, str]:
+    """The one check of a scan request, driver-side or device scan: the pattern, the
+    joints, speed and dwell, the pan range and (all but *sector*, which stays at the
+    current tilt) the tilt range and step. Returns (pan, tilt); raises ScanError."""
     if request.pattern not in patterns:
         raise ScanError(
-            f'pattern {request.pattern!r} not available; this driver has {list(patterns)}'
+            f'pattern {request.pattern!r} not available; {device} has {list(patterns)}'
         )
     if len(joints) < 2:
         raise ScanError('a scan needs a pan and a tilt joint')
@@ -81,15 +83,29 @@ def plan_scan(
     if not math.isfinite(request.dwell) or request.dwell < 0:
         raise ScanError(f'dwell {request.dwell} must be >= 0 s')
     _check_range('pan', request.pan_min, request.pan_max, limits[pan])
+    if request.pattern != 'sector':
+        _check_range('tilt', request.tilt_min, request.tilt_max, limits[tilt])
+        step = request.tilt_step
+        if not math.isfinite(step) or step <= 0:
+            raise ScanError(f'tilt_step {step} must be > 0 rad for {request.pattern}')
+    return pan, tilt
+
+
+def plan_scan(
+    request: ScanRequest,
+    joints: Sequence[str],
+    current: Mapping[str, float],
+    limits: Mapping[str, JointLimits],
+    patterns: Sequence[str],
+) -> list[dict[str, float]]:
+    """Waypoints (joint -> position) for one period of the pattern; raises ScanError."""
+    pan, tilt = check_scan(request, joints, limits, patterns)
+    step = request.tilt_step
     if request.pattern == 'sector':
         if pan not in current or tilt not in current:
             raise ScanError('no current position yet: cannot scan at the current tilt')
         tilt_now = current[tilt]
         return [{pan: request.pan_min, tilt: tilt_now}, {pan: request.pan_max, tilt: tilt_now}]
-    _check_range('tilt', request.tilt_min, request.tilt_max, limits[tilt])
-    step = request.tilt_step
-    if not math.isfinite(step) or step <= 0:
-        raise ScanError(f'tilt_step {step} must be > 0 rad for {request.pattern}')
     if request.pattern == 'zigzag':
         rows = math.floor((request.tilt_max - request.tilt_min) / step + 1e-9) + 1
         if rows * 2 > MAX_WAYPOINTS:

@@ -3,7 +3,7 @@
 A driver's client talks to a :class:`ByteStream` and never to a socket or a
 ``serial.Serial`` directly, so the same protocol session runs over TCP, RS-232
 or a pseudo-terminal. Failures surface as :class:`TransportError` subclasses;
-the client decides whether to reconnect (see :class:`Backoff`).
+the controller's supervisor (not the client) reconnects.
 """
 
 from __future__ import annotations
@@ -15,8 +15,6 @@ import select
 import socket
 import threading
 import time
-from dataclasses import dataclass, field
-from urllib.parse import parse_qs, urlparse
 
 import serial
 
@@ -266,43 +264,6 @@ class SerialStream(ByteStream):
             raise LinkClosed(f'{self.description}: device reports readiness to read but '
                              'returned no data')
         return data
-
-
-def stream_from_url(url: str, connect_timeout: float = 2.0) -> ByteStream:
-    """Build a stream from ``tcp://host:port`` or ``serial:///dev/ttyUSB0?baudrate=115200``."""
-    parsed = urlparse(url)
-    if parsed.scheme == 'tcp':
-        if not parsed.hostname or parsed.port is None:
-            raise ValueError(f'TCP URL needs host and port: {url!r}')
-        return TcpStream(parsed.hostname, parsed.port, connect_timeout)
-    if parsed.scheme == 'serial':
-        query = parse_qs(parsed.query)
-        baud = int(query.get('baudrate', ['115200'])[0])
-        return SerialStream(parsed.path, baud)
-    raise ValueError(f'unsupported link URL {url!r}: use tcp://host:port or serial:///dev/X')
-
-
-@dataclass
-class Backoff:
-    """Exponential reconnect delay: ``initial`` doubling up to ``maximum``, reset on success."""
-
-    initial: float = 0.5
-    maximum: float = 10.0
-    _next: float = field(default=0.0, init=False)
-
-    def __post_init__(self) -> None:
-        if self.initial <= 0 or self.maximum < self.initial:
-            raise ValueError('backoff needs 0 < initial <= maximum')
-        self._next = self.initial
-
-    def next_delay(self) -> float:
-        """The delay to wait before the next attempt; doubles each call."""
-        delay = self._next
-        self._next = min(self._next * 2.0, self.maximum)
-        return delay
-
-    def reset(self) -> None:
-        self._next = self.initial
 
 
 def read_exactly(stream: ByteStream, count: int, timeout: float) -> bytes:

@@ -10,7 +10,7 @@ import rclpy.executors
 from rclpy.event_handler import EventHandler
 from rclpy.parameter import Parameter
 
-from gimbal_driver_common.policies import scan_joints
+from gimbal_driver_common.config import scan_joints
 from gimbal_driver_common.ros import messages
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.look_at import LookAtRefused
@@ -123,7 +123,7 @@ def test_axis_state_code_in_axis_details() -> None:
     """A ROS-free adapter gives an AxisStateCode (no gimbal_msgs import); ~/status has it."""
     import logging
 
-    from gimbal_driver_common.controller import ControllerConfig, GimbalController
+    from gimbal_driver_common.controller import ControllerConfig, GimbalController, LinkState
     from gimbal_driver_common.device import AxisStateCode, Device, StatusReport
     from gimbal_driver_common.joint_command import JointLimits
     from gimbal_driver_common.ros import messages
@@ -146,7 +146,7 @@ def test_axis_state_code_in_axis_details() -> None:
 
     config = ControllerConfig(['pan', 'tilt'], {n: JointLimits() for n in ('pan', 'tilt')})
     ctl = GimbalController(Named(), config, logging.getLogger('test'))
-    ctl.connected = True
+    ctl.link_state = LinkState.CONNECTED
     msg = messages.gimbal_status(ctl, ['pan', 'tilt'])
     assert [a.state for a in msg.axes] == [AxisState.STATE_FAULT, AxisState.STATE_PLAYBACK]
     assert all(a.calibrated for a in msg.axes)

@@ -11,13 +11,11 @@ import tty
 import pytest
 
 from gimbal_driver_common.transport import (
-    Backoff,
     LinkClosed,
     SerialStream,
     TcpStream,
     TransportError,
     read_exactly,
-    stream_from_url,
 )
 
 
@@ -146,24 +144,6 @@ def test_serial_port_vanishing_raises_link_closed() -> None:
         for _ in range(20):
             stream.read(10, 0.05)
     stream.close()
-
-
-def test_stream_from_url() -> None:
-    tcp = stream_from_url('tcp://127.0.0.1:4949')
-    assert isinstance(tcp, TcpStream) and tcp.port == 4949
-    ser = stream_from_url('serial:///dev/ttyUSB0?baudrate=9600')
-    assert isinstance(ser, SerialStream) and ser.baudrate == 9600 and ser.port == '/dev/ttyUSB0'
-    with pytest.raises(ValueError, match='unsupported'):
-        stream_from_url('udp://127.0.0.1:1')
-
-
-def test_backoff_doubles_to_maximum_and_resets() -> None:
-    backoff = Backoff(0.5, 3.0)
-    assert [backoff.next_delay() for _ in range(5)] == [0.5, 1.0, 2.0, 3.0, 3.0]
-    backoff.reset()
-    assert backoff.next_delay() == 0.5
-    with pytest.raises(ValueError):
-        Backoff(0.0, 1.0)
 
 
 def test_tcp_close_from_another_thread_raises_link_closed() -> None:

@@ -44,7 +44,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from gimbal_driver_common.controller import Logger
+from gimbal_driver_common.config import Logger
 from gimbal_driver_common.device import Device, DeviceInfo, Homing, JointSample, Moves, StatusReport
 from gimbal_driver_common.diagnostics import Level, StatusPart
 from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, InvalidRequest, Unsupported

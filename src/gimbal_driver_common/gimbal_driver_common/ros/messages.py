@@ -7,7 +7,7 @@ import math
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.controller import GimbalController
+from gimbal_driver_common.controller import GimbalController, LinkState
 from gimbal_driver_common.device import DeviceInfo, JointSample
 from gimbal_driver_common.diagnostics import FrequencyMonitor, Level, StatusPart
 from gimbal_driver_common.ros.diagnostics import to_message
@@ -81,7 +81,7 @@ def gimbal_status(ctl: GimbalController | None, joint_names: list[str]) -> Gimba
     connected = bool(ctl and ctl.connected)
     if connected:
         msg.connection = GimbalStatus.CONNECTION_CONNECTED
-    elif ctl and (ctl.reconnects or ctl.link_error.startswith(('link lost', 'reconnecting'))):
+    elif ctl and (ctl.reconnects or ctl.link_state in (LinkState.LOST, LinkState.RECONNECTING)):
         msg.connection = GimbalStatus.CONNECTION_CONNECTING
     else:
         msg.connection = GimbalStatus.CONNECTION_DISCONNECTED
