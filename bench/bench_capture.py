@@ -129,12 +129,14 @@ class TransactionLog:
 
 class MotionLog:
     """The tilt axis' motion packets as the simulated controller handles them (wraps
-    ``PedestalModel.handle``): the last MOT_SendPosition value (the command bytes) and the
-    position the last MOT_Update executed (the device acting), in load degrees."""
+    ``PedestalModel.handle``): the last MOT_SendPosition value (the command bytes), the
+    position the last MOT_Update executed (the device acting), in load degrees, and how
+    many stops (a MOT_Update in speed mode at speed 0) the axis acted on."""
 
     def __init__(self, model: PedestalModel, axis: int) -> None:
         self.sent: float | None = None
         self.updated: float | None = None
+        self.stops = 0
         handle = model.handle
         send_position = COMMANDS['MOT_SendPosition'].opcode
         update = COMMANDS['MOT_Update'].opcode
@@ -143,6 +145,8 @@ class MotionLog:
         def logged(frame: Frame, session: object) -> bytes:
             if frame.axis == axis and frame.opcode == update:
                 pending = target.pending_position
+                if target.speed_mode and target.speed == 0.0:
+                    self.stops += 1
                 reply = handle(frame, session)
                 if pending is not None and not target.relative:
                     self.updated = pending
@@ -161,7 +165,8 @@ def run(domain: int) -> dict:
     transactions = TransactionLog(sim.model)
     motion = MotionLog(sim.model, TILT_AXIS)
     recorder = DeviceRecorder(sim.tcp, {'received': lambda: motion.sent,
-                                        'acting': lambda: motion.updated})
+                                        'acting': lambda: motion.updated,
+                                        'stopped': lambda: motion.stops})
     sim.start()
     # joint 'tilt' = axis 2, direction +1, load degrees (capture_driver_sim.yaml)
     stream = StreamSpec('tilt', -0.25, math.degrees, 0.01, node_name=PACKAGE)

@@ -54,6 +54,13 @@ STREAM_COMMANDS = int(os.environ.get('BENCH_STREAM_COMMANDS', '500'))
 #: targets: the reference ratios the issue sets (p99 within 3x, p50 within 1.5x)
 P99_RATIO_TARGET = 3.0
 P50_RATIO_TARGET = 1.5
+#: ~/stop under a joint_command stream: calls (>= 500 for a p99; BENCH_STOP_CALLS overrides
+#: it, for development only), their rate, and the stream's rate
+STOP_CALLS = int(os.environ.get('BENCH_STOP_CALLS', '500'))
+STOP_CALL_HZ = 10.0
+STOP_STREAM_HZ = 50.0
+#: how far (rad) the stream under ~/stop walks in all: small steps stay inside the limits
+STOP_STREAM_SPAN = 0.4
 
 
 @dataclass
@@ -356,6 +363,76 @@ def move_and_stop_figures(ros: ProbeClient, spec: StreamSpec, recorder: DeviceRe
     }
     if failures:
         figures['failures'] = failures[:5]
+    return figures
+
+
+def stop_during_stream_figures(ros: ProbeClient, domain: int, spec: StreamSpec,
+                               recorder: DeviceRecorder, calls: int = STOP_CALLS,
+                               timeout: float = 10.0) -> dict:
+    """``~/stop`` while a 50 Hz joint_command stream runs (a closed loop that a user stops).
+
+    The node's executor must stay free for the service while joint_command callbacks
+    arrive every 20 ms (ARCHITECTURE.md's thread rule: the callback never waits for a device
+    reply). ``calls`` stops, one every 1/STOP_CALL_HZ s; each timed as its service round
+    trip (the future's done callback) and, where the recorder has a ``stopped`` point (a
+    counter the simulator bumps when an axis acts on a stop), from the call to the device
+    acting on it.
+    """
+    stop = ros.node.create_client(Trigger, f'/{spec.node_name}/stop')
+    if not stop.wait_for_service(timeout_sec=timeout):
+        return {'error': f'/{spec.node_name}/stop not available'}
+    count = int((calls / STOP_CALL_HZ + 5.0) * STOP_STREAM_HZ)
+    sink = ReferenceSink()   # the publisher waits for the reference subscriber too
+    env = ros_env(domain)
+    reference = ManagedProcess([sys.executable, str(ROOT / 'bench' / 'reference_subscriber.py'),
+                                str(sink.port)], env, name='reference_subscriber')
+    round_trips: list[float] = []
+    to_device: list[float] = []
+    failures: list[str] = []
+    recorder.take()
+    with tempfile.TemporaryDirectory(prefix='bench-stop-') as tmp:
+        output = Path(tmp, 'publish_times.json')
+        publisher = ManagedProcess([
+            sys.executable, str(ROOT / 'bench' / 'stream_publisher.py'), repr(STOP_STREAM_HZ),
+            str(count), spec.joint, repr(spec.base), repr(STOP_STREAM_SPAN / count), '1',
+            str(output)], env, name='stream_publisher')
+        try:
+            wait_for(lambda: recorder.events['received'], 60.0, 'the stream at the device')
+            next_call = time.monotonic()
+            for _ in range(calls):
+                next_call += 1.0 / STOP_CALL_HZ
+                answered: list[float] = []
+                call_start = time.time()
+                answer = stop.call_async(Trigger.Request())
+                answer.add_done_callback(lambda _f, times=answered: times.append(time.time()))
+                try:
+                    wait_for(lambda times=answered: times, timeout, 'the ~/stop reply')
+                except TimeoutError as exc:
+                    failures.append(str(exc))
+                    continue
+                round_trips.append(answered[0] - call_start)
+                if not answer.result().success:
+                    failures.append(answer.result().message)
+                acted = next((t for t, _ in list(recorder.events.get('stopped', ()))
+                              if t >= call_start), None)
+                if acted is not None:
+                    to_device.append(acted - call_start)
+                time.sleep(max(0.0, next_call - time.monotonic()))
+            stream_running = publisher.running
+        finally:
+            publisher.stop(timeout=5.0)
+            reference.stop(timeout=5.0)
+            sink.close()
+    recorder.take()
+    figures = {
+        'stream_hz': STOP_STREAM_HZ, 'stop_calls': calls, 'stop_call_hz': STOP_CALL_HZ,
+        'stream_still_running_after_the_last_stop': stream_running,
+        'stop_round_trip': percentiles(round_trips),
+    }
+    if 'stopped' in recorder.events:
+        figures['stop_call_to_device_acting'] = percentiles(to_device)
+    if failures:
+        figures['failures'] = [*failures[:5], f'{len(failures)} in all']
     return figures
 
 

@@ -31,6 +31,7 @@ from command_stream import (
     DeviceRecorder,
     StreamSpec,
     move_and_stop_figures,
+    stop_during_stream_figures,
     stream_figures,
     trace_figures,
 )
@@ -220,6 +221,9 @@ def node_figures(
                     raise RuntimeError(f'{exc}; node exit code {node.process.poll()}, output:\n'
                                        f'{node.output()[-3000:]}') from exc
                 results['move_and_stop'] = move_and_stop_figures(ros, stream, recorder)
+                if 'stopped' in recorder.events:
+                    results['stop_during_stream'] = stop_during_stream_figures(
+                        ros, domain, stream, recorder)
                 results['stream_variant'] = {name: os.environ[name] for name in
                                              NODE_HOOK_VARIABLES if os.environ.get(name)}
     finally:

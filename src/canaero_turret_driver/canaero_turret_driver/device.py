@@ -145,6 +145,8 @@ class TurretDevice(Device):
 
     #: positions arrive as NOD broadcasts: joint_states follow each broadcast cycle
     streamed = True
+    #: set-points are single CAN frames; the turret answers none of them
+    sends_without_reply = True
 
     def __init__(
         self, client: TurretClient, settings: TurretSettings,

@@ -244,8 +244,8 @@ class CanaeroTurretNode(GimbalDriverNode):
                             lambda: self.config.publish_rate, self.get_logger())
 
     def device_ready(self, device: Device) -> None:
-        self.periodic.remove(self._publish_sensors)  # once, also after a reconfigure
-        self.periodic.add(SENSOR_PERIOD_S, self._publish_sensors)
+        self.sensor_jobs.remove(self._publish_sensors)  # once, also after a reconfigure
+        self.sensor_jobs.add(SENSOR_PERIOD_S, self._publish_sensors)
 
     def on_activate(self, state):
         result = super().on_activate(state)

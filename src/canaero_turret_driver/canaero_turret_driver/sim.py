@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import logging
 import math
 import os
@@ -96,6 +97,17 @@ class Operation(IntEnum):
 
 
 LOCATION = {YAW: 1, PITCH: 2}
+
+#: set-point command (key after the axis name) -> (operation named in a refusal's EED, the
+#: AxisModel motion it starts, whether the value must lie in the axis range)
+SETPOINTS: dict[str, tuple[Operation, str, bool]] = {
+    "position_setpoint": (Operation.POSITION, "move_to", True),
+    "velocity_setpoint": (Operation.VELOCITY, "jog", False),
+    "relative_setpoint": (Operation.RELATIVE, "move_by", False),
+}
+#: on/off controls (value 0 or 1) -> the simulator attribute they switch
+SWITCHES = {"fan_control": "fan_on", "oes_heater_control": "oes_heater_on",
+            "drives_heater_control": "drives_heater_on", "charging_control": "charging_on"}
 
 # Default transmission intervals in ms (the ICD only fixes cover state = 100 ms). A real
 # turret sends its positions and velocities every 100 ms until a master asks for more by
@@ -297,6 +309,7 @@ class TurretSimulator:
                                               writable=False),
         }
         self._download: _Download | None = None
+        self._handlers = self._command_handlers()
 
     # --- helpers -----------------------------------------------------------------
 
@@ -480,68 +493,79 @@ class TurretSimulator:
         self.received_commands.append((key, value))
         if self._is_silent(self.config.turret_node_id, self._clock()) and key != "cover_control":
             return
-        axis_name = YAW if key.startswith("yaw") else PITCH
+        handler = self._handlers.get(key)
+        if handler is not None:
+            handler(value)
+
+    def _command_handlers(self) -> dict[str, Callable[[object], None]]:
+        """Command key -> handler: the turret's commands as a table (ICD 6, 7)."""
+        handlers: dict[str, Callable[[object], None]] = {
+            "stop_actuators": self._stop_actuators,
+            "remember_position": self._remember_position,
+            "restore_position": self._restore_position,
+            "cover_control": self._cover_control,
+        }
+        for axis in (YAW, PITCH):
+            for kind, (operation, motion, ranged) in SETPOINTS.items():
+                handlers[f"{axis}_{kind}"] = functools.partial(
+                    self._setpoint, axis, operation, motion, ranged)
+            handlers[f"{axis}_actuator_mode"] = functools.partial(self._actuator_mode, axis)
+        for key, attribute in SWITCHES.items():
+            handlers[key] = functools.partial(self._switch, attribute)
+        return handlers
+
+    def _setpoint(self, axis_name: str, operation: Operation, motion: str, ranged: bool,
+                  value: object) -> None:
+        """A position, velocity or relative set-point: refused (EED) by a disabled axis or
+        for a value that is not finite (positions: outside the axis range)."""
         axis = self.axes[axis_name]
-        if key.endswith("_position_setpoint"):
-            if not self._accepts(axis, Operation.POSITION):
-                return
-            if not (isinstance(value, float) and math.isfinite(value)
-                    and axis.in_range(value)):
-                self._eed(EedCode.SETPOINT_OUT_OF_RANGE, Operation.POSITION,
-                          LOCATION[axis_name])
-                return
-            axis.move_to(value)
-        elif key.endswith("_velocity_setpoint"):
-            if not self._accepts(axis, Operation.VELOCITY):
-                return
-            if not (isinstance(value, float) and math.isfinite(value)):
-                self._eed(EedCode.SETPOINT_OUT_OF_RANGE, Operation.VELOCITY,
-                          LOCATION[axis_name])
-                return
-            axis.jog(value)
-        elif key.endswith("_relative_setpoint"):
-            if not self._accepts(axis, Operation.RELATIVE):
-                return
-            if not (isinstance(value, float) and math.isfinite(value)):
-                self._eed(EedCode.SETPOINT_OUT_OF_RANGE, Operation.RELATIVE,
-                          LOCATION[axis_name])
-                return
-            axis.move_by(value)
-        elif key.endswith("_actuator_mode"):
-            if value not in tuple(ActuatorMode):
-                self._eed(EedCode.SETPOINT_OUT_OF_RANGE, Operation.MODE, LOCATION[axis_name])
-                return
-            axis.actuator_mode = int(value)  # type: ignore[arg-type]
-            axis.fault = False  # a mode command re-initialises the drive
-            axis.stop()
-        elif key == "stop_actuators":
-            bits = int(value)  # type: ignore[arg-type]
-            if bits & STOP_YAW_BIT:
-                self.axes[YAW].stop()
-            if bits & STOP_PITCH_BIT:
-                self.axes[PITCH].stop()
-        elif key == "remember_position" and value == 1:
+        if not self._accepts(axis, operation):
+            return
+        if not (isinstance(value, float) and math.isfinite(value)
+                and (not ranged or axis.in_range(value))):
+            self._eed(EedCode.SETPOINT_OUT_OF_RANGE, operation, LOCATION[axis_name])
+            return
+        getattr(axis, motion)(value)
+
+    def _actuator_mode(self, axis_name: str, value: object) -> None:
+        axis = self.axes[axis_name]
+        if value not in tuple(ActuatorMode):
+            self._eed(EedCode.SETPOINT_OUT_OF_RANGE, Operation.MODE, LOCATION[axis_name])
+            return
+        axis.actuator_mode = int(value)  # type: ignore[arg-type]
+        axis.fault = False  # a mode command re-initialises the drive
+        axis.stop()
+
+    def _stop_actuators(self, value: object) -> None:
+        bits = int(value)  # type: ignore[arg-type]
+        for axis_name, bit in ((YAW, STOP_YAW_BIT), (PITCH, STOP_PITCH_BIT)):
+            if bits & bit:
+                self.axes[axis_name].stop()
+
+    def _remember_position(self, value: object) -> None:
+        if value == 1:
             self.saved_position = (self.axes[YAW].reported_position,
                                    self.axes[PITCH].reported_position)
-        elif key == "restore_position" and value == 1:
-            if self.saved_position is not None:
-                for name, target in zip((YAW, PITCH), self.saved_position, strict=True):
-                    if self._accepts(self.axes[name], Operation.POSITION):
-                        self.axes[name].move_to(target)
-        elif key == "cover_control" and value in (0, 1):
-            target = CoverState.OPENED if value == 1 else CoverState.CLOSED
-            if target != self.cover_state:
-                self.cover_state = CoverState.MIDDLE
-                self._cover_target = target
-                self._cover_arrival = self._clock() + 1.0
-        elif key == "fan_control" and value in (0, 1):
-            self.fan_on = bool(value)
-        elif key == "oes_heater_control" and value in (0, 1):
-            self.oes_heater_on = bool(value)
-        elif key == "drives_heater_control" and value in (0, 1):
-            self.drives_heater_on = bool(value)
-        elif key == "charging_control" and value in (0, 1):
-            self.charging_on = bool(value)
+
+    def _restore_position(self, value: object) -> None:
+        if value != 1 or self.saved_position is None:
+            return
+        for name, target in zip((YAW, PITCH), self.saved_position, strict=True):
+            if self._accepts(self.axes[name], Operation.POSITION):
+                self.axes[name].move_to(target)
+
+    def _cover_control(self, value: object) -> None:
+        if value not in (0, 1):
+            return
+        target = CoverState.OPENED if value == 1 else CoverState.CLOSED
+        if target != self.cover_state:
+            self.cover_state = CoverState.MIDDLE
+            self._cover_target = target
+            self._cover_arrival = self._clock() + 1.0
+
+    def _switch(self, attribute: str, value: object) -> None:
+        if value in (0, 1):
+            setattr(self, attribute, bool(value))
 
     def _accepts(self, axis: AxisModel, operation: int) -> bool:
         if axis.enabled:

@@ -218,7 +218,7 @@ class CaptureDriverNode(GimbalDriverNode):
                 setattr(self, name, value)
                 for job, rate_name in self._sensor_jobs():
                     if rate_name == name:
-                        self.periodic.set_period(job, self._job_period(rate_name))
+                        self.sensor_jobs.set_period(job, self._job_period(rate_name))
             return apply
 
         for name in DEVICE_RUNTIME_PARAMETERS:
@@ -236,13 +236,13 @@ class CaptureDriverNode(GimbalDriverNode):
         """Device-run motions report their targets to ~/status; the sensor topics start."""
         device.on_targets = self.controller.commanded_targets.update
         for job, rate_name in self._sensor_jobs():
-            self.periodic.remove(job)  # a reconfigure adds them again
-            self.periodic.add(self._job_period(rate_name), job)
+            self.sensor_jobs.remove(job)  # a reconfigure adds them again
+            self.sensor_jobs.add(self._job_period(rate_name), job)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         result = super().on_activate(state)
         for job, _ in self._sensor_jobs():  # publish at once, as the first poll did
-            self.periodic.trigger(job)
+            self.sensor_jobs.trigger(job)
         return result
 
     def _device_service(self, response: object, request: Callable[[CaptureDevice], str],
@@ -411,7 +411,7 @@ class CaptureDriverNode(GimbalDriverNode):
         def ranging(device: CaptureDevice) -> str:
             message = device.set_ranging(request.data)
             if request.data:
-                self.periodic.trigger(self._publish_range)
+                self.sensor_jobs.trigger(self._publish_range)
                 message += f': ~/range at {self.range_rate:g} Hz'
             return message
 
@@ -420,7 +420,7 @@ class CaptureDriverNode(GimbalDriverNode):
     def _on_set_tracking(self, request, response):
         def tracking(device: CaptureDevice) -> str:
             message = device.set_tracking(request.mode)
-            self.periodic.trigger(self._publish_tracking)
+            self.sensor_jobs.trigger(self._publish_tracking)
             return message
 
         return self._device_service(response, tracking)
@@ -428,7 +428,7 @@ class CaptureDriverNode(GimbalDriverNode):
     def _on_set_output(self, number: int, request, response):
         def output(device: CaptureDevice) -> str:
             message = device.set_digital_output(number, request.data)
-            self.periodic.trigger(self._publish_digital_io)
+            self.sensor_jobs.trigger(self._publish_digital_io)
             return message
 
         return self._device_service(response, output)

@@ -4,7 +4,15 @@ It owns the device thread (poll or stream, then hand each sample to the node),
 the one connection supervisor (open, identity, reconnect every
 ``reconnect_period``, link state with reason and count), the command thread
 (newest command per joint wins, sent before the next poll), the jog dead-man
-watchdog, ``stop`` and the refusal rules. Moves, homing, scans and presets are
+watchdog, ``stop`` and the refusal rules.
+
+The thread rule: :meth:`GimbalController.command` (the joint_command callback) never
+waits for a device reply. It validates and queues; the command thread sends. Only a
+device whose sends wait for no reply (``Device.sends_without_reply``) is sent to from
+the caller's thread, when the link is free. Periodic work runs on two plain threads:
+``periodic`` (housekeeping: the jog watchdog, diagnostics, ~/status, all quick) and
+``sensors`` (the driver's extra topics that read the device), so a slow or silent
+sensor read never delays a dead-man stop. Moves, homing, scans and presets are
 policies in :mod:`gimbal_driver_common.policies` built on this class.
 
 The ROS node is an adapter around one controller (see ``ros/base_node.py``),
@@ -62,6 +70,7 @@ class GimbalController:
         self, device: Device, config: ControllerConfig, log: Logger,
         on_sample: Callable[[JointSample], None] | None = None,
         on_link_change: Callable[[], None] | None = None, periodic: Periodic | None = None,
+        sensors: Periodic | None = None,
     ) -> None:
         self.device = device
         self.config = config
@@ -82,6 +91,8 @@ class GimbalController:
         self.motion_generation = 0
         self.watchdog = JogWatchdog(config.command_timeout, self._on_jog_expired)
         self.periodic = periodic or Periodic(on_error=log.error)
+        #: jobs that do device I/O (sensor topics): never on the watchdog's thread
+        self.sensors = sensors or Periodic(on_error=log.error, name='sensors')
         self.periodic.add(self._watchdog_period(), self.watchdog.check)
         self.halt_hooks: list[Callable[[], None]] = []  # stop and halt call these (policies)
         self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
@@ -207,12 +218,11 @@ class GimbalController:
     def command(
         self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float]
     ) -> None:
-        """A joint_command: validated, then sent now if the link is free, else queued.
-
-        The caller never waits behind another send: a command that finds the link busy
-        is queued for the command thread, and newest wins (a queued command for a joint
-        is replaced by a newer one for the same joint). Raises (nothing sent) when the
-        command is invalid or the axes cannot move.
+        """A joint_command: validated, then queued for the command thread (newest per
+        joint wins); a device that sends without waiting for a reply gets it from this
+        thread at once when the link is free. The caller never waits for a device reply
+        nor behind another send. Raises (nothing sent) when the command is invalid or the
+        axes cannot move.
         """
         self.require()
         plan = validate_joint_command(names, positions, velocities, self.config.limits)
@@ -228,9 +238,10 @@ class GimbalController:
                 self._pending[joint] = ('jog', velocity, None)
         self.watchdog.cancel(list(plan.moves) + [j for j, v in plan.jogs.items() if v == 0.0])
         self.watchdog.feed([j for j, v in plan.jogs.items() if v != 0.0])
-        # Fast path: send from the caller's thread when the link is free (no thread hand-off);
-        # otherwise the command thread sends it as soon as the current send is done.
-        if self._send_lock.acquire(blocking=False):
+        # Fast path, for a write-only device: send from the caller's thread when the link is
+        # free (no thread hand-off). Otherwise the command thread sends it as soon as the
+        # current send is done.
+        if self.device.sends_without_reply and self._send_lock.acquire(blocking=False):
             try:
                 self._flush_pending()
             finally:

@@ -179,6 +179,11 @@ class Device(abc.ABC):
     #: True when :meth:`read` returns data a receive thread streams in: the controller
     #: then publishes on :meth:`wait_for_data` instead of on a fixed polling tick.
     streamed: bool = False
+    #: True when :meth:`move` and :meth:`jog` only write (a CAN frame, a serial packet, a
+    #: TCP message) and wait for no reply: the controller may then send a joint_command
+    #: from the subscription callback's own thread. Otherwise (a device that ACKs each
+    #: set-up request) the command thread sends, so the callback never waits on the device.
+    sends_without_reply: bool = False
 
     def __init__(self) -> None:
         self.capabilities = Capabilities()

@@ -54,6 +54,8 @@ class FakeDevice(Device):
         self.broken = False  # read() raises: the link dropped
         self.refuse: str | None = None
         self.nack_moves = False
+        self.move_threads: list[str] = []  # the thread each move() ran in
+        self.hold_moves: threading.Event | None = None  # move() waits for it (a slow ACK)
 
     def open(self) -> DeviceInfo:
         self.opens += 1
@@ -81,6 +83,9 @@ class FakeDevice(Device):
             return JointSample(dict(self.positions), velocities)
 
     def move(self, moves: Moves) -> None:
+        self.move_threads.append(threading.current_thread().name)
+        if self.hold_moves is not None:
+            self.hold_moves.wait()
         if self.nack_moves:
             raise DeviceRefused('device NACK: axis disabled')
         with self.lock:
@@ -199,6 +204,7 @@ def controller(device):
     yield ctl
     ctl.shutdown()
     ctl.periodic.stop()
+    ctl.sensors.stop()
 
 
 @pytest.fixture
@@ -289,6 +295,45 @@ def test_jog_stops_when_the_watchdog_expires(controller, device) -> None:
     wait_for(lambda: controller.moving('pan'), 2.0, 'the jog')
     wait_for(lambda: ('stop', ['pan']) in device.sent, 2.0, 'the dead-man stop')
     assert controller.watchdog.jogging == []
+
+
+def test_a_joint_command_never_waits_for_the_device_reply(controller, device) -> None:
+    """The thread rule (ARCHITECTURE.md): a device that waits for ACKs is sent to from the
+    command thread; the caller returns while the device is still busy with the send."""
+    device.hold_moves = threading.Event()
+    caller = threading.Thread(target=controller.command, args=(['pan'], [0.2], []))
+    caller.start()
+    wait_for(lambda: device.move_threads, 2.0, 'the move reaching the device')
+    wait_for(lambda: not caller.is_alive(), 2.0, 'command() returning during the send')
+    assert device.move_threads == ['commands']
+    device.hold_moves.set()
+    wait_for(lambda: controller.commanded_targets.get('pan') == 0.2, 2.0, 'the move sent')
+
+
+def test_a_write_only_device_is_sent_to_from_the_callers_thread(controller, device) -> None:
+    device.sends_without_reply = True
+    controller.command(['pan'], [0.2], [])
+    assert device.move_threads == [threading.current_thread().name]
+
+
+def test_a_blocked_sensor_read_does_not_delay_the_dead_man_stop(controller, device) -> None:
+    """Sensor jobs (device I/O of a driver's extra topics) run on their own thread: one
+    that hangs on a silent device leaves the jog watchdog's thread free."""
+    released, entered = threading.Event(), threading.Event()
+
+    def silent_sensor_read() -> None:
+        entered.set()
+        released.wait()
+
+    controller.sensors.add(0.01, silent_sensor_read)
+    try:
+        wait_for(entered.is_set, 2.0, 'the sensor read to start')
+        controller.command(['pan'], [], [0.5])
+        wait_for(lambda: ('stop', ['pan']) in device.sent, 2.0, 'the dead-man stop')
+        assert not released.is_set()  # the stop came while the sensor read still hung
+    finally:
+        released.set()
+        controller.sensors.remove(silent_sensor_read)
 
 
 def test_stop_drops_queued_commands_and_stops_everything(controller, device) -> None:

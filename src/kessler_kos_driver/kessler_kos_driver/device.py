@@ -116,6 +116,8 @@ class KosDevice(Device):
 
     #: positions come from MotorInfo polls (every ``poll_period``) and notifications
     streamed = True
+    #: a move is one kOS message written to the link; no reply is awaited
+    sends_without_reply = True
 
     def __init__(
         self, client: KosClient, joints: Sequence[JointMapping], config: MotionConfig,

@@ -104,6 +104,8 @@ class UCameraDevice(Device):
     """One U-Camera in joint space (REP-103); thread-safe."""
 
     streamed = True  # angles arrive as periodic reports: publish each as it comes
+    #: UCSP has no ACK: a set-point is one packet written to the serial line
+    sends_without_reply = True
 
     def __init__(
         self, settings: UCameraSettings, *, tolerance: Callable[[], float] = lambda: 0.01,

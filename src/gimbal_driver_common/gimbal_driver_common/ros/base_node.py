@@ -6,11 +6,13 @@ every device (link supervision, commands, moves, scans, presets, the jog
 watchdog) lives in the ROS-free controller and policies. This class only maps
 parameters, topics, services and actions onto them and builds the messages.
 
-Threading, chosen for the command path: ``joint_command`` only validates and
-queues (the controller's command thread sends, newest wins), so the one
-subscription callback never waits on the device; services and actions share a
-reentrant group on a MultiThreadedExecutor, so ``~/stop`` answers while a
-``move_to`` waits; periodic jobs run on the controller's plain thread.
+Threading (ARCHITECTURE.md, "Threads"): ``joint_command`` validates and queues, and the
+controller's command thread sends (newest wins), so the subscription callback never
+waits for a device reply; only a device whose sends wait for no reply is written to
+from the callback itself. Services and actions share a reentrant group on a
+MultiThreadedExecutor, so ``~/stop`` answers while a ``move_to`` waits. Periodic jobs run
+on two plain threads: ``periodic`` (jog watchdog, diagnostics, ~/status) and
+``sensor_jobs`` (a driver's extra topics that read the device).
 """
 
 from __future__ import annotations
@@ -76,6 +78,8 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
         self.controller: GimbalController | None = None
         self.motion: Motion | None = None
         self.periodic = Periodic(on_error=self.get_logger().error)
+        #: a driver's jobs that do device I/O (sensor topics): off the watchdog's thread
+        self.sensor_jobs = Periodic(on_error=self.get_logger().error, name='sensors')
         self._active = False
         self._joint_rate = FrequencyMonitor(self.publish_rate)
         self.service_group = ReentrantCallbackGroup()
@@ -294,6 +298,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
 
     def destroy_node(self) -> None:
         self.periodic.stop()
+        self.sensor_jobs.stop()
         super().destroy_node()
 
     # -------------------------------------------------------------- lifecycle
@@ -304,7 +309,8 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
             device = self.make_device()
             controller = GimbalController(
                 device, self.config, self.get_logger(), on_sample=self._publish_joint_state,
-                on_link_change=self._publish_diagnostics, periodic=self.periodic)
+                on_link_change=self._publish_diagnostics, periodic=self.periodic,
+                sensors=self.sensor_jobs)
             self.controller = controller
             self.motion = Motion(controller, store, self.SCAN_PATTERNS)
             controller.open()
