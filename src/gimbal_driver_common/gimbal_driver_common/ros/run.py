@@ -108,9 +108,10 @@ class InlineGroupExecutor(MultiThreadedExecutor):
 
     Measured (bench, node trace): the hand-off to the pool thread is the whole of the
     command path's excess over a bare rclpy subscriber (publish -> callback p50 1.7 ms
-    against 0.65 ms single-threaded). ``joint_command``'s callback only validates and
-    queues (it never waits on the device), so it runs inline; services and actions still
-    run in the pool, so ``~/stop`` answers while a ``move_to`` waits.
+    against 0.65 ms single-threaded). ``joint_command``'s callback never waits for a device reply
+    (it validates and queues for the controller's command thread; only a device whose
+    sends wait for no reply is written to from here), so it runs inline; services and
+    actions still run in the pool, so ``~/stop`` answers while a ``move_to`` waits.
     """
 
     def _spin_once_impl(self, timeout_sec=None, wait_condition=lambda: False) -> None:
