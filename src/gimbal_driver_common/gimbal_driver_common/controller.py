@@ -137,8 +137,11 @@ class GimbalController:
             if thread is not threading.current_thread():
                 thread.join(timeout=5.0)
         self._threads = []
+        if self.link_state is LinkState.CONNECTED:
+            self.link_error = 'link closed (lifecycle cleanup)'
+        # else the reason it is not connected (say, why configure failed) stays readable
         self._close_device()
-        self.link_state, self.link_error = LinkState.NOT_CONFIGURED, 'closed (lifecycle cleanup)'
+        self.link_state = LinkState.NOT_CONFIGURED
         self.periodic.remove(self.watchdog.check)
 
     def shutdown(self, why: str = 'shutting down') -> None:

@@ -330,7 +330,9 @@ def test_password_never_leaves_the_node(rig):
     assert reply.values[0].string_value == '********'
     diag = ros.wait_for_message('/diagnostics', DiagnosticArray)
     status = ros.wait_for_message(srv('status'), GimbalStatus)
-    assert logs, 'rosout is recorded'
+    # the start-up lines may come before /rosout matched this subscriber: make one more
+    assert ros.set_parameter(NODE, 'diagnostics_period', 0.3).successful
+    wait_for(lambda: logs, 10.0, 'a /rosout line of the node')
     for message in (*logs, diag, status):
         assert PASSWORD not in str(message)
 
