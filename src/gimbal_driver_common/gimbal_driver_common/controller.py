@@ -251,6 +251,10 @@ class GimbalController:
                 self._send_lock.release()
         else:
             self._command_ready.set()
+            # Let the command thread take the GIL now. Otherwise it waits until this
+            # (executor) thread blocks again, after rclpy's wait-set rebuild: measured in
+            # a loop with 300 us of Python after the set(), hand-off p50 330 -> 50 us.
+            time.sleep(0)
 
     def send_moves(self, moves: Moves, offsets: dict[str, float] | None = None) -> None:
         """Send absolute moves now (move_to, presets, scans), after the queued commands."""
