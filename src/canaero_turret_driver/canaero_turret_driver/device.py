@@ -164,7 +164,7 @@ class TurretGeolocation(Geolocation):
 
     The ICD gives the inclinometer no sign convention; it is read as the aerospace one
     (pitch nose-up positive, roll right side down positive), i.e. REP-103 roll = global
-    roll, REP-103 pitch = -global pitch (README, decision 19).
+    roll, REP-103 pitch = -global pitch (README, decision 21).
     """
 
     POSITION_KEYS = ("latitude", "longitude", "altitude_msl")
