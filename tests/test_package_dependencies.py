@@ -33,6 +33,10 @@ THIRD_PARTY = {
     'pytest': 'python3-pytest',
     'hypothesis': 'python3-hypothesis',
     'urdf_parser_py': 'urdfdom_py',  # a ROS package in Jazzy, not a python3-* key
+    # rosdep/python.yaml has pymap3d-pip (pip) and no python3-pymap3d key, although
+    # Debian ships python3-pymap3d (bookworm: 2.9.1)
+    'pymap3d': 'pymap3d-pip',
+    'geographiclib': 'python3-geographiclib',  # Debian/Ubuntu python3-geographiclib
 }
 # Imported by setup.py only (build time, brought by colcon itself).
 BUILD_ONLY = {'setuptools'}

@@ -23,8 +23,22 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from gimbal_driver_common.config import Logger
-from gimbal_driver_common.device import Device, DeviceInfo, DevicePresets, JointSample, Moves
+from gimbal_driver_common.device import (
+    Device,
+    DeviceInfo,
+    DevicePresets,
+    Geolocation,
+    JointSample,
+    Moves,
+)
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
+from gimbal_driver_common.geodesy import (
+    Attitude,
+    DevicePose,
+    GeoPoint,
+    OrientationFix,
+    PositionFix,
+)
 
 from .client import AXES, CommandError, Sample, TurretClient
 from .protocol.identifiers import ActuatorMode, AxisStatus, TargetState
@@ -67,6 +81,9 @@ class TurretSettings:
     temperature_error: float = 85.0
     eed_hold: float = 10.0
     monitored_nodes: Sequence[str] = ("turret", "cover", "rover_gnss", "base_gnss", "zoom")
+    #: m, the geoid height N at the site (ellipsoid height = the base GNSS's mean-sea-level
+    #: altitude + N); None: unknown, so ~/look_at_geo has no ellipsoid altitude (run time)
+    geoid_height: float | None = None
 
 
 @dataclass(frozen=True)
@@ -140,6 +157,68 @@ class TurretPresets(DevicePresets):
                 "record of it")
 
 
+class TurretGeolocation(Geolocation):
+    """Where the turret stands and faces: the base GNSS position (7.4: latitude, longitude,
+    altitude above mean sea level plus ``geoid_height``, accuracy estimate), the rover
+    GNSS heading (7.3.1, accuracy 7.3.2) and the base's inclinometer (7.1.31-32).
+
+    The ICD gives the inclinometer no sign convention; it is read as the aerospace one
+    (pitch nose-up positive, roll right side down positive), i.e. REP-103 roll = global
+    roll, REP-103 pitch = -global pitch (README, decision 21).
+    """
+
+    POSITION_KEYS = ("latitude", "longitude", "altitude_msl")
+    ORIENTATION_KEYS = ("rover_heading", "global_roll", "global_pitch")
+
+    def __init__(self, device: TurretDevice) -> None:
+        self.device = device
+
+    def _readings(self, keys: Sequence[str], what: str) -> tuple[list[Sample], str | None]:
+        """The samples of ``keys``, or why they cannot be used (never received, stale)."""
+        client = self.device.client
+        samples = [client.latest(key) for key in keys]
+        absent = [k for k, s in zip(keys, samples, strict=True) if s is None or s.si is None]
+        if absent:
+            return [], f"no {what} received ({', '.join(absent)})"
+        stale = [k for k in keys if client.is_stale(k)]
+        if stale:
+            age = max(client.age(k) or 0.0 for k in stale)
+            return [], (f"{what} stale: no {', '.join(stale)} for {age:.1f} s "
+                        f"(stale after {client.stale_timeout_for(stale[0]):g} s)")
+        return samples, None
+
+    def pose(self) -> DevicePose:
+        missing: dict[str, str] = {}
+        position = orientation = None
+        samples, why = self._readings(self.POSITION_KEYS, "base GNSS position")
+        geoid_height = self.device.settings.geoid_height
+        if why is None and geoid_height is None:
+            why = ("the base GNSS gives the altitude above mean sea level (ICD 7.4.3): set "
+                   "geoid_height (the geoid height N at the site, m) to make it a height above "
+                   "the WGS84 ellipsoid")
+        if why is not None:
+            missing["position"] = why
+        else:
+            latitude, longitude, altitude = samples
+            accuracy = self.device._fresh("position_accuracy")
+            position = PositionFix(
+                GeoPoint(latitude.si, longitude.si, altitude.si + geoid_height), "base GNSS",
+                stamp=min(s.stamp for s in samples),
+                error=abs(accuracy.si) if accuracy is not None else None)
+        samples, why = self._readings(self.ORIENTATION_KEYS,
+                                      "rover GNSS heading and inclinometer")
+        if why is not None:
+            missing["orientation"] = why
+        else:
+            heading, roll, pitch = samples
+            accuracy = self.device._fresh("rover_heading_accuracy")
+            orientation = OrientationFix(
+                Attitude.from_heading(heading.si, roll.si, -pitch.si),
+                "rover GNSS heading + inclinometer", stamp=min(s.stamp for s in samples),
+                heading_error=abs(accuracy.si) if accuracy is not None else None)
+        return DevicePose(position, orientation, missing)
+
+
 class TurretDevice(Device):
     """One turret (and its cover, GNSS and zoom nodes) on one CAN interface."""
 
@@ -172,6 +251,7 @@ class TurretDevice(Device):
         self.presets = TurretPresets(self)
         self.capabilities.presets = self.presets
         self.capabilities.status = TurretStatus(self)
+        self.capabilities.geolocation = TurretGeolocation(self)
 
     # ------------------------------------------------------------------ conversion
     def _direction(self, axis: str) -> float:

@@ -43,6 +43,17 @@ NODE_NAME = "canaero_turret_driver"
 SENSOR_PERIOD_S = 0.1  # how often ~/fix, ~/heading, ... look for new frames
 
 
+def _geoid_height(value: float) -> float | None:
+    """The geoid_height parameter: None for NaN (unknown); the geoid lies within about
+    -107..+86 m of the ellipsoid (EGM2008), so more than 200 m is a mistake."""
+    if math.isnan(value):
+        return None
+    if not abs(value) <= 200.0:
+        raise ParameterError(f"parameter 'geoid_height': {value} m is not a geoid height "
+                             "(the geoid is within about -107..+86 m of the ellipsoid)")
+    return float(value)
+
+
 def _parse_options(items: Sequence[str]) -> dict[str, object]:
     """["key=value", ...] -> kwargs for can.Bus, with ints/floats/bools recognised."""
     options: dict[str, object] = {}
@@ -172,6 +183,9 @@ class CanaeroTurretNode(GimbalDriverNode):
                                    value_range=(-50.0, 200.0))
         eed_hold = p("eed_hold_time", 10.0, "s an EED event keeps the events status WARN",
                           value_range=(0.0, 3600.0))
+        geoid_height = p("geoid_height", math.nan,
+                         "m, geoid height N at the site: ellipsoid height = the base GNSS's "
+                         "mean-sea-level altitude + N, for ~/look_at_geo (NaN = unknown)")
         self.fix_frame_id = p("fix_frame_id", "gnss_base", "frame_id of ~/fix")
         self.inclination_frame_id = p("inclination_frame_id", "turret_base",
                                       "frame_id of ~/inclination")
@@ -191,7 +205,7 @@ class CanaeroTurretNode(GimbalDriverNode):
             transmission_intervals=transmission_intervals, actuator_mode=actuator_mode,
             allow_data_download=allow_data_download, temperature_warn=temperature_warn,
             temperature_error=temperature_error, eed_hold=eed_hold,
-            monitored_nodes=tuple(monitored_nodes))
+            monitored_nodes=tuple(monitored_nodes), geoid_height=_geoid_height(geoid_height))
 
     # ------------------------------------------------------------------ run-time parameters
     def declare_runtime_parameters(self) -> None:
@@ -225,6 +239,9 @@ class CanaeroTurretNode(GimbalDriverNode):
             self.runtime_parameter(name, set_setting(name))
         for name in ("fix_frame_id", "inclination_frame_id"):
             self.runtime_parameter(name, name)
+        self.runtime_parameter(
+            "geoid_height", lambda value: setattr(settings, "geoid_height", _geoid_height(value)),
+            check=_geoid_height)
 
     def _client_config(self) -> ClientConfig:
         return ClientConfig(

@@ -283,6 +283,16 @@ class TurretSimulator:
         self._cover_arrival = 0.0
         self.saved_position: tuple[float, float] | None = None
         self.zoom_position = 2500  # Camera0 zoom, LONG counts (ICD 7.5.1)
+        # GNSS and inclinometer (the `gnss` and `inclination` verbs set them): the base
+        # GNSS position (7.4), the rover GNSS heading and its accuracy (7.3), and the
+        # base's inclinometer roll and pitch (7.1.31-32), in the ICD's units
+        self.latitude_deg = self.config.latitude_deg
+        self.longitude_deg = self.config.longitude_deg
+        self.altitude_m = self.config.altitude_m
+        self.position_accuracy_m = 1.5
+        self.heading_deg = 123.45678
+        self.heading_accuracy_deg = 0.25
+        self.inclination_deg = (-0.8, 1.5)  # (roll, pitch)
         self.stored_configuration: dict[str, object] | None = None
         self.received_commands: list[tuple[str, object]] = []
         self.malformed_received = 0
@@ -370,16 +380,17 @@ class TurretSimulator:
             "oes_heater_state": int(self.oes_heater_on) | (int(self.oes_heater_on) << 1),
             "drives_heater_state": int(self.drives_heater_on),
             "periphery_status": self._periphery(),
-            "global_pitch": 1.5 + 0.01 * math.sin(elapsed),
-            "global_roll": -0.8,
+            "global_pitch": self.inclination_deg[1] + (0.01 * math.sin(elapsed)
+                                                        if self.inclination_deg[1] else 0.0),
+            "global_roll": self.inclination_deg[0],
             "cover_state": int(self.cover_state),
-            "rover_heading": round(123.45678 * 1e5),
-            "rover_heading_accuracy": round(0.25 * 1e5),
-            "global_yaw": 123.45678,
-            "latitude": round(self.config.latitude_deg * 1e7),
-            "longitude": round(self.config.longitude_deg * 1e7),
-            "altitude_msl": round(self.config.altitude_m * 1000),
-            "position_accuracy": 15000,
+            "rover_heading": round(self.heading_deg * 1e5),
+            "rover_heading_accuracy": round(self.heading_accuracy_deg * 1e5),
+            "global_yaw": self.heading_deg,
+            "latitude": round(self.latitude_deg * 1e7),
+            "longitude": round(self.longitude_deg * 1e7),
+            "altitude_msl": round(self.altitude_m * 1000),
+            "position_accuracy": round(self.position_accuracy_m * 1e4),
             "utc_time": int(time.time()),
             "zoom_position": self.zoom_position,
         }
@@ -1043,6 +1054,22 @@ def make_control(simulator: TurretSimulator, link: object | None = None) -> SimC
         for name in nodes:
             simulator.set_silent(name, duration)
 
+    def gnss(args: list[str]) -> None:
+        if len(args) < 4:
+            raise ControlError("gnss LAT LON ALT_MSL HEADING [ACCURACY_M]")
+        latitude, longitude, altitude, heading = (float(a) for a in args[:4])
+        with simulator._lock:
+            simulator.latitude_deg, simulator.longitude_deg = latitude, longitude
+            simulator.altitude_m, simulator.heading_deg = altitude, heading % 360.0
+            if len(args) > 4:
+                simulator.position_accuracy_m = float(args[4])
+
+    def inclination(args: list[str]) -> None:
+        if len(args) != 2:
+            raise ControlError("inclination ROLL PITCH (deg)")
+        with simulator._lock:
+            simulator.inclination_deg = (float(args[0]), float(args[1]))
+
     def eed(args: list[str]) -> None:
         numbers = [int(a, 0) for a in args[:3]]
         simulator.emit_eed(*numbers, node=args[3] if len(args) > 3 else "turret")
@@ -1063,6 +1090,10 @@ def make_control(simulator: TurretSimulator, link: object | None = None) -> SimC
     control.add_verb("malformed", lambda a: simulator.send_malformed(int(a[0]) if a else 3),
                      "malformed [COUNT]")
     control.add_verb("eed", eed, "eed CODE [OPERATION] [LOCATION] [NODE]")
+    control.add_verb("gnss", gnss, "gnss LAT LON ALT_MSL HEADING [ACCURACY_M]: base GNSS "
+                     "position (deg, m above mean sea level) and rover heading (deg)")
+    control.add_verb("inclination", inclination, "inclination ROLL PITCH: the base's "
+                     "inclinometer (deg)")
     return control
 
 

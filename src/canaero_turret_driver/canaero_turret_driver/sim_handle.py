@@ -85,6 +85,13 @@ class CanaeroSimHandle(SimHandle):
 
         return recorded
 
+    def set_gnss(self, latitude: float, longitude: float, altitude_msl: float,
+                 heading: float, roll: float = 0.0, pitch: float = 0.0) -> None:
+        """The base GNSS position (deg, m above mean sea level), the rover heading (deg,
+        clockwise from north) and the inclinometer (deg), through the control verbs."""
+        self.control(f'gnss {latitude!r} {longitude!r} {altitude_msl!r} {heading!r}')
+        self.control(f'inclination {roll!r} {pitch!r}')
+
     def changing(self, request: str) -> bool:
         return request not in self.READ_SERVICES
 

@@ -22,6 +22,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from gimbal_driver_common import geodesy
 from gimbal_driver_common.controller import ControllerConfig, Logger
 from gimbal_driver_common.device import (
     AxisStateCode,
@@ -29,10 +30,12 @@ from gimbal_driver_common.device import (
     DeviceInfo,
     DevicePresets,
     DeviceScans,
+    Geolocation,
     Homing,
     JointSample,
     Moves,
     StatusReport,
+    TargetPointing,
 )
 from gimbal_driver_common.diagnostics import ActiveFlag, Level, StatusPart
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
@@ -272,6 +275,8 @@ class CaptureDevice(Device):
         self.ranging = False
         self.device_scanning = self.preset_looping = self.target_looping = False
         self.capabilities.homing = CaptureHoming(self)
+        self.capabilities.geolocation = CaptureGeolocation(self)
+        self.capabilities.target_pointing = CaptureTargetPointing(self)
         self.capabilities.presets = CapturePresets(self)
         self.capabilities.scans = CaptureScans(self)
         self.capabilities.status = CaptureStatus(self)
@@ -1089,3 +1094,78 @@ class CaptureStatus(StatusReport):
         system = status.get('system', {})
         flags = [a.key for a in CSR.decode(system.get('CSR', 0)) if a.flag.level > Level.OK]
         return flags + [text for text in status.get('errors', {}).values() if text]
+
+
+#: the pose source of the position and heading the user inserted on the device (4.4.21-27)
+INSERTED_SOURCE = 'inserted position (GPS_GetInsertedLLA, override flag set)'
+
+
+class CaptureGeolocation(Geolocation):
+    """Where the pedestal stands and faces, as the controller knows it.
+
+    With the 'Override GPS' flag (GPS_GetOvdPosGPS 1) the controller aims from the
+    position and heading the user inserted (GPS_GetInsertedLLA, GPS_GetInsertedHeading):
+    the whole pose, surveyed, so it does not age. Otherwise from its GPS: the heading
+    (GPS_GetHeading while GPS_HeadingReady) is usable, but the position has no altitude
+    (GPS_GetAltitude has no established opcode, see the README), so the position is
+    missing and ~/look_at_geo names what to do: site_position, or insert the position.
+    """
+
+    def __init__(self, device: CaptureDevice) -> None:
+        self.device = device
+
+    def pose(self) -> geodesy.DevicePose:
+        client = self.device.client
+        if client.request('GPS_GetOvdPosGPS'):
+            point = client.request('GPS_GetInsertedLLA')
+            heading = client.request('GPS_GetInsertedHeading')
+            return geodesy.DevicePose(
+                geodesy.PositionFix(
+                    geodesy.GeoPoint(point.latitude, point.longitude, point.altitude),
+                    INSERTED_SOURCE),
+                geodesy.OrientationFix(geodesy.Attitude.from_heading(math.radians(heading)),
+                                       'inserted heading (GPS_GetInsertedHeading)'))
+        if not self.device.has_gps:
+            reason = ('no GPS (GPS_isConnectedGPS 0) and no inserted position (override flag '
+                      '0)')
+            return geodesy.DevicePose(missing={'position': reason, 'orientation': reason})
+        missing: dict[str, str] = {}
+        fix = client.gps_fix()
+        if fix is None or not fix[0]:
+            missing['position'] = 'no GPS fix (GPS_PositionReady 0)'
+        else:
+            missing['position'] = (
+                'the GPS gives no altitude (GPS_GetAltitude has no established opcode); or '
+                'insert the position on the pedestal (GPS_SetInsertedLLA, '
+                'GPS_SetInsertedHeading, GPS_SetOvdPosGPS 1)')
+        heading = self.device.gps_heading()
+        orientation = None
+        if heading is None:
+            missing['orientation'] = 'no valid GPS heading (GPS_HeadingReady 0)'
+        else:
+            orientation = geodesy.OrientationFix(geodesy.Attitude.from_heading(heading),
+                                                 'GPS heading', stamp=time.time())
+        return geodesy.DevicePose(None, orientation, missing)
+
+
+class CaptureTargetPointing(TargetPointing):
+    """GPS_SetTargetLLA + GPS_GoToTarget on ``gps_target_slot`` (4.4.10-11): the pedestal
+    aims itself from the pose it holds, like its presets and scans."""
+
+    def __init__(self, device: CaptureDevice) -> None:
+        self.device = device
+
+    def refusal(self, pose: geodesy.GeoPose, speed: float) -> str | None:
+        if pose.position.source != INSERTED_SOURCE:
+            return 'the pedestal aims from its inserted position only'
+        if speed > 0.0:
+            return 'GPS_GoToTarget takes no speed (it moves at the axes\' general speed)'
+        return None
+
+    def point_at(self, target: geodesy.GeoPoint) -> str:
+        device = self.device
+        slot = device.settings.gps_target_slot
+        device.leave_device_programs()
+        device.client.goto_lla(slot, GeoPoint(target.longitude, target.latitude,
+                                               target.altitude))
+        return f'GPS_SetTargetLLA + GPS_GoToTarget on target {slot}'

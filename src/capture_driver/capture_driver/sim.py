@@ -308,6 +308,7 @@ class PedestalModel:
         self.inserted_position = GeoPoint(0.0, 0.0, 0.0)
         self.inserted_heading = 0.0
         self.override_gps = False
+        self.gps_fix = True  # GPS_PositionReady / HeadingReady (the `gps nofix` verb clears)
         self.keepalive_on = False
         self.keepalive_timeout_ms = 1000
         self.keepalive_count = 3
@@ -1096,6 +1097,26 @@ class PedestalModel:
             return self.inserted_position, self.inserted_heading
         return self.gps_position, self.gps_heading
 
+    def set_gps_from_console(self, args: list[str]) -> None:
+        """`gps LAT LON ALT HEADING` or `gps nofix` (GPS_PositionReady/HeadingReady 0)."""
+        with self.lock:
+            if args == ['nofix']:
+                self.gps_fix = False
+                return
+            latitude, longitude, altitude, heading = (float(a) for a in args)
+            self.gps_position = GeoPoint(longitude, latitude, altitude)
+            self.gps_heading, self.gps_fix = heading % 360.0, True
+
+    def set_inserted_from_console(self, args: list[str]) -> None:
+        """`inserted LAT LON ALT HEADING` (and the override flag on) or `inserted off`."""
+        with self.lock:
+            if args == ['off']:
+                self.override_gps = False
+                return
+            latitude, longitude, altitude, heading = (float(a) for a in args)
+            self.inserted_position = GeoPoint(longitude, latitude, altitude)
+            self.inserted_heading, self.override_gps = heading % 360.0, True
+
     def _do_GPS_GetLongitude(self, frame, arg, session):
         return degrees_to_ddmm(self.gps_position.longitude)
 
@@ -1106,10 +1127,10 @@ class PedestalModel:
         return self._system_position()[1]
 
     def _do_GPS_PositionReady(self, frame, arg, session):
-        return self.gps_present
+        return self.gps_present and self.gps_fix
 
     def _do_GPS_HeadingReady(self, frame, arg, session):
-        return self.gps_present
+        return self.gps_present and self.gps_fix
 
     def _do_GPS_isConnectedGPS(self, frame, arg, session):
         return self.gps_present
@@ -1327,6 +1348,12 @@ class CaptureSimulator:
         control.add_verb('lose', lambda a: model.lose_replies(int(a[0]) if a else 1),
                          'lose [COUNT]')
         control.add_verb('unknown', self._unknown, 'unknown COMMAND [on|off]')
+        control.add_verb('gps', model.set_gps_from_console,
+                         'gps LAT LON ALT HEADING | gps nofix: the GPS position (deg, deg, m) '
+                         'and heading (deg clockwise from north), or no fix')
+        control.add_verb('inserted', model.set_inserted_from_console,
+                         'inserted LAT LON ALT HEADING | inserted off: the user-inserted '
+                         'position and heading with the override flag set, or the flag off')
         control.add_verb('pose', lambda a: model.set_pose(int(a[0]), float(a[1])),
                          'pose AXIS DEG')
         control.add_verb('detect', lambda a: model.set_target_detected(

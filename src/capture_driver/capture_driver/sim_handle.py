@@ -48,6 +48,17 @@ class CaptureSimHandle(SimHandle):
         self.port = self.sim.tcp.port
         self._started(self.sim.tcp, self.sim)
 
+    def set_gps(self, latitude: float, longitude: float, altitude: float,
+                heading: float) -> None:
+        """The GPS position (deg, deg, m) and heading (deg clockwise from north), with a fix."""
+        self.control(f'gps {latitude!r} {longitude!r} {altitude!r} {heading!r}')
+
+    def set_inserted(self, latitude: float | None, longitude: float = 0.0,
+                     altitude: float = 0.0, heading: float = 0.0) -> None:
+        """The user-inserted position and heading with the override flag (None: flag off)."""
+        self.control('inserted off' if latitude is None else
+                     f'inserted {latitude!r} {longitude!r} {altitude!r} {heading!r}')
+
     def changing(self, request: str) -> bool:
         from capture_driver.protocol import COMMANDS, DataType
 

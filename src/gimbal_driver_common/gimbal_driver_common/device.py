@@ -25,11 +25,15 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from gimbal_driver_common.config import ControllerConfig, Logger
 from gimbal_driver_common.diagnostics import StatusPart
 from gimbal_driver_common.errors import Unsupported
 from gimbal_driver_common.scan import ScanRequest
+
+if TYPE_CHECKING:  # the geodesy (pymap3d) is loaded only by the adapters that report a pose
+    from gimbal_driver_common.geodesy import DevicePose, GeoPoint, GeoPose
 
 #: joint -> (target position, max speed or None for the device default)
 Moves = dict[str, tuple[float, float | None]]
@@ -161,6 +165,31 @@ class StatusReport(abc.ABC):
         return {}
 
 
+class Geolocation(abc.ABC):
+    """The device knows where it stands and which way it faces (GNSS, heading, attitude)."""
+
+    @abc.abstractmethod
+    def pose(self) -> DevicePose:
+        """Position and orientation with their source, time and accuracy; a part the
+        device does not know now is None with the reason in ``missing``. May ask the
+        device (raise GimbalError when it cannot answer)."""
+
+
+class TargetPointing(abc.ABC):
+    """The device points at a geographic target itself (Capture GPS_SetTargetLLA +
+    GPS_GoToTarget), from the pose it holds; ~/look_at_geo uses it like presets and scans
+    use the device's own implementation, after checking the limits on its own solution."""
+
+    def refusal(self, pose: GeoPose, speed: float) -> str | None:
+        """Why the device's pointing cannot serve this goal (the pose is not the one the
+        device aims from, it cannot take a speed), or None; the driver then moves itself."""
+        return None
+
+    @abc.abstractmethod
+    def point_at(self, target: GeoPoint) -> str:
+        """Send the target and start the device's own pointing; return a message."""
+
+
 @dataclass
 class Capabilities:
     """What the device offers beyond the contract; None means "not on this device"."""
@@ -169,6 +198,8 @@ class Capabilities:
     presets: DevicePresets | None = None
     scans: DeviceScans | None = None
     status: StatusReport | None = None
+    geolocation: Geolocation | None = None
+    target_pointing: TargetPointing | None = None
     #: device-specific objects the driver's node exposes (name -> object)
     extras: dict[str, object] = field(default_factory=dict)
 

@@ -72,16 +72,20 @@ def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * skew + (1.0 - math.cos(angle)) * (skew @ skew)
 
 
-def _origin(xyz: object, rpy: object) -> np.ndarray:
-    """URDF <origin>: translation, then fixed-axis roll, pitch, yaw (R = Rz Ry Rx)."""
-    roll, pitch, yaw = rpy or (0.0, 0.0, 0.0)
-    rotation = (
+def rotation_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """Rotation matrix of fixed-axis roll, pitch, yaw (R = Rz Ry Rx): URDF ``rpy`` and
+    REP-103 / tf2 ``setRPY`` alike; its columns are the rotated frame's axes."""
+    return (
         _axis_angle(np.array([0.0, 0.0, 1.0]), yaw)
         @ _axis_angle(np.array([0.0, 1.0, 0.0]), pitch)
         @ _axis_angle(np.array([1.0, 0.0, 0.0]), roll)
     )
+
+
+def _origin(xyz: object, rpy: object) -> np.ndarray:
+    """URDF <origin>: translation, then fixed-axis roll, pitch, yaw (R = Rz Ry Rx)."""
     matrix = np.eye(4)
-    matrix[:3, :3] = rotation
+    matrix[:3, :3] = rotation_rpy(*(rpy or (0.0, 0.0, 0.0)))
     matrix[:3, 3] = xyz or (0.0, 0.0, 0.0)
     return matrix
 

@@ -13,10 +13,11 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from gimbal_driver_common.config import scan_joints
 from gimbal_driver_common.controller import GimbalController, is_moving
-from gimbal_driver_common.device import Moves
+from gimbal_driver_common.device import Moves, TargetPointing
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest, Unsupported
 from gimbal_driver_common.joint_command import (
     check_positions,
@@ -25,6 +26,9 @@ from gimbal_driver_common.joint_command import (
 )
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.scan import ScanRequest, plan_scan
+
+if TYPE_CHECKING:
+    from gimbal_driver_common.geodesy import GeoPoint
 
 #: the patterns a driver-side scan offers
 DRIVER_SCAN_PATTERNS = ('sector', 'zigzag', 'square')
@@ -134,6 +138,19 @@ class Motion:
                 return MoveOutcome(
                     'failed', f'not reached within move_timeout {ctl.config.move_timeout:g} s',
                     positions)
+
+    def point_at(self, pointing: TargetPointing, target: GeoPoint,
+                 targets: dict[str, float]) -> str:
+        """Start the device's own pointing at ``target``; ``targets`` is where the
+        driver's own solution puts the joints (already checked against the limits), which
+        ~/status shows and the caller waits for with :meth:`wait_move`."""
+        ctl = self.controller
+        ctl.require(list(targets))
+        self.preempt()
+        ctl.watchdog.cancel(list(targets))
+        message = ctl.call(lambda: pointing.point_at(target))
+        ctl.commanded_targets.update(targets)
+        return message
 
     def _scan_stop_current(self) -> None:
         self._scan_stop.set()

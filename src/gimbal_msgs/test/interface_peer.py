@@ -14,7 +14,7 @@ MESSAGES = ['AxisState', 'GimbalStatus', 'Preset', 'PlaybackStatus', 'BezierSegm
             'AxisTrajectory']
 SERVICES = ['SetPreset', 'GotoPreset', 'ListPresets', 'ClearPreset', 'StartScan',
             'LoadTrajectory', 'SetMode', 'DeviceCommand', 'Calibrate']
-ACTIONS = ['MoveTo', 'Home', 'LookAt']
+ACTIONS = ['MoveTo', 'Home', 'LookAt', 'LookAtGeo']
 
 
 def main() -> int:
@@ -51,6 +51,9 @@ def main() -> int:
             if hasattr(goal_handle.request, 'target'):  # LookAt: echo the point back
                 point = goal_handle.request.target.point
                 result.positions = [point.x, point.y, point.z]
+            if hasattr(goal_handle.request, 'latitude'):  # LookAtGeo: echo the place back
+                request = goal_handle.request
+                result.positions = [request.latitude, request.longitude, request.altitude]
             goal_handle.succeed()
             return result
 

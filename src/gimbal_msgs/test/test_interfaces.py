@@ -115,3 +115,5 @@ def test_action_crosses_process_boundary(peer: RosTestClient, name: str) -> None
         assert list(result.positions) == [0.5, -0.5]
     if name == 'LookAt':
         assert list(result.positions) == [1.5, -0.5, 2.0]
+    if name == 'LookAtGeo':  # sample() fills latitude, longitude and altitude with 1.25
+        assert list(result.positions) == [1.25, 1.25, 1.25]

@@ -45,9 +45,24 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from gimbal_driver_common.config import Logger
-from gimbal_driver_common.device import Device, DeviceInfo, Homing, JointSample, Moves, StatusReport
+from gimbal_driver_common.device import (
+    Device,
+    DeviceInfo,
+    Geolocation,
+    Homing,
+    JointSample,
+    Moves,
+    StatusReport,
+)
 from gimbal_driver_common.diagnostics import Level, StatusPart
 from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, InvalidRequest, Unsupported
+from gimbal_driver_common.geodesy import (
+    Attitude,
+    DevicePose,
+    GeoPoint,
+    OrientationFix,
+    PositionFix,
+)
 from gimbal_driver_common.orientation import euler_from_quaternion, wrap_angle
 
 from .client import NotConnectedError, UCameraClient
@@ -128,8 +143,11 @@ class UCameraDevice(Device):
         self._ramp_time = 0.0
         self._jog_rates: dict[str, float] = {}
         self._rates_check_pending = False
+        #: the vehicle attitude last sent to the gimbal (~/ext/imu) and when (time.time())
+        self.vehicle_attitude: tuple[Attitude, float] | None = None
         self.capabilities.homing = PilotHoming(self)
         self.capabilities.status = UCameraStatus(self)
+        self.capabilities.geolocation = UCameraGeolocation(self)
 
     # ---------------------------------------------------------------- frames
     @property
@@ -415,9 +433,10 @@ class UCameraDevice(Device):
         norm = math.sqrt(x * x + y * y + z * z + w * w)
         if not 0.9 < norm < 1.1:
             raise InvalidRequest(f"quaternion norm {norm:.3f} is not 1")
-        yaw, pitch, roll = enu_flu_to_ned_frd(
-            *euler_from_quaternion(x / norm, y / norm, z / norm, w / norm))
+        rep103 = euler_from_quaternion(x / norm, y / norm, z / norm, w / norm)
+        yaw, pitch, roll = enu_flu_to_ned_frd(*rep103)
         self.client.send_vehicle_angles(yaw, pitch, roll)
+        self.vehicle_attitude = (Attitude(*rep103), time.time())
 
     def send_external_body_rates(self, x: float, y: float, z: float) -> None:
         """FLU body rates (rad/s) -> FRD p, q, r -> Send Vehicle Angular Velocities."""
@@ -440,6 +459,40 @@ class UCameraDevice(Device):
             raise DeviceRefused(
                 f"{what} refused: non-volatile writes need the parameter allow_nv_write:=true "
                 "(never during flight; keep the power stable while saving)")
+
+
+class UCameraGeolocation(Geolocation):
+    """Where the vehicle is and how it lies. Pan and tilt turn relative to the vehicle body
+    (the gimbal fixed frame, 4.3.1), so the base frame is the body: its attitude in ENU is
+    the one ~/ext/imu gave (the same angles the gimbal is sent, Send Vehicle Angles 5.5.5.5;
+    UCSP has no report of the attitude the gimbal estimates itself). The position is the
+    System Position Report (5.5.5.3, the gimbal's own solution, which follows the external
+    feed when that is configured); its altitude is taken as height above the WGS84
+    ellipsoid, as in the NavSatFix the feed sends (the manual names no datum)."""
+
+    POSITION_SOURCE = "System Position Report"
+    ORIENTATION_SOURCE = "~/ext/imu (vehicle attitude sent to the gimbal)"
+
+    def __init__(self, device: UCameraDevice) -> None:
+        self.device = device
+
+    def pose(self) -> DevicePose:
+        state = self.device.client.state()
+        missing: dict[str, str] = {}
+        position = orientation = None
+        if state.latitude is None or state.longitude is None or state.altitude is None:
+            missing["position"] = "no System Position Report received from the gimbal"
+        else:
+            position = PositionFix(GeoPoint(state.latitude, state.longitude, state.altitude),
+                                   self.POSITION_SOURCE, stamp=state.position_time)
+        attitude = self.device.vehicle_attitude
+        if attitude is None:
+            missing["orientation"] = (
+                "the U-Camera reports no vehicle attitude: publish it as sensor_msgs/Imu on "
+                "~/ext/imu")
+        else:
+            orientation = OrientationFix(attitude[0], self.ORIENTATION_SOURCE, stamp=attitude[1])
+        return DevicePose(position, orientation, missing)
 
 
 class PilotHoming(Homing):

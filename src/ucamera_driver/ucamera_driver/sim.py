@@ -39,7 +39,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-from gimbal_driver_common.sim_control import SimControl, run_simulator
+from gimbal_driver_common.sim_control import ControlError, SimControl, run_simulator
 from gimbal_driver_common.sim_motion import AxisMotion
 from gimbal_driver_common.sim_server import PtySimServer
 
@@ -140,6 +140,9 @@ class UCameraModel:
         self.external_position: tuple[float, float, float] | None = None
         self.external_velocity: tuple[float, float, float] | None = None
         self.vehicle_angles: tuple[float, float, float] | None = None
+        #: the on-board GPS position (deg, deg, m; the `gnss` verb moves it)
+        self.internal_position = (self.config.latitude, self.config.longitude,
+                                  self.config.altitude)
         self.vehicle_rates: tuple[float, float, float] | None = None
         self.busy_until = 0.0  # NV write in progress: no telemetry, commands ignored
         self.nv_saves = 0
@@ -289,7 +292,7 @@ class UCameraModel:
             if self.gps_feed == GpsFeed.EXTERNAL and self.external_position is not None:
                 position = self.external_position
             else:
-                position = (self.config.latitude, self.config.longitude, self.config.altitude)
+                position = self.internal_position
             reports: list[Packet] = [
                 ModeReport(self.mode),
                 AnglesReport(self.pan.position, self.tilt.position),
@@ -458,8 +461,16 @@ class UCameraSim:
                              "corrupt_rate P")
             control.add_verb("drop_rate", lambda a: self.drop_frames(float(a[0])),
                              "drop_rate P (lose sent frames)")
+            control.add_verb("gnss", self._set_gnss,
+                             "gnss LAT LON ALT: the on-board GPS position (deg, deg, m)")
             self._controls = control
         return self._controls
+
+    def _set_gnss(self, args: list[str]) -> None:
+        if len(args) != 3:
+            raise ControlError("gnss LAT LON ALT")
+        with self.model.lock:
+            self.model.internal_position = tuple(float(a) for a in args)
 
     def command(self, line: str) -> str:
         """Run one control request (``help`` lists the verbs); return the answer line."""

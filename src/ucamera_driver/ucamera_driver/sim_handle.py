@@ -77,6 +77,15 @@ class UCameraSimHandle(SimHandle):
         """The last commanded angle (rad) of ``joint``, as the gimbal model holds it."""
         return self.sim.model.commanded_angles[self.spec.joints.index(joint)]
 
+    def set_gnss(self, latitude: float, longitude: float, altitude: float) -> None:
+        """The on-board GPS position (deg, deg, m) the System Position Report gives."""
+        self.control(f'gnss {latitude!r} {longitude!r} {altitude!r}')
+
+    def vehicle_angles(self) -> tuple[float, float, float] | None:
+        """(yaw, pitch, roll) rad, NED/FRD, the last Send Vehicle Angles the gimbal got."""
+        with self.sim.model.lock:
+            return self.sim.model.vehicle_angles
+
     def controls(self) -> SimControl:
         return self.sim.controls
 

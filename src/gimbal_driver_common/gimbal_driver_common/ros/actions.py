@@ -30,6 +30,13 @@ class MotionActions:
             current = self.current_positions()
             result.positions = [current.get(n, math.nan) for n in goal.joint_names]
             return result
+        return self._finish_move(goal_handle, targets, goal.tolerance)
+
+    def _finish_move(self, goal_handle, targets: dict[str, float],
+                     tolerance: float) -> MoveTo.Result:
+        """Wait for a started move (ours or one the device runs itself, e.g. its own
+        target pointing): feedback, then reached / cancelled / stopped / timeout."""
+        result = MoveTo.Result()
         feedback = MoveTo.Feedback()
 
         def publish(positions: list[float]) -> None:
@@ -37,7 +44,7 @@ class MotionActions:
             goal_handle.publish_feedback(feedback)
 
         outcome = self.motion.wait_move(
-            targets, goal.tolerance, lambda: goal_handle.is_cancel_requested, publish)
+            targets, tolerance, lambda: goal_handle.is_cancel_requested, publish)
         result.positions, result.success, result.message = (
             outcome.positions, outcome.success, outcome.message)
         if outcome.state == 'cancelled':

@@ -44,6 +44,7 @@ from gimbal_driver_common.ros import messages
 from gimbal_driver_common.ros.actions import MotionActions, guard_change_state_service
 from gimbal_driver_common.ros.common_parameters import declare_common_parameters, limits_from
 from gimbal_driver_common.ros.look_at import LookAtMixin
+from gimbal_driver_common.ros.look_at_geo import LookAtGeoMixin
 from gimbal_driver_common.ros.parameters import ParameterRegistry, declare
 from gimbal_driver_common.ros.run import run_driver
 from gimbal_driver_common.scan import ScanRequest
@@ -54,7 +55,7 @@ from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, Sta
 __all__ = ['GimbalDriverNode', 'run_driver']
 
 
-class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
+class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode):
     """Common ROS interface of the pan-tilt drivers; a driver adds :meth:`make_device`."""
 
     #: joint names when the ``joint_names`` parameter is not set
@@ -293,6 +294,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LifecycleNode):
         self.create_accepting_action_server(MoveTo, '~/move_to', self._execute_move)
         self.create_accepting_action_server(Home, '~/home', self._execute_home)
         self._setup_look_at()  # ~/look_at (ros/look_at.py) runs through _execute_move
+        self._setup_look_at_geo()  # ~/look_at_geo (ros/look_at_geo.py), the same path
         self.periodic.add(self.diagnostics_period, self._publish_diagnostics)
         self.periodic.add(self._status_period(), self._publish_status)
 

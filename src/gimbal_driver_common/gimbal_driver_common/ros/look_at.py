@@ -30,19 +30,22 @@ class LookAtRefused(Exception):
     """The look_at goal cannot be served; nothing was sent."""
 
 
-class _MoveGoalView:
-    """A LookAt goal handle seen as a MoveTo goal handle by the base node's move path."""
+class MoveGoalView:
+    """A LookAt (or LookAtGeo) goal handle seen as a MoveTo goal handle by the base node's
+    move path; feedback goes out as the action's own Feedback type."""
 
-    def __init__(self, handle: ServerGoalHandle, request: MoveTo.Goal) -> None:
+    def __init__(self, handle: ServerGoalHandle, request: MoveTo.Goal,
+                 feedback_type: type = LookAt.Feedback) -> None:
         self._handle = handle
         self.request = request
+        self._feedback_type = feedback_type
 
     @property
     def is_cancel_requested(self) -> bool:
         return self._handle.is_cancel_requested
 
     def publish_feedback(self, feedback: MoveTo.Feedback) -> None:
-        self._handle.publish_feedback(LookAt.Feedback(positions=list(feedback.positions)))
+        self._handle.publish_feedback(self._feedback_type(positions=list(feedback.positions)))
 
     def succeed(self) -> None:
         self._handle.succeed()
@@ -122,20 +125,27 @@ class LookAtMixin:
 
         Raises LookAtRefused with a message naming the frame, point or limit.
         """
-        chain = self.aiming_chain
-        if chain is None:
-            raise LookAtRefused(f'look_at is unavailable: {self.aiming_error}')
-        joints = [chain.pan_joint, chain.tilt_joint]
-        refusal = self.motion_refusal(joints)
-        if refusal:
-            raise LookAtRefused(refusal)
+        chain = self.aim_checks('look_at', goal.speed)
         frame = goal.target.header.frame_id.lstrip('/')
         if frame not in ('', chain.base_frame):
             raise LookAtRefused(
                 f'target frame {goal.target.header.frame_id!r} is not the device\'s base frame '
                 f'{chain.base_frame!r}: transform the point first (tf2 Buffer.transform)'
             )
-        speed = goal.speed
+        point = goal.target.point
+        return self.plan_aim((point.x, point.y, point.z),
+                             f'point ({point.x:.3f}, {point.y:.3f}, {point.z:.3f}) m')
+
+    def aim_checks(self, action: str, speed: float) -> AimingChain:
+        """The chain, after the checks every aiming goal passes before anything else: the
+        description loaded, the joints free to move, ``speed`` valid. Raises LookAtRefused."""
+        chain = self.aiming_chain
+        if chain is None:
+            raise LookAtRefused(f'{action} is unavailable: {self.aiming_error}')
+        joints = [chain.pan_joint, chain.tilt_joint]
+        refusal = self.motion_refusal(joints)
+        if refusal:
+            raise LookAtRefused(refusal)
         if not math.isfinite(speed) or speed < 0:
             raise LookAtRefused(f'speed {speed} must be >= 0 rad/s (0 = default)')
         for joint in joints:
@@ -144,12 +154,20 @@ class LookAtMixin:
                     f'speed {speed:.4f} rad/s exceeds velocity_max '
                     f'{self.limits[joint].velocity_max:.4f} of joint {joint!r}'
                 )
+        return chain
+
+    def plan_aim(self, point: tuple[float, float, float],
+                 what: str) -> tuple[list[str], list[float]]:
+        """Joint names and REP-103 positions that point the aim frame at ``point`` (base
+        frame, m), inside the limits; LookAtRefused names ``what``, the joint and the limit.
+        """
+        chain = self.aiming_chain
+        joints = [chain.pan_joint, chain.tilt_joint]
         current = self.current_positions()
         if not current:
             raise LookAtRefused('no joint position received yet')
-        point = goal.target.point
         try:
-            angles = chain.solve((point.x, point.y, point.z), current)
+            angles = chain.solve(point, current)
         except KinematicsError as exc:
             raise LookAtRefused(str(exc)) from exc
         # Pan: the turn of the solution inside the limits nearest to where pan is now (a
@@ -166,7 +184,7 @@ class LookAtMixin:
             if position is None or not (
                     limits.position_min - 1e-9 <= position <= limits.position_max + 1e-9):
                 raise LookAtRefused(
-                    f'point ({point.x:.3f}, {point.y:.3f}, {point.z:.3f}) m needs {joint} '
+                    f'{what} needs {joint} '
                     f'{angles[joint]:.4f} rad ({math.degrees(angles[joint]):.1f} deg), '
                     f'outside position_min {limits.position_min:.4f} .. position_max '
                     f'{limits.position_max:.4f}'
@@ -182,19 +200,30 @@ class LookAtMixin:
         try:
             joints, positions = self.plan_look_at(goal_handle.request)
         except LookAtRefused as exc:
-            goal_handle.abort()
-            chain = self.aiming_chain
-            result.joint_names = [chain.pan_joint, chain.tilt_joint] if chain else []
-            current = self.current_positions()
-            result.positions = [current.get(j, math.nan) for j in result.joint_names]
-            result.success, result.message = False, f'look_at refused, nothing sent: {exc}'
-            return result
+            return self.refuse_aim(goal_handle, result, 'look_at', exc)
+        return self.move_aim(goal_handle, result, joints, positions, LookAt.Feedback)
+
+    def refuse_aim(self, goal_handle: ServerGoalHandle, result: object, action: str,
+                   reason: Exception) -> object:
+        """Abort an aiming goal that sent nothing: the result names the joints, where they
+        are and why."""
+        goal_handle.abort()
+        chain = self.aiming_chain
+        result.joint_names = [chain.pan_joint, chain.tilt_joint] if chain else []
+        current = self.current_positions()
+        result.positions = [current.get(j, math.nan) for j in result.joint_names]
+        result.success, result.message = False, f'{action} refused, nothing sent: {reason}'
+        return result
+
+    def move_aim(self, goal_handle: ServerGoalHandle, result: object, joints: list[str],
+                 positions: list[float], feedback_type: type) -> object:
+        """Run a planned aim exactly like ~/move_to (feedback, tolerance, timeout, cancel)."""
         speed = goal_handle.request.speed
         move = MoveTo.Goal(
             joint_names=joints, positions=positions,
             velocities=[speed] * len(joints) if speed > 0 else [], relative=False,
         )
-        moved = self._execute_move(_MoveGoalView(goal_handle, move))
+        moved = self._execute_move(MoveGoalView(goal_handle, move, feedback_type))
         result.success = moved.success
         result.message = moved.message
         result.positions = list(moved.positions)

@@ -228,6 +228,22 @@ class ParameterRegistry:
                                         f'{plain_value(parameter.value)!r}')
 
 
+def _declare_empty_array(node: Node, name: str, descriptor: ParameterDescriptor) -> Any:
+    """An array parameter whose default is empty ("unknown", e.g. site_position).
+
+    rclpy infers a type from the default, and an empty list reads as a byte array
+    (``Parameter.Type.from_parameter_value([])``), which then refuses ``[1.0, 2.0]``; so
+    it is declared by its type, and set to an empty array of that type when no override
+    gave a value (``-p name:=[]`` leaves it unset too: rcl cannot type an empty list).
+    """
+    kind = Parameter.Type(descriptor.type)
+    value = node.declare_parameter(name, kind, descriptor).value
+    if value is None:
+        node.set_parameters([Parameter(name, kind, [])])
+        value = []
+    return value
+
+
 def declare(
     node: Node,
     name: str,
@@ -263,7 +279,10 @@ def declare(
                 FloatingPointRange(from_value=float(low), to_value=float(high))
             ]
     try:
-        value = node.declare_parameter(name, default, descriptor).value
+        if is_array and not default:
+            value = _declare_empty_array(node, name, descriptor)
+        else:
+            value = node.declare_parameter(name, default, descriptor).value
     except Exception as exc:  # rclpy raises several types for bad overrides
         raise ParameterError(f'parameter {name!r}: {exc}') from exc
     if is_array and value is None:
