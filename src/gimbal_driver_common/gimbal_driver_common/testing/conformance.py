@@ -18,14 +18,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Sequence
-from pathlib import Path
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common import registry
 from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.testing.conformance_rig import (
     OK,
@@ -35,7 +33,6 @@ from gimbal_driver_common.testing.conformance_rig import (
     SimulatorHandle,
 )
 from gimbal_driver_common.testing.restart_conformance import RestartConformance
-from gimbal_driver_common.testing.sim_handle import make_handle
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
 
@@ -51,8 +48,6 @@ class DriverConformance(RestartConformance):
 
     __test__ = False  # a subclass per driver sets True
 
-    #: the driver's registry name (gimbal_driver_common.registry)
-    driver: str = ''
     joints: Sequence[str] = ()
     #: absolute joint positions every axis reaches quickly from anywhere (rad / m)
     small_move: dict[str, float] = {}
@@ -76,28 +71,6 @@ class DriverConformance(RestartConformance):
     link_lost_text: str = 'disconnected'
 
     # ------------------------------------------------------------------ hooks
-    @property
-    def spec(self) -> registry.DriverSpec:
-        return registry.driver(self.driver)
-
-    @property
-    def package(self) -> str:
-        return self.spec.package
-
-    @property
-    def node_executable(self) -> str:
-        return self.spec.node_executable
-
-    @property
-    def node_name(self) -> str:
-        return self.spec.node_name
-
-    def start_simulator(self, workdir: Path, domain: int) -> SimulatorHandle:
-        """The registry spec's simulator handle with the process tests' settings, started."""
-        handle = make_handle(self.spec, workdir, process_tests=True)
-        handle.start()
-        return handle
-
     def check_jog_running(self, rig: ConformanceRig) -> None:
         """Device-specific checks while a jog runs (e.g. the mode the device reports)."""
 

@@ -13,9 +13,10 @@ from typing import TYPE_CHECKING
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 
+from gimbal_driver_common import registry
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 from gimbal_driver_common.testing.ros import RosTestClient, joint_positions
-from gimbal_driver_common.testing.sim_handle import SimHandle
+from gimbal_driver_common.testing.sim_handle import SimHandle, make_handle
 from gimbal_msgs.action import MoveTo
 
 if TYPE_CHECKING:
@@ -106,10 +107,38 @@ class ConformanceRig:
             print(f'--- {self.suite.node_executable} log (tail) ---\n{tail}')
 
 
-class ConformanceHelpers:
+class RegisteredDriver:
+    """A process-test suite's driver, from the registry: set ``driver`` (the spec's name);
+    the package, executables, node name and simulator follow from its spec."""
+
+    driver: str = ''
+
+    @property
+    def spec(self) -> registry.DriverSpec:
+        return registry.driver(self.driver)
+
+    @property
+    def package(self) -> str:
+        return self.spec.package
+
+    @property
+    def node_executable(self) -> str:
+        return self.spec.node_executable
+
+    @property
+    def node_name(self) -> str:
+        return self.spec.node_name
+
+    def start_simulator(self, workdir: Path, domain: int) -> SimulatorHandle:
+        """The registry spec's simulator handle with the process tests' settings, started."""
+        handle = make_handle(self.spec, workdir, process_tests=True)
+        handle.start()
+        return handle
+
+
+class ConformanceHelpers(RegisteredDriver):
     """Waits and requests the conformance tests share (attributes come from the suite)."""
 
-    node_name: str
     tolerance: float
     far_move: tuple[str, float, float]
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import pymap3d
 import pytest
@@ -28,13 +27,15 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common import registry
 from gimbal_driver_common.geodesy import Attitude, GeoPoint, base_frame_point, resolve_pose
 from gimbal_driver_common.kinematics import AimingChain
-from gimbal_driver_common.testing.conformance_rig import ConformanceRig, GoalStatus
+from gimbal_driver_common.testing.conformance_rig import (
+    ConformanceRig,
+    GoalStatus,
+    RegisteredDriver,
+)
 from gimbal_driver_common.testing.look_at import installed_description
 from gimbal_driver_common.testing.ros import joint_positions
-from gimbal_driver_common.testing.sim_handle import SimHandle, make_handle
 from gimbal_msgs.action import LookAtGeo
 
 #: the independent check's tolerance (deg), issue 24
@@ -73,13 +74,12 @@ class TestPose:
         return GeoPoint(float(latitude), float(longitude), float(altitude))
 
 
-class LookAtGeoSuite:
+class LookAtGeoSuite(RegisteredDriver):
     """~/look_at_geo: ahead-right at 1 km, 30 deg up, behind, below the tilt range, no
     pose, and the independent check. The node runs with tilt ``position_min`` -0.8 rad."""
 
     __test__ = False  # a subclass per driver sets True
 
-    driver: str = ''
     #: the pose of the shared tests (a non-level one where the device reports roll/pitch)
     pose = TestPose(GeoPoint(48.1372, 11.5756, 566.5), heading=30.0)
     #: the pose of the independent check: level (the azimuth is then the pan)
@@ -91,27 +91,6 @@ class LookAtGeoSuite:
     position_min: tuple[float, ...] = (-math.pi, -0.8)
 
     # ------------------------------------------------------------------ hooks
-    @property
-    def spec(self) -> registry.DriverSpec:
-        return registry.driver(self.driver)
-
-    @property
-    def package(self) -> str:
-        return self.spec.package
-
-    @property
-    def node_executable(self) -> str:
-        return self.spec.node_executable
-
-    @property
-    def node_name(self) -> str:
-        return self.spec.node_name
-
-    def start_simulator(self, workdir: Path, domain: int) -> SimHandle:
-        handle = make_handle(self.spec, workdir, process_tests=True)
-        handle.start()
-        return handle
-
     def node_parameters(self) -> list[str]:
         """Test-speed parameters; ``position_min`` puts the tilt limit where the suite
         needs it, and a goal tolerance well inside the independent check's 0.1 deg (the

@@ -12,7 +12,7 @@ from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.testing import DomainLease, ManagedProcess
+from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
 from gimbal_driver_common.testing.conformance_rig import (
     ERROR,
     OK,
@@ -81,13 +81,17 @@ class RestartConformance(ConformanceHelpers):
     def test_link_drop_is_an_error_then_reconnects_and_obeys(self, rig: ConformanceRig) -> None:
         ros = rig.ros
         self.wait_connection(ros, OK)
+        # ~/status is published only while subscribed: record it from before the drop, so
+        # a reconnect that comes quickly cannot hide the disconnected messages
+        statuses = ros.subscribe(self.srv('status'), GimbalStatus)
+        wait_for(lambda: statuses, 15.0, 'a first ~/status')
         rig.sim.drop_link(1.0)
         status = self.wait_connection(ros, ERROR)
         assert self.link_lost_text in status.message, status.message
         # the axes' last values are stale, and ~/status says the link is down
         ros.wait_for_diagnostic(self.node_name, self.joints[0], lambda s: s.level[0] == STALE)
-        ros.wait_for_message(self.srv('status'), GimbalStatus,
-                             lambda m: m.connection != GimbalStatus.CONNECTION_CONNECTED)
+        wait_for(lambda: any(m.connection != GimbalStatus.CONNECTION_CONNECTED
+                             for m in list(statuses)), 15.0, 'a ~/status saying the link is down')
         status = self.wait_connection(ros, OK, timeout=40)
         assert int({kv.key: kv.value for kv in status.values}['reconnects']) >= 1
         ros.wait_for_message(self.srv('status'), GimbalStatus,
