@@ -11,9 +11,12 @@ system state) whose bits follow the motion.
 Axes run on the shared trapezoidal model (``gimbal_driver_common.sim_motion``). Fault
 injection (methods of :class:`PedestalModel`, and the shared control verbs of
 ``gimbal_driver_common.sim_control`` on stdin and the ``--control-port`` console: drop,
-silence, garbage, nack, fault, clear, state, quit, plus Capture's lose, unknown, pose,
+silence, garbage, nack, fault, clear, state, quit, plus Capture's lose, unknown, wrong, pose,
 detect, dio, count): latched axis and system faults, NACK replies, lost replies, garbage
-bytes, a silent device and a dropped link.
+bytes, a silent device and a dropped link, replies of the wrong kind (``wrong``). A device
+that knows only part of the table (``known_commands`` / ``--only``, ``unknown_commands`` /
+``--unknown``) answers the rest with NACK 0xA6, or with an ACK (``ack_unknown`` /
+``--ack-unknown``) as a third-party controller does.
 
 Assumptions where the spec is silent are marked "sim:" in comments.
 """
@@ -71,6 +74,36 @@ GENERAL_SPEED = 30.0  # deg/s, default CFG_SetGeneralSpd
 TILT_HARD_LIMIT = 95.0  # deg, sim: mechanical limit switches of the tilt axis
 GYRO_BIAS = 0.05  # deg/s, sim: the yaw gyro drift IMU_GyroDriftCompensation measures
 DRIFT_MEASURE_TIME = 2.0  # s (simulated), sim: how long the drift calculation takes
+
+#: the motion set-up of 7.1 (TUM aside) and the speed mode of jogs and stops
+MOTION_SETUP = ('MOT_SetPositionMode', 'MOT_SetSpeedMode', 'MOT_SetPositionAbsolute',
+                'MOT_SetPositionRelative', 'MOT_SetAcceleration', 'MOT_SetSpeed',
+                'MOT_SendPosition', 'MOT_Update')
+#: named command subsets for ``known_commands`` (``--only``): controllers that know only
+#: part of the table (issue 26)
+KNOWN_SETS: dict[str, tuple[str, ...]] = {
+    # a third-party Cap-Track simulator: motion, load position and speed, voltage, current,
+    # the motor error register and COM_Connect (it ACKs the rest: ``--ack-unknown``)
+    'third-party': ('COM_Connect', *MOTION_SETUP, 'MOT_SetTum', 'MOT_GetLoadPosition',
+                    'MOT_GetMotorSpeed', 'MOT_GetMotorVoltage', 'MOT_GetMotorCurrent',
+                    'MOT_MerRegister'),
+    # a partial controller: COM_Connect, the joint poll and the motion set-up without TUM
+    'partial': ('COM_Connect', 'MOT_GetLoadPosition', 'MOT_GetMotorSpeed', *MOTION_SETUP),
+}
+
+
+def command_names(names: Iterable[str]) -> list[str]:
+    """Table command names, with the names of :data:`KNOWN_SETS` expanded; a name that is
+    neither raises KeyError naming it."""
+    expanded = []
+    for name in names:
+        if name in KNOWN_SETS:
+            expanded += KNOWN_SETS[name]
+        elif name in COMMANDS:
+            expanded.append(name)
+        else:
+            raise KeyError(f'{name!r} is neither a table command nor one of {sorted(KNOWN_SETS)}')
+    return expanded
 
 
 @dataclass
@@ -276,6 +309,8 @@ class PedestalModel:
         serial_number: int = 24017,
         firmware: str = '2.24.0',
         unknown_commands: Iterable[str] = (),
+        known_commands: Iterable[str] | None = None,
+        ack_unknown: bool = False,
     ) -> None:
         if axes not in (2, 3):
             raise ValueError('the simulator models 2 or 3 axes')
@@ -293,6 +328,15 @@ class PedestalModel:
         # Opcodes this device does not know (an older firmware, or a table guess that is
         # wrong): answered 0xA6 "Opcode not Recognized" like any opcode outside the table.
         self.unknown_opcodes = {COMMANDS[name].opcode for name in unknown_commands}
+        #: a device that knows only these opcodes (None: the whole table)
+        self.known_opcodes = None if known_commands is None else {
+            COMMANDS[name].opcode for name in command_names(known_commands)}
+        #: answer ACK (0x06) instead of NACK 0xA6 to an opcode the device does not know, as
+        #: a third-party controller does (getters included)
+        self.ack_unknown = ack_unknown
+        #: opcodes answered with the other kind of reply (fault injection: a getter gets an
+        #: ACK, a setter a data packet with its opcode), after they were executed
+        self.wrong_kind_opcodes: set[int] = set()
         self.emergency_stop = False
         self.stabilization = False
         self.scan: ScanState | None = None
@@ -534,6 +578,7 @@ class PedestalModel:
             self.nack_queue.clear()
             self.nack_all = None
             self.drop_replies = 0
+            self.wrong_kind_opcodes.clear()
 
     def set_pose(self, axis: int, degrees: float) -> None:
         with self.lock:
@@ -584,9 +629,16 @@ class PedestalModel:
         if axis is not None and axis.homing:
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Command not valid while homing')
 
+    def knows(self, opcode: int) -> bool:
+        """The device knows this opcode (table, ``unknown_commands``, ``known_commands``)."""
+        return opcode in BY_OPCODE and opcode not in self.unknown_opcodes and (
+            self.known_opcodes is None or opcode in self.known_opcodes)
+
     def _execute(self, frame: Frame, session: CaptureSession) -> bytes:
         cmd = BY_OPCODE.get(frame.opcode)
-        if cmd is None or frame.opcode in self.unknown_opcodes:
+        if cmd is None or not self.knows(frame.opcode):
+            if self.ack_unknown:  # sim: executes nothing, raises no protocol-error flag
+                return bytes([ReplyCode.ACK])
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Opcode not Recognized')
         if not session.connected and cmd.name != 'COM_Connect':
             # sim: commands are processed only after COM_Connect (4.6.2)
@@ -622,10 +674,11 @@ class PedestalModel:
             result = handler(frame, arg, session)
         else:
             result = self._generic(cmd.name, frame, arg)
-        if cmd.replies_with_data:
-            data = encode_value(cmd.ret, result, cmd.name)
-            return Frame(frame.group, frame.axis, frame.opcode, data).encode()
-        return bytes([ReplyCode.ACK])
+        data_reply = cmd.replies_with_data != (frame.opcode in self.wrong_kind_opcodes)
+        if not data_reply:
+            return bytes([ReplyCode.ACK])
+        data = encode_value(cmd.ret, result, cmd.name) if cmd.replies_with_data else bytes(4)
+        return Frame(frame.group, frame.axis, frame.opcode, data).encode()
 
     def _generic(self, name: str, frame: Frame, arg: object) -> object:
         """Setters store, getters return what was stored (or a zero of the right type)."""
@@ -1326,7 +1379,10 @@ class CaptureSimulator:
                              clear_device=model.clear_injected)
         control.add_verb('lose', lambda a: model.lose_replies(int(a[0]) if a else 1),
                          'lose [COUNT]')
-        control.add_verb('unknown', self._unknown, 'unknown COMMAND [on|off]')
+        control.add_verb('unknown', lambda a: self._toggle(model.unknown_opcodes, a),
+                         'unknown COMMAND [on|off]')
+        control.add_verb('wrong', lambda a: self._toggle(model.wrong_kind_opcodes, a),
+                         'wrong COMMAND [on|off]  (answer it with the other kind of reply)')
         control.add_verb('pose', lambda a: model.set_pose(int(a[0]), float(a[1])),
                          'pose AXIS DEG')
         control.add_verb('detect', lambda a: model.set_target_detected(
@@ -1371,13 +1427,15 @@ class CaptureSimulator:
             model.scan = None
         return None
 
-    def _unknown(self, args: list[str]) -> None:
+    def _toggle(self, opcodes: set[int], args: list[str]) -> None:
+        """``COMMAND [on|off]``: add or remove the command's opcode in one of the model's
+        opcode sets (unknown, wrong kind of reply)."""
         opcode = COMMANDS[args[0]].opcode
         with self.model.lock:
             if len(args) > 1 and args[1].lower() in ('off', '0', 'false'):
-                self.model.unknown_opcodes.discard(opcode)
+                opcodes.discard(opcode)
             else:
-                self.model.unknown_opcodes.add(opcode)
+                opcodes.add(opcode)
 
     def _dio(self, args: list[str]) -> None:
         with self.model.lock:
@@ -1413,6 +1471,9 @@ class CaptureSimulator:
                     else f'0x{f.opcode:04X}' for f in model.requests)),
                 'connections': self.tcp.connections if self.tcp else 0,
                 'nack_all': model.nack_all is not None,
+                'ack_unknown': model.ack_unknown,
+                'known_commands': None if model.known_opcodes is None else sorted(
+                    BY_OPCODE[opcode].name for opcode in model.known_opcodes),
             }
 
 
@@ -1445,6 +1506,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--unknown', action='append', default=[], metavar='COMMAND',
                         help='play a device that does not know this table command: it '
                              'answers 0xA6 "Opcode not Recognized" (repeatable)')
+    parser.add_argument('--only', action='append', default=None, metavar='NAMES',
+                        help='play a device that knows only these table commands (comma-'
+                             'separated, repeatable; the sets ' + ', '.join(KNOWN_SETS)
+                             + ' name the command subsets of issue 26); the rest get 0xA6, '
+                             'or an ACK with --ack-unknown')
+    parser.add_argument('--ack-unknown', action='store_true',
+                        help='answer ACK (0x06) instead of NACK 0xA6 to every opcode the '
+                             'device does not know, getters included (a third-party '
+                             'controller)')
     parser.add_argument('--one-request-per-read', action='store_true',
                         help='play a controller that drops every packet after the first in '
                              'one receive (the driver then reads one request at a time)')
@@ -1453,10 +1523,18 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.unknown:
         if name not in COMMANDS:
             parser.error(f'--unknown {name}: not a command of the table')
+    known = None
+    if args.only is not None:
+        try:
+            known = command_names(n.strip() for arg in args.only for n in arg.split(',')
+                                  if n.strip())
+        except KeyError as exc:
+            parser.error(f'--only: {exc.args[0]}')
     logging.basicConfig(level=args.log_level.upper(), format='%(name)s: %(message)s')
     model = PedestalModel(axes=args.axes, gps=not args.no_gps, imu=not args.no_imu,
                           gear_ratio=args.gear_ratio, time_scale=args.time_scale,
-                          unknown_commands=args.unknown)
+                          unknown_commands=args.unknown, known_commands=known,
+                          ack_unknown=args.ack_unknown)
     model.digital_io_present = not args.no_digital_io
     model.one_request_per_read = args.one_request_per_read
     sim = CaptureSimulator(model, tcp_port=None if args.port < 0 else args.port,
