@@ -14,13 +14,14 @@ gyro drift, ``~/command``) are plain methods the node's services call through
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from gimbal_driver_common.controller import ControllerConfig, Logger
 from gimbal_driver_common.device import (
@@ -42,20 +43,28 @@ from gimbal_driver_common.scan import ScanError, ScanRequest
 from gimbal_driver_common.transport import ByteStream, SerialStream, TcpStream
 
 from .client import (
+    IDENTITY_GETTERS,
+    REQUEST_ERRORS,
     SCAN_COMMANDS,
     CaptureClient,
     DeviceNack,
-    DeviceTimeout,
     Identity,
     NotConnected,
+    NotSupported,
     TrackingState,
+    WrongReply,
 )
 from .protocol import COMMANDS, DataType, GeoPoint, PresetRecord, ProtocolError, Safety
 from .protocol import command as lookup_command
 from .protocol.geometry import aim_at
-from .protocol.registers import AXIS_REGISTERS, CSR, SYSTEM_STATE
+from .protocol.registers import AXIS_REGISTERS, CSR, SYSTEM_REGISTERS, SYSTEM_STATE
 
 LOG = logging.getLogger('capture_driver.device')
+
+T = TypeVar('T')
+
+#: what ``hardware_id``, diagnostics and ~/status say for an identity the device did not give
+UNKNOWN = 'unknown'
 
 MAX_PRESETS = 15
 DIGITAL_IO_COUNT = 6  # COM_get/setDigitalIO: I/O 1..6 in the axis byte (4.6.17-18)
@@ -173,8 +182,16 @@ class LevelErrors:
 
 
 def axis_flags(registers: dict[str, int]) -> list[ActiveFlag]:
-    """Active flags of one axis' polled registers (MER, DER, SRH, SRL, MSR, CMER, OPR)."""
-    return [a for r in AXIS_REGISTERS for a in r.decode(registers.get(r.name, 0))]
+    """Active flags of one axis' polled registers (MER, DER, SRH, SRL, MSR, CMER, OPR),
+    decoded from those the device reports: a register it does not answer is no flag (read
+    as 0, SRL's active-low "axis_off" would refuse every move)."""
+    return [a for r in AXIS_REGISTERS if r.name in registers for a in r.decode(registers[r.name])]
+
+
+def system_flags(registers: dict[str, int]) -> list[ActiveFlag]:
+    """Active flags of the system registers the device reports (CSR, SYS)."""
+    return [a for r in SYSTEM_REGISTERS if r.name in registers
+            for a in r.decode(registers[r.name])]
 
 
 def parse_arguments(dtype: DataType, args: Sequence[str]) -> Any:
@@ -233,17 +250,22 @@ def format_result(cmd_name: str, value: Any) -> list[str]:
 
 
 def hardware_id(ident: Identity, link: str) -> str:
-    """capture[-pn<part>]-sn<serial>[-hw<rev>][-fw<firmware>] from what the device
-    answered; the link address stands in for a serial number it does not give."""
-    parts = ['capture']
-    if ident.part_number:
-        parts.append(f'pn{ident.part_number}')
-    parts.append(f'sn{ident.serial_number}' if ident.serial_number else f'@{link}')
-    if ident.hardware:
-        parts.append(f'hw{ident.hardware}')
-    if ident.firmware:
-        parts.append(f'fw{ident.firmware}')
-    return '-'.join(parts)
+    """capture-pn<part>-sn<serial>-hw<rev>-fw<firmware>, "unknown" for what the device did
+    not give; without a serial number the link address (``@<link>``) keeps two such
+    devices apart."""
+    text = '-'.join(['capture', *(f'{key}{value or UNKNOWN}' for key, value in (
+        ('pn', ident.part_number), ('sn', ident.serial_number), ('hw', ident.hardware),
+        ('fw', ident.firmware)))])
+    return text if ident.serial_number else f'{text}@{link}'
+
+
+def device_info(ident: Identity, link: str) -> DeviceInfo:
+    """The controller's DeviceInfo (~/status, diagnostics): "unknown" where not read."""
+    firmware = (ident.firmware or UNKNOWN) + (f' (hw {ident.hardware})' if ident.hardware
+                                              else '')
+    return DeviceInfo(model=ident.part_number or f'Capture pedestal (part number {UNKNOWN})',
+                      serial_number=ident.serial_number or UNKNOWN,
+                      firmware_version=firmware, hardware_id=hardware_id(ident, link))
 
 
 class CaptureDevice(Device):
@@ -268,7 +290,10 @@ class CaptureDevice(Device):
         self._next_status = 0.0
         self._warned: dict[str, float] = {}
         self.has_imu = self.has_gps = self.has_tracker = self.has_digital_io = False
+        self.has_heading = False
         self.tracker_problem = ''
+        #: the identity the device gave at the last open (what it did not: ``problems``)
+        self.identity = Identity()
         self.ranging = False
         self.device_scanning = self.preset_looping = self.target_looping = False
         self.capabilities.homing = CaptureHoming(self)
@@ -301,11 +326,21 @@ class CaptureDevice(Device):
 
     # ------------------------------------------------------------ link
     def open(self) -> DeviceInfo:
+        """Connect and read what the device tells about itself, best effort: only the link
+        and the handshake must work (the joint poll is the controller's first read); an
+        identity getter or probe the device does not answer with data leaves "unknown" or
+        "no", said once here and named in the diagnostics."""
         client = self.client
         client.connect()
-        ident = client.identity()
+        self.identity = ident = client.identity()
+        if ident.problems:
+            unread = [attr.replace('_', ' ') for attr, name in IDENTITY_GETTERS
+                      if name in ident.problems]
+            self.log.warning(f'identity: {", ".join(unread)} {UNKNOWN} ('
+                             + '; '.join(f'{name}: {how}' for name, how in
+                                         ident.problems.items()) + ')')
         self.has_imu = bool(client.optional('IMU_IsReadyImu'))
-        self.has_gps = bool(client.optional('GPS_isConnectedGPS'))
+        self.has_gps = self.has_heading = bool(client.optional('GPS_isConnectedGPS'))
         self.device_scanning = bool(client.optional('SCN_IsScanOn'))
         self.preset_looping = self.target_looping = False
         self._probe_extras()
@@ -314,11 +349,7 @@ class CaptureDevice(Device):
         self.log.info(
             f'Capture controller on {client.description}: IMU {"yes" if self.has_imu else "no"}'
             f', GPS {"yes" if self.has_gps else "no"}')
-        firmware = ident.firmware + (f' (hw {ident.hardware})' if ident.hardware else '')
-        return DeviceInfo(
-            model=ident.part_number or 'Capture pedestal', serial_number=ident.serial_number,
-            firmware_version=firmware,
-            hardware_id=hardware_id(ident, self.settings.link_description()))
+        return device_info(ident, self.settings.link_description())
 
     def _probe_extras(self) -> None:
         """Which optional units answer (a missing video tracker NACKs with 0x76); ranging
@@ -327,7 +358,7 @@ class CaptureDevice(Device):
         if self.ranging:
             try:
                 client.run('LRF_StartMeasurement')
-            except (DeviceNack, DeviceTimeout) as exc:
+            except REQUEST_ERRORS as exc:
                 self.ranging = False
                 self.log.warning(f'ranging not restarted after reconnect: {exc}')
         # firmware before 2.22.0 has no digital I/O: polling it would latch protocol errors
@@ -363,7 +394,7 @@ class CaptureDevice(Device):
             values = self.client.read_many([
                 (name, self.axis(joint)) for joint in joints
                 for name in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')])
-        except (DeviceNack, DeviceTimeout) as exc:
+        except REQUEST_ERRORS as exc:  # an answer of the wrong kind too: the link stays
             self._warn('poll', f'poll skipped: {exc}', 5.0)
             return None
         positions = {joint: self.from_device(joint, values[2 * i])
@@ -389,15 +420,17 @@ class CaptureDevice(Device):
             axis = self.axis(joint)
             try:
                 status['axes'][joint] = client.registers(axis)
-                status['current'][joint] = client.request('MOT_GetMotorCurrent', axis) / 1000.0
-            except (DeviceNack, DeviceTimeout) as exc:
+                with contextlib.suppress(NotSupported):  # no effort in joint_states
+                    status['current'][joint] = client.poll('MOT_GetMotorCurrent', axis) / 1000.0
+            except REQUEST_ERRORS as exc:
                 status['problems'].append(f'{joint}: {exc}')
         try:
             system = client.registers(None)
             status['system'] = system
             status['errors'] = client.error_strings(system.get('CSR', 0))
-            status['emergency_stop'] = bool(client.request('MOT_GetEmgStopAxes'))
-        except (DeviceNack, DeviceTimeout) as exc:
+            with contextlib.suppress(NotSupported):
+                status['emergency_stop'] = bool(client.poll('MOT_GetEmgStopAxes'))
+        except REQUEST_ERRORS as exc:
             status['problems'].append(f'system: {exc}')
         status['refusals'] = {joint: self._axis_refusal(joint, registers)
                               for joint, registers in status['axes'].items()}
@@ -464,7 +497,7 @@ class CaptureDevice(Device):
                 for joint in joints:
                     try:
                         self.client.stop_axis(self.axis(joint))
-                    except (DeviceNack, DeviceTimeout) as exc:
+                    except REQUEST_ERRORS as exc:
                         problems.append(str(exc))
         if problems:
             raise DeviceRefused('; '.join(problems))
@@ -479,7 +512,7 @@ class CaptureDevice(Device):
             try:
                 client.reset_faults(axis)  # ResetFaults + AxisOn (4.10)
                 client.stop_axis(axis)  # AxisOn resumes a buffered move (4.2.11)
-            except (DeviceNack, DeviceTimeout) as exc:
+            except REQUEST_ERRORS as exc:
                 self.expire_status()
                 raise DeviceRefused(f'{joint}: {exc}') from exc
         client.request('ERR_ClearErrors')
@@ -533,10 +566,20 @@ class CaptureDevice(Device):
                 from None
 
     # ----------------------------------------------------- sensors (SI)
+    def _sensor(self, flag: str, read: Callable[[], T]) -> T:
+        """One sensor read for its topic. When the device does not answer one of its
+        getters with data (:class:`NotSupported`, which says which and how), ``flag`` is
+        cleared: the topic stops asking until the next connection."""
+        try:
+            return read()
+        except NotSupported:
+            setattr(self, flag, False)
+            raise
+
     def imu(self) -> ImuReading:
         """IMU attitude and rates; device yaw counts clockwise 0..360, REP-103 yaw the
         other way, so yaw is negated."""
-        values = self.client.imu()
+        values = self._sensor('has_imu', self.client.imu)
         return ImuReading(
             roll=math.radians(values['roll']), pitch=math.radians(values['pitch']),
             yaw=-math.radians(values['yaw']),
@@ -559,25 +602,32 @@ class CaptureDevice(Device):
             return math.nan  # 4.4.4 prints no opcode: 0x0506..0x0509 all fit (README)
         try:
             return float(self.client.request('GPS_GetAltitude'))
-        except (DeviceNack, DeviceTimeout):
+        except REQUEST_ERRORS:
             return math.nan
 
     def gps_heading(self) -> float | None:
         """Compass heading in rad (clockwise from north), None while not valid."""
-        ready, heading = self.client.gps_heading()
+        ready, heading = self._sensor('has_heading', self.client.gps_heading)
         return math.radians(heading) if ready else None
 
     def range_m(self) -> float:
         """Laser range in m; +inf when the device reads 0 (no return, REP-117)."""
-        distance = self.client.request('LRF_GetLRFDistance', 1)  # 4.17.11: 1 = current/last
+        # 4.17.11: 1 = current/last
+        distance = self._sensor('ranging', lambda: self.client.poll('LRF_GetLRFDistance', 1))
         return float(distance) if distance > 0 else math.inf
 
     def tracking_state(self) -> TrackingState:
-        return self.client.tracking_state(self.settings.tracker_camera)
+        try:
+            return self._sensor('has_tracker', lambda: self.client.tracking_state(
+                self.settings.tracker_camera))
+        except NotSupported as exc:
+            self.tracker_problem = str(exc)
+            raise
 
     def digital_io(self) -> list[int]:
         """States of digital I/O 1..6 (1 = set)."""
-        states = self.client.digital_io(list(range(1, DIGITAL_IO_COUNT + 1)))
+        states = self._sensor('has_digital_io', lambda: self.client.digital_io(
+            list(range(1, DIGITAL_IO_COUNT + 1))))
         return [int(states[n]) for n in sorted(states)]
 
     # ---------------------------------------------------------- extras
@@ -856,7 +906,7 @@ class CaptureHoming(Homing):
                                     f'({client.request("ERR_GetHomingErrorString")})')
         except NotConnected as exc:
             raise LinkError(f'homing failed: {exc}') from exc
-        except (DeviceNack, DeviceTimeout) as exc:
+        except REQUEST_ERRORS as exc:
             raise DeviceRefused(f'homing failed: {exc}') from exc
         device.expire_status()
         return f'homed: {", ".join(joints)}'
@@ -996,9 +1046,18 @@ class CaptureScans(DeviceScans):
                 f'{steps} step(s) of {math.degrees(request.tilt_step):.2f} deg')
 
     def stop(self) -> None:
-        if self.device.client.connected:
-            self.device.client.request('SCN_StopScan')
-        self.device.device_scanning = False
+        """SCN_StopScan. A refusal (or a reply of the wrong kind) while the driver knows of
+        no device scan is not a failed stop: a controller without the scan functions
+        refuses it, and ~/stop must stop its axes all the same (``device.stop`` follows)."""
+        device = self.device
+        if device.client.connected:
+            try:
+                device.client.request('SCN_StopScan')
+            except (DeviceNack, WrongReply) as exc:
+                if device.device_scanning:
+                    raise
+                LOG.debug('SCN_StopScan with no device scan known: %s', exc)
+        device.device_scanning = False
 
 
 class CaptureStatus(StatusReport):
@@ -1020,20 +1079,28 @@ class CaptureStatus(StatusReport):
                 parts.append(StatusPart(joint, Level.STALE, 'registers unavailable'))
                 continue
             values = [(f'{name}_raw', f'0x{value:04X}') for name, value in registers.items()]
+            if not registers:
+                values.append(('registers', 'the device reports none (see device status)'))
             current = status['current'].get(joint)
             if current is not None:
                 values.append(('current_A', f'{current:.3f}'))
             values.append(('axis_id', str(device.axis(joint))))
             parts.append(StatusPart.from_flags(joint, axis_flags(registers), values))
         system = status.get('system', {})
-        active = CSR.decode(system.get('CSR', 0)) + SYSTEM_STATE.decode(system.get('SYS', 0))
+        active = system_flags(system)
         values = [(f'{name}_raw', f'0x{value:04X}') for name, value in system.items()]
         values += [(f'error.{name}', text) for name, text in status.get('errors', {}).items()
                    if text]
         values += [(f'problem.{i}', text) for i, text in enumerate(status['problems'])]
         unsupported = dict(client.unsupported)
-        values += [(f'unsupported.{name}', f'{answer}; not polled')
+        values += [(f'unsupported.{name}', f'{answer}; not sent again on this connection')
                    for name, answer in unsupported.items()]
+        # replies of the wrong kind, counted per command (those of unsupported ones too)
+        values += [(f'wrong_reply.{name}', f'{answer} ({count}x)')
+                   for name, (count, answer) in dict(client.wrong_replies).items()]
+        # identity getters that failed otherwise (no reply, another NACK)
+        values += [(f'identity.{name}', how) for name, how in device.identity.problems.items()
+                   if name not in unsupported]
         values += [('link', client.description)] + [
             (f'link.{k}', str(v)) for k, v in client.stats.items()
         ] + [('link.garbage_bytes', str(client.garbage_bytes)),
@@ -1051,6 +1118,9 @@ class CaptureStatus(StatusReport):
             part.message += ' | ' + '; '.join(texts)
         if unsupported:  # informational: an optional function the device lacks
             part.message += ' | device does not know: ' + ', '.join(unsupported)
+        wrong = [name for name in client.wrong_replies if name not in unsupported]
+        if wrong:  # answered, but not as the protocol says: named, not called silence
+            part.message += ' | wrong kind of reply from: ' + ', '.join(wrong)
         parts.append(part)
         return parts
 

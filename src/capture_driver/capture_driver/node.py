@@ -26,7 +26,13 @@ from std_msgs.msg import MultiArrayDimension, UInt8MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from gimbal_driver_common.device import Device
-from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest, LinkError
+from gimbal_driver_common.errors import (
+    DeviceRefused,
+    GimbalError,
+    InvalidRequest,
+    LinkError,
+    Unsupported,
+)
 from gimbal_driver_common.orientation import quaternion_from_euler
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.heading import heading_imu
@@ -267,6 +273,8 @@ class CaptureDriverNode(GimbalDriverNode):
                      rate: float, read: Callable[[CaptureDevice], T]) -> T | None:
         """One sensor read while active, connected, the device has the sensor and someone
         subscribes to its topic; a failed read is a throttled warning, never an exception.
+        A getter the device does not answer with data stops the topic (the device clears
+        its flag), said here once.
 
         Without a subscriber the read is skipped: each is one or more request/reply
         transactions (the IMU six) that would take the link from commands and polls, and
@@ -281,9 +289,11 @@ class CaptureDriverNode(GimbalDriverNode):
             return None
         try:
             return self.controller.call(lambda: read(device))
+        except Unsupported as exc:
+            self.get_logger().warning(f'{name} not read any more on this connection: {exc}')
         except GimbalError as exc:
             self.get_logger().warning(f'{name} read failed: {exc}', throttle_duration_sec=10.0)
-            return None
+        return None
 
     def _publish_imu(self) -> None:
         reading = self._read_sensor('IMU', self._imu_pub, lambda d: d.has_imu, self.imu_rate,
@@ -315,8 +325,8 @@ class CaptureDriverNode(GimbalDriverNode):
         self._fix_pub.publish(msg)
 
     def _publish_heading(self) -> None:
-        read = self._read_sensor('heading', self._heading_pub, lambda d: d.has_gps, self.fix_rate,
-                                 lambda d: (d.gps_heading(),))
+        read = self._read_sensor('heading', self._heading_pub, lambda d: d.has_heading,
+                                 self.fix_rate, lambda d: (d.gps_heading(),))
         if read is None:
             return
         (heading,) = read
