@@ -23,7 +23,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
-from gimbal_driver_common.controller import ControllerConfig, Logger
+from gimbal_driver_common.config import scan_joints
 from gimbal_driver_common.device import (
     AxisStateCode,
     Device,
@@ -37,9 +37,8 @@ from gimbal_driver_common.device import (
 )
 from gimbal_driver_common.diagnostics import ActiveFlag, Level, StatusPart
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
-from gimbal_driver_common.joint_command import validate_joint_command
-from gimbal_driver_common.policies import scan_joints
-from gimbal_driver_common.scan import ScanError, ScanRequest
+from gimbal_driver_common.joint_command import check_positions
+from gimbal_driver_common.scan import ScanError, ScanRequest, check_scan
 from gimbal_driver_common.transport import ByteStream, SerialStream, TcpStream
 
 from .client import (
@@ -271,12 +270,9 @@ def device_info(ident: Identity, link: str) -> DeviceInfo:
 class CaptureDevice(Device):
     """One Capture controller in SI units; thread-safe (the client serialises requests)."""
 
-    def __init__(self, settings: CaptureSettings, config: ControllerConfig,
-                 log: Logger = LOG) -> None:
-        super().__init__()
+    def __init__(self, settings: CaptureSettings) -> None:
+        super().__init__()  # the controller attaches its config (live limits) and logger
         self.settings = settings
-        self.config = config  # limits and joint names, as the controller uses them now
-        self.log = log
         self.client = CaptureClient(
             settings.open_stream, group=settings.group_id, timeout=settings.request_timeout,
             expect_greeting=settings.transport == 'tcp',
@@ -558,12 +554,9 @@ class CaptureDevice(Device):
         return None
 
     def check_pose(self, pose: dict[str, float], what: str) -> None:
-        """Raise InvalidRequest naming ``what`` when ``pose`` (rad) is outside the limits."""
-        try:
-            validate_joint_command(list(pose), list(pose.values()), [], self.config.limits)
-        except InvalidRequest as exc:
-            raise InvalidRequest(f'{what} is outside the joint limits, not moving: {exc}') \
-                from None
+        """The core's one pose check (unknown joint, outside the live limits) of a pose
+        the device itself moves to, naming ``what`` (a preset, a target, ...)."""
+        check_positions(pose, self.config.limits, what)
 
     # ----------------------------------------------------- sensors (SI)
     def _sensor(self, flag: str, read: Callable[[], T]) -> T:
@@ -743,7 +736,7 @@ class CaptureDevice(Device):
                 raise InvalidRequest(f'{label} {value} outside +-{bound}')
         target = GeoPoint(longitude, latitude, altitude if math.isfinite(altitude) else 0.0)
         pose = self.target_pose(target)
-        validate_joint_command(list(pose), list(pose.values()), [], self.config.limits)
+        self.check_pose(pose, f'the pose for lat {latitude:.6f} lon {longitude:.6f}')
         self.leave_device_programs()
         self.client.goto_lla(self.settings.gps_target_slot, target)
         self.on_targets(pose)
@@ -802,7 +795,7 @@ class CaptureDevice(Device):
         targets = {j: self.from_device(j, self.client.request('MOT_GetLoadPosition',
                                                                self.axis(j)) + errors[j])
                    for j in joints}
-        validate_joint_command(list(targets), list(targets.values()), [], self.config.limits)
+        self.check_pose(targets, 'the levelled pose')
         self.leave_device_programs()
         for joint in joints:
             self.client.run('IMU_Leveling', self.axis(joint))
@@ -1000,31 +993,14 @@ class CaptureScans(DeviceScans):
         self.device = device
 
     def start(self, request: ScanRequest) -> str:
+        """The core's scan-request check, then what the device adds: yaw and pitch are axes
+        1 and 2, at most 255 rows; limits go out in motor degrees."""
         device = self.device
-        limits = device.config.limits
-        if request.pattern not in SCAN_COMMANDS:
-            raise ScanError(f'pattern {request.pattern!r} not available; the Capture device '
-                            f'has {sorted(SCAN_COMMANDS)}')
-        if len(device.joint_names) < 2:
-            raise ScanError('a scan needs a pan and a tilt joint')
-        pan, tilt = device.joint_names[0], device.joint_names[1]
+        pan, tilt = check_scan(request, scan_joints(device.config), device.config.limits,
+                               self.patterns, 'the Capture device')
         if device.axis(pan) != 1 or device.axis(tilt) != 2:
-            raise ScanError('device scans move yaw (axis 1) and pitch (axis 2); map the first '
-                            'two joints to axis_ids 1 and 2')
-        for label, value in (('speed', request.speed), ('tilt_step', request.tilt_step)):
-            if not math.isfinite(value) or value <= 0:
-                raise ScanError(f'{label} {value} must be > 0')
-        if request.speed > limits[pan].velocity_max:
-            raise ScanError(f'speed {request.speed:.4f} exceeds {pan} velocity_max '
-                            f'{limits[pan].velocity_max:.4f}')
-        for label, joint, low, high in (('pan', pan, request.pan_min, request.pan_max),
-                                        ('tilt', tilt, request.tilt_min, request.tilt_max)):
-            limit = limits[joint]
-            if not (math.isfinite(low) and math.isfinite(high)) or low > high:
-                raise ScanError(f'{label} range [{low}, {high}] is not a valid interval')
-            if low < limit.position_min or high > limit.position_max:
-                raise ScanError(f'{label} range [{low:.4f}, {high:.4f}] outside the joint limits '
-                                f'[{limit.position_min:.4f}, {limit.position_max:.4f}]')
+            raise ScanError(f'device scans move yaw (axis 1) and pitch (axis 2); map the scan '
+                            f'joints {pan} and {tilt} to axis_ids 1 and 2')
         steps = math.floor((request.tilt_max - request.tilt_min) / request.tilt_step + 1e-9)
         if steps > 255:
             raise ScanError(f'{steps} rows exceed the device maximum 255; increase tilt_step')

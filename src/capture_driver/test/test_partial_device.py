@@ -251,7 +251,7 @@ def make_rig(sim) -> tuple[CaptureDevice, GimbalController]:
         joint_names=['pan', 'tilt'], axis_ids=[1, 2], joint_directions=[-1.0, 1.0],
         gear_ratios=[1.0, 1.0], host='127.0.0.1', port=sim.tcp.port, keepalive_period=0.5,
         default_speed=1.0, acceleration=6.0, status_period=0.1)
-    device = CaptureDevice(settings, config, LOG)
+    device = CaptureDevice(settings)
     controller = GimbalController(device, config, LOG)
     controller.open()
     controller.activate()
