@@ -200,6 +200,7 @@ class TurretClient:
         self._cache_lock = threading.Lock()
         self._cache: dict[str, Sample] = {}
         self._node_seen: dict[int, float] = {}
+        self._frames_at_seen: dict[int, int] = {}  # counters.frames when the node last spoke
         self._intervals_ms: dict[str, int] = {}  # TIS intervals the nodes accepted
         self.refused_intervals: dict[str, str] = {}  # key -> why TIS was refused
         self._observed_interval: dict[str, float] = {}
@@ -372,7 +373,7 @@ class TurretClient:
             return
         now = time.monotonic()
         if is_eed(message.can_id):
-            self._node_seen[message.node_id] = now
+            self._seen(message.node_id, now)
             try:
                 event = decode_eed(message)
             except CodecError as exc:
@@ -393,7 +394,7 @@ class TurretClient:
         if message.node_id != self._expected_node(ident):
             self.counters.foreign_node += 1
             return
-        self._node_seen[message.node_id] = now
+        self._seen(message.node_id, now)
         if message.data_type != ident.data_type:
             self.counters.type_mismatch += 1
             self._malformed(f"id {message.can_id} ({ident.key}) carries {message.type_name}, "
@@ -425,7 +426,7 @@ class TurretClient:
     def _service_frame(self, message: CanAerospaceMessage, now: float) -> None:
         exchange = self._exchange
         if exchange is not None and ns.is_response_to(exchange.request, message):
-            self._node_seen[message.node_id] = now
+            self._seen(message.node_id, now)
             exchange.add(message)
 
     # --- cache --------------------------------------------------------------------
@@ -482,6 +483,15 @@ class TurretClient:
 
     def node_last_seen(self, node_id: int) -> float | None:
         return self._node_seen.get(node_id)
+
+    def _seen(self, node_id: int, now: float) -> None:
+        self._node_seen[node_id] = now
+        self._frames_at_seen[node_id] = self.counters.frames
+
+    def frames_since_seen(self, node_id: int) -> int:
+        """CAN frames received since ``node_id`` last spoke (all of them if it never did):
+        a silent node on a bus that still carries frames is not a silent bus."""
+        return self.counters.frames - self._frames_at_seen.get(node_id, 0)
 
     # --- sending ------------------------------------------------------------------
 

@@ -304,8 +304,12 @@ class TurretDevice(Device):
             node = client.config.turret_node_id
             seen = client.node_last_seen(node)
             silent_for = "" if seen is None else f" for {time.monotonic() - seen:.1f} s"
-            raise LinkError(f"turret node {node} silent{silent_for} (no CAN frames on "
-                            f"{self.description()})")
+            others = client.frames_since_seen(node)
+            heard = (f"{others} other CAN frames arrived meanwhile; data frames from a node "
+                     f"id other than turret_node_id {node} on this connection: "
+                     f"{client.counters.foreign_node}" if others
+                     else f"no CAN frames on {self.description()}")
+            raise LinkError(f"turret node {node} silent{silent_for} ({heard})")
         return True
 
     def _on_link(self, up: bool, why: str) -> None:

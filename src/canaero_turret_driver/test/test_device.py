@@ -174,6 +174,8 @@ def test_turret_silence_is_a_lost_link_until_it_talks_again(rig):
     rig.simulator.set_silent("turret")
     wait_for(lambda: not rig.controller.connected, 30, "the silence to be seen")
     assert "turret node 1 silent" in rig.controller.link_error
+    # the cover, GNSS and zoom nodes keep talking: the bus is not silent, only the turret
+    assert "other CAN frames arrived meanwhile" in rig.controller.link_error
     rig.simulator.set_silent("turret", 0)
     wait_for(lambda: rig.controller.connected, 30, "the supervisor to reconnect")
     assert rig.move({"pitch": 0.1}).success

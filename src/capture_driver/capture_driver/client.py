@@ -3,10 +3,18 @@
 One request is in flight at a time (a lock serialises callers from any thread). A request
 writes one packet and reads until its reply: a data packet with the same opcode and axis
 for getters, a single ACK byte for everything else, or a NACK byte, which raises
-:class:`DeviceNack` carrying the spec's meaning and advice. Garbage and corrupted or
-truncated packets are skipped by :class:`~.protocol.StreamDecoder`; if a started packet
-stalls for ``resync_gap`` the decoder gives it up and rescans, so a lost byte costs at
-most one request.
+:class:`DeviceNack` carrying the spec's meaning and advice. A reply of the other kind (an
+ACK to a getter, data to a setter) raises :class:`WrongReply`: the device answered, so it
+is a protocol error of that request, never silence; only no answer at all is a
+:class:`DeviceTimeout`, and only timeouts in a row close the link ("device silent").
+Garbage and corrupted or truncated packets are skipped by
+:class:`~.protocol.StreamDecoder`; if a started packet stalls for ``resync_gap`` the
+decoder gives it up and rescans, so a lost byte costs at most one request.
+
+Requests the host makes on its own (identity, probes, the status registers, the sensor
+polls: :meth:`CaptureClient.optional` and :meth:`CaptureClient.poll`) stop being sent once
+the device answered one with 0xA6 or with the wrong kind of reply (:attr:`unsupported`);
+so does the one advisory step of a move, MOT_SetTum (4.2.14, 7.1 "as needed").
 
 Handshake (section 6.1): over TCP the controller sends a COM_Connect packet as soon as the
 connection opens; the client answers with a COM_Connect packet carrying the opcode the
@@ -31,7 +39,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from gimbal_driver_common import errors
@@ -78,6 +86,29 @@ class DeviceTimeout(CaptureError, errors.DeviceTimeout):
     """The controller did not answer in time."""
 
 
+class WrongReply(CaptureError, errors.DeviceRefused):
+    """The controller answered, but with the other kind of reply: an ACK byte where the
+    request takes a data packet, a data packet where it takes an ACK, or data that does not
+    decode. A protocol error of that request (the link stays up), never silence."""
+
+    def __init__(self, request: str, answer: str, expected: str) -> None:
+        super().__init__(f'{request} answered {answer}, expected {expected}')
+        self.request = request
+        self.answer = answer
+        self.expected = expected
+
+
+class NotSupported(CaptureError, errors.Unsupported):
+    """A request the host makes on its own that the device answered with 0xA6 or the wrong
+    kind of reply; it is not sent again on this connection (:attr:`CaptureClient.unsupported`)."""
+
+    def __init__(self, name: str, answer: str) -> None:
+        super().__init__(f'{name}: the device does not support it ({answer}); '
+                         'not asked again on this connection')
+        self.name = name
+        self.answer = answer
+
+
 class DeviceNack(CaptureError, errors.DeviceRefused):
     """The controller answered with a NACK byte; the message carries its meaning."""
 
@@ -94,12 +125,27 @@ class DeviceNack(CaptureError, errors.DeviceRefused):
         self.detail = detail
 
 
+#: what a request can fail with while the link stays up: a NACK, a reply of the wrong kind,
+#: no reply (DeviceTimeout). NotConnected (the link is gone) is not among them.
+REQUEST_ERRORS: tuple[type[CaptureError], ...] = (DeviceNack, WrongReply, DeviceTimeout)
+
+#: motion set-up steps the protocol calls advisory (4.2.14 "it is advisable to send this
+#: command before each command session", 7.1 "MOT_SetTum (as needed)"): a controller that
+#: does not know one (0xA6 while the rest of the set-up is accepted) is driven without it
+ADVISORY_STEPS = frozenset({'MOT_SetTum'})
+
+IDENTITY_GETTERS = (('serial_number', 'COM_GetSn'), ('firmware', 'COM_GetFw'),
+                    ('hardware', 'COM_GetHw'), ('part_number', 'COM_GetPn'))
+
+
 @dataclass
 class Identity:
     serial_number: str = ''
     firmware: str = ''
     hardware: str = ''
     part_number: str = ''
+    #: getter -> how it failed (the ones that gave no value)
+    problems: dict[str, str] = field(default_factory=dict)
 
 
 class CaptureClient:
@@ -149,11 +195,14 @@ class CaptureClient:
         self._stop = threading.Event()
         self.last_error = 'not connected'
         self.connects = 0
-        self.stats = {'requests': 0, 'timeouts': 0, 'nacks': 0, 'stale': 0,
-                      'incomplete_batches': 0}
-        # Commands the host sends on its own whose opcode the device refused with 0xA6
-        # (name -> the device's answer); never sent again on this connection.
+        self.stats = {'requests': 0, 'timeouts': 0, 'nacks': 0, 'wrong_replies': 0,
+                      'stale': 0, 'incomplete_batches': 0}
+        # Commands the host sends on its own that the device answered with 0xA6 or with the
+        # wrong kind of reply (name -> its answer); never sent again on this connection.
         self.unsupported: dict[str, str] = {}
+        #: replies of the wrong kind per command (name -> (count, the last answer))
+        self.wrong_replies: dict[str, tuple[int, str]] = {}
+        self._keepalive_on = False
 
     # ---------------------------------------------------------------- link
     @property
@@ -184,6 +233,8 @@ class CaptureClient:
             self._stale_possible = True
             self.batching, self._batch_failures = self.batch_reads, 0
             self.unsupported = {}  # a new connection may be a different controller
+            self.wrong_replies = {}
+            self._keepalive_on = False
             try:
                 self._handshake()
                 self._connected = True
@@ -221,8 +272,10 @@ class CaptureClient:
             self._request_locked('COM_setKeepAliveTimeout', None, min(timeout_ms, 0xFFFF))
             self._request_locked('COM_setKeepAliveCount', None, self.keepalive_count)
             self._request_locked('COM_StartKeepAlive', None, 1)
-        except DeviceNack as exc:  # older firmware (before 2.13.6) has no keep-alive
+        except (DeviceNack, WrongReply) as exc:  # firmware before 2.13.6 has no keep-alive
             LOG.warning('controller keep-alive not available: %s', exc)
+            return
+        self._keepalive_on = True
 
     def close(self, send_disconnect: bool = False) -> None:
         """Close the link cleanly.
@@ -232,7 +285,7 @@ class CaptureClient:
         controller also gets COM_Disconnect, which powers the motors off (4.6.3).
         """
         with self._lock:
-            if self._connected and self.keepalive_period > 0:
+            if self._connected and self._keepalive_on:
                 with contextlib.suppress(CaptureError, TransportError, ProtocolError):
                     self._request_locked('COM_StartKeepAlive', None, 0, timeout=0.2)
             if send_disconnect and self._connected:
@@ -271,11 +324,11 @@ class CaptureClient:
     def _run(self) -> None:
         tick = 0.05
         while not self._stop.wait(tick):
-            if self._connected and self.keepalive_period > 0 and (
+            if self._connected and self._keepalive_on and (
                 time.monotonic() - self._last_activity >= self.keepalive_period
             ):
                 with contextlib.suppress(CaptureError):
-                    self.request('COM_IsKeepAliveOn')
+                    self.optional('COM_IsKeepAliveOn')
 
     # ------------------------------------------------------------- requests
     def request(self, name: str, axis: int | None = None, value: Any = None,
@@ -283,7 +336,8 @@ class CaptureClient:
         """Send one table command and return its decoded reply (None for ACK-only commands).
 
         Raises :class:`ProtocolError` for bad arguments (nothing is sent),
-        :class:`DeviceNack`, :class:`DeviceTimeout` or :class:`NotConnected`.
+        :class:`DeviceNack`, :class:`WrongReply`, :class:`DeviceTimeout` or
+        :class:`NotConnected`.
         """
         cmd = command(name)
         with self._lock:
@@ -302,22 +356,37 @@ class CaptureClient:
             try:
                 reply = self._transact(name, frame, cmd.replies_with_data,
                                        self.timeout if timeout is None else timeout)
+                return self._decode(name, frame, reply) if cmd.replies_with_data else None
             except DeviceNack as exc:
                 # 0xF6: the controller did not execute the packet, so resending is safe.
                 if exc.code == ReplyCode.WRONG_CHECKSUM and attempt == 1:
                     continue
                 raise
-            except DeviceTimeout:
-                # A getter changes nothing, so it is retried once; a setter is not.
+            except (DeviceTimeout, WrongReply):
+                # A getter changes nothing, so it is retried once (a reply of the wrong kind
+                # is named only when the device gives it twice: noise can look like an ACK
+                # byte); a setter is not.
                 if cmd.replies_with_data and attempt == 1:
                     continue
                 raise
-            return cmd.decode_reply(reply) if cmd.replies_with_data else None
         raise DeviceTimeout(f'{name}: no reply')  # pragma: no cover
 
-    def read_many(self, reads: Sequence[tuple[str, int | None]]) -> list[Any]:
+    def _decode(self, name: str, frame: Frame, reply: Frame) -> Any:
+        """A getter's value; data that does not decode is a reply of the wrong kind."""
+        try:
+            return command(name).decode_reply(reply)
+        except ProtocolError as exc:
+            raise self._wrong_reply(name, frame, f'{len(reply.data)} data bytes ({exc})',
+                                    'data') from None
+
+    def read_many(self, reads: Sequence[tuple[str, int | None]],
+                  optional: bool = False) -> list[Any]:
         """Several getters (``(name, axis)``) written at once, their replies matched by
         opcode and axis; returns the decoded values in order.
+
+        ``optional``: reads the host makes on its own (the status registers), each as
+        :meth:`poll`: None for a getter the device does not answer with data (it is not
+        sent again), so the rest are read from what the device does report.
 
         A data reply names the opcode and axis it answers (section 3), so getters need not
         wait for each other: the joint poll (position and speed of each axis) costs one
@@ -327,6 +396,8 @@ class CaptureClient:
         the missing reads sent again one at a time (with :meth:`request`'s retry rules),
         and after ``BATCH_FAILURES`` such batches in a row the client reads one at a
         time for the rest of the connection (:attr:`batching` says which, in diagnostics).
+        An ACK byte names neither opcode nor axis: in a batch it only says that one of the
+        reads got no data, and that read is then named by asking it alone.
         """
         frames = []
         for name, axis in reads:
@@ -335,20 +406,30 @@ class CaptureClient:
                 raise ProtocolError(f'{name} is not a getter: only getters are batched')
             frames.append((cmd, axis, cmd.frame(axis, None, self.group)))
         with self._lock:
-            if not self.batching or len(frames) < 2:
-                return [self._request_locked(cmd.name, axis, None) for cmd, axis, _ in frames]
-            replies = self._transact_batch([frame for _, _, frame in frames])
-            values = []
-            for (cmd, axis, _), reply in zip(frames, replies, strict=True):
-                if reply is None:  # NACKed or unanswered: once more, on its own
-                    values.append(self._request_locked(cmd.name, axis, None))
-                else:
-                    values.append(cmd.decode_reply(reply))
+            values: list[Any] = [None] * len(frames)
+            asked = [i for i, (cmd, _, _) in enumerate(frames)
+                     if not (optional and cmd.name in self.unsupported)]
+            replies: list[Frame | None] = [None] * len(asked)
+            if self.batching and len(asked) >= 2:
+                replies = self._transact_batch([frames[i][2] for i in asked])
+            for i, reply in zip(asked, replies, strict=True):
+                cmd, axis, frame = frames[i]
+                if reply is not None:
+                    with contextlib.suppress(WrongReply):  # undecodable: asked alone below
+                        values[i] = self._decode(cmd.name, frame, reply)
+                        continue
+                # NACKed, answered without data or unanswered: once more, on its own
+                if not optional:
+                    values[i] = self._request_locked(cmd.name, axis, None)
+                    continue
+                with contextlib.suppress(NotSupported):  # None: not asked again
+                    values[i] = self.poll(cmd.name, axis)
             return values
 
     def _transact_batch(self, frames: list[Frame]) -> list[Frame | None]:
         """Write ``frames`` in one go; the reply to each, or None for those that got no
-        data reply within :attr:`timeout` (a NACK ends the wait for one of them)."""
+        data reply within :attr:`timeout` (a NACK or an ACK ends the wait for one of them:
+        which one, the reply byte does not say)."""
         stream = self._stream
         if stream is None:
             raise NotConnected(f'batched read: not connected ({self.last_error})')
@@ -365,8 +446,9 @@ class CaptureClient:
                 for item in self._decoder.feed(data) if data else \
                         self._decoder.flush_partial():
                     if isinstance(item, ReplyByte):
-                        self.stats['stale' if item.is_ack else 'nacks'] += 1
-                        waiting -= not item.is_ack  # a refused read answers no data
+                        if not item.is_ack:
+                            self.stats['nacks'] += 1
+                        waiting -= 1  # one of the reads answered without data
                     elif isinstance(item, Frame):
                         slot = next((i for i, frame in enumerate(frames) if replies[i] is None
                                      and (frame.opcode, frame.axis) == (item.opcode,
@@ -381,7 +463,8 @@ class CaptureClient:
             raise NotConnected(f'batched read: link lost ({exc})') from exc
         if waiting == len(frames):  # not one answer: a timeout, as for a single request
             self._count_timeout('batched read')
-        if all(reply is not None for reply in replies):
+        if not waiting:  # each read answered (a NACK or ACK too): nothing late can come,
+            # and the controller handles queued requests (those reads are named alone)
             self._stale_possible = False
             self._consecutive_timeouts = 0
             self._batch_failures = 0
@@ -400,23 +483,29 @@ class CaptureClient:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
         self.stats['requests'] += 1
         try:
-            self._send(stream, frame.encode())
-            reply = self._await_reply(stream, name, frame, expect_data, timeout)
+            late_possible = self._send(stream, frame.encode())
+            reply = self._await_reply(stream, name, frame, expect_data, timeout, late_possible)
         except TransportError as exc:
             self._link_lost(f'{name}: {exc}')
             raise NotConnected(f'{name}: link lost ({exc})') from exc
+        except WrongReply:
+            self._consecutive_timeouts = 0  # the device answered: it is not silent
+            raise
         self._stale_possible = False
         self._consecutive_timeouts = 0
         return reply
 
-    def _send(self, stream: ByteStream, data: bytes) -> None:
+    def _send(self, stream: ByteStream, data: bytes) -> bool:
         """Write one request (or a batch), after draining stale input if there can be any;
-        until its reply is in, input may hold a stale reply again."""
-        if self._stale_possible:
+        until its reply is in, input may hold a stale reply again. Returns True when a late
+        reply to an earlier request may still arrive (one was left unanswered)."""
+        late_possible = self._stale_possible
+        if late_possible:
             self._drain(stream)
         stream.write(data)
         self._last_activity = time.monotonic()
         self._stale_possible = True
+        return late_possible
 
     def _drain(self, stream: ByteStream) -> None:
         """Discard stale input before a new request.
@@ -438,7 +527,18 @@ class CaptureClient:
                     LOG.info('controller re-sent its greeting (0x%04X)', item.opcode)
 
     def _await_reply(self, stream: ByteStream, name: str, frame: Frame, expect_data: bool,
-                     timeout: float) -> Frame:
+                     timeout: float, late_possible: bool) -> Frame:
+        """The reply to ``frame``: its data packet (getters) or the ACK (the rest).
+
+        The other kind of reply is this request's protocol error (:class:`WrongReply`) when
+        nothing else can have sent it: an ACK to a getter while no earlier request is left
+        unanswered, a data packet with this request's opcode and axis to a setter. Anything
+        that may be a late reply to an earlier request (a data packet of another opcode, an
+        ACK after a timeout) is skipped while the real reply can still come; if nothing else
+        comes, the request is named with what it got at the deadline. Only a device that
+        answers nothing at all times out.
+        """
+        unexpected = ''  # the first answer of the wrong kind that may have been stale
         deadline = time.monotonic() + timeout
         while True:
             remaining = deadline - time.monotonic()
@@ -449,19 +549,39 @@ class CaptureClient:
             items = self._decoder.feed(data) if data else self._decoder.flush_partial()
             for item in items:
                 if isinstance(item, ReplyByte):
-                    if item.is_ack:
-                        if not expect_data:
-                            return frame
-                        self.stats['stale'] += 1
-                        continue
-                    self.stats['nacks'] += 1
-                    raise DeviceNack(self._label(name, frame), item.code)
-                if isinstance(item, Frame):
-                    if expect_data and item.opcode == frame.opcode and item.axis == frame.axis:
-                        return item
+                    if not item.is_ack:
+                        self.stats['nacks'] += 1
+                        raise DeviceNack(self._label(name, frame), item.code)
+                    if not expect_data:
+                        return frame
+                    if not late_possible:
+                        self._stale_possible = False
+                        raise self._wrong_reply(name, frame, 'ACK', 'data')
+                    unexpected = unexpected or 'ACK'
                     self.stats['stale'] += 1
+                elif isinstance(item, Frame):
+                    if (item.opcode, item.axis) == (frame.opcode, frame.axis):
+                        if expect_data:
+                            return item
+                        self._stale_possible = False
+                        raise self._wrong_reply(name, frame, 'data', 'ACK')
+                    self.stats['stale'] += 1
+                    if not (0x0700 <= item.opcode <= 0x07FF and not item.data):  # greeting
+                        unexpected = unexpected or (
+                            f'data of opcode 0x{item.opcode:04X} (axis {item.axis})')
+        if unexpected:
+            raise self._wrong_reply(name, frame, unexpected, 'data' if expect_data else 'ACK')
         self._count_timeout(name)
         raise DeviceTimeout(f'{self._label(name, frame)}: no reply within {timeout:g} s')
+
+    def _wrong_reply(self, name: str, frame: Frame, answer: str, expected: str) -> WrongReply:
+        """Count a reply of the wrong kind for ``name`` (diagnostics, per command)."""
+        self.stats['wrong_replies'] += 1
+        count, _ = self.wrong_replies.get(name, (0, ''))
+        error = WrongReply(self._label(name, frame), answer, expected)
+        self.wrong_replies[name] = (count + 1, f'0x{frame.opcode:04X} answered {answer}, '
+                                               f'expected {expected}')
+        return error
 
     def _count_timeout(self, what: str) -> None:
         """One more unanswered request; after ``max_timeouts`` in a row the link is closed
@@ -481,8 +601,8 @@ class CaptureClient:
         if exc.code != ReplyCode.INVALID_COMMAND or exc.detail:
             return exc
         try:
-            detail = self.request('ERR_GetProtocolErrorString')
-        except (CaptureError, ProtocolError):
+            detail = self.optional('ERR_GetProtocolErrorString')
+        except CaptureError:  # the link went
             return exc
         return DeviceNack(exc.request, exc.code, detail) if detail else exc
 
@@ -493,49 +613,77 @@ class CaptureClient:
         except DeviceNack as exc:
             raise self.explain_nack(exc) from None
 
-    def optional(self, name: str, axis: int | None = None) -> Any:
-        """A request the host makes on its own (identity, polls, probes); None if refused.
+    def poll(self, name: str, axis: int | None = None) -> Any:
+        """A getter the host asks on its own (identity, probes, registers, sensor polls).
 
         Some of these opcodes are reconstructions, and a device may lack the function. When
-        the device answers 0xA6 the command lands in :attr:`unsupported` with the device's
-        reason and is never sent again, so the host does not keep raising the controller's
-        protocol-error flag; the one flag this request raised is cleared again when it is
-        the only CSR bit set (ERR_ClearErrors would otherwise also clear real errors).
-        Timeouts and other NACKs return None for this call only.
+        the device answers 0xA6, or answers with the wrong kind of reply (an ACK: a
+        controller that acknowledges what it does not know), the command lands in
+        :attr:`unsupported` with that answer and is never sent again on this connection
+        (:class:`NotSupported`, now and on every later call), so the host does not keep
+        raising the controller's protocol-error flag; the one flag an 0xA6 raised is cleared
+        again when it is the only CSR bit set (ERR_ClearErrors would otherwise also clear
+        real errors). Timeouts and other NACKs raise as :meth:`request` does, for this call
+        only.
         """
-        if name in self.unsupported:
-            return None
+        answer = self.unsupported.get(name)
+        if answer is not None:
+            raise NotSupported(name, answer)
+        opcode = f'0x{command(name).opcode:04X}'
         try:
             return self.request(name, axis)
+        except WrongReply as exc:
+            self._not_supported(name, f'{opcode} answered {exc.answer}, expected {exc.expected}')
+            raise NotSupported(name, self.unsupported[name]) from exc
         except DeviceNack as exc:
             if exc.code != ReplyCode.INVALID_COMMAND:
-                LOG.info('%s', exc)
-                return None
-            explained = self.explain_nack(exc)
-            self.unsupported[name] = (
-                f'0x{command(name).opcode:04X} answered NACK 0xA6'
-                + (f' "{explained.detail}"' if explained.detail else ''))
-            LOG.warning('%s: the device does not support it (%s); not sent again',
-                        name, self.unsupported[name])
-            self._clear_own_protocol_error()
-        except DeviceTimeout as exc:
+                raise
+            self._not_supported(name, f'{opcode} answered NACK 0xA6', exc)
+            raise NotSupported(name, self.unsupported[name]) from exc
+
+    def optional(self, name: str, axis: int | None = None) -> Any:
+        """:meth:`poll`, with None for every answer that is not the value."""
+        try:
+            return self.poll(name, axis)
+        except NotSupported:
+            return None
+        except (DeviceNack, DeviceTimeout) as exc:
             LOG.info('%s', exc)
-        return None
+            return None
+
+    def _not_supported(self, name: str, answer: str, nack: DeviceNack | None = None) -> None:
+        """Record ``name`` as unknown to the device (said once, here); for an 0xA6, with the
+        device's reason, and the protocol-error flag it raised cleared."""
+        self.unsupported[name] = answer  # first: explaining it asks the device again
+        if nack is not None:
+            detail = self.explain_nack(nack).detail
+            if detail:
+                self.unsupported[name] = f'{answer} "{detail}"'
+        LOG.warning('%s: the device does not support it (%s); not sent again on this '
+                    'connection', name, self.unsupported[name])
+        if nack is not None:
+            self._clear_own_protocol_error()
 
     def _clear_own_protocol_error(self) -> None:
         with contextlib.suppress(CaptureError, ProtocolError):
-            if self.request('ERR_CaptureSystemRegister') == CSR_PROTOCOL_ERROR:
+            if self.optional('ERR_CaptureSystemRegister') == CSR_PROTOCOL_ERROR:
                 self.request('ERR_ClearErrors')
 
     # ----------------------------------------------------- device functions
     def identity(self) -> Identity:
-        """Serial number, firmware, hardware and part number (blank where refused)."""
+        """Serial number, firmware, hardware and part number, best effort: blank where the
+        getter is not answered with data, and how it failed in ``problems``."""
         ident = Identity()
-        for attr, name in (('serial_number', 'COM_GetSn'), ('firmware', 'COM_GetFw'),
-                           ('hardware', 'COM_GetHw'), ('part_number', 'COM_GetPn')):
-            value = self.optional(name)
-            if value is not None:
-                setattr(ident, attr, f'{value:g}' if isinstance(value, float) else str(value))
+        for attr, name in IDENTITY_GETTERS:
+            try:
+                value = self.poll(name)
+            except NotSupported as exc:
+                ident.problems[name] = exc.answer
+                continue
+            except (DeviceNack, DeviceTimeout) as exc:
+                ident.problems[name] = str(exc)
+                continue
+            setattr(ident, attr, f'{value:g}' if isinstance(value, float) else str(value))
         return ident
 
     def read_axis(self, axis: int, with_current: bool = False) -> tuple[float, float, float | None]:
@@ -590,13 +738,19 @@ class CaptureClient:
 
     def _arm_tum(self, axis: int) -> bool:
         """MOT_SetTum for the axis' next session (see :meth:`move_absolute`); False when it
-        failed, so that session sends it itself. The move already happened: a failure here
-        is not the move's."""
+        failed, so that session sends it itself (and judges an 0xA6 with the rest of its
+        set-up), or when the device does not know it. The move already happened: a failure
+        here is not the move's."""
+        if 'MOT_SetTum' in self.unsupported:
+            return False
+        self._in_setup = True
         try:
-            self._run_setup(axis, [('MOT_SetTum', None)])
+            self.request('MOT_SetTum', axis)
         except CaptureError as exc:
             LOG.debug('TUM for the next move of axis %d: %s', axis, exc)
             return False
+        finally:
+            self._in_setup = False
         return True
 
     def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:
@@ -629,13 +783,34 @@ class CaptureClient:
 
     def _run_setup(self, axis: int, steps: list[tuple[str, Any]]) -> None:
         """Send one axis' motion set-up under the lock; the setters in it do not count as
-        "something else commanded" (see :attr:`_setups`)."""
+        "something else commanded" (see :attr:`_setups`).
+
+        An advisory step (:data:`ADVISORY_STEPS`: MOT_SetTum) refused with 0xA6 does not
+        end the set-up. When the device accepts the rest, it does not know the step: it is
+        recorded in :attr:`unsupported` (said once) and left out of later set-ups on this
+        connection. When the rest is refused too, the 0xA6 meant the mode (scanning,
+        stabilising, ...), and the set-up fails with the later refusal as before.
+        """
+        refused: tuple[str, DeviceNack] | None = None
         self._in_setup = True
         try:
             for name, value in steps:
-                self.run(name, axis, value)
+                if name not in ADVISORY_STEPS:
+                    self.run(name, axis, value)
+                elif name not in self.unsupported:
+                    try:
+                        self.run(name, axis, value)
+                    except DeviceNack as exc:
+                        if exc.code != ReplyCode.INVALID_COMMAND:
+                            raise
+                        refused = (name, exc)
         finally:
             self._in_setup = False
+        if refused is not None:
+            name, exc = refused
+            answer = f'0x{command(name).opcode:04X} answered NACK 0xA6'
+            self._not_supported(name, f'{answer} "{exc.detail}"' if exc.detail else answer)
+            self._clear_own_protocol_error()
 
     def stop_all(self, axes: list[int]) -> list[str]:
         """Stop scans, loops and every axis; returns the problems (empty when all worked)."""
@@ -643,12 +818,12 @@ class CaptureClient:
         for name in ('SCN_StopScan', 'PRST_StopPresetLooping', 'GPS_StopTargetLooping'):
             try:
                 self.request(name)
-            except (DeviceNack, DeviceTimeout) as exc:
+            except REQUEST_ERRORS as exc:
                 LOG.debug('stop: %s', exc)
         for axis in axes:
             try:
                 self.stop_axis(axis)
-            except (DeviceNack, DeviceTimeout) as exc:
+            except REQUEST_ERRORS as exc:
                 problems.append(str(exc))
         return problems
 
@@ -658,20 +833,27 @@ class CaptureClient:
         self.run('MOT_AxisOn', axis)
 
     def registers(self, axis: int | None) -> dict[str, int]:
-        """Raw per-axis registers (``axis``) or system registers (``None``)."""
+        """Raw per-axis registers (``axis``) or system registers (``None``): those the
+        device reports; a register getter it does not answer with data is left out and
+        not asked again (:meth:`poll`)."""
         wanted = [register for register in REGISTERS.values()
                   if register.per_axis == (axis is not None)]
-        values = self.read_many([(register.command, axis) for register in wanted])
-        return {register.name: value for register, value in zip(wanted, values, strict=True)}
+        values = self.read_many([(register.command, axis) for register in wanted],
+                                optional=True)
+        return {register.name: value for register, value in zip(wanted, values, strict=True)
+                if value is not None}
 
     def error_strings(self, csr: int) -> dict[str, str]:
-        """Detailed device error text for every set CSR bit that has one."""
+        """Detailed device error text for every set CSR bit that has one (and the device
+        answers with data)."""
         texts = {}
         for bit, name in CSR_ERROR_STRINGS.items():
             if csr & (1 << bit):
                 try:
-                    texts[name] = self.request(name)
-                except (DeviceNack, DeviceTimeout) as exc:
+                    texts[name] = self.poll(name)
+                except NotSupported:
+                    continue
+                except REQUEST_ERRORS as exc:
                     texts[name] = f'unavailable ({exc})'
         return texts
 
@@ -706,24 +888,23 @@ class CaptureClient:
         return [bit + 1 for bit in range(15) if flags & (1 << bit)]
 
     def imu(self) -> dict[str, float]:
-        """Euler angles (deg) and gyro rates (deg/s)."""
+        """Euler angles (deg) and gyro rates (deg/s); :class:`NotSupported` once the device
+        does not answer one of the six with data."""
         names = ('IMU_GetRoll', 'IMU_GetPitch', 'IMU_GetYaw',
                  'IMU_GetGyroX', 'IMU_GetGyroY', 'IMU_GetGyroZ')
         keys = ('roll', 'pitch', 'yaw', 'gyro_x', 'gyro_y', 'gyro_z')
-        return {key: self.request(name) for key, name in zip(keys, names, strict=True)}
+        return {key: self.poll(name) for key, name in zip(keys, names, strict=True)}
 
     def gps_fix(self) -> tuple[bool, float, float] | None:
         """(position valid, latitude deg, longitude deg), converted from DDMM.mmmm (4.4.1);
-        None once the device has refused one of the three (the fix poll then stops)."""
+        None once the device does not answer one of the three with data (the fix poll then
+        stops); a timeout or another NACK raises, for this read only."""
         if any(name in self.unsupported for name in GPS_FIX_COMMANDS):
+            return None  # nothing is sent for a fix the device cannot give
+        try:
+            ready, latitude, longitude = (self.poll(name) for name in GPS_FIX_COMMANDS)
+        except NotSupported:
             return None
-        values = []
-        for name in GPS_FIX_COMMANDS:
-            value = self.optional(name)
-            if value is None:
-                return None
-            values.append(value)
-        ready, latitude, longitude = values
         return bool(ready), ddmm_to_degrees(latitude), ddmm_to_degrees(longitude)
 
     def goto_lla(self, target: int, point: GeoPoint) -> None:
@@ -739,9 +920,9 @@ class CaptureClient:
         """Tracking active, automatic mode and target detection of one camera (4.11.2-4)."""
         return TrackingState(
             camera=camera,
-            active=bool(self.run('VDT_isTrackingOn', camera)),
-            automatic=bool(self.run('VDT_isAutoModeOn', camera)),
-            target_detected=bool(self.run('VDT_isTargetDetected', camera)),
+            active=bool(self.poll('VDT_isTrackingOn', camera)),
+            automatic=bool(self.poll('VDT_isAutoModeOn', camera)),
+            target_detected=bool(self.poll('VDT_isTargetDetected', camera)),
         )
 
     def set_axis_power(self, axis: int, on: bool) -> None:
@@ -755,15 +936,15 @@ class CaptureClient:
 
     def digital_io(self, numbers: list[int]) -> dict[int, bool]:
         """State of digital I/O 1..6 (COM_getDigitalIO, the number in the axis byte)."""
-        return {n: bool(self.request('COM_getDigitalIO', n)) for n in numbers}
+        return {n: bool(self.poll('COM_getDigitalIO', n)) for n in numbers}
 
     def set_digital_output(self, number: int, on: bool) -> None:
         self.run('COM_setDigitalIO', number, int(on))
 
     def gps_heading(self) -> tuple[bool, float]:
         """(heading valid, system heading in compass degrees clockwise from north)."""
-        ready = bool(self.request('GPS_HeadingReady'))
-        return ready, self.request('GPS_GetHeading')
+        ready = bool(self.poll('GPS_HeadingReady'))
+        return ready, self.poll('GPS_GetHeading')
 
     def stored_targets(self) -> dict[int, GeoPoint]:
         """Targets 1..15 that hold a position (4.4.12: a cleared target reads all zero)."""

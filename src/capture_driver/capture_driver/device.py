@@ -14,16 +14,17 @@ gyro drift, ``~/command``) are plain methods the node's services call through
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from gimbal_driver_common import geodesy
-from gimbal_driver_common.controller import ControllerConfig, Logger
+from gimbal_driver_common.config import scan_joints
 from gimbal_driver_common.device import (
     AxisStateCode,
     Device,
@@ -39,26 +40,33 @@ from gimbal_driver_common.device import (
 )
 from gimbal_driver_common.diagnostics import ActiveFlag, Level, StatusPart
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
-from gimbal_driver_common.joint_command import validate_joint_command
-from gimbal_driver_common.policies import scan_joints
-from gimbal_driver_common.scan import ScanError, ScanRequest
+from gimbal_driver_common.joint_command import check_positions
+from gimbal_driver_common.scan import ScanError, ScanRequest, check_scan
 from gimbal_driver_common.transport import ByteStream, SerialStream, TcpStream
 
 from .client import (
+    IDENTITY_GETTERS,
+    REQUEST_ERRORS,
     SCAN_COMMANDS,
     CaptureClient,
     DeviceNack,
-    DeviceTimeout,
     Identity,
     NotConnected,
+    NotSupported,
     TrackingState,
+    WrongReply,
 )
 from .protocol import COMMANDS, DataType, GeoPoint, PresetRecord, ProtocolError, Safety
 from .protocol import command as lookup_command
 from .protocol.geometry import aim_at
-from .protocol.registers import AXIS_REGISTERS, CSR, SYSTEM_STATE
+from .protocol.registers import AXIS_REGISTERS, CSR, SYSTEM_REGISTERS, SYSTEM_STATE
 
 LOG = logging.getLogger('capture_driver.device')
+
+T = TypeVar('T')
+
+#: what ``hardware_id``, diagnostics and ~/status say for an identity the device did not give
+UNKNOWN = 'unknown'
 
 MAX_PRESETS = 15
 DIGITAL_IO_COUNT = 6  # COM_get/setDigitalIO: I/O 1..6 in the axis byte (4.6.17-18)
@@ -176,8 +184,16 @@ class LevelErrors:
 
 
 def axis_flags(registers: dict[str, int]) -> list[ActiveFlag]:
-    """Active flags of one axis' polled registers (MER, DER, SRH, SRL, MSR, CMER, OPR)."""
-    return [a for r in AXIS_REGISTERS for a in r.decode(registers.get(r.name, 0))]
+    """Active flags of one axis' polled registers (MER, DER, SRH, SRL, MSR, CMER, OPR),
+    decoded from those the device reports: a register it does not answer is no flag (read
+    as 0, SRL's active-low "axis_off" would refuse every move)."""
+    return [a for r in AXIS_REGISTERS if r.name in registers for a in r.decode(registers[r.name])]
+
+
+def system_flags(registers: dict[str, int]) -> list[ActiveFlag]:
+    """Active flags of the system registers the device reports (CSR, SYS)."""
+    return [a for r in SYSTEM_REGISTERS if r.name in registers
+            for a in r.decode(registers[r.name])]
 
 
 def parse_arguments(dtype: DataType, args: Sequence[str]) -> Any:
@@ -236,28 +252,30 @@ def format_result(cmd_name: str, value: Any) -> list[str]:
 
 
 def hardware_id(ident: Identity, link: str) -> str:
-    """capture[-pn<part>]-sn<serial>[-hw<rev>][-fw<firmware>] from what the device
-    answered; the link address stands in for a serial number it does not give."""
-    parts = ['capture']
-    if ident.part_number:
-        parts.append(f'pn{ident.part_number}')
-    parts.append(f'sn{ident.serial_number}' if ident.serial_number else f'@{link}')
-    if ident.hardware:
-        parts.append(f'hw{ident.hardware}')
-    if ident.firmware:
-        parts.append(f'fw{ident.firmware}')
-    return '-'.join(parts)
+    """capture-pn<part>-sn<serial>-hw<rev>-fw<firmware>, "unknown" for what the device did
+    not give; without a serial number the link address (``@<link>``) keeps two such
+    devices apart."""
+    text = '-'.join(['capture', *(f'{key}{value or UNKNOWN}' for key, value in (
+        ('pn', ident.part_number), ('sn', ident.serial_number), ('hw', ident.hardware),
+        ('fw', ident.firmware)))])
+    return text if ident.serial_number else f'{text}@{link}'
+
+
+def device_info(ident: Identity, link: str) -> DeviceInfo:
+    """The controller's DeviceInfo (~/status, diagnostics): "unknown" where not read."""
+    firmware = (ident.firmware or UNKNOWN) + (f' (hw {ident.hardware})' if ident.hardware
+                                              else '')
+    return DeviceInfo(model=ident.part_number or f'Capture pedestal (part number {UNKNOWN})',
+                      serial_number=ident.serial_number or UNKNOWN,
+                      firmware_version=firmware, hardware_id=hardware_id(ident, link))
 
 
 class CaptureDevice(Device):
     """One Capture controller in SI units; thread-safe (the client serialises requests)."""
 
-    def __init__(self, settings: CaptureSettings, config: ControllerConfig,
-                 log: Logger = LOG) -> None:
-        super().__init__()
+    def __init__(self, settings: CaptureSettings) -> None:
+        super().__init__()  # the controller attaches its config (live limits) and logger
         self.settings = settings
-        self.config = config  # limits and joint names, as the controller uses them now
-        self.log = log
         self.client = CaptureClient(
             settings.open_stream, group=settings.group_id, timeout=settings.request_timeout,
             expect_greeting=settings.transport == 'tcp',
@@ -271,7 +289,10 @@ class CaptureDevice(Device):
         self._next_status = 0.0
         self._warned: dict[str, float] = {}
         self.has_imu = self.has_gps = self.has_tracker = self.has_digital_io = False
+        self.has_heading = False
         self.tracker_problem = ''
+        #: the identity the device gave at the last open (what it did not: ``problems``)
+        self.identity = Identity()
         self.ranging = False
         self.device_scanning = self.preset_looping = self.target_looping = False
         self.capabilities.homing = CaptureHoming(self)
@@ -306,11 +327,21 @@ class CaptureDevice(Device):
 
     # ------------------------------------------------------------ link
     def open(self) -> DeviceInfo:
+        """Connect and read what the device tells about itself, best effort: only the link
+        and the handshake must work (the joint poll is the controller's first read); an
+        identity getter or probe the device does not answer with data leaves "unknown" or
+        "no", said once here and named in the diagnostics."""
         client = self.client
         client.connect()
-        ident = client.identity()
+        self.identity = ident = client.identity()
+        if ident.problems:
+            unread = [attr.replace('_', ' ') for attr, name in IDENTITY_GETTERS
+                      if name in ident.problems]
+            self.log.warning(f'identity: {", ".join(unread)} {UNKNOWN} ('
+                             + '; '.join(f'{name}: {how}' for name, how in
+                                         ident.problems.items()) + ')')
         self.has_imu = bool(client.optional('IMU_IsReadyImu'))
-        self.has_gps = bool(client.optional('GPS_isConnectedGPS'))
+        self.has_gps = self.has_heading = bool(client.optional('GPS_isConnectedGPS'))
         self.device_scanning = bool(client.optional('SCN_IsScanOn'))
         self.preset_looping = self.target_looping = False
         self._probe_extras()
@@ -319,11 +350,7 @@ class CaptureDevice(Device):
         self.log.info(
             f'Capture controller on {client.description}: IMU {"yes" if self.has_imu else "no"}'
             f', GPS {"yes" if self.has_gps else "no"}')
-        firmware = ident.firmware + (f' (hw {ident.hardware})' if ident.hardware else '')
-        return DeviceInfo(
-            model=ident.part_number or 'Capture pedestal', serial_number=ident.serial_number,
-            firmware_version=firmware,
-            hardware_id=hardware_id(ident, self.settings.link_description()))
+        return device_info(ident, self.settings.link_description())
 
     def _probe_extras(self) -> None:
         """Which optional units answer (a missing video tracker NACKs with 0x76); ranging
@@ -332,7 +359,7 @@ class CaptureDevice(Device):
         if self.ranging:
             try:
                 client.run('LRF_StartMeasurement')
-            except (DeviceNack, DeviceTimeout) as exc:
+            except REQUEST_ERRORS as exc:
                 self.ranging = False
                 self.log.warning(f'ranging not restarted after reconnect: {exc}')
         # firmware before 2.22.0 has no digital I/O: polling it would latch protocol errors
@@ -368,7 +395,7 @@ class CaptureDevice(Device):
             values = self.client.read_many([
                 (name, self.axis(joint)) for joint in joints
                 for name in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')])
-        except (DeviceNack, DeviceTimeout) as exc:
+        except REQUEST_ERRORS as exc:  # an answer of the wrong kind too: the link stays
             self._warn('poll', f'poll skipped: {exc}', 5.0)
             return None
         positions = {joint: self.from_device(joint, values[2 * i])
@@ -394,15 +421,17 @@ class CaptureDevice(Device):
             axis = self.axis(joint)
             try:
                 status['axes'][joint] = client.registers(axis)
-                status['current'][joint] = client.request('MOT_GetMotorCurrent', axis) / 1000.0
-            except (DeviceNack, DeviceTimeout) as exc:
+                with contextlib.suppress(NotSupported):  # no effort in joint_states
+                    status['current'][joint] = client.poll('MOT_GetMotorCurrent', axis) / 1000.0
+            except REQUEST_ERRORS as exc:
                 status['problems'].append(f'{joint}: {exc}')
         try:
             system = client.registers(None)
             status['system'] = system
             status['errors'] = client.error_strings(system.get('CSR', 0))
-            status['emergency_stop'] = bool(client.request('MOT_GetEmgStopAxes'))
-        except (DeviceNack, DeviceTimeout) as exc:
+            with contextlib.suppress(NotSupported):
+                status['emergency_stop'] = bool(client.poll('MOT_GetEmgStopAxes'))
+        except REQUEST_ERRORS as exc:
             status['problems'].append(f'system: {exc}')
         status['refusals'] = {joint: self._axis_refusal(joint, registers)
                               for joint, registers in status['axes'].items()}
@@ -469,7 +498,7 @@ class CaptureDevice(Device):
                 for joint in joints:
                     try:
                         self.client.stop_axis(self.axis(joint))
-                    except (DeviceNack, DeviceTimeout) as exc:
+                    except REQUEST_ERRORS as exc:
                         problems.append(str(exc))
         if problems:
             raise DeviceRefused('; '.join(problems))
@@ -484,7 +513,7 @@ class CaptureDevice(Device):
             try:
                 client.reset_faults(axis)  # ResetFaults + AxisOn (4.10)
                 client.stop_axis(axis)  # AxisOn resumes a buffered move (4.2.11)
-            except (DeviceNack, DeviceTimeout) as exc:
+            except REQUEST_ERRORS as exc:
                 self.expire_status()
                 raise DeviceRefused(f'{joint}: {exc}') from exc
         client.request('ERR_ClearErrors')
@@ -530,18 +559,25 @@ class CaptureDevice(Device):
         return None
 
     def check_pose(self, pose: dict[str, float], what: str) -> None:
-        """Raise InvalidRequest naming ``what`` when ``pose`` (rad) is outside the limits."""
-        try:
-            validate_joint_command(list(pose), list(pose.values()), [], self.config.limits)
-        except InvalidRequest as exc:
-            raise InvalidRequest(f'{what} is outside the joint limits, not moving: {exc}') \
-                from None
+        """The core's one pose check (unknown joint, outside the live limits) of a pose
+        the device itself moves to, naming ``what`` (a preset, a target, ...)."""
+        check_positions(pose, self.config.limits, what)
 
     # ----------------------------------------------------- sensors (SI)
+    def _sensor(self, flag: str, read: Callable[[], T]) -> T:
+        """One sensor read for its topic. When the device does not answer one of its
+        getters with data (:class:`NotSupported`, which says which and how), ``flag`` is
+        cleared: the topic stops asking until the next connection."""
+        try:
+            return read()
+        except NotSupported:
+            setattr(self, flag, False)
+            raise
+
     def imu(self) -> ImuReading:
         """IMU attitude and rates; device yaw counts clockwise 0..360, REP-103 yaw the
         other way, so yaw is negated."""
-        values = self.client.imu()
+        values = self._sensor('has_imu', self.client.imu)
         return ImuReading(
             roll=math.radians(values['roll']), pitch=math.radians(values['pitch']),
             yaw=-math.radians(values['yaw']),
@@ -564,25 +600,32 @@ class CaptureDevice(Device):
             return math.nan  # 4.4.4 prints no opcode: 0x0506..0x0509 all fit (README)
         try:
             return float(self.client.request('GPS_GetAltitude'))
-        except (DeviceNack, DeviceTimeout):
+        except REQUEST_ERRORS:
             return math.nan
 
     def gps_heading(self) -> float | None:
         """Compass heading in rad (clockwise from north), None while not valid."""
-        ready, heading = self.client.gps_heading()
+        ready, heading = self._sensor('has_heading', self.client.gps_heading)
         return math.radians(heading) if ready else None
 
     def range_m(self) -> float:
         """Laser range in m; +inf when the device reads 0 (no return, REP-117)."""
-        distance = self.client.request('LRF_GetLRFDistance', 1)  # 4.17.11: 1 = current/last
+        # 4.17.11: 1 = current/last
+        distance = self._sensor('ranging', lambda: self.client.poll('LRF_GetLRFDistance', 1))
         return float(distance) if distance > 0 else math.inf
 
     def tracking_state(self) -> TrackingState:
-        return self.client.tracking_state(self.settings.tracker_camera)
+        try:
+            return self._sensor('has_tracker', lambda: self.client.tracking_state(
+                self.settings.tracker_camera))
+        except NotSupported as exc:
+            self.tracker_problem = str(exc)
+            raise
 
     def digital_io(self) -> list[int]:
         """States of digital I/O 1..6 (1 = set)."""
-        states = self.client.digital_io(list(range(1, DIGITAL_IO_COUNT + 1)))
+        states = self._sensor('has_digital_io', lambda: self.client.digital_io(
+            list(range(1, DIGITAL_IO_COUNT + 1))))
         return [int(states[n]) for n in sorted(states)]
 
     # ---------------------------------------------------------- extras
@@ -698,7 +741,7 @@ class CaptureDevice(Device):
                 raise InvalidRequest(f'{label} {value} outside +-{bound}')
         target = GeoPoint(longitude, latitude, altitude if math.isfinite(altitude) else 0.0)
         pose = self.target_pose(target)
-        validate_joint_command(list(pose), list(pose.values()), [], self.config.limits)
+        self.check_pose(pose, f'the pose for lat {latitude:.6f} lon {longitude:.6f}')
         self.leave_device_programs()
         self.client.goto_lla(self.settings.gps_target_slot, target)
         self.on_targets(pose)
@@ -757,7 +800,7 @@ class CaptureDevice(Device):
         targets = {j: self.from_device(j, self.client.request('MOT_GetLoadPosition',
                                                                self.axis(j)) + errors[j])
                    for j in joints}
-        validate_joint_command(list(targets), list(targets.values()), [], self.config.limits)
+        self.check_pose(targets, 'the levelled pose')
         self.leave_device_programs()
         for joint in joints:
             self.client.run('IMU_Leveling', self.axis(joint))
@@ -861,7 +904,7 @@ class CaptureHoming(Homing):
                                     f'({client.request("ERR_GetHomingErrorString")})')
         except NotConnected as exc:
             raise LinkError(f'homing failed: {exc}') from exc
-        except (DeviceNack, DeviceTimeout) as exc:
+        except REQUEST_ERRORS as exc:
             raise DeviceRefused(f'homing failed: {exc}') from exc
         device.expire_status()
         return f'homed: {", ".join(joints)}'
@@ -955,31 +998,14 @@ class CaptureScans(DeviceScans):
         self.device = device
 
     def start(self, request: ScanRequest) -> str:
+        """The core's scan-request check, then what the device adds: yaw and pitch are axes
+        1 and 2, at most 255 rows; limits go out in motor degrees."""
         device = self.device
-        limits = device.config.limits
-        if request.pattern not in SCAN_COMMANDS:
-            raise ScanError(f'pattern {request.pattern!r} not available; the Capture device '
-                            f'has {sorted(SCAN_COMMANDS)}')
-        if len(device.joint_names) < 2:
-            raise ScanError('a scan needs a pan and a tilt joint')
-        pan, tilt = device.joint_names[0], device.joint_names[1]
+        pan, tilt = check_scan(request, scan_joints(device.config), device.config.limits,
+                               self.patterns, 'the Capture device')
         if device.axis(pan) != 1 or device.axis(tilt) != 2:
-            raise ScanError('device scans move yaw (axis 1) and pitch (axis 2); map the first '
-                            'two joints to axis_ids 1 and 2')
-        for label, value in (('speed', request.speed), ('tilt_step', request.tilt_step)):
-            if not math.isfinite(value) or value <= 0:
-                raise ScanError(f'{label} {value} must be > 0')
-        if request.speed > limits[pan].velocity_max:
-            raise ScanError(f'speed {request.speed:.4f} exceeds {pan} velocity_max '
-                            f'{limits[pan].velocity_max:.4f}')
-        for label, joint, low, high in (('pan', pan, request.pan_min, request.pan_max),
-                                        ('tilt', tilt, request.tilt_min, request.tilt_max)):
-            limit = limits[joint]
-            if not (math.isfinite(low) and math.isfinite(high)) or low > high:
-                raise ScanError(f'{label} range [{low}, {high}] is not a valid interval')
-            if low < limit.position_min or high > limit.position_max:
-                raise ScanError(f'{label} range [{low:.4f}, {high:.4f}] outside the joint limits '
-                                f'[{limit.position_min:.4f}, {limit.position_max:.4f}]')
+            raise ScanError(f'device scans move yaw (axis 1) and pitch (axis 2); map the scan '
+                            f'joints {pan} and {tilt} to axis_ids 1 and 2')
         steps = math.floor((request.tilt_max - request.tilt_min) / request.tilt_step + 1e-9)
         if steps > 255:
             raise ScanError(f'{steps} rows exceed the device maximum 255; increase tilt_step')
@@ -1001,9 +1027,18 @@ class CaptureScans(DeviceScans):
                 f'{steps} step(s) of {math.degrees(request.tilt_step):.2f} deg')
 
     def stop(self) -> None:
-        if self.device.client.connected:
-            self.device.client.request('SCN_StopScan')
-        self.device.device_scanning = False
+        """SCN_StopScan. A refusal (or a reply of the wrong kind) while the driver knows of
+        no device scan is not a failed stop: a controller without the scan functions
+        refuses it, and ~/stop must stop its axes all the same (``device.stop`` follows)."""
+        device = self.device
+        if device.client.connected:
+            try:
+                device.client.request('SCN_StopScan')
+            except (DeviceNack, WrongReply) as exc:
+                if device.device_scanning:
+                    raise
+                LOG.debug('SCN_StopScan with no device scan known: %s', exc)
+        device.device_scanning = False
 
 
 class CaptureStatus(StatusReport):
@@ -1025,20 +1060,28 @@ class CaptureStatus(StatusReport):
                 parts.append(StatusPart(joint, Level.STALE, 'registers unavailable'))
                 continue
             values = [(f'{name}_raw', f'0x{value:04X}') for name, value in registers.items()]
+            if not registers:
+                values.append(('registers', 'the device reports none (see device status)'))
             current = status['current'].get(joint)
             if current is not None:
                 values.append(('current_A', f'{current:.3f}'))
             values.append(('axis_id', str(device.axis(joint))))
             parts.append(StatusPart.from_flags(joint, axis_flags(registers), values))
         system = status.get('system', {})
-        active = CSR.decode(system.get('CSR', 0)) + SYSTEM_STATE.decode(system.get('SYS', 0))
+        active = system_flags(system)
         values = [(f'{name}_raw', f'0x{value:04X}') for name, value in system.items()]
         values += [(f'error.{name}', text) for name, text in status.get('errors', {}).items()
                    if text]
         values += [(f'problem.{i}', text) for i, text in enumerate(status['problems'])]
         unsupported = dict(client.unsupported)
-        values += [(f'unsupported.{name}', f'{answer}; not polled')
+        values += [(f'unsupported.{name}', f'{answer}; not sent again on this connection')
                    for name, answer in unsupported.items()]
+        # replies of the wrong kind, counted per command (those of unsupported ones too)
+        values += [(f'wrong_reply.{name}', f'{answer} ({count}x)')
+                   for name, (count, answer) in dict(client.wrong_replies).items()]
+        # identity getters that failed otherwise (no reply, another NACK)
+        values += [(f'identity.{name}', how) for name, how in device.identity.problems.items()
+                   if name not in unsupported]
         values += [('link', client.description)] + [
             (f'link.{k}', str(v)) for k, v in client.stats.items()
         ] + [('link.garbage_bytes', str(client.garbage_bytes)),
@@ -1056,6 +1099,9 @@ class CaptureStatus(StatusReport):
             part.message += ' | ' + '; '.join(texts)
         if unsupported:  # informational: an optional function the device lacks
             part.message += ' | device does not know: ' + ', '.join(unsupported)
+        wrong = [name for name in client.wrong_replies if name not in unsupported]
+        if wrong:  # answered, but not as the protocol says: named, not called silence
+            part.message += ' | wrong kind of reply from: ' + ', '.join(wrong)
         parts.append(part)
         return parts
 

@@ -26,7 +26,13 @@ from std_msgs.msg import MultiArrayDimension, UInt8MultiArray
 from std_srvs.srv import SetBool, Trigger
 
 from gimbal_driver_common.device import Device
-from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest, LinkError
+from gimbal_driver_common.errors import (
+    DeviceRefused,
+    GimbalError,
+    InvalidRequest,
+    LinkError,
+    Unsupported,
+)
 from gimbal_driver_common.orientation import quaternion_from_euler
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.heading import heading_imu
@@ -230,7 +236,7 @@ class CaptureDriverNode(GimbalDriverNode):
 
     # ---------------------------------------------------------------- device
     def make_device(self) -> Device:
-        return CaptureDevice(self.settings, self.config, self.get_logger())
+        return CaptureDevice(self.settings)  # the controller attaches config and logger
 
     def device_ready(self, device: Device) -> None:
         """Device-run motions report their targets to ~/status; the sensor topics start."""
@@ -245,11 +251,16 @@ class CaptureDriverNode(GimbalDriverNode):
             self.sensor_jobs.trigger(job)
         return result
 
+    def _device_call(self, request: Callable[[CaptureDevice], T],
+                     joints: Sequence[str] | None = None) -> T:
+        """One adapter request through the controller's ``call()`` boundary (refused while
+        inactive, disconnected or, with ``joints``, while they cannot move)."""
+        return self.controller.call(lambda: request(self.controller.device), joints)
+
     def _device_service(self, response: object, request: Callable[[CaptureDevice], str],
                         joints: Sequence[str] | None = None) -> object:
         """Answer a service with one adapter call (refusals and errors: success=false)."""
-        return self.serve_request(response, lambda: self.controller.call(
-            lambda: request(self.controller.device), joints))
+        return self.serve_request(response, lambda: self._device_call(request, joints))
 
     # ----------------------------------------------------------- sensor topics
     def _sensor_jobs(self) -> list[tuple[Callable[[], None], str]]:
@@ -267,6 +278,8 @@ class CaptureDriverNode(GimbalDriverNode):
                      rate: float, read: Callable[[CaptureDevice], T]) -> T | None:
         """One sensor read while active, connected, the device has the sensor and someone
         subscribes to its topic; a failed read is a throttled warning, never an exception.
+        A getter the device does not answer with data stops the topic (the device clears
+        its flag), said here once.
 
         Without a subscriber the read is skipped: each is one or more request/reply
         transactions (the IMU six) that would take the link from commands and polls, and
@@ -276,14 +289,13 @@ class CaptureDriverNode(GimbalDriverNode):
             return None
         if publisher.get_subscription_count() == 0:
             return None
-        device = self.controller.device
-        if not available(device):
-            return None
         try:
-            return self.controller.call(lambda: read(device))
+            return self._device_call(lambda device: read(device) if available(device) else None)
+        except Unsupported as exc:
+            self.get_logger().warning(f'{name} not read any more on this connection: {exc}')
         except GimbalError as exc:
             self.get_logger().warning(f'{name} read failed: {exc}', throttle_duration_sec=10.0)
-            return None
+        return None
 
     def _publish_imu(self) -> None:
         reading = self._read_sensor('IMU', self._imu_pub, lambda d: d.has_imu, self.imu_rate,
@@ -315,8 +327,8 @@ class CaptureDriverNode(GimbalDriverNode):
         self._fix_pub.publish(msg)
 
     def _publish_heading(self) -> None:
-        read = self._read_sensor('heading', self._heading_pub, lambda d: d.has_gps, self.fix_rate,
-                                 lambda d: (d.gps_heading(),))
+        read = self._read_sensor('heading', self._heading_pub, lambda d: d.has_heading,
+                                 self.fix_rate, lambda d: (d.gps_heading(),))
         if read is None:
             return
         (heading,) = read
@@ -396,13 +408,14 @@ class CaptureDriverNode(GimbalDriverNode):
 
     def _stop_program(self, response: object, stop: Callable[[CaptureDevice], None],
                       message: str) -> object:
-        """End a device program (loop), then stop every axis as ~/stop does."""
-        def run(device: CaptureDevice) -> str:
-            stop(device)
+        """End a device program (loop), then stop every axis as ~/stop does: two calls to
+        the controller, one after the other."""
+        def run() -> str:
+            self._device_call(stop)
             self.controller.stop()
             return message
 
-        return self._device_service(response, run)
+        return self.serve_request(response, run)
 
     def _on_reset_gyro_drift(self, request, response):
         return self._device_service(response, lambda d: d.reset_gyro_drift())
@@ -434,9 +447,9 @@ class CaptureDriverNode(GimbalDriverNode):
         return self._device_service(response, output)
 
     def _on_enable(self, request, response):
-        def enable(device: CaptureDevice) -> str:
+        def enable() -> str:
             if request.data:
-                faulted = device.faulted_joints()
+                faulted = self._device_call(lambda device: device.faulted_joints())
                 if faulted:
                     raise DeviceRefused(f'{", ".join(faulted)}: drive in fault; call '
                                         '~/reset_faults (it switches the drives on)')
@@ -445,9 +458,9 @@ class CaptureDriverNode(GimbalDriverNode):
                     self.controller.stop()
                 except GimbalError as exc:
                     raise DeviceRefused(f'stop before switching off failed: {exc}') from exc
-            return device.set_power(request.data)
+            return self._device_call(lambda device: device.set_power(request.data))
 
-        return self._device_service(response, enable)
+        return self.serve_request(response, enable)
 
     def _on_command(self, request, response):
         def run(device: CaptureDevice) -> str:
@@ -463,7 +476,7 @@ class CaptureDriverNode(GimbalDriverNode):
             self.get_logger().warning(f'~/goto_lla ignored: {refusal}')
             return
         try:
-            pose = self.controller.call(lambda: self.controller.device.goto_lla(
+            pose = self._device_call(lambda device: device.goto_lla(
                 msg.latitude, msg.longitude, msg.altitude))
         except GimbalError as exc:
             self.get_logger().error(f'~/goto_lla refused, nothing moved: {exc}')
@@ -475,7 +488,7 @@ class CaptureDriverNode(GimbalDriverNode):
     # ----------------------------------------------------------- actions
     def _busy_reason(self) -> str | None:
         """Why the pedestal is not at rest for a guarded operation, or None."""
-        program = self.controller.device.program_running() if self.controller else None
+        program = self._device_call(lambda device: device.program_running())
         if program:
             return program
         if self.motion is not None and self.motion.scanning:
@@ -522,20 +535,19 @@ class CaptureDriverNode(GimbalDriverNode):
         joints = list(goal_handle.request.joint_names) or list(self.joint_names)
 
         def work(report: Callable[[str], None]) -> str:
-            device = self.controller.device  # _run_guarded checked it is configured
-            self.controller.call(lambda: device.start_leveling(joints))
-            return self._wait_level(device, joints, report, goal_handle)
+            self._device_call(lambda device: device.start_leveling(joints))
+            return self._wait_level(joints, report, goal_handle)
 
         return self._run_guarded(goal_handle, work)
 
-    def _wait_level(self, device: CaptureDevice, joints: Sequence[str],
-                    report: Callable[[str], None], goal_handle) -> str:
+    def _wait_level(self, joints: Sequence[str], report: Callable[[str], None],
+                    goal_handle) -> str:
         """Feedback until every IMU angle is at its levelling value and the axes rest."""
         ctl = self.controller
         generation = ctl.motion_generation
         deadline = time.monotonic() + self.move_timeout
         while True:
-            errors = ctl.call(lambda: device.level_errors(joints))
+            errors = self._device_call(lambda device: device.level_errors(joints))
             moving = ctl.latest is None or any(ctl.moving(j) for j in joints)
             report(errors.progress() + (' (moving)' if moving else ''))
             if errors.within(self.goal_tolerance) and not moving:
@@ -557,8 +569,7 @@ class CaptureDriverNode(GimbalDriverNode):
                                      f'measures IMU sensor {self.gyro_drift_sensor}, '
                                      'gyro_drift_sensor)')
             ctl = self.controller  # _run_guarded checked it is configured
-            device = ctl.device
-            ctl.call(device.start_gyro_drift)
+            self._device_call(lambda device: device.start_gyro_drift())
             generation = ctl.motion_generation
             start = time.monotonic()
             while (elapsed := time.monotonic() - start) < self.gyro_drift_time:
@@ -574,7 +585,7 @@ class CaptureDriverNode(GimbalDriverNode):
                 report(f'holding still while measuring the gyro drift: {elapsed:.1f} of '
                        f'{self.gyro_drift_time:g} s')
                 time.sleep(0.2)
-            return ctl.call(device.gyro_drift_result)
+            return self._device_call(lambda device: device.gyro_drift_result())
 
         return self._run_guarded(goal_handle, work)
 

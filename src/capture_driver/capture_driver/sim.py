@@ -11,9 +11,16 @@ system state) whose bits follow the motion.
 Axes run on the shared trapezoidal model (``gimbal_driver_common.sim_motion``). Fault
 injection (methods of :class:`PedestalModel`, and the shared control verbs of
 ``gimbal_driver_common.sim_control`` on stdin and the ``--control-port`` console: drop,
-silence, garbage, nack, fault, clear, state, quit, plus Capture's lose, unknown, pose,
+silence, garbage, nack, fault, clear, state, quit, plus Capture's lose, unknown, wrong, pose,
 detect, dio, count): latched axis and system faults, NACK replies, lost replies, garbage
-bytes, a silent device and a dropped link.
+bytes, a silent device and a dropped link, replies of the wrong kind (``wrong``). A device
+that knows only part of the table (``known_commands`` / ``--only``, ``unknown_commands`` /
+``--unknown``) answers the rest with NACK 0xA6, or with an ACK (``ack_unknown`` /
+``--ack-unknown``) as a third-party controller does.
+
+The device is a table of opcodes, and so is the model: :data:`HANDLERS` maps every command
+it executes to its handler, one row each (a table command without a row stores and returns
+its value); handlers longer than a row are methods of :class:`PedestalModel`.
 
 Assumptions where the spec is silent are marked "sim:" in comments.
 """
@@ -25,8 +32,9 @@ import logging
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from typing import Any
 
 from gimbal_driver_common.sim_control import (
     ControlError,
@@ -71,6 +79,36 @@ GENERAL_SPEED = 30.0  # deg/s, default CFG_SetGeneralSpd
 TILT_HARD_LIMIT = 95.0  # deg, sim: mechanical limit switches of the tilt axis
 GYRO_BIAS = 0.05  # deg/s, sim: the yaw gyro drift IMU_GyroDriftCompensation measures
 DRIFT_MEASURE_TIME = 2.0  # s (simulated), sim: how long the drift calculation takes
+
+#: the motion set-up of 7.1 (TUM aside) and the speed mode of jogs and stops
+MOTION_SETUP = ('MOT_SetPositionMode', 'MOT_SetSpeedMode', 'MOT_SetPositionAbsolute',
+                'MOT_SetPositionRelative', 'MOT_SetAcceleration', 'MOT_SetSpeed',
+                'MOT_SendPosition', 'MOT_Update')
+#: named command subsets for ``known_commands`` (``--only``): controllers that know only
+#: part of the table (issue 26)
+KNOWN_SETS: dict[str, tuple[str, ...]] = {
+    # a third-party Cap-Track simulator: motion, load position and speed, voltage, current,
+    # the motor error register and COM_Connect (it ACKs the rest: ``--ack-unknown``)
+    'third-party': ('COM_Connect', *MOTION_SETUP, 'MOT_SetTum', 'MOT_GetLoadPosition',
+                    'MOT_GetMotorSpeed', 'MOT_GetMotorVoltage', 'MOT_GetMotorCurrent',
+                    'MOT_MerRegister'),
+    # a partial controller: COM_Connect, the joint poll and the motion set-up without TUM
+    'partial': ('COM_Connect', 'MOT_GetLoadPosition', 'MOT_GetMotorSpeed', *MOTION_SETUP),
+}
+
+
+def command_names(names: Iterable[str]) -> list[str]:
+    """Table command names, with the names of :data:`KNOWN_SETS` expanded; a name that is
+    neither raises KeyError naming it."""
+    expanded = []
+    for name in names:
+        if name in KNOWN_SETS:
+            expanded += KNOWN_SETS[name]
+        elif name in COMMANDS:
+            expanded.append(name)
+        else:
+            raise KeyError(f'{name!r} is neither a table command nor one of {sorted(KNOWN_SETS)}')
+    return expanded
 
 
 @dataclass
@@ -276,6 +314,8 @@ class PedestalModel:
         serial_number: int = 24017,
         firmware: str = '2.24.0',
         unknown_commands: Iterable[str] = (),
+        known_commands: Iterable[str] | None = None,
+        ack_unknown: bool = False,
     ) -> None:
         if axes not in (2, 3):
             raise ValueError('the simulator models 2 or 3 axes')
@@ -293,6 +333,15 @@ class PedestalModel:
         # Opcodes this device does not know (an older firmware, or a table guess that is
         # wrong): answered 0xA6 "Opcode not Recognized" like any opcode outside the table.
         self.unknown_opcodes = {COMMANDS[name].opcode for name in unknown_commands}
+        #: a device that knows only these opcodes (None: the whole table)
+        self.known_opcodes = None if known_commands is None else {
+            COMMANDS[name].opcode for name in command_names(known_commands)}
+        #: answer ACK (0x06) instead of NACK 0xA6 to an opcode the device does not know, as
+        #: a third-party controller does (getters included)
+        self.ack_unknown = ack_unknown
+        #: opcodes answered with the other kind of reply (fault injection: a getter gets an
+        #: ACK, a setter a data packet with its opcode), after they were executed
+        self.wrong_kind_opcodes: set[int] = set()
         self.emergency_stop = False
         self.stabilization = False
         self.scan: ScanState | None = None
@@ -535,6 +584,7 @@ class PedestalModel:
             self.nack_queue.clear()
             self.nack_all = None
             self.drop_replies = 0
+            self.wrong_kind_opcodes.clear()
 
     def set_pose(self, axis: int, degrees: float) -> None:
         with self.lock:
@@ -585,9 +635,16 @@ class PedestalModel:
         if axis is not None and axis.homing:
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Command not valid while homing')
 
+    def knows(self, opcode: int) -> bool:
+        """The device knows this opcode (table, ``unknown_commands``, ``known_commands``)."""
+        return opcode in BY_OPCODE and opcode not in self.unknown_opcodes and (
+            self.known_opcodes is None or opcode in self.known_opcodes)
+
     def _execute(self, frame: Frame, session: CaptureSession) -> bytes:
         cmd = BY_OPCODE.get(frame.opcode)
-        if cmd is None or frame.opcode in self.unknown_opcodes:
+        if cmd is None or not self.knows(frame.opcode):
+            if self.ack_unknown:  # sim: executes nothing, raises no protocol-error flag
+                return bytes([ReplyCode.ACK])
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Opcode not Recognized')
         if not session.connected and cmd.name != 'COM_Connect':
             # sim: commands are processed only after COM_Connect (4.6.2)
@@ -618,15 +675,16 @@ class PedestalModel:
                 and cmd.name != 'MOT_SetEmgStopAxes'):
             # 4.3: while scanning, motor commands other than reads are refused with 0xA6
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Command not valid while scanning')
-        handler = getattr(self, '_do_' + cmd.name, None)
+        handler = HANDLERS.get(cmd.name)
         if handler is not None:
-            result = handler(frame, arg, session)
+            result = handler(self, frame, arg, session)
         else:
             result = self._generic(cmd.name, frame, arg)
-        if cmd.replies_with_data:
-            data = encode_value(cmd.ret, result, cmd.name)
-            return Frame(frame.group, frame.axis, frame.opcode, data).encode()
-        return bytes([ReplyCode.ACK])
+        data_reply = cmd.replies_with_data != (frame.opcode in self.wrong_kind_opcodes)
+        if not data_reply:
+            return bytes([ReplyCode.ACK])
+        data = encode_value(cmd.ret, result, cmd.name) if cmd.replies_with_data else bytes(4)
+        return Frame(frame.group, frame.axis, frame.opcode, data).encode()
 
     def _generic(self, name: str, frame: Frame, arg: object) -> object:
         """Setters store, getters return what was stored (or a zero of the right type)."""
@@ -645,48 +703,21 @@ class PedestalModel:
             self.stored[key] = arg
         return None
 
-    # --- video tracker (4.11): the camera index is the group byte
-    def _do_VDT_GetTargetsList(self, frame, arg, session):
-        return self.detected_targets[self._camera(frame)][:5]
-
-    # --- COM
-    def _do_COM_Connect(self, frame, arg, session):
+    # ------------------------------------------------ handlers too long for one table row
+    # (the table itself, HANDLERS, follows the class: every command the model executes)
+    def _connect(self, frame, arg, session):
         session.connected = True
         for axis in self.axes.values():  # 4.6.2: axes on, position mode, relative, speed 0
             axis.axis_on, axis.speed_mode, axis.relative, axis.speed = True, False, True, 0.0
 
-    def _do_COM_Disconnect(self, frame, arg, session):
+    def _disconnect(self, frame, arg, session):
         session.connected = False
         self.scan = None
         for axis in self.axes.values():
             axis.halt()
             axis.axis_on, axis.speed_mode, axis.relative = False, False, True
 
-    def _do_COM_Reboot(self, frame, arg, session):
-        self._do_COM_Disconnect(frame, arg, session)
-
-    def _do_COM_IsConnected(self, frame, arg, session):
-        return True
-
-    def _do_COM_StartKeepAlive(self, frame, arg, session):
-        self.keepalive_on = bool(arg)
-
-    def _do_COM_IsKeepAliveOn(self, frame, arg, session):
-        return self.keepalive_on
-
-    def _do_COM_setKeepAliveTimeout(self, frame, arg, session):
-        self.keepalive_timeout_ms = arg
-
-    def _do_COM_getKeepAliveTimeout(self, frame, arg, session):
-        return self.keepalive_timeout_ms
-
-    def _do_COM_setKeepAliveCount(self, frame, arg, session):
-        self.keepalive_count = arg
-
-    def _do_COM_getKeepAliveCount(self, frame, arg, session):
-        return self.keepalive_count
-
-    def _do_COM_SysState(self, frame, arg, session):
+    def _system_state(self, frame, arg, session):
         value = 0
         if self.stabilization:
             value |= reg.SYS_STABILIZATION
@@ -700,67 +731,7 @@ class PedestalModel:
             value |= 1 << 4  # SYS bit 4: target looping active
         return value
 
-    def _do_COM_GetSn(self, frame, arg, session):
-        return self.serial_number
-
-    def _do_COM_GetFw(self, frame, arg, session):
-        return self.firmware
-
-    def _do_COM_GetHw(self, frame, arg, session):
-        return self.hardware_revision
-
-    def _do_COM_GetPn(self, frame, arg, session):
-        return self.part_number
-
-    # --- MOT reads
-    def _do_MOT_GetLoadPosition(self, frame, arg, session):
-        return self._axis(frame).position
-
-    def _do_MOT_GetMotorPosition(self, frame, arg, session):
-        return self._axis(frame).position * self.gear_ratio
-
-    def _do_MOT_GetMotorSpeed(self, frame, arg, session):
-        return self._axis(frame).velocity
-
-    def _do_MOT_GetMotorCurrent(self, frame, arg, session):
-        axis = self._axis(frame)
-        return axis.current_ma if axis.axis_on else 0.0
-
-    def _do_MOT_GetMotorVoltage(self, frame, arg, session):
-        return 24.12
-
-    def _do_MOT_GetPositionErr(self, frame, arg, session):
-        axis = self._axis(frame)
-        return (axis.target - axis.position) if axis.target is not None else 0.0
-
-    def _do_MOT_GetIncPosition(self, frame, arg, session):
-        return self._axis(frame).position * self.gear_ratio
-
-    def _do_MOT_GetEmgStopAxes(self, frame, arg, session):
-        return self.emergency_stop
-
-    def _do_MOT_MerRegister(self, frame, arg, session):
-        return self._axis(frame).mer()
-
-    def _do_MOT_DerRegister(self, frame, arg, session):
-        return self._axis(frame).der()
-
-    def _do_MOT_SrhRegister(self, frame, arg, session):
-        return self._axis(frame).srh()
-
-    def _do_MOT_SrlRegister(self, frame, arg, session):
-        return self._axis(frame).srl()
-
-    def _do_MOT_MsrRegister(self, frame, arg, session):
-        return self._axis(frame).msr()
-
-    def _do_ERR_CaptureMotorErrorRegister(self, frame, arg, session):
-        return self._axis(frame).cmer()
-
-    def _do_ERR_OperationRegister(self, frame, arg, session):
-        return self._axis(frame).operation()
-
-    def _do_ERR_CaptureSystemRegister(self, frame, arg, session):
+    def _system_register(self, frame=None, arg=None, session=None):
         value = self.csr_latched
         if any(a.faulted for a in self.axes.values()):
             value |= 1 << 0
@@ -768,70 +739,31 @@ class PedestalModel:
             value |= reg.CSR_HOMING_NOT_COMPLETED
         return value
 
-    def _do_ERR_ClearErrors(self, frame, arg, session):
+    def _clear_errors(self, frame, arg, session):
         self.csr_latched = 0
         self.protocol_error = ''
 
-    def _error_string(self, bit: int, text: str) -> str:
-        return text if self._do_ERR_CaptureSystemRegister(None, None, None) & (1 << bit) else ''
-
-    def _do_ERR_GetDriverErrorString(self, frame, arg, session):
+    def _driver_error_string(self, frame, arg, session):
         bitmap = sum(1 << (n - 1) for n, a in self.axes.items() if a.faulted)
-        return self._error_string(0, f'No communication with axes (bitmap): 0x{bitmap:02X}')
-
-    def _do_ERR_GetSystemErrorString(self, frame, arg, session):
-        return self._error_string(1, 'General system error')
-
-    def _do_ERR_GetLoadImuErrorString(self, frame, arg, session):
-        return self._error_string(3, 'No communication with IMU')
-
-    def _do_ERR_GetBaseImuErrorString(self, frame, arg, session):
-        return self._error_string(2, 'Fail to sync with IMU')
-
-    def _do_ERR_GetGpsComErrorString(self, frame, arg, session):
-        return self._error_string(4, 'No communication with the GPS')
-
-    def _do_ERR_GetGpsPosString(self, frame, arg, session):
-        return self._error_string(5, 'The position of the GPS is not ready')
-
-    def _do_ERR_GetGpsHeadErrorString(self, frame, arg, session):
-        return self._error_string(6, 'The heading of the GPS is not ready')
-
-    def _do_ERR_GetProtocolErrorString(self, frame, arg, session):
-        return self.protocol_error
-
-    def _do_ERR_GetHomingErrorString(self, frame, arg, session):
-        return self._error_string(11, 'Pan & Tilt Homing are not completed')
+        return _error_text(self, 0, f'No communication with axes (bitmap): 0x{bitmap:02X}')
 
     # --- MOT motion
-    def _do_MOT_SetAcceleration(self, frame, arg, session):
+    def _set_acceleration(self, frame, arg, session):
         if arg <= 0:
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
         self._axis(frame).acceleration = arg
 
-    def _do_MOT_SetSpeed(self, frame, arg, session):
-        self._axis(frame).speed = arg
-
-    def _do_MOT_SendPosition(self, frame, arg, session):
-        self._axis(frame).pending_position = arg
-
-    def _do_MOT_SetPositionRelative(self, frame, arg, session):
-        self._axis(frame).relative = True
-
-    def _do_MOT_SetPositionAbsolute(self, frame, arg, session):
-        self._axis(frame).relative = False
-
-    def _do_MOT_SetSpeedMode(self, frame, arg, session):
+    def _speed_mode(self, frame, arg, session):
         axis = self._axis(frame)
         axis.speed_mode = True
         axis.target = None
 
-    def _do_MOT_SetPositionMode(self, frame, arg, session):
+    def _position_mode(self, frame, arg, session):
         axis = self._axis(frame)
         axis.speed_mode = False
         axis.jog_velocity = 0.0
 
-    def _do_MOT_Update(self, frame, arg, session):
+    def _update(self, frame, arg, session):
         axis = self._axis(frame)
         if axis.speed_mode and axis.speed == 0.0:
             axis.target, axis.jog_velocity = None, 0.0  # sim: a stop is always accepted
@@ -850,40 +782,40 @@ class PedestalModel:
         axis.pending_position = None
         axis.target = goal
 
-    def _do_MOT_Homing(self, frame, arg, session):
+    def _homing(self, frame, arg, session):
         axis = self._axis(frame)
         self._motion_allowed(axis)
         axis.target, axis.jog_velocity, axis.homing, axis.homed = None, 0.0, True, False
 
-    def _do_MOT_AxisOn(self, frame, arg, session):
+    def _axis_on(self, frame, arg, session):
         axis = self._axis(frame)
         if axis.faulted:
             raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Axis in fault: reset faults')
         axis.axis_on = True
 
-    def _do_MOT_AxisOff(self, frame, arg, session):
+    def _axis_off(self, frame, arg, session):
         axis = self._axis(frame)
         axis.axis_on = False
         axis.velocity = 0.0  # 4.2.12: stops; the buffered target resumes on AxisOn
 
-    def _do_MOT_AxisReset(self, frame, arg, session):
+    def _axis_reset(self, frame, arg, session):
         axis = self._axis(frame)
         axis.mer_latched = axis.der_latched = 0
         axis.halt()
         axis.homing, axis.homed = True, False
 
-    def _do_MOT_ResetFaults(self, frame, arg, session):
+    def _reset_faults(self, frame, arg, session):
         axis = self._axis(frame)
         if axis.mer_latched:
             axis.axis_on = False  # sim: a cleared fault leaves the drive off until AxisOn
         axis.mer_latched = axis.der_latched = 0
 
-    def _do_MOT_SetActualPosition(self, frame, arg, session):
+    def _set_actual_position(self, frame, arg, session):
         axis = self._axis(frame)
         axis.halt()
         axis.position = arg / self.gear_ratio
 
-    def _do_MOT_SetEmgStopAxes(self, frame, arg, session):
+    def _emergency_stop(self, frame, arg, session):
         self.emergency_stop = bool(arg)
         if self.emergency_stop:
             self.scan = None
@@ -896,62 +828,26 @@ class PedestalModel:
                 axis.speed_mode, axis.relative = False, True
 
     # --- software limits
-    def _do_SWLS_SetNegSWLS(self, frame, arg, session):
+    def _set_negative_limit(self, frame, arg, session):
         axis = self._axis(frame)
         if arg >= axis.swls_pos:
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
         axis.swls_neg = arg
 
-    def _do_SWLS_SetPosSWLS(self, frame, arg, session):
+    def _set_positive_limit(self, frame, arg, session):
         axis = self._axis(frame)
         if arg <= axis.swls_neg:
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
         axis.swls_pos = arg
 
-    def _do_SWLS_ActivateSWLS(self, frame, arg, session):
+    def _activate_limits(self, frame, arg, session):
         axis = self._axis(frame)
         if arg and not axis.swls_neg <= axis.position <= axis.swls_pos:
             raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Position outside the SWLS range')
         axis.swls_active = bool(arg)
 
-    def _do_SWLS_GetNegSWLS(self, frame, arg, session):
-        return self._axis(frame).swls_neg
-
-    def _do_SWLS_GetPosSWLS(self, frame, arg, session):
-        return self._axis(frame).swls_pos
-
-    def _do_SWLS_IsActiveSWLS(self, frame, arg, session):
-        return self._axis(frame).swls_active
-
     # --- scans
-    def _set_scan(self, key: str, value: object) -> None:
-        self.scan_params[key] = value
-
-    def _do_SCN_SetYawMin(self, frame, arg, session):
-        self._set_scan('yaw_min', arg)
-
-    def _do_SCN_SetYawMax(self, frame, arg, session):
-        self._set_scan('yaw_max', arg)
-
-    def _do_SCN_SetPitchMin(self, frame, arg, session):
-        self._set_scan('pitch_min', arg)
-
-    def _do_SCN_SetNumSteps(self, frame, arg, session):
-        self._set_scan('steps', arg)
-
-    def _do_SCN_SetStepHeight(self, frame, arg, session):
-        self._set_scan('step_height', arg)
-
-    def _do_SCN_SetScanSpeed(self, frame, arg, session):
-        self._set_scan('speed', arg)
-
-    def _do_SCN_SetShortPath(self, frame, arg, session):
-        self._set_scan('short_path', int(arg))
-
-    def _do_SCN_IsScanOn(self, frame, arg, session):
-        return self.scan is not None
-
-    def _do_SCN_StopScan(self, frame, arg, session):
+    def _stop_scan(self, frame, arg, session):
         if self.scan is not None:
             self.scan = None
             for axis in self.axes.values():
@@ -969,23 +865,8 @@ class PedestalModel:
         self.target_looping = None
         self.scan = ScanState(self._scan_waypoints(pattern))
 
-    def _do_SCN_StartScanZigZag(self, frame, arg, session):
-        self._start_scan('zigzag')
-
-    def _do_SCN_StartScanSnake(self, frame, arg, session):
-        self._start_scan('snake')
-
-    def _do_SCN_StartScanSquare(self, frame, arg, session):
-        self._start_scan('square')
-
     # --- presets
-    def _do_PRST_GetPreset(self, frame, arg, session):
-        return self.presets.get(frame.axis, PresetRecord(''))
-
-    def _do_PRST_SetPreset(self, frame, arg, session):
-        self.presets[frame.axis] = arg
-
-    def _do_PRST_GoToPreset(self, frame, arg, session):
+    def _goto_preset_request(self, frame, arg, session):
         self._motion_allowed()
         if frame.axis not in self.presets:
             raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Preset not exist')
@@ -996,16 +877,7 @@ class PedestalModel:
         self.target_looping = None
         self._goto_preset(frame.axis)
 
-    def _do_PRST_ClearAll(self, frame, arg, session):
-        self.presets.clear()
-
-    def _do_PRST_ClearSinglePreset(self, frame, arg, session):
-        self.presets.pop(frame.axis, None)
-
-    def _do_PRST_GetPresetFlag(self, frame, arg, session):
-        return sum(1 << (i - 1) for i in self.presets)
-
-    def _do_PRST_StartPresetLooping(self, frame, arg, session):
+    def _start_preset_looping(self, frame, arg, session):
         self._motion_allowed()
         if not self.presets:
             raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'No presets stored')
@@ -1013,82 +885,30 @@ class PedestalModel:
         self.preset_looping = sorted(self.presets)
         self._loop_wait_until = 0.0
 
-    def _do_PRST_StopPresetLooping(self, frame, arg, session):
-        self.preset_looping = None
-
-    def _do_PRST_SetLoopingDelay(self, frame, arg, session):
-        self.looping_delay_ms = max(float(arg), 0.0)
-
-    def _do_PRST_GetLoopingDelay(self, frame, arg, session):
-        return self.looping_delay_ms
-
-    def _do_CFG_SetGeneralSpd(self, frame, arg, session):
+    def _set_general_speed(self, frame, arg, session):
         if arg < 0:
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
         self._axis(frame).general_speed = arg
 
-    def _do_CFG_GetGeneralSpd(self, frame, arg, session):
-        return self._axis(frame).general_speed
-
     # --- stabilisation
-    def _do_STB_StabilizationOn(self, frame, arg, session):
+    def _stabilization_on(self, frame, arg, session):
         if not self.imu_present:
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid command for Manual system')
         self.stabilization = True
 
-    def _do_STB_StabilizationOff(self, frame, arg, session):
+    def _stabilization_off(self, frame, arg, session):
         self.stabilization = False
         for axis in self.axes.values():  # 4.8.2: speed/acc/position 0, relative position mode
             axis.stop()
             axis.speed_mode, axis.relative, axis.speed = False, True, 0.0
 
-    def _do_STB_IsStabActive(self, frame, arg, session):
-        return self.stabilization
-
-    # --- IMU: the sensor sits on the load (sim)
-    def _do_IMU_IsReadyImu(self, frame, arg, session):
-        return True
-
-    def _do_IMU_GetRoll(self, frame, arg, session):
-        return self.axes[3].position if 3 in self.axes else 0.0
-
-    def _do_IMU_GetPitch(self, frame, arg, session):
-        return self.axes[2].position
-
-    def _do_IMU_GetYaw(self, frame, arg, session):
-        return (self.gps_heading + self.axes[1].position) % 360.0
-
-    def _do_IMU_GetGyroX(self, frame, arg, session):
-        return self.axes[3].velocity if 3 in self.axes else 0.0
-
-    def _do_IMU_GetGyroY(self, frame, arg, session):
-        return self.axes[2].velocity
-
-    def _do_IMU_GetGyroZ(self, frame, arg, session):
-        return self.axes[1].velocity
-
-    def _do_IMU_GetTemperature(self, frame, arg, session):
-        return 36.5
-
-    def _do_IMU_GetPressure(self, frame, arg, session):
-        return 101.3
-
     # --- laser rangefinder (sim: a target 850 m away while measuring)
-    def _do_LRF_IsConnected(self, frame, arg, session):
-        return True
-
-    def _do_LRF_StartMeasurement(self, frame, arg, session):
-        self.stored[('LRF_measuring', 0)] = True
-
-    def _do_LRF_StopMeasurement(self, frame, arg, session):
-        self.stored[('LRF_measuring', 0)] = False
-
-    def _do_LRF_GetLRFDistance(self, frame, arg, session):
+    def _lrf_distance(self, frame, arg, session):
         return 850.0 + 10.0 * (frame.axis - 1) if self.stored.get(('LRF_measuring', 0)) else 0.0
 
-    def _do_LRF_GetTargetDistance(self, frame, arg, session):
+    def _target_distance(self, frame, arg, session):
         if self.stored.get(('LRF_distancesource', 0)):
-            return self._do_LRF_GetLRFDistance(Frame(0, 1, 0x030A), None, session)
+            return self._lrf_distance(Frame(0, 1, 0x030A), None, session)
         return self.stored.get(('LRF_manualdistance', 0), 0.0)
 
     # --- GPS and targets
@@ -1117,55 +937,7 @@ class PedestalModel:
             self.inserted_position = GeoPoint(longitude, latitude, altitude)
             self.inserted_heading, self.override_gps = heading % 360.0, True
 
-    def _do_GPS_GetLongitude(self, frame, arg, session):
-        return degrees_to_ddmm(self.gps_position.longitude)
-
-    def _do_GPS_GetLatitude(self, frame, arg, session):
-        return degrees_to_ddmm(self.gps_position.latitude)
-
-    def _do_GPS_GetHeading(self, frame, arg, session):
-        return self._system_position()[1]
-
-    def _do_GPS_PositionReady(self, frame, arg, session):
-        return self.gps_present and self.gps_fix
-
-    def _do_GPS_HeadingReady(self, frame, arg, session):
-        return self.gps_present and self.gps_fix
-
-    def _do_GPS_isConnectedGPS(self, frame, arg, session):
-        return self.gps_present
-
-    def _do_GPS_SetTargetLLA(self, frame, arg, session):
-        self.targets[frame.axis] = arg
-
-    def _do_GPS_GetTargetLLA(self, frame, arg, session):
-        return self.targets.get(frame.axis, GeoPoint(0.0, 0.0, 0.0))
-
-    def _do_GPS_ClearSingleTarget(self, frame, arg, session):
-        self.targets.pop(frame.axis, None)
-
-    def _do_GPS_ClearAllTargets(self, frame, arg, session):
-        self.targets.clear()
-
-    def _do_GPS_SetInsertedLLA(self, frame, arg, session):
-        self.inserted_position = arg
-
-    def _do_GPS_GetInsertedLLA(self, frame, arg, session):
-        return self.inserted_position
-
-    def _do_GPS_SetInsertedHeading(self, frame, arg, session):
-        self.inserted_heading = arg
-
-    def _do_GPS_GetInsertedHeading(self, frame, arg, session):
-        return self.inserted_heading
-
-    def _do_GPS_SetOvdPosGPS(self, frame, arg, session):
-        self.override_gps = bool(arg)
-
-    def _do_GPS_GetOvdPosGPS(self, frame, arg, session):
-        return self.override_gps
-
-    def _do_GPS_GoToTarget(self, frame, arg, session):
+    def _go_to_target(self, frame, arg, session):
         self._motion_allowed()
         target = self.targets.get(frame.axis)
         if target is None:
@@ -1177,7 +949,7 @@ class PedestalModel:
         self._move_to(self.axes[1], azimuth, self.axes[1].general_speed)
         self._move_to(self.axes[2], elevation, self.axes[2].general_speed)
 
-    def _do_GPS_StartTargetLooping(self, frame, arg, session):
+    def _start_target_looping(self, frame, arg, session):
         self._motion_allowed()
         if not self.targets:
             raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'No targets stored')
@@ -1186,11 +958,8 @@ class PedestalModel:
         self.target_looping = sorted(self.targets)
         self._loop_wait_until = 0.0
 
-    def _do_GPS_StopTargetLooping(self, frame, arg, session):
-        self.target_looping = None
-
     # --- IMU levelling and gyro drift (sim: the IMU sits on the load)
-    def _do_IMU_Leveling(self, frame, arg, session):
+    def _leveling(self, frame, arg, session):
         axis = self._axis(frame)
         self._motion_allowed(axis)
         if not axis.axis_on:
@@ -1203,28 +972,22 @@ class PedestalModel:
         self.preset_looping = self.target_looping = None
         self._move_to(axis, target, axis.general_speed)
 
-    def _do_IMU_GyroDriftCompensation(self, frame, arg, session):
-        self.drift_measuring[frame.axis] = DRIFT_MEASURE_TIME
+    def _measure_drift(self, frame, arg, session):
+        self.drift_measuring[frame.axis] = DRIFT_MEASURE_TIME  # the sensor in the axis byte
 
-    def _do_IMU_ResetGyroDriftCompensation(self, frame, arg, session):
+    def _reset_gyro_drift(self, frame, arg, session):
         self.drift_measuring.pop(frame.axis, None)
         self.gyro_drift[frame.axis] = 0.0
 
-    def _do_IMU_GetGyroDrift(self, frame, arg, session):
-        return self.gyro_drift[frame.axis]
-
     # --- digital I/O (4.6.17-18); the console's 'dio' changes an input
-    def _require_digital_io(self) -> None:
-        if not self.digital_io_present:
+    def _digital_io(self, frame, arg, session):
+        if not self.digital_io_present:  # firmware before 2.22.0
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Opcode not Recognized')
-
-    def _do_COM_setDigitalIO(self, frame, arg, session):
-        self._require_digital_io()
-        self.stored[('COM_digitalio', frame.axis)] = int(arg)
-
-    def _do_COM_getDigitalIO(self, frame, arg, session):
-        self._require_digital_io()
-        return self.stored.get(('COM_digitalio', frame.axis), 0)
+        key = ('COM_digitalio', frame.axis)
+        if arg is None:  # COM_getDigitalIO
+            return self.stored.get(key, 0)
+        self.stored[key] = int(arg)
+        return None
 
     # --- video tracker (4.11): the camera index travels in the group byte
     def _camera(self, frame: Frame) -> int:
@@ -1234,21 +997,261 @@ class PedestalModel:
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid camera index')
         return frame.group
 
-    def _do_VDT_setTrackingOn(self, frame, arg, session):
+    def _set_tracking(self, frame, arg, session):
         camera = self._camera(frame)
         if arg not in (0, 1, 2):
             raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Invalid input')
         # 4.11.1: manual tracking starts only if a target is detected right now
         self.tracker_mode[camera] = 0 if arg == 1 and not self.detected_targets[camera] else arg
 
-    def _do_VDT_isTrackingOn(self, frame, arg, session):
-        return self._tracking_active(self._camera(frame))
 
-    def _do_VDT_isAutoModeOn(self, frame, arg, session):
-        return self.tracker_mode[self._camera(frame)] == 2
+#: one handler per command: (model, request frame, decoded argument, session) -> the value
+#: a getter returns (None for the rest); a command without an entry stores and returns
+#: its value (PedestalModel._generic)
+Handler = Callable[[PedestalModel, Frame, Any, 'CaptureSession'], Any]
 
-    def _do_VDT_isTargetDetected(self, frame, arg, session):
-        return bool(self.detected_targets[self._camera(frame)])
+
+def _value(value: object) -> Handler:
+    """A constant answer."""
+    return lambda model, frame, arg, session: value
+
+
+def _get(attribute: str) -> Handler:
+    """A model attribute."""
+    return lambda model, frame, arg, session: getattr(model, attribute)
+
+
+def _set(attribute: str, convert: Callable[[Any], Any] = lambda arg: arg) -> Handler:
+    """Store the argument in a model attribute."""
+    return lambda model, frame, arg, session: setattr(model, attribute, convert(arg))
+
+
+def _of_axis(read: Callable[[AxisModel], Any]) -> Handler:
+    """A value of the addressed axis (0xA6 for an axis the pedestal has not)."""
+    return lambda model, frame, arg, session: read(model._axis(frame))
+
+
+def _assign(attribute: str, value: object) -> Handler:
+    """Set a model attribute to ``value`` (the argument is not used)."""
+    return lambda model, frame, arg, session: setattr(model, attribute, value)
+
+
+def _put(attribute: str) -> Handler:
+    """Store the argument in a model dict under the number in the axis byte."""
+    return lambda model, frame, arg, session: getattr(model, attribute).__setitem__(
+        frame.axis, arg)
+
+
+def _remove(attribute: str) -> Handler:
+    """Forget the entry of a model dict numbered in the axis byte."""
+    return lambda model, frame, arg, session: getattr(model, attribute).pop(frame.axis, None)
+
+
+def _clear(attribute: str) -> Handler:
+    """Empty a model dict."""
+    return lambda model, frame, arg, session: getattr(model, attribute).clear()
+
+
+def _measuring(on: bool) -> Handler:
+    """LRF_Start/StopMeasurement: the range reads 850 m while measuring (sim)."""
+    return lambda model, frame, arg, session: model.stored.__setitem__(('LRF_measuring', 0), on)
+
+
+def _set_axis(attribute: str, value: object = None) -> Handler:
+    """Store the argument (or ``value``) in an attribute of the addressed axis."""
+    return lambda model, frame, arg, session: setattr(
+        model._axis(frame), attribute, arg if value is None else value)
+
+
+def _of_target(read: Callable[[PedestalModel, int], Any]) -> Handler:
+    """A value of the preset, target or IMU sensor numbered in the axis byte."""
+    return lambda model, frame, arg, session: read(model, frame.axis)
+
+
+def _of_camera(read: Callable[[PedestalModel, int], Any]) -> Handler:
+    """A value of the video-tracker camera in the group byte (4.11)."""
+    return lambda model, frame, arg, session: read(model, model._camera(frame))
+
+
+def _error_text(model: PedestalModel, bit: int, text: str) -> str:
+    return text if model._system_register() & (1 << bit) else ''
+
+
+def _error_string(bit: int, text: str) -> Handler:
+    """An ERR_Get...String: ``text`` while its CSR bit is set, else empty (4.10.22)."""
+    return lambda model, frame, arg, session: _error_text(model, bit, text)
+
+
+def _scan_parameter(key: str, convert: Callable[[Any], Any] = lambda arg: arg) -> Handler:
+    return lambda model, frame, arg, session: model.scan_params.__setitem__(key, convert(arg))
+
+
+def _scan(pattern: str) -> Handler:
+    return lambda model, frame, arg, session: model._start_scan(pattern)
+
+
+def _motor_position(model: PedestalModel, frame: Frame, arg: object, session: object) -> float:
+    return model._axis(frame).position * model.gear_ratio
+
+
+M = PedestalModel
+HANDLERS: dict[str, Handler] = {
+    # --- COM
+    'COM_Connect': M._connect,
+    'COM_Disconnect': M._disconnect,
+    'COM_Reboot': M._disconnect,
+    'COM_IsConnected': _value(True),
+    'COM_StartKeepAlive': _set('keepalive_on', bool),
+    'COM_IsKeepAliveOn': _get('keepalive_on'),
+    'COM_setKeepAliveTimeout': _set('keepalive_timeout_ms'),
+    'COM_getKeepAliveTimeout': _get('keepalive_timeout_ms'),
+    'COM_setKeepAliveCount': _set('keepalive_count'),
+    'COM_getKeepAliveCount': _get('keepalive_count'),
+    'COM_SysState': M._system_state,
+    'COM_GetSn': _get('serial_number'),
+    'COM_GetFw': _get('firmware'),
+    'COM_GetHw': _get('hardware_revision'),
+    'COM_GetPn': _get('part_number'),
+    'COM_setDigitalIO': M._digital_io,
+    'COM_getDigitalIO': M._digital_io,
+    # --- MOT reads and registers
+    'MOT_GetLoadPosition': _of_axis(lambda axis: axis.position),
+    'MOT_GetMotorPosition': _motor_position,
+    'MOT_GetIncPosition': _motor_position,
+    'MOT_GetMotorSpeed': _of_axis(lambda axis: axis.velocity),
+    'MOT_GetMotorCurrent': _of_axis(lambda axis: axis.current_ma if axis.axis_on else 0.0),
+    'MOT_GetMotorVoltage': _value(24.12),
+    'MOT_GetPositionErr': _of_axis(
+        lambda axis: axis.target - axis.position if axis.target is not None else 0.0),
+    'MOT_GetEmgStopAxes': _get('emergency_stop'),
+    'MOT_MerRegister': _of_axis(AxisModel.mer),
+    'MOT_DerRegister': _of_axis(AxisModel.der),
+    'MOT_SrhRegister': _of_axis(AxisModel.srh),
+    'MOT_SrlRegister': _of_axis(AxisModel.srl),
+    'MOT_MsrRegister': _of_axis(AxisModel.msr),
+    'ERR_CaptureMotorErrorRegister': _of_axis(AxisModel.cmer),
+    'ERR_OperationRegister': _of_axis(AxisModel.operation),
+    'ERR_CaptureSystemRegister': M._system_register,
+    'ERR_ClearErrors': M._clear_errors,
+    # --- error strings (4.10.22): each while its CSR bit is set
+    'ERR_GetDriverErrorString': M._driver_error_string,
+    'ERR_GetSystemErrorString': _error_string(1, 'General system error'),
+    'ERR_GetBaseImuErrorString': _error_string(2, 'Fail to sync with IMU'),
+    'ERR_GetLoadImuErrorString': _error_string(3, 'No communication with IMU'),
+    'ERR_GetGpsComErrorString': _error_string(4, 'No communication with the GPS'),
+    'ERR_GetGpsPosString': _error_string(5, 'The position of the GPS is not ready'),
+    'ERR_GetGpsHeadErrorString': _error_string(6, 'The heading of the GPS is not ready'),
+    'ERR_GetHomingErrorString': _error_string(11, 'Pan & Tilt Homing are not completed'),
+    'ERR_GetProtocolErrorString': _get('protocol_error'),
+    # --- MOT motion (7.1 profile, MOT_Update executes it)
+    'MOT_SetAcceleration': M._set_acceleration,
+    'MOT_SetSpeed': _set_axis('speed'),
+    'MOT_SendPosition': _set_axis('pending_position'),
+    'MOT_SetPositionRelative': _set_axis('relative', True),
+    'MOT_SetPositionAbsolute': _set_axis('relative', False),
+    'MOT_SetSpeedMode': M._speed_mode,
+    'MOT_SetPositionMode': M._position_mode,
+    'MOT_Update': M._update,
+    'MOT_Homing': M._homing,
+    'MOT_AxisOn': M._axis_on,
+    'MOT_AxisOff': M._axis_off,
+    'MOT_AxisReset': M._axis_reset,
+    'MOT_ResetFaults': M._reset_faults,
+    'MOT_SetActualPosition': M._set_actual_position,
+    'MOT_SetEmgStopAxes': M._emergency_stop,
+    # --- software limits
+    'SWLS_SetNegSWLS': M._set_negative_limit,
+    'SWLS_SetPosSWLS': M._set_positive_limit,
+    'SWLS_ActivateSWLS': M._activate_limits,
+    'SWLS_GetNegSWLS': _of_axis(lambda axis: axis.swls_neg),
+    'SWLS_GetPosSWLS': _of_axis(lambda axis: axis.swls_pos),
+    'SWLS_IsActiveSWLS': _of_axis(lambda axis: axis.swls_active),
+    # --- scans (4.3)
+    'SCN_SetYawMin': _scan_parameter('yaw_min'),
+    'SCN_SetYawMax': _scan_parameter('yaw_max'),
+    'SCN_SetPitchMin': _scan_parameter('pitch_min'),
+    'SCN_SetNumSteps': _scan_parameter('steps'),
+    'SCN_SetStepHeight': _scan_parameter('step_height'),
+    'SCN_SetScanSpeed': _scan_parameter('speed'),
+    'SCN_SetShortPath': _scan_parameter('short_path', int),
+    'SCN_IsScanOn': lambda model, frame, arg, session: model.scan is not None,
+    'SCN_StopScan': M._stop_scan,
+    'SCN_StartScanZigZag': _scan('zigzag'),
+    'SCN_StartScanSnake': _scan('snake'),
+    'SCN_StartScanSquare': _scan('square'),
+    # --- presets (the number in the axis byte)
+    'PRST_GetPreset': _of_target(lambda model, n: model.presets.get(n, PresetRecord(''))),
+    'PRST_SetPreset': _put('presets'),
+    'PRST_GoToPreset': M._goto_preset_request,
+    'PRST_ClearAll': _clear('presets'),
+    'PRST_ClearSinglePreset': _remove('presets'),
+    'PRST_GetPresetFlag': lambda model, frame, arg, session: sum(
+        1 << (i - 1) for i in model.presets),
+    'PRST_StartPresetLooping': M._start_preset_looping,
+    'PRST_StopPresetLooping': _assign('preset_looping', None),
+    'PRST_SetLoopingDelay': _set('looping_delay_ms', lambda arg: max(float(arg), 0.0)),
+    'PRST_GetLoopingDelay': _get('looping_delay_ms'),
+    'CFG_SetGeneralSpd': M._set_general_speed,
+    'CFG_GetGeneralSpd': _of_axis(lambda axis: axis.general_speed),
+    # --- stabilisation
+    'STB_StabilizationOn': M._stabilization_on,
+    'STB_StabilizationOff': M._stabilization_off,
+    'STB_IsStabActive': _get('stabilization'),
+    # --- IMU (sim: the sensor sits on the load)
+    'IMU_IsReadyImu': _value(True),
+    'IMU_GetRoll': lambda model, frame, arg, session: (
+        model.axes[3].position if 3 in model.axes else 0.0),
+    'IMU_GetPitch': lambda model, frame, arg, session: model.axes[2].position,
+    'IMU_GetYaw': lambda model, frame, arg, session: (
+        (model.gps_heading + model.axes[1].position) % 360.0),
+    'IMU_GetGyroX': lambda model, frame, arg, session: (
+        model.axes[3].velocity if 3 in model.axes else 0.0),
+    'IMU_GetGyroY': lambda model, frame, arg, session: model.axes[2].velocity,
+    'IMU_GetGyroZ': lambda model, frame, arg, session: model.axes[1].velocity,
+    'IMU_GetTemperature': _value(36.5),
+    'IMU_GetPressure': _value(101.3),
+    'IMU_Leveling': M._leveling,
+    'IMU_GyroDriftCompensation': M._measure_drift,
+    'IMU_ResetGyroDriftCompensation': M._reset_gyro_drift,
+    'IMU_GetGyroDrift': _of_target(lambda model, sensor: model.gyro_drift[sensor]),
+    # --- laser rangefinder
+    'LRF_IsConnected': _value(True),
+    'LRF_StartMeasurement': _measuring(True),
+    'LRF_StopMeasurement': _measuring(False),
+    'LRF_GetLRFDistance': M._lrf_distance,
+    'LRF_GetTargetDistance': M._target_distance,
+    # --- GPS (positions DDMM.mmmm, 4.4.1) and targets (the number in the axis byte)
+    'GPS_GetLongitude': lambda model, frame, arg, session: degrees_to_ddmm(
+        model.gps_position.longitude),
+    'GPS_GetLatitude': lambda model, frame, arg, session: degrees_to_ddmm(
+        model.gps_position.latitude),
+    'GPS_GetHeading': lambda model, frame, arg, session: model._system_position()[1],
+    'GPS_PositionReady': lambda model, frame, arg, session: model.gps_present and model.gps_fix,
+    'GPS_HeadingReady': lambda model, frame, arg, session: model.gps_present and model.gps_fix,
+    'GPS_isConnectedGPS': _get('gps_present'),
+    'GPS_SetTargetLLA': _put('targets'),
+    'GPS_GetTargetLLA': _of_target(
+        lambda model, n: model.targets.get(n, GeoPoint(0.0, 0.0, 0.0))),
+    'GPS_ClearSingleTarget': _remove('targets'),
+    'GPS_ClearAllTargets': _clear('targets'),
+    'GPS_SetInsertedLLA': _set('inserted_position'),
+    'GPS_GetInsertedLLA': _get('inserted_position'),
+    'GPS_SetInsertedHeading': _set('inserted_heading'),
+    'GPS_GetInsertedHeading': _get('inserted_heading'),
+    'GPS_SetOvdPosGPS': _set('override_gps', bool),
+    'GPS_GetOvdPosGPS': _get('override_gps'),
+    'GPS_GoToTarget': M._go_to_target,
+    'GPS_StartTargetLooping': M._start_target_looping,
+    'GPS_StopTargetLooping': _assign('target_looping', None),
+    # --- video tracker (the camera in the group byte)
+    'VDT_setTrackingOn': M._set_tracking,
+    'VDT_isTrackingOn': _of_camera(PedestalModel._tracking_active),
+    'VDT_isAutoModeOn': _of_camera(lambda model, camera: model.tracker_mode[camera] == 2),
+    'VDT_isTargetDetected': _of_camera(
+        lambda model, camera: bool(model.detected_targets[camera])),
+    'VDT_GetTargetsList': _of_camera(lambda model, camera: model.detected_targets[camera][:5]),
+}
+del M
 
 
 class CaptureSession:
@@ -1347,7 +1350,10 @@ class CaptureSimulator:
                              clear_device=model.clear_injected)
         control.add_verb('lose', lambda a: model.lose_replies(int(a[0]) if a else 1),
                          'lose [COUNT]')
-        control.add_verb('unknown', self._unknown, 'unknown COMMAND [on|off]')
+        control.add_verb('unknown', lambda a: self._toggle(model.unknown_opcodes, a),
+                         'unknown COMMAND [on|off]')
+        control.add_verb('wrong', lambda a: self._toggle(model.wrong_kind_opcodes, a),
+                         'wrong COMMAND [on|off]  (answer it with the other kind of reply)')
         control.add_verb('gps', model.set_gps_from_console,
                          'gps LAT LON ALT HEADING | gps nofix: the GPS position (deg, deg, m) '
                          'and heading (deg clockwise from north), or no fix')
@@ -1398,13 +1404,15 @@ class CaptureSimulator:
             model.scan = None
         return None
 
-    def _unknown(self, args: list[str]) -> None:
+    def _toggle(self, opcodes: set[int], args: list[str]) -> None:
+        """``COMMAND [on|off]``: add or remove the command's opcode in one of the model's
+        opcode sets (unknown, wrong kind of reply)."""
         opcode = COMMANDS[args[0]].opcode
         with self.model.lock:
             if len(args) > 1 and args[1].lower() in ('off', '0', 'false'):
-                self.model.unknown_opcodes.discard(opcode)
+                opcodes.discard(opcode)
             else:
-                self.model.unknown_opcodes.add(opcode)
+                opcodes.add(opcode)
 
     def _dio(self, args: list[str]) -> None:
         with self.model.lock:
@@ -1440,6 +1448,9 @@ class CaptureSimulator:
                     else f'0x{f.opcode:04X}' for f in model.requests)),
                 'connections': self.tcp.connections if self.tcp else 0,
                 'nack_all': model.nack_all is not None,
+                'ack_unknown': model.ack_unknown,
+                'known_commands': None if model.known_opcodes is None else sorted(
+                    BY_OPCODE[opcode].name for opcode in model.known_opcodes),
             }
 
 
@@ -1472,6 +1483,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--unknown', action='append', default=[], metavar='COMMAND',
                         help='play a device that does not know this table command: it '
                              'answers 0xA6 "Opcode not Recognized" (repeatable)')
+    parser.add_argument('--only', action='append', default=None, metavar='NAMES',
+                        help='play a device that knows only these table commands (comma-'
+                             'separated, repeatable; the sets ' + ', '.join(KNOWN_SETS)
+                             + ' name the command subsets of issue 26); the rest get 0xA6, '
+                             'or an ACK with --ack-unknown')
+    parser.add_argument('--ack-unknown', action='store_true',
+                        help='answer ACK (0x06) instead of NACK 0xA6 to every opcode the '
+                             'device does not know, getters included (a third-party '
+                             'controller)')
     parser.add_argument('--one-request-per-read', action='store_true',
                         help='play a controller that drops every packet after the first in '
                              'one receive (the driver then reads one request at a time)')
@@ -1480,10 +1500,18 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.unknown:
         if name not in COMMANDS:
             parser.error(f'--unknown {name}: not a command of the table')
+    known = None
+    if args.only is not None:
+        try:
+            known = command_names(n.strip() for arg in args.only for n in arg.split(',')
+                                  if n.strip())
+        except KeyError as exc:
+            parser.error(f'--only: {exc.args[0]}')
     logging.basicConfig(level=args.log_level.upper(), format='%(name)s: %(message)s')
     model = PedestalModel(axes=args.axes, gps=not args.no_gps, imu=not args.no_imu,
                           gear_ratio=args.gear_ratio, time_scale=args.time_scale,
-                          unknown_commands=args.unknown)
+                          unknown_commands=args.unknown, known_commands=known,
+                          ack_unknown=args.ack_unknown)
     model.digital_io_present = not args.no_digital_io
     model.one_request_per_read = args.one_request_per_read
     sim = CaptureSimulator(model, tcp_port=None if args.port < 0 else args.port,

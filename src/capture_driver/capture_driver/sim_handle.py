@@ -27,6 +27,11 @@ class CaptureSimHandle(SimHandle):
     # clearing an empty slot is a no-op on the device
     valid_preset_calls = (('clear_preset', None),)
     process_test_parameters = {'status_period': 0.5}
+    #: the device answers ACK to every opcode it does not know (a third-party controller)
+    ack_unknown = False
+    #: the only commands the device knows (table names or ``sim.KNOWN_SETS`` names);
+    #: None: the whole table
+    known_commands: tuple[str, ...] | None = None
 
     def __init__(self, spec: DriverSpec, workdir: Path, process_tests: bool = False) -> None:
         super().__init__(spec, workdir, process_tests)
@@ -36,7 +41,9 @@ class CaptureSimHandle(SimHandle):
         from capture_driver.protocol import BY_OPCODE
         from capture_driver.sim import CaptureSimulator, PedestalModel
 
-        self.sim = CaptureSimulator(PedestalModel(), tcp_port=self.port).start()
+        self.sim = CaptureSimulator(PedestalModel(
+            known_commands=self.known_commands, ack_unknown=self.ack_unknown),
+            tcp_port=self.port).start()
         handle = self.sim.model.handle
 
         def recorded(frame, session):

@@ -14,7 +14,7 @@ import pytest
 
 from capture_driver.client import DeviceNack, NotConnected
 from capture_driver.device import CaptureDevice, CaptureSettings
-from capture_driver.protocol import COMMANDS
+from capture_driver.protocol import BY_OPCODE, COMMANDS
 from capture_driver.sim import CaptureSimulator, PedestalModel
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
 from gimbal_driver_common.device import AxisStateCode
@@ -61,7 +61,7 @@ class Rig:
     def __init__(self, sim, transport: str = 'tcp', command_timeout: float = 0.5) -> None:
         self.sim = sim
         self.config = make_config(command_timeout)
-        self.device = CaptureDevice(make_settings(sim, transport), self.config, LOG)
+        self.device = CaptureDevice(make_settings(sim, transport))
         self.controller = GimbalController(self.device, self.config, LOG)
         self.device.on_targets = self.controller.commanded_targets.update
         self.motion = Motion(self.controller, scan_patterns=self.device.capabilities.scans
@@ -266,6 +266,24 @@ def test_device_scan_converts_limits_and_stop_ends_it(tcp_rig):
     assert tcp_rig.sim.model.scan is None
     with pytest.raises(InvalidRequest, match='zigzag'):
         motion.start_scan(ScanRequest('sector', -0.2, 0.2, 0.0, 0.0, 0.3, 0.1, 0.0))
+
+
+@pytest.mark.parametrize('request_fields, reason', [
+    (('zigzag', -0.2, 0.2, 0.0, 2.0, 0.5, 0.1, 0.0), 'tilt range .* outside the joint limits'),
+    (('snake', -0.2, 0.2, 0.0, 0.2, 0.5, 0.0, 0.0), 'tilt_step 0.0 must be > 0'),
+    (('square', -0.2, 0.2, 0.0, 0.2, 9.0, 0.1, 0.0), 'speed 9.0000 exceeds pan velocity_max'),
+    (('zigzag', 0.3, -0.3, 0.0, 0.2, 0.5, 0.1, 0.0), 'pan_min 0.3000 > pan_max'),
+    (('zigzag', -0.2, 0.2, -1.5, 1.5, 0.5, 0.01, 0.0), '300 rows exceed the device maximum 255'),
+])
+def test_device_scan_requests_are_checked_before_anything_is_sent(tcp_rig, request_fields,
+                                                                   reason):
+    """The core's scan check (scan.check_scan) and then the device's own (at most 255 rows):
+    a refused scan sends nothing."""
+    before = len(tcp_rig.sim.model.requests)
+    with pytest.raises(InvalidRequest, match=reason):
+        tcp_rig.motion.start_scan(ScanRequest(*request_fields))
+    sent = [BY_OPCODE[frame.opcode].name for frame in tcp_rig.sim.model.requests[before:]]
+    assert not [name for name in sent if name.startswith('SCN_')]
 
 
 def test_imu_reading_is_rep103(tcp_rig):

@@ -70,7 +70,8 @@ def test_healthy_device_with_default_parameters_is_all_ok(default_node):
         ros.wait_for_message('joint_states', JointState, timeout=30)
         array = ros.wait_for_message('/diagnostics', DiagnosticArray, all_ok, timeout=30)
         device = device_status(array)
-        assert not any(kv.key.startswith('unsupported.') for kv in device.values)
+        assert not any(kv.key.startswith(('unsupported.', 'wrong_reply.', 'identity.'))
+                       for kv in device.values)
         assert 'does not know' not in device.message
         wait_for(lambda: sim_state(control_port)['requests_by_command'].get(
             'GPS_GetLatitude', 0) >= 1, 15.0, 'the fix poll (fix_rate 1 Hz) to read the GPS')
@@ -91,9 +92,9 @@ def test_device_without_gps_latitude_stops_that_poll_and_stays_ok(default_node):
         assert [kv.key for kv in mentions] == ['unsupported.GPS_GetLatitude']
         assert 'Opcode not Recognized' in mentions[0].value
         assert device.message.count('GPS_GetLatitude') == 1
-        # identity: what the device answers ends in hardware_id, the rest is left out
+        # identity: what the device answers ends in hardware_id, the rest reads "unknown"
         connection = next(s for s in array.status if s.name == f'{NODE}: connection')
-        assert connection.hardware_id == 'capture-pnCAP-PT2-SIM-sn24017-fw2.24.0'
+        assert connection.hardware_id == 'capture-pnCAP-PT2-SIM-sn24017-hwunknown-fw2.24.0'
         assert 'unsupported.COM_GetHw' in {kv.key for kv in device.values}
         first = sim_state(control_port)['requests_by_command']
         # Several more fix periods (1 s by default): the poll stays stopped, the device

@@ -39,6 +39,7 @@ from gimbal_driver_common.transport import ByteStream, TcpStream, TransportError
 from .protocol import (
     ALL_MOTORS,
     DEFAULT_TCP_PORT,
+    HEADER_SIZE,
     KEEPALIVE_PERIOD_S,
     PLAYBACK_RUNNING_STATES,
     REPORT_SIZE,
@@ -87,6 +88,7 @@ from .protocol import (
     UserPassword,
     decode,
     describe_error,
+    unpack_header,
     validate,
 )
 from .protocol.trajectory import AxisLimits
@@ -105,6 +107,10 @@ class NotConnected(KosError, errors.LinkError):
 
 class DeviceTimeout(KosError, errors.DeviceTimeout):
     """The device did not answer a Get in time."""
+
+
+class MessageUnsupported(KosError, errors.Unsupported):
+    """The device answered a request with UnsupportedMessage: it answered, it is not silent."""
 
 
 class PasswordRejected(KosError, errors.DeviceRefused):
@@ -243,6 +249,8 @@ class KosClient:
         self._lock = threading.RLock()
         self._cond = threading.Condition(self._lock)
         self._seq: dict[int, int] = {}
+        #: MessageID -> UnsupportedMessage replies naming it (the offending message's header)
+        self._refused: dict[int, int] = {}
         self._latest: dict[int, Message] = {}
         self._motor_parts: list = []
         self._request_lock = threading.Lock()
@@ -300,6 +308,7 @@ class KosClient:
         with self._lock:
             self._stream = stream
             self._seq.clear()
+            self._refused.clear()
             self._latest.clear()
             self._motor_parts = []
             self._session_stop = threading.Event()
@@ -385,18 +394,26 @@ class KosClient:
             self._unanswered_since = self._last_tx
 
     def request(self, message: Message, timeout: float | None = None) -> Message:
-        """Send a Get and wait for the next complete response with the same MessageID."""
+        """Send a Get and wait for the next complete response with the same MessageID.
+
+        An UnsupportedMessage that carries this MessageID is the device's answer too: it
+        raises :class:`MessageUnsupported` at once instead of a "no reply" timeout."""
         message_id = message.MESSAGE_ID
         timeout = self.reply_timeout if timeout is None else timeout
         with self._request_lock:
             with self._lock:
                 seq0 = self._seq.get(message_id, 0)
+                refused0 = self._refused.get(message_id, 0)
             self.send(message)
             deadline = time.monotonic() + timeout
             with self._cond:
                 while self._seq.get(message_id, 0) == seq0:
                     remaining = deadline - time.monotonic()
                     what = type(message).__name__
+                    if self._refused.get(message_id, 0) != refused0:
+                        raise MessageUnsupported(f'{self.description} answered {what} with '
+                                                 'UnsupportedMessage: the device does not '
+                                                 'support it')
                     if self._stream is None:   # the link was lost (or closed) meanwhile
                         raise NotConnected(f'link to {self.description} lost while waiting '
                                            f'for the reply to {what}')
@@ -567,6 +584,10 @@ class KosClient:
             elif isinstance(message, UnsupportedMessage):
                 self.unsupported_replies += 1
                 LOG.warning('device did not support a message: %s', message.offending.hex())
+                if len(message.offending) >= HEADER_SIZE:  # names the request it refuses
+                    refused = unpack_header(message.offending).message_id
+                    self._refused[refused] = self._refused.get(refused, 0) + 1
+                    self._cond.notify_all()
             elif isinstance(message, UnknownMessage):
                 LOG.debug('ignoring unknown message id %#x', message.message_id)
             else:   # responses: DeviceInfo, DeviceGuid, NetworkInfo, TrajectoryData, ...

@@ -7,12 +7,15 @@ wait *up to* a timeout for conditions and never assert on timings.
 import math
 import socket
 import time
+from dataclasses import dataclass
+from typing import ClassVar
 
 import pytest
 
 from kessler_kos_driver.client import (
     CommandRejected,
     KosClient,
+    MessageUnsupported,
     NotConnected,
     PasswordRejected,
 )
@@ -30,6 +33,8 @@ from kessler_kos_driver.protocol import (
     FrameParser,
     GetDeviceInfo,
     GetTrajectoryData,
+    Message,
+    MessageType,
     MotorCalibrated,
     PlaybackMode,
     PlaybackState,
@@ -360,6 +365,28 @@ def test_unsupported_message_is_reported(make_sim, make_client):
     client._stream.write(encode_frame(0x10, 1))          # (Get)UserPassword: not supported
     client._stream.write(encode_frame(0x80, 0, b'\x30'))  # undefined action id
     assert wait_until(lambda: client.unsupported_replies >= 2)
+
+
+@dataclass
+class GetUndefined(Message):
+    """A Get of a MessageID the document does not define (the device does not support it)."""
+
+    MESSAGE_ID: ClassVar[int] = 0x55
+    message_type: ClassVar[int] = MessageType.GET
+
+
+def test_a_request_answered_with_unsupported_message_is_named_not_timed_out(
+        make_sim, make_client):
+    """The device answers, with UnsupportedMessage: the request says so (issue 26), it is
+    not "no reply", and the link stays up."""
+    sim = make_sim()
+    client = make_client(sim, reply_timeout=10.0)
+    client.connect()
+    with pytest.raises(MessageUnsupported, match='answered GetUndefined with '
+                                                 'UnsupportedMessage'):
+        client.request(GetUndefined())
+    assert client.connected
+    assert client.request(GetDeviceInfo()) is not None
 
 
 def test_take_picture(make_sim, make_client):

@@ -17,6 +17,7 @@ from ucamera_driver.protocol import (
     GpsFeed,
     RangeError,
     VersionRequest,
+    encode_frame,
 )
 from ucamera_driver.sim import UCameraSim
 
@@ -190,6 +191,23 @@ def test_silence_then_recovery(sim: UCameraSim, client: UCameraClient) -> None:
     assert client.connected
     assert client.request_telemetry_rate() == 50
     assert client.stats.reconnects == 1
+
+
+def test_packets_not_understood_are_named_not_silence(sim: UCameraSim,
+                                                     client: UCameraClient) -> None:
+    """The gimbal keeps sending well-framed packets, but none the driver knows (another
+    firmware): the link is given up, and the reason says so (not a bare "no telemetry")."""
+    sim.set_silent(True)  # the model's telemetry stops; injected bytes still go out
+    unknown = encode_frame(0x03, 0x7E, b"\x01\x02")  # a packet id the manual does not list
+
+    def dropped() -> bool:
+        sim.server.inject(unknown)
+        return not client.connected
+
+    wait_for(dropped, what="the link given up")
+    assert "no telemetry the driver understands" in client.last_error, client.last_error
+    assert client.stats.unknown_packets > 0
+    sim.set_silent(False)
 
 
 def test_link_drop_is_reported_and_start_reopens(sim: UCameraSim, client: UCameraClient) -> None:

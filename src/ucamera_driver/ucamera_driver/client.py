@@ -184,6 +184,7 @@ class UCameraClient:
         self._sessions = 0
         self._link_broken = False
         self._last_rx = 0.0
+        self._last_packet = 0.0  # any well-framed packet, understood or not
         self._quiet_until = 0.0
         self._alive = False
         self._next_refresh = 0.0
@@ -212,7 +213,7 @@ class UCameraClient:
         self._parser.reset()
         with self._lock:  # the mode may have changed while the link was down: unknown again
             self._state = replace(self._state, mode=None)
-        self._last_rx = time.monotonic()
+        self._last_rx = self._last_packet = time.monotonic()
         self._next_refresh = 0.0
         self.last_error = ""
         LOG.info("opened %s", stream.description)
@@ -456,11 +457,21 @@ class UCameraClient:
                                             else 0.0)
             if now - self._last_rx > quiet:
                 self.stats.silences += 1
-                self._drop(f"no telemetry for {now - self._last_rx:.1f} s")
+                self._drop(self._no_telemetry(now))
                 return
             if now >= self._next_refresh:
                 self._next_refresh = now + self.refresh_period
                 self._refresh(now)
+
+    def _no_telemetry(self, now: float) -> str:
+        """Why the link is given up: the gimbal sent nothing, or only packets the driver
+        does not understand (it answered, but not as the manual says: not silence)."""
+        quiet = f"{now - self._last_rx:.1f} s"
+        if self._last_packet > self._last_rx:
+            return (f"no telemetry the driver understands for {quiet}: the gimbal sends "
+                    f"packets, but of unknown ids ({self.stats.unknown_packets} so far) or with "
+                    f"bad payloads ({self.stats.bad_payloads}); another firmware?")
+        return f"no telemetry for {quiet}"
 
     def _close(self) -> None:
         with self._write_lock:
@@ -483,6 +494,7 @@ class UCameraClient:
         self.stats.length_errors = stats.length_errors
         self.stats.discarded_bytes = stats.discarded_bytes
         for frame in frames:
+            self._last_packet = time.monotonic()
             try:
                 packet = decode_packet(frame)
             except UnknownPacketError:

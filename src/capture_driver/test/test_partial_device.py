@@ -1,0 +1,309 @@
+"""A device that answers, but not as the document says (issue 26): the client, the adapter
+and the controller against the simulator over TCP, no ROS.
+
+Two controllers: a third-party one that knows a subset of the table and answers ACK 0x06 to
+every other opcode, getters included (``--only third-party --ack-unknown``), and a partial
+one that answers NACK 0xA6 to what it does not know (``--only partial``: no MOT_SetTum, no
+identity, no registers). Plus the ``wrong`` fault: one command answered with the other kind
+of reply. Waits are "up to a timeout", never timing assertions.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+
+import pytest
+
+from capture_driver.client import (
+    CaptureClient,
+    DeviceTimeout,
+    NotSupported,
+    WrongReply,
+)
+from capture_driver.device import CaptureDevice, CaptureSettings
+from capture_driver.protocol import BY_OPCODE, COMMANDS
+from capture_driver.protocol.registers import REGISTERS
+from capture_driver.sim import KNOWN_SETS, CaptureSimulator, PedestalModel
+from gimbal_driver_common.controller import ControllerConfig, GimbalController
+from gimbal_driver_common.diagnostics import Level
+from gimbal_driver_common.joint_command import JointLimits
+from gimbal_driver_common.testing import wait_for
+from gimbal_driver_common.transport import TcpStream
+
+LOG = logging.getLogger('test_partial_device')
+POLL = [(name, axis) for axis in (1, 2) for name in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')]
+THIRD_PARTY = {'known_commands': ['third-party'], 'ack_unknown': True}
+PARTIAL = {'known_commands': ['partial']}
+
+
+@pytest.fixture
+def cleanup():
+    """What a test started, stopped after it (last first)."""
+    with contextlib.ExitStack() as stack:
+        yield stack
+
+
+def start_sim(cleanup: contextlib.ExitStack, model: dict | None) -> CaptureSimulator:
+    sim = CaptureSimulator(PedestalModel(time_scale=8.0, **(model or {})), tcp_port=0).start()
+    cleanup.callback(sim.stop)
+    return sim
+
+
+@pytest.fixture
+def connect(cleanup):
+    """``connect(model, **client options)``: (simulator, connected client over TCP)."""
+
+    def make(model: dict | None = None, **kwargs) -> tuple[CaptureSimulator, CaptureClient]:
+        sim = start_sim(cleanup, model)
+        kwargs.setdefault('timeout', 0.3)
+        client = CaptureClient(lambda: TcpStream('127.0.0.1', sim.tcp.port), **kwargs)
+        cleanup.callback(client.stop)
+        client.connect()
+        return sim, client
+
+    return make
+
+
+def sent(sim, name: str) -> int:
+    opcode = COMMANDS[name].opcode
+    return sum(1 for frame in list(sim.model.requests) if frame.opcode == opcode)
+
+
+def sent_names(sim, since: int = 0) -> list[str]:
+    return [BY_OPCODE[frame.opcode].name for frame in list(sim.model.requests)[since:]]
+
+
+# ------------------------------------------------------------------ rule 1: named, not silence
+def test_an_ack_to_a_getter_is_that_request_s_protocol_error_not_silence(connect):
+    sim, client = connect(THIRD_PARTY, max_timeouts=3)
+    for _ in range(5):  # more than max_timeouts: the link must stay up
+        with pytest.raises(WrongReply, match=r'^COM_GetFw answered ACK, expected data$'):
+            client.request('COM_GetFw')
+        assert client.request('MOT_GetLoadPosition', 1) == 0.0  # the next one goes on
+    assert client.connected
+    assert client.stats['timeouts'] == 0
+    # each request asked twice (a getter is retried once): two answers each
+    assert client.wrong_replies == {'COM_GetFw': (10, '0x0C4A answered ACK, '
+                                                      'expected data')}
+    assert sent(sim, 'COM_GetFw') == 10
+
+
+def test_data_to_a_setter_is_that_request_s_protocol_error(connect):
+    sim, client = connect(max_timeouts=2)
+    sim.control('wrong MOT_SetAcceleration')
+    with pytest.raises(WrongReply, match=r'^MOT_SetAcceleration \(axis 1\) answered data, '
+                                         r'expected ACK$'):
+        client.request('MOT_SetAcceleration', 1, 100.0)
+    assert sent(sim, 'MOT_SetAcceleration') == 1  # a setter is never sent twice
+    assert client.request('MOT_GetLoadPosition', 1) == 0.0
+    assert client.connected and client.stats['timeouts'] == 0
+    assert client.wrong_replies['MOT_SetAcceleration'][0] == 1
+
+
+def test_only_a_device_that_answers_nothing_is_silent(connect):
+    sim, client = connect(THIRD_PARTY, timeout=0.1, max_timeouts=2)
+    with pytest.raises(WrongReply):
+        client.request('COM_GetSn')
+    sim.set_silent(True)
+    with pytest.raises(Exception, match='device silent'):
+        client.request('MOT_GetLoadPosition', 1)
+    assert not client.connected
+
+
+def test_an_acked_read_in_a_batch_is_named_by_asking_it_alone(connect):
+    sim, client = connect()
+    sim.control('wrong MOT_GetMotorSpeed')  # one getter of the joint poll answers ACK
+    before = len(sim.model.requests)
+    with pytest.raises(WrongReply, match=r'MOT_GetMotorSpeed \(axis 1\) answered ACK'):
+        client.read_many(POLL)
+    # the batch of four, then the read without data alone and its retry
+    assert sent_names(sim, before) == [name for name, _ in POLL] + ['MOT_GetMotorSpeed'] * 2
+    assert client.connected and client.stats['timeouts'] == 0
+    sim.control('wrong MOT_GetMotorSpeed off')
+    assert client.read_many(POLL) == [0.0] * 4
+    assert client.batching
+
+
+def test_registers_are_read_from_what_the_device_reports(connect):
+    """Batched registers on the third-party device: the ACKed getters are asked alone once,
+    recorded and left out; the motor error register it knows is read and decoded."""
+    sim, client = connect(THIRD_PARTY)
+    assert client.registers(1) == {'MER': 0}
+    axis_getters = {r.command for r in REGISTERS.values() if r.per_axis} - {'MOT_MerRegister'}
+    assert axis_getters <= set(client.unsupported)
+    assert all(client.unsupported[name].endswith('answered ACK, expected data')
+               for name in axis_getters)
+    assert client.registers(None) == {}
+    before = len(sim.model.requests)
+    sim.model.inject_fault(1, 'over_current')
+    assert client.registers(1) == {'MER': 1 << 8}
+    assert client.registers(2) == {'MER': 0}
+    assert client.registers(None) == {}
+    assert sent_names(sim, before) == ['MOT_MerRegister'] * 2  # nothing else asked
+    assert client.batching  # the joint poll is still one write
+    assert client.read_many(POLL) == [0.0] * 4
+
+
+# ------------------------------------------------------------------ rule 2: identity
+@pytest.mark.parametrize('model', [THIRD_PARTY, PARTIAL], ids=['ack', 'nack'])
+def test_identity_is_best_effort(connect, model):
+    sim, client = connect(model)
+    ident = client.identity()
+    assert (ident.serial_number, ident.firmware, ident.hardware, ident.part_number) == (
+        '', '', '', '')
+    how = 'answered ACK, expected data' if model is THIRD_PARTY else 'answered NACK 0xA6'
+    assert set(ident.problems) == {'COM_GetSn', 'COM_GetFw', 'COM_GetHw', 'COM_GetPn'}
+    assert all(how in text for text in ident.problems.values())
+    assert client.connected and client.stats['timeouts'] == 0
+    before = len(sim.model.requests)
+    client.identity()  # not asked again on this connection
+    assert len(sim.model.requests) == before
+
+
+def test_identity_timeouts_are_named_too(connect):
+    sim, client = connect(timeout=0.1, max_timeouts=5)
+    sim.model.lose_replies(2)  # COM_GetSn and its retry
+    ident = client.identity()
+    assert ident.serial_number == '' and ident.firmware == '2.24.0'
+    assert 'no reply' in ident.problems['COM_GetSn']
+    assert 'COM_GetSn' not in client.unsupported  # a timeout is not "unknown"
+
+
+# ------------------------------------------------------------------ rule 3: partial device
+def test_a_tum_the_device_does_not_know_is_left_out_of_later_moves(connect):
+    sim, client = connect(PARTIAL)
+    client.move_absolute(1, 10.0, 60.0, 200.0)
+    assert client.unsupported['MOT_SetTum'].startswith('0x013F answered NACK 0xA6')
+    assert sent(sim, 'MOT_SetTum') == 1  # the armed TUM after MOT_Update not sent either
+    for target in (12.0, -5.0):
+        client.move_absolute(1, target, 60.0, 200.0)
+        client.move_absolute(2, target / 2, 30.0, 200.0)
+    assert sent(sim, 'MOT_SetTum') == 1
+    wait_for(lambda: sim.model.axes[1].position == pytest.approx(-5.0)
+             and sim.model.axes[2].position == pytest.approx(-2.5), 10.0, 'moves done')
+    client.connect()  # a new connection may be another controller: TUM is tried again
+    client.move_absolute(1, 0.0, 60.0, 200.0)
+    assert sent(sim, 'MOT_SetTum') == 2
+
+
+def test_a_tum_refused_with_the_rest_of_the_set_up_is_not_left_out(connect):
+    """0xA6 also means "not in this mode": TUM is only judged unknown when the device
+    accepts the rest of the set-up."""
+    sim, client = connect()
+    sim.model.nack_next(0xA6, COMMANDS['MOT_SetTum'].opcode)
+    sim.model.nack_next(0xA6, COMMANDS['MOT_SetPositionAbsolute'].opcode)
+    with pytest.raises(Exception, match=r'MOT_SetPositionAbsolute \(axis 1\): NACK 0xA6'):
+        client.move_absolute(1, 10.0, 60.0, 200.0)
+    assert 'MOT_SetTum' not in client.unsupported
+    before = sent(sim, 'MOT_SetTum')
+    client.move_absolute(1, 10.0, 60.0, 200.0)
+    assert sent(sim, 'MOT_SetTum') == before + 2  # in the set-up, and armed after it
+
+
+@pytest.mark.parametrize('model', [THIRD_PARTY, PARTIAL], ids=['ack', 'nack'])
+def test_sensor_polls_stop_once_not_answered_with_data(connect, model):
+    sim, client = connect(model)
+    for _ in range(2):
+        with pytest.raises(NotSupported, match='IMU_GetRoll: the device does not support '
+                                               'it'):
+            client.imu()
+        assert client.gps_fix() is None
+    for name in ('IMU_GetRoll', 'GPS_PositionReady'):
+        assert sent(sim, name) == (2 if model is THIRD_PARTY else 1)  # retried getter
+    assert sent(sim, 'IMU_GetPitch') == 0
+
+
+def test_a_timeout_of_a_sensor_poll_does_not_stop_it(connect):
+    sim, client = connect(timeout=0.1, max_timeouts=5)
+    sim.model.lose_replies(2)
+    with pytest.raises(DeviceTimeout):
+        client.gps_fix()
+    assert client.gps_fix() is not None
+    assert not client.unsupported
+
+
+# ------------------------------------------------------------------ the adapter and controller
+@pytest.fixture
+def drive(cleanup):
+    """``drive(model)``: (simulator, adapter, its controller open and active)."""
+
+    def make(model: dict | None = None) -> tuple[CaptureSimulator, CaptureDevice,
+                                                 GimbalController]:
+        sim = start_sim(cleanup, model)
+        device, controller = make_rig(sim)
+        cleanup.callback(controller.shutdown)
+        wait_for(device.status_snapshot, 10.0, 'the first register poll')
+        return sim, device, controller
+
+    return make
+
+
+def make_rig(sim) -> tuple[CaptureDevice, GimbalController]:
+    config = ControllerConfig(
+        joint_names=['pan', 'tilt'],
+        limits={'pan': JointLimits(-math.pi, math.pi, 1.5),
+                'tilt': JointLimits(-math.pi / 2, math.pi / 2, 1.5)},
+        publish_rate=20.0, command_timeout=0.5, reconnect_period=0.2, goal_tolerance=2e-3,
+        move_timeout=30.0)
+    settings = CaptureSettings(
+        joint_names=['pan', 'tilt'], axis_ids=[1, 2], joint_directions=[-1.0, 1.0],
+        gear_ratios=[1.0, 1.0], host='127.0.0.1', port=sim.tcp.port, keepalive_period=0.5,
+        default_speed=1.0, acceleration=6.0, status_period=0.1)
+    device = CaptureDevice(settings)
+    controller = GimbalController(device, config, LOG)
+    controller.open()
+    controller.activate()
+    return device, controller
+
+
+def at(controller: GimbalController, targets: dict[str, float]):
+    positions = controller.positions()
+    return all(abs(positions.get(j, math.inf) - p) < 2e-3 for j, p in targets.items())
+
+
+@pytest.mark.parametrize('model', [THIRD_PARTY, PARTIAL], ids=['ack', 'nack'])
+def test_the_controller_drives_a_partial_device(drive, model):
+    sim, device, controller = drive(model)
+    info = controller.device_info
+    assert info.serial_number == 'unknown' and info.firmware_version == 'unknown'
+    assert info.hardware_id == ('capture-pnunknown-snunknown-hwunknown-fwunknown'
+                                f'@tcp://127.0.0.1:{sim.tcp.port}')
+    assert not device.has_imu and not device.has_gps and not device.has_tracker
+    assert device.refusal(['pan', 'tilt']) is None  # no "axis off" from absent registers
+    controller.command(['pan', 'tilt'], [0.2, -0.1], [])
+    wait_for(lambda: at(controller, {'pan': 0.2, 'tilt': -0.1}), 20.0, 'the move carried out')
+    assert controller.connected and controller.reconnects == 0
+    assert device.client.stats['timeouts'] == 0
+    parts = {p.part: p for p in device.capabilities.status.parts()}
+    values = dict(parts['device'].values)
+    assert parts['device'].level == parts['pan'].level == Level.OK
+    for name in ('COM_GetFw', 'COM_GetSn', 'IMU_IsReadyImu', 'ERR_CaptureSystemRegister'):
+        assert f'unsupported.{name}' in values, sorted(values)
+    if model is PARTIAL:
+        assert 'unsupported.MOT_SetTum' in values
+        assert 'MOT_SetTum' in parts['device'].message
+        return
+    assert values['wrong_reply.COM_GetFw'] == '0x0C4A answered ACK, expected data (2x)'
+    assert 'unsupported.MOT_SetTum' not in values
+    sim.model.inject_fault(1, 'over_current')  # the one register it reports is decoded
+    device.expire_status()
+    wait_for(lambda: device.refusal(['pan']), 10.0, 'the fault seen in MER')
+    assert 'over_current' in device.refusal(['pan'])
+
+
+def test_a_healthy_device_answers_everything_the_driver_asks(drive):
+    _, device, controller = drive()
+    controller.command(['pan'], [0.1], [])
+    wait_for(lambda: at(controller, {'pan': 0.1}), 20.0, 'the move carried out')
+    assert not device.client.unsupported and not device.client.wrong_replies
+    assert device.identity.problems == {}
+    assert controller.device_info.hardware_id == 'capture-pnCAP-PT2-SIM-sn24017-hw3.1-fw2.24.0'
+    assert all(p.level == Level.OK for p in device.capabilities.status.parts())
+
+
+def test_known_sets_name_table_commands():
+    for names in KNOWN_SETS.values():
+        assert all(name in COMMANDS for name in names)
+    assert 'MOT_SetTum' not in KNOWN_SETS['partial']
