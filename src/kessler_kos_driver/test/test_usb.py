@@ -41,7 +41,7 @@ from kessler_kos_driver.protocol import (
     decode,
     encode_reports,
 )
-from kessler_kos_driver.sim import KosDevice, SimHidDevice, SimSettings
+from kessler_kos_driver.sim import SimHidDevice, SimSettings, SimulatedRig
 from kessler_kos_driver.usb_link import HidStream, UsbTarget
 
 TWO_PI = 2 * math.pi
@@ -202,7 +202,7 @@ def test_stream_failures_are_transport_errors():
 # ------------------------------------------------ client over USB against the device model
 @pytest.fixture
 def usb_rig():
-    device = KosDevice(SimSettings(password='not-used-on-usb', precalibrated=True,
+    device = SimulatedRig(SimSettings(password='not-used-on-usb', precalibrated=True,
                                    time_scale=20.0))
     hid_device = SimHidDevice(device)
     client = KosClient(usb=TARGET, usb_keepalive_period=0.1, poll_period=0.05,
