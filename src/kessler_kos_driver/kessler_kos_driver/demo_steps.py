@@ -14,9 +14,10 @@ from gimbal_msgs.srv import LoadTrajectory
 PLAYBACK_JOINTS = ('pan', 'tilt', 'slider')
 #: (s, (pan rad, tilt rad, slider m)): inside the simulator's example rig in SI
 #: (registration.SIM_RIG: pan -pi..pi, tilt -pi/2..pi/2, slider 0..1.5 m) and well under
-#: MaxMaxMoveSpeed: pan sweeps from 30 deg right to 140 deg left, the tilt rises above the
-#: horizon and back, the carriage runs 0.9 m out and back to 0.6 m
-KEYFRAMES = ((0.0, (-0.5, -0.2, 0.1)), (2.5, (1.2, 0.4, 1.0)), (5.0, (2.5, 0.1, 0.6)))
+#: MaxMaxMoveSpeed and MaxMaxAcceleration: pan sweeps from 30 deg right to 140 deg left, the
+#: tilt rises above the horizon and back, the carriage runs from 0.1 m out to 0.9 m and back
+#: to 0.6 m
+KEYFRAMES = ((0.0, (-0.5, -0.2, 0.1)), (3.0, (1.2, 0.4, 0.9)), (6.0, (2.5, 0.1, 0.6)))
 
 
 def playback(target: Any, ros: Any) -> str:

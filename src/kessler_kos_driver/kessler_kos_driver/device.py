@@ -393,12 +393,23 @@ class KosDevice(Device):
         return self._load(lambda: from_segments(segments, self.joints, settings))
 
     def _load(self, build: Callable[[], Trajectory]) -> Trajectory:
+        """Build and load; a refusal names the joints behind the device's motor numbers."""
         try:
             trajectory = build()
             self.client.load_trajectory(trajectory)
         except (ProtocolError, KosError) as exc:
-            raise DeviceRefused(f'trajectory not loaded: {exc}') from exc
+            raise DeviceRefused(f'trajectory not loaded: {exc}; {self._rotations_legend()}'
+                                ) from exc
         return trajectory
+
+    def _rotations_legend(self) -> str:
+        """What a device figure in rotations means for each joint (refusals quote them)."""
+        parts = []
+        for name, mapping in self.joints.items():
+            units = self.conversion(name)
+            parts.append(f'motor {mapping.address} is joint {name!r}, 1 rotation = '
+                         f'{abs(units.per_rotation):.6g} ({units.describe()})')
+        return '; '.join(parts)
 
     def setup_playback(self, delay_return: bool) -> None:
         """SetupPlayback, answered once SetupCompleted arrives."""
