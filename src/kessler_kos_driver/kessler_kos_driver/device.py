@@ -145,6 +145,7 @@ class KosDevice(Device):
         client.on_error = self.status.latch
         #: end mark (rotations) per joint as last seen, to log a recalibration
         self._ends: dict[str, float] = {}
+        self._ends_lock = threading.Lock()   # the device thread and services both look
 
     # ------------------------------------------------------------ conversion
     def joint_of(self, address: int) -> str | None:
@@ -185,12 +186,12 @@ class KosDevice(Device):
             if motor is None:
                 continue
             end = motor.end_position
-            if self._ends.get(name) != end:
-                if name in self._ends:
-                    LOG.info('joint %r: end mark now %.6g rotations (was %.6g); positions '
-                             'are %s', name, end, self._ends[name],
-                             self.conversion(name).describe())
+            with self._ends_lock:
+                before = self._ends.get(name)
                 self._ends[name] = end
+            if before is not None and before != end:
+                LOG.info('joint %r: end mark now %.6g rotations (was %.6g); positions are %s',
+                         name, end, before, self.conversion(name).describe())
 
     # ------------------------------------------------------------- contract
     def open(self) -> DeviceInfo:
@@ -202,8 +203,7 @@ class KosDevice(Device):
             LOG.warning('joints without a connected motor: %s; device motors: %s', missing,
                         sorted(client.motors))
         self.status.locked_out = False
-        self._ends.clear()
-        self._note_calibration()
+        self._note_calibration()   # an end mark changed while the link was down is logged
         self._read_device_settings()
         self.on_aux_inputs(client.aux_inputs)
         info = client.device_info

@@ -379,6 +379,12 @@ def test_axis_fault_offline_motor_and_reset(rig):
 
 
 
+def test_unit_parameters_are_checked_at_startup():
+    output = node_refusing_to_start(PKG, 'kessler_kos_driver_node',
+                                    ['calibrated_spans:=[1.5, 6.28]'])
+    assert 'parameter calibrated_spans: need 3 finite values' in output
+
+
 def test_usb_transport_parameters_are_checked_at_startup():
     output = node_refusing_to_start(PKG, 'kessler_kos_driver_node', ['transport:=usb'])
     assert 'usb_vendor_id' in output
