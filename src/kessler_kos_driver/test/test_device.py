@@ -285,7 +285,6 @@ def test_refusal_reasons_in_si_and_nothing_sent(rig):
 
 
 def test_keyframe_playback_in_si(rig):
-    ctl = rig.controller
     frames = [Keyframe(0.0, {'pan': -1.0, 'tilt': -0.5}),
               Keyframe(2.0, {'pan': 1.0, 'tilt': 0.5})]
     trajectory = rig.device.load_keyframes(frames, PlaybackSettings())
@@ -311,7 +310,7 @@ def test_keyframe_playback_in_si(rig):
     with pytest.raises(DeviceRefused, match=r"'tilt'.*calibrated range \[-1.5708, 1.5708\]"):
         rig.device.load_keyframes([Keyframe(0.0, {'tilt': 0.0}), Keyframe(1.0, {'tilt': 1.6})],
                                   PlaybackSettings())
-    assert not ctl.busy()
+    assert not rig.client.playback.loaded    # FullStop consumed the move; nothing new sent
 
 
 def test_a_recalibration_changes_the_conversion(rig, caplog):
