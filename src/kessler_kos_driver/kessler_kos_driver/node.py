@@ -79,6 +79,8 @@ class _RosLogHandler(logging.Handler):
             self._logger.error(text)
         elif record.levelno >= logging.WARNING:
             self._logger.warning(text)
+        elif record.levelno >= logging.INFO:   # a connect, a new end mark (units change)
+            self._logger.info(text)
         else:
             self._logger.debug(text)
 

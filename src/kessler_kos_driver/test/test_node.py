@@ -311,7 +311,7 @@ def test_move_to_and_joint_command(rig):
 
 
 def test_calibrate_take_picture_and_home(rig):
-    ros, control_port, _, _ = rig
+    ros, control_port, node, _ = rig
     reply = ros.call(Calibrate, srv('calibrate'),
                      Calibrate.Request(joint_name='slider', action=Calibrate.Request.RESET))
     assert reply.success, reply.message
@@ -333,6 +333,7 @@ def test_calibrate_take_picture_and_home(rig):
     assert reply.success, reply.message
     # the 1.5 m span now lies over 0..0.19 rotations: the slider reads its end, 1.5 m
     assert 'range 0.0000 .. 1.5000' in reply.message, reply.message
+    node.wait_for_output("joint 'slider': end mark now 0.1")   # 0.19 rotations (was 0)
     ros.wait_for_message('joint_states', JointState,
                          lambda m: abs(joint_positions(m)['slider'] - 1.5) < 1e-3, timeout=10)
     wait_diag(ros, 'slider', lambda s: s.level[0] == 0 and any(
