@@ -12,9 +12,12 @@ from gimbal_msgs.msg import PlaybackStatus
 from gimbal_msgs.srv import LoadTrajectory
 
 PLAYBACK_JOINTS = ('pan', 'tilt', 'slider')
-#: (s, rad per joint): inside the simulator's --precalibrated ranges (pan 0..100 rotations,
-#: tilt 0..-40, slider 0..200) and well under MaxMaxMoveSpeed
-KEYFRAMES = ((0.0, (2.0, -2.0, 5.0)), (2.5, (40.0, -30.0, 40.0)), (5.0, (80.0, -10.0, 20.0)))
+#: (s, (pan rad, tilt rad, slider m)): inside the simulator's example rig in SI
+#: (registration.SIM_RIG: pan -pi..pi, tilt -pi/2..pi/2, slider 0..1.5 m) and well under
+#: MaxMaxMoveSpeed and MaxMaxAcceleration: pan sweeps from 30 deg right to 140 deg left, the
+#: tilt rises above the horizon and back, the carriage runs from 0.1 m out to 0.9 m and back
+#: to 0.6 m
+KEYFRAMES = ((0.0, (-0.5, -0.2, 0.1)), (3.0, (1.2, 0.4, 0.9)), (6.0, (2.5, 0.1, 0.6)))
 
 
 def playback(target: Any, ros: Any) -> str:
@@ -52,7 +55,7 @@ def playback(target: Any, ros: Any) -> str:
     end = wait_for(full_stop, 60, 'playback FullStop', interval=0.1)
     target.note = ''
     names = [s.status_name for s in list(statuses)[start:]]
-    ends = ', '.join(f'{n}={p:.1f}' for n, p in zip(end.joint_names, end.positions,
-                                                     strict=False))
+    ends = ', '.join(f'{n}={p:.3f} {"m" if n == "slider" else "rad"}'
+                     for n, p in zip(end.joint_names, end.positions, strict=False))
     return (f'{len(KEYFRAMES)} key frames on {len(PLAYBACK_JOINTS)} axes, '
             f'{KEYFRAMES[-1][0]:g} s: {" -> ".join(names)} at [{ends}]')

@@ -1,12 +1,15 @@
 """The kOS device adapter: KosClient on the shared device contract, in SI units (no ROS).
 
 The device works in motor rotations; everything the controller and the node see is SI
-(rad, or m for a slider) through `joint_scales` (SI units per rotation; a negative scale
-flips the direction so a motor that counts the other way still follows REP-103). Every
-scale, sign and unit conversion of the driver lives here:
+(rad, or m for a slider). Each joint converts by the rule of :mod:`kessler_kos_driver.units`:
+a calibrated axis with a span reports ``offset + rotations * span / end_position``, any
+other ``offset + rotations * joint_scale``. The end position is the one the device reports
+(read at every connect, after every MarkEnd and by every MotorInfo poll), so the conversion
+follows a recalibration. Every scale, sign and unit conversion of the driver lives here:
 :meth:`KosDevice.read` (rotations -> SI), :meth:`KosDevice.move` and :meth:`KosDevice.jog`
-(SI -> rotations, checked against the motor maxima before anything is sent), the key-frame
-load, the calibration range, ~/playback_status positions and the diagnostics values.
+(SI -> rotations, checked against the calibrated range and the motor maxima, in SI, before
+anything is sent), the key-frame load, homing to the begin mark, the calibration range,
+~/playback_status positions and the diagnostics values (with the ``units`` key).
 
 Capabilities: :class:`KosHoming` (first key frame of a loaded move, else the begin marks) and
 :class:`KosStatus` (ErrorStatus latch, lock state, per-motor diagnostics). kOS has no device
@@ -63,6 +66,7 @@ from .protocol import (
     Trajectory,
     playback_state_name,
 )
+from .units import Conversion, JointUnits
 
 LOG = logging.getLogger('kessler_kos_driver.device')
 
@@ -141,28 +145,55 @@ class KosDevice(Device):
         client.on_playback = self._playback_notified
         client.on_aux_inputs = lambda status: self.on_aux_inputs(status)
         client.on_error = self.status.latch
+        #: end mark (rotations) per joint as last seen, to log a recalibration
+        self._ends: dict[str, float] = {}
+        self._ends_lock = threading.Lock()   # the device thread and services both look
 
     # ------------------------------------------------------------ conversion
     def joint_of(self, address: int) -> str | None:
         return next((m.name for m in self.joints.values() if m.address == address), None)
 
+    def conversion(self, joint: str) -> Conversion:
+        """The joint's SI conversion at the calibration the device last reported."""
+        mapping = self.joints[joint]
+        motor = self.client.motors.get(mapping.address)
+        return mapping.units.conversion(motor.end_position if motor is not None else 0.0)
+
     def to_si(self, joint: str, rotations: float) -> float:
-        """A position or signed velocity in rotations as SI (the scale's sign flips it)."""
-        return rotations * self.joints[joint].scale
+        """A position in rotations as SI."""
+        return self.conversion(joint).to_si(rotations)
 
-    def to_rotations(self, joint: str, si: float) -> float:
-        return si / self.joints[joint].scale
+    def set_units(self, units: Sequence[JointUnits], targets: dict[str, float]) -> None:
+        """New unit parameters per joint (order of the joints); ``targets`` (SI, by joint,
+        e.g. the controller's commanded targets) keep their motor positions."""
+        before = {name: self.conversion(name) for name in self.joints}
+        for (name, mapping), joint_units in zip(list(self.joints.items()), units, strict=True):
+            self.joints[name] = JointMapping(name, mapping.address, joint_units)
+        for name, target in list(targets.items()):
+            if name in before:
+                targets[name] = self.conversion(name).to_si(before[name].to_rotations(target))
 
-    def magnitude_si(self, joint: str, rotations: float) -> float:
-        """A speed or acceleration limit (no direction) in SI."""
-        return rotations * abs(self.joints[joint].scale)
+    def units_report(self) -> dict[str, str]:
+        """Joint -> what its joint_states mean now (the diagnostics ``units`` value)."""
+        return {name: self.conversion(name).describe() for name in self.joints}
 
-    def set_joint_scales(self, scales: Sequence[float], targets: dict[str, float]) -> None:
-        """New SI units per rotation; ``targets`` (SI, by joint) keep their motor positions."""
-        for (name, mapping), scale in zip(list(self.joints.items()), scales, strict=True):
-            if name in targets:
-                targets[name] *= scale / mapping.scale
-            self.joints[name] = JointMapping(name, mapping.address, scale)
+    def set_poll_period(self, period: float) -> None:
+        """s between MotorInfo polls (the client reads it on every poll tick)."""
+        self.client.poll_period = period
+
+    def _note_calibration(self) -> None:
+        """Log each change of a joint's end mark, and what the joint's units become."""
+        for name, mapping in self.joints.items():
+            motor = self.client.motors.get(mapping.address)
+            if motor is None:
+                continue
+            end = motor.end_position
+            with self._ends_lock:
+                before = self._ends.get(name)
+                self._ends[name] = end
+            if before is not None and before != end:
+                LOG.info('joint %r: end mark now %.6g rotations (was %.6g); positions are %s',
+                         name, end, before, self.conversion(name).describe())
 
     # ------------------------------------------------------------- contract
     def open(self) -> DeviceInfo:
@@ -174,6 +205,7 @@ class KosDevice(Device):
             LOG.warning('joints without a connected motor: %s; device motors: %s', missing,
                         sorted(client.motors))
         self.status.locked_out = False
+        self._note_calibration()   # an end mark changed while the link was down is logged
         self._read_device_settings()
         self.on_aux_inputs(client.aux_inputs)
         info = client.device_info
@@ -205,12 +237,14 @@ class KosDevice(Device):
         positions: dict[str, float] = {}
         velocities: dict[str, float] = {}
         stamp = 0.0
+        self._note_calibration()
         for name, mapping in self.joints.items():
             motor = client.motors.get(mapping.address)
             if motor is None or not motor.online or not motor.stamp:
                 continue
-            positions[name] = self.to_si(name, motor.position)
-            velocities[name] = self.to_si(name, motor.velocity)
+            units = self.conversion(name)
+            positions[name] = units.to_si(motor.position)
+            velocities[name] = units.rate_to_si(motor.velocity)
             stamp = max(stamp, motor.stamp)
         if not positions:
             return None
@@ -258,7 +292,8 @@ class KosDevice(Device):
         return motor.max_acceleration * self.settings.acceleration_scale
 
     def move(self, moves: Moves) -> None:
-        """Absolute moves: every target and speed is checked (in rotations) before sending.
+        """Absolute moves: every target and speed is checked (in SI, then by the client in
+        rotations) before anything is sent.
 
         No speed: the joint's velocity_max, capped at the motor's MaxMaxSetupSpeed.
         """
@@ -267,30 +302,54 @@ class KosDevice(Device):
         messages = []
         for name, (target, speed) in moves.items():
             motor = self._motor(name)
+            units = self.conversion(name)
             wanted = speed if speed is not None else self.config.limits[name].velocity_max
-            speed_rot = abs(self.to_rotations(name, wanted))
+            speed_rot = abs(units.rate_to_rotations(wanted))
             if speed is None:
                 speed_rot = min(speed_rot, motor.max_setup_speed)
+            else:
+                self._check_speed(name, units, motor, abs(wanted))
+            self._check_travel(name, units, motor, target)
             try:
                 messages.append(client.check_move(
-                    motor.address, self.to_rotations(name, target), speed_rot,
+                    motor.address, units.to_rotations(target), speed_rot,
                     self._acceleration(motor)))
             except DeviceRefused as exc:
                 raise InvalidRequest(f'joint {name!r}: {exc}') from exc
         for message in messages:
             client.send(message)
 
+    @staticmethod
+    def _check_travel(name: str, units: Conversion, motor: MotorState, target: float) -> None:
+        """The calibrated range (or the uncalibrated travel) in SI, before any byte is sent."""
+        low, high = motor.travel()
+        rotations = units.to_rotations(target) if math.isfinite(target) else math.nan
+        if not low - 1e-9 <= rotations <= high + 1e-9:
+            si_low, si_high = sorted((units.to_si(low), units.to_si(high)))
+            state = 'calibrated range' if motor.calibrated else 'uncalibrated travel'
+            raise InvalidRequest(
+                f'joint {name!r}: {target:.4f} is outside the {state} [{si_low:.4f}, '
+                f'{si_high:.4f}] ({units.describe()}; motor {motor.address}: {low:g} .. '
+                f'{high:g} rotations)')
+
+    @staticmethod
+    def _check_speed(name: str, units: Conversion, motor: MotorState, speed: float) -> None:
+        """A speed (SI, no direction) against the motor's MaxMaxSetupSpeed, in SI."""
+        if abs(units.rate_to_rotations(speed)) > motor.max_setup_speed:
+            raise InvalidRequest(
+                f'joint {name!r}: speed {speed:.4f} exceeds the motor maximum '
+                f'{units.magnitude_to_si(motor.max_setup_speed):.4f} (MaxMaxSetupSpeed '
+                f'{motor.max_setup_speed:g} rot/s, {units.describe()})')
+
     def jog(self, velocities: dict[str, float]) -> None:
         """Velocities (SI/s) as moves toward the end of travel at that speed (0 stops)."""
         self.require_idle()
         motors = {name: self._motor(name) for name in velocities}
-        rotations = {name: self.to_rotations(name, v) for name, v in velocities.items()}
-        for name, velocity in rotations.items():
-            motor = motors[name]
-            if abs(velocity) > motor.max_setup_speed:
-                raise InvalidRequest(
-                    f'joint {name!r}: {abs(velocities[name]):.4f} exceeds the motor maximum '
-                    f'{self.magnitude_si(name, motor.max_setup_speed):.4f}')
+        rotations = {}
+        for name, velocity in velocities.items():
+            units = self.conversion(name)
+            self._check_speed(name, units, motors[name], abs(velocity))
+            rotations[name] = units.rate_to_rotations(velocity)
         for name, velocity in rotations.items():
             motor = motors[name]
             self.client.jog(motor.address, velocity, self._acceleration(motor))
@@ -336,12 +395,23 @@ class KosDevice(Device):
         return self._load(lambda: from_segments(segments, self.joints, settings))
 
     def _load(self, build: Callable[[], Trajectory]) -> Trajectory:
+        """Build and load; a refusal names the joints behind the device's motor numbers."""
         try:
             trajectory = build()
             self.client.load_trajectory(trajectory)
         except (ProtocolError, KosError) as exc:
-            raise DeviceRefused(f'trajectory not loaded: {exc}') from exc
+            raise DeviceRefused(f'trajectory not loaded: {exc}; {self._rotations_legend()}'
+                                ) from exc
         return trajectory
+
+    def _rotations_legend(self) -> str:
+        """What a device figure in rotations means for each joint (refusals quote them)."""
+        parts = []
+        for name, mapping in self.joints.items():
+            units = self.conversion(name)
+            parts.append(f'motor {mapping.address} is joint {name!r}, 1 rotation = '
+                         f'{abs(units.per_rotation):.6g} ({units.describe()})')
+        return '; '.join(parts)
 
     def setup_playback(self, delay_return: bool) -> None:
         """SetupPlayback, answered once SetupCompleted arrives."""
@@ -381,10 +451,16 @@ class KosDevice(Device):
         self.client.mark_begin(self._mapping(joint).address)
 
     def mark_end(self, joint: str) -> tuple[float, float]:
-        """MarkEndPosition; the calibrated (begin, end) in SI."""
+        """MarkEndPosition, then MotorInfo read again: the new end mark sets the joint's
+        conversion (its span over the end); the calibrated (begin, end) in SI."""
         self.require_idle()
-        begin, end = self.client.mark_end(self._mapping(joint).address)
-        return self.to_si(joint, begin), self.to_si(joint, end)
+        client = self.client
+        address = self._mapping(joint).address
+        client.mark_end(address)
+        client.refresh_motors()
+        self._note_calibration()
+        motor = client.motor(address)
+        return self.to_si(joint, motor.begin_position), self.to_si(joint, motor.end_position)
 
     def reset_axis(self, joint: str) -> None:
         self.require_idle()
@@ -457,7 +533,7 @@ class KosHoming(Homing):
         device.status.clear({device.joints[n].address for n in uncalibrated})
         if calibrated:
             report('moving to the begin marks')
-            device.move({n: (0.0, None) for n in calibrated})
+            device.move({n: (device.to_si(n, 0.0), None) for n in calibrated})
             self._wait_at_begin(calibrated, cancelled)
         parts = []
         if calibrated:
@@ -488,8 +564,8 @@ class KosHoming(Homing):
             if cancelled.is_set():
                 return True
             motors = device.client.motors
-            return all(abs(device.to_si(n, motors[device.joints[n].address].position))
-                       <= tolerance for n in joints)
+            return all(device.conversion(n).magnitude_to_si(
+                abs(motors[device.joints[n].address].position)) <= tolerance for n in joints)
 
         if not device.client.wait_for(at_begin, config.move_timeout) and not cancelled.is_set():
             raise DeviceTimeout(f'begin marks not reached within {config.move_timeout:g} s')
@@ -576,15 +652,18 @@ class KosStatus(StatusReport):
             part.values = [('motor_address', str(mapping.address)), ('online', 'False')]
             return part
         axis_errors = [e for e in errors if e.motor_address == mapping.address]
+        units = device.conversion(name)
         part.values = [
             ('motor_address', str(mapping.address)), ('online', 'True'),
             ('calibrated', str(motor.calibrated)),
-            ('begin_position', f'{device.to_si(name, motor.begin_position):.6g}'),
-            ('end_position', f'{device.to_si(name, motor.end_position):.6g}'),
+            *self._units_values(mapping.units, units, motor.calibrated),
+            ('begin_position', f'{units.to_si(motor.begin_position):.6g}'),
+            ('end_position', f'{units.to_si(motor.end_position):.6g}'),
+            ('end_position_rotations', f'{motor.end_position:.6g}'),
             ('position_rotations', f'{motor.position:.6g}'),
-            ('max_setup_speed', f'{device.magnitude_si(name, motor.max_setup_speed):.6g}'),
-            ('max_move_speed', f'{device.magnitude_si(name, motor.max_move_speed):.6g}'),
-            ('max_acceleration', f'{device.magnitude_si(name, motor.max_acceleration):.6g}'),
+            ('max_setup_speed', f'{units.magnitude_to_si(motor.max_setup_speed):.6g}'),
+            ('max_move_speed', f'{units.magnitude_to_si(motor.max_move_speed):.6g}'),
+            ('max_acceleration', f'{units.magnitude_to_si(motor.max_acceleration):.6g}'),
             ('fiz_motor', str(motor.is_fiz)),
             *[(f'error_{e.code}', e.description) for e in axis_errors],
         ]
@@ -597,6 +676,18 @@ class KosStatus(StatusReport):
         else:
             part.message = 'calibrated'
         return part
+
+    @staticmethod
+    def _units_values(parameters: JointUnits, units: Conversion,
+                      calibrated: bool) -> list[tuple[str, str]]:
+        """``units`` (``motor radians`` when neither a span nor a joint scale applies: level
+        OK, the README says what to set), the SI per rotation in use and the offset."""
+        values = [('units', units.describe()), ('si_per_rotation', f'{units.per_rotation:.6g}'),
+                  ('offset', f'{units.offset:.6g}')]
+        if parameters.span:
+            values.append(('calibrated_span', f'{parameters.span:.6g}' if calibrated else
+                           f'{parameters.span:.6g} (applies once the axis is calibrated)'))
+        return values
 
     def mode(self) -> str:
         client = self.device.client
@@ -632,8 +723,8 @@ class KosStatus(StatusReport):
 
 
 def joint_mappings(
-    names: Sequence[str], addresses: Sequence[int], scales: Sequence[float]
+    names: Sequence[str], addresses: Sequence[int], units: Sequence[JointUnits]
 ) -> list[JointMapping]:
-    """The joint -> (motor address, SI per rotation) table from the parameters."""
-    return [JointMapping(n, a, s) for n, a, s in zip(names, addresses, scales, strict=True)]
+    """The joint -> (motor address, units) table from the parameters."""
+    return [JointMapping(n, a, u) for n, a, u in zip(names, addresses, units, strict=True)]
 

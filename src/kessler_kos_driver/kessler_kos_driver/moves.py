@@ -1,15 +1,16 @@
 """Turning ROS-level move requests into kOS trajectories (pure Python, no ROS).
 
-Joint positions are SI (rad or m); the device works in motor rotations: position_rot =
-position_si / joint_scale. Bezier segments are normalised: time as a fraction of the move,
-position as a fraction of the calibrated range (0 = BeginPosition, 1 = EndPosition).
+Joint positions are SI (rad or m); the device works in motor rotations, converted by each
+joint's :class:`~kessler_kos_driver.units.JointUnits` at the axis' calibration (its span over
+the end mark, or joint_scales). Bezier segments are normalised: time as a fraction of the
+move, position as a fraction of the calibrated range (0 = BeginPosition, 1 = EndPosition).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from .protocol import (
     DelayMode,
@@ -22,13 +23,14 @@ from .protocol import (
     fit_keyframes,
 )
 from .protocol.trajectory import LOOP_FOREVER
+from .units import Conversion, JointUnits
 
 
 @dataclass(frozen=True)
 class JointMapping:
     name: str
     address: int
-    scale: float              # SI units per motor rotation (may be negative to flip)
+    units: JointUnits = field(default_factory=JointUnits)   # SI <-> rotations
 
 
 @dataclass(frozen=True)
@@ -41,6 +43,10 @@ class AxisRange:
 
     def rotations(self, normalised: float) -> float:
         return self.begin + normalised * (self.end - self.begin)
+
+    def conversion(self, units: JointUnits) -> Conversion:
+        """The joint's SI conversion at this calibration."""
+        return units.conversion(self.end)
 
 
 @dataclass
@@ -154,25 +160,26 @@ def from_keyframes(
     for name in names:
         mapping = _mapping(name, joints)
         axis = _range(mapping, ranges)
+        units = axis.conversion(mapping.units)
         normalised = []
         for index, keyframe in enumerate(keyframes):
             value = keyframe.positions[name]
             if not math.isfinite(value):
                 raise TrajectoryError(f'keyframe {index}: joint {name!r} position is not finite')
-            normalised.append(axis.normalise(value / mapping.scale))
+            normalised.append(axis.normalise(units.to_rotations(value)))
         for index, value in enumerate(normalised):
             if not -1e-9 <= value <= 1 + 1e-9:
+                low, high = sorted((units.to_si(axis.begin), units.to_si(axis.end)))
                 raise TrajectoryError(
                     f'keyframe {index}: joint {name!r} position '
                     f'{keyframes[index].positions[name]:.4f} is outside its calibrated range '
-                    f'[{min(axis.begin, axis.end) * mapping.scale:.4f}, '
-                    f'{max(axis.begin, axis.end) * mapping.scale:.4f}]')
+                    f'[{low:.4f}, {high:.4f}]')
         normalised = [min(max(v, 0.0), 1.0) for v in normalised]
         velocities = None
         if any(k.velocities for k in keyframes):
             span = axis.end - axis.begin
-            velocities = [(k.velocities or {}).get(name, 0.0) / mapping.scale / span * duration
-                          for k in keyframes]
+            velocities = [units.rate_to_rotations((k.velocities or {}).get(name, 0.0))
+                          / span * duration for k in keyframes]
         try:
             fitted = fit_keyframes([t / duration for t in times], normalised, velocities)
         except TrajectoryError as exc:

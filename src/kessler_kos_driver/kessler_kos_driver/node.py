@@ -3,12 +3,13 @@
 The base node (gimbal_driver_common.ros.base_node) and its controller provide the lifecycle,
 link supervision, joint_states, joint_command, ~/stop, ~/move_to, ~/home, presets
 (driver-side YAML, kOS has none), the driver-side `sector` scan, /diagnostics and ~/status.
-Everything device-side, including the SI <-> motor rotation conversion (`joint_scales`), is
-in the ROS-free adapter :class:`~kessler_kos_driver.device.KosDevice` (built by
-:meth:`KosDriverNode.make_device`). This node adds the kOS services (playback, ~/calibrate,
-~/take_picture, ~/command for LEDStatus and SoftwareID) and topics (~/playback_status,
-~/aux_inputs, ~/slave_controller_present), each a call of the adapter through
-``controller.call``.
+Everything device-side, including the SI <-> motor rotation conversion (`calibrated_spans`,
+`joint_offsets`, `joint_scales`: :mod:`kessler_kos_driver.units`), is in the ROS-free
+adapter :class:`~kessler_kos_driver.device.KosDevice` (built by
+:meth:`KosDriverNode.make_device`); this node sees SI only. It adds the kOS services
+(playback, ~/calibrate, ~/take_picture, ~/command for LEDStatus and SoftwareID) and topics
+(~/playback_status, ~/aux_inputs, ~/slave_controller_present); each service is one call of
+adapter methods through the controller's ``call()`` boundary, never the client.
 
 The `password` parameter is redacted: rclpy publishes declared parameter values on
 /parameter_events and serves them on ~/get_parameters, so the real value is taken from the
@@ -56,11 +57,13 @@ from .protocol import (
     USB_KEEPALIVE_PERIOD_S,
     PlaybackMode,
 )
+from .units import MOTOR_RADIANS, MOTOR_RADIANS_PER_ROTATION, JointUnits, joint_units
 from .usb_link import USB_BACKENDS, UsbTarget
 
 REDACTED = '********'
 TRANSPORTS = ('tcp', 'usb')
-TWO_PI = 2.0 * math.pi
+#: the parameters of the SI <-> rotation conversion (changed together, while idle)
+UNIT_PARAMETERS = ('calibrated_spans', 'joint_offsets', 'joint_scales')
 
 
 class _RosLogHandler(logging.Handler):
@@ -76,17 +79,21 @@ class _RosLogHandler(logging.Handler):
             self._logger.error(text)
         elif record.levelno >= logging.WARNING:
             self._logger.warning(text)
+        elif record.levelno >= logging.INFO:   # a connect, a new end mark (units change)
+            self._logger.info(text)
         else:
             self._logger.debug(text)
 
 
 class KosDriverNode(GimbalDriverNode):
     DEFAULT_JOINT_NAMES = ('slider', 'pan', 'tilt')
-    # Device limits are the calibrated ranges and the motors' MaxMax speeds (checked by the
-    # adapter and client); these parameter defaults only bound what the driver accepts at all.
-    DEFAULT_POSITION_MIN = (-1000.0,)
-    DEFAULT_POSITION_MAX = (1000.0,)
-    DEFAULT_VELOCITY_MAX = (60.0,)
+    # One example rig in SI, the same in urdf/kessler_kos_driver.urdf (tests/
+    # test_descriptions.py checks they agree): a slider of 1.5 m from its begin mark at up
+    # to 0.5 m/s, a pan of +-pi at up to 1.5 rad/s and a tilt of +-pi/2 at up to 1 rad/s.
+    # The device checks its calibrated ranges and MaxMax speeds as well (the adapter, in SI).
+    DEFAULT_POSITION_MIN = (0.0, -math.pi, -math.pi / 2)
+    DEFAULT_POSITION_MAX = (1.5, math.pi, math.pi / 2)
+    DEFAULT_VELOCITY_MAX = (0.5, 1.5, 1.0)
     SCAN_PATTERNS = ('sector',)
 
     def __init__(self, **kwargs: object) -> None:
@@ -168,9 +175,20 @@ class KosDriverNode(GimbalDriverNode):
             'motor_addresses', list(range(1, n + 1)),
             'kOS motor address (1..10) of each joint, same order as joint_names',
             element_type=int, value_range=(MOTOR_ADDRESS_MIN, MOTOR_ADDRESS_MAX))
+        self.calibrated_spans = self.declare_param(
+            'calibrated_spans', [0.0] * n,
+            'per joint: how far the joint moves from its begin mark to its end mark (m or rad, '
+            'signed in the REP-103 direction), measured on the rig; a calibrated axis then '
+            'reports joint_offsets + rotations * span / end_position (0 = no span: '
+            'joint_scales)', element_type=float)
+        self.joint_offsets = self.declare_param(
+            'joint_offsets', [0.0] * n,
+            'per joint: the SI value (m or rad) at the begin mark (motor rotation 0)',
+            element_type=float)
         self.joint_scales = self.declare_param(
-            'joint_scales', [TWO_PI] * n,
-            'SI units (rad or m) per motor rotation for each joint; negative flips direction',
+            'joint_scales', [MOTOR_RADIANS_PER_ROTATION] * n,
+            'per joint without a calibrated span: SI units (m or rad) per motor rotation; '
+            'negative flips the direction (default 2*pi: motor-shaft radians, not the joint)',
             element_type=float)
         self.acceleration_scale = self.declare_param(
             'acceleration_scale', 0.5,
@@ -200,7 +218,7 @@ class KosDriverNode(GimbalDriverNode):
         if len(self.motor_addresses) != n or len(set(self.motor_addresses)) != n:
             raise ParameterError(f'parameter motor_addresses: need {n} distinct addresses '
                                  f'(one per joint), got {self.motor_addresses}')
-        self._check_joint_scales(self.joint_scales)
+        self.joint_units = self._joint_units(self.parameter_registry.current)
         self.kos_settings = KosSettings(self.acceleration_scale, self.playback_timeout)
 
     def _declare_password(self) -> str:
@@ -227,33 +245,40 @@ class KosDriverNode(GimbalDriverNode):
         return password
 
     # ------------------------------------------------- run-time parameters
-    def _check_joint_scales(self, scales: Sequence[float]) -> None:
-        """One value per joint, finite and non-zero (start-up and ``ros2 param set``)."""
-        n = len(self.joint_names)
-        if len(scales) != n or any(not math.isfinite(s) or s == 0 for s in scales):
-            raise ParameterError(f'parameter joint_scales: need {n} finite non-zero values, '
-                                 f'got {list(scales)}')
+    def _joint_units(self, value_of: Callable[[str], object]) -> list[JointUnits]:
+        """The unit parameters, checked (start-up and ``ros2 param set``)."""
+        try:
+            return joint_units(len(self.joint_names), *(value_of(n) for n in UNIT_PARAMETERS))
+        except ValueError as exc:
+            raise ParameterError(str(exc)) from None
 
     def declare_runtime_parameters(self) -> None:
         """kOS parameters that apply when set; the link settings need a reconfigure.
 
-        joint_scales change the SI<->rotation conversion of every command and reading, so
-        they are taken only while the axes are idle and no device move (playback) runs.
+        calibrated_spans, joint_offsets and joint_scales change the SI<->rotation conversion
+        of every command and reading, so they are taken only while the axes are idle and no
+        device move (playback) runs.
         """
 
-        def scales_busy() -> str | None:
-            if self.controller is None:
+        def units_busy() -> str | None:
+            device = self.device
+            if device is None:
                 return None
-            reason = self.kos.playing() or self.controller.busy()
+            reason = device.playing() or self.controller.busy()
             return f'the axes must be idle ({reason})' if reason else None
 
-        def set_joint_scales(scales: list[float]) -> None:
-            self.joint_scales = scales
-            if self.controller is not None:
-                self.kos.set_joint_scales(scales, self.controller.commanded_targets)
+        def set_units(name: str) -> Callable[[list[float]], None]:
+            def apply(values: list[float]) -> None:
+                setattr(self, name, values)
+                self.joint_units = joint_units(
+                    len(self.joint_names), *(getattr(self, n) for n in UNIT_PARAMETERS))
+                if self.device is not None:
+                    self.device.set_units(self.joint_units, self.controller.commanded_targets)
+            return apply
 
-        self.runtime_parameter('joint_scales', set_joint_scales, busy=scales_busy,
-                               check=self._check_joint_scales)
+        for name in UNIT_PARAMETERS:
+            self.runtime_parameter(name, set_units(name), busy=units_busy)
+        self.parameter_check(UNIT_PARAMETERS, self._joint_units)
         for name in ('return_to_home_percent', 'picture_exposure'):
             self.runtime_parameter(name, name)
 
@@ -268,8 +293,8 @@ class KosDriverNode(GimbalDriverNode):
 
         def set_poll_period(period: float) -> None:
             self.poll_period = period
-            if self.controller is not None:  # the client reads it on every poll tick
-                self.kos.client.poll_period = period
+            if self.device is not None:  # applies at the next poll tick
+                self.device.set_poll_period(period)
 
         self.runtime_parameter('poll_period', set_poll_period)
 
@@ -284,20 +309,40 @@ class KosDriverNode(GimbalDriverNode):
             usb=self.usb_target, usb_report_size=self.usb_report_size,
             usb_keepalive_period=self.usb_keepalive_period,
         )
-        joints = joint_mappings(self.joint_names, self.motor_addresses, self.joint_scales)
+        joints = joint_mappings(self.joint_names, self.motor_addresses, self.joint_units)
         return KosDevice(client, joints, self.config, self.kos_settings,
                          on_playback=self._publish_playback,
                          on_aux_inputs=self._publish_aux_inputs)
 
     @property
-    def kos(self) -> KosDevice:
+    def device(self) -> KosDevice | None:
         """The adapter (after configure)."""
-        return self.controller.device
+        return super().device
 
-    def _serve_device(self, response: object, request: Callable[[KosDevice], str]) -> object:
-        """A kOS extra: refused while inactive or disconnected, errors become success=false."""
+    def device_ready(self, device: KosDevice) -> None:
+        """Units are never silent: what each joint reports, and a warning naming the
+        parameters to set for each joint that reports motor radians."""
+        report = device.units_report()
+        self.get_logger().info('joint units: ' + ', '.join(f'{j} {u}' for j, u in report.items()))
+        for joint, units in report.items():
+            if units != MOTOR_RADIANS:
+                continue
+            index = self.joint_names.index(joint)
+            pending = (' (its calibrated_spans entry applies once the axis is calibrated: '
+                       '~/calibrate)' if self.calibrated_spans[index] else '')
+            self.get_logger().warning(
+                f'joint {joint!r} reports motor-shaft radians, not the joint\'s rad or m: no '
+                f'calibrated span applies{pending} and joint_scales is 2*pi per motor '
+                'rotation; set calibrated_spans (the distance between the begin and end '
+                'marks, measured on the rig) or joint_scales (SI per motor rotation)')
+
+    def _serve_device(self, response: object, request: Callable[[KosDevice], str],
+                      joints: Sequence[str] | None = None) -> object:
+        """A kOS extra through the controller's ``call()`` boundary: refused while inactive,
+        disconnected or (with ``joints``) while those joints cannot move; errors become
+        success=false."""
         return self.serve_request(
-            response, lambda: self.controller.call(lambda: request(self.kos)))
+            response, lambda: self.controller.call(lambda: request(self.device), joints))
 
     # ---------------------------------------------------------- notifications
     def _publish_playback(self, report: PlaybackReport) -> None:
@@ -372,7 +417,6 @@ class KosDriverNode(GimbalDriverNode):
 
     def _on_load_trajectory(self, request, response):
         def action(device: KosDevice) -> str:
-            device.require_idle()
             start_time = self._start_time(request.start_time)
             settings = PlaybackSettings(
                 mode=request.playback_mode, duration=request.duration,
@@ -407,7 +451,8 @@ class KosDriverNode(GimbalDriverNode):
                     f'{trajectory.effective_duration():.3f} s{when}; now ~/setup_playback '
                     'and ~/start_playback')
 
-        return self._serve_device(response, action)
+        joints = list(request.keyframes.joint_names) or [a.joint_name for a in request.axes]
+        return self._serve_device(response, action, joints)
 
     def _start_time(self, stamp) -> int:
         """LoadTrajectory.start_time as UnixTime (0 = not used); a past date is refused."""
@@ -509,7 +554,7 @@ class KosDriverNode(GimbalDriverNode):
             raise CommandError(f'action {request.action} is not MARK_BEGIN (0), MARK_END (1) '
                                'or RESET (2)')
 
-        return self._serve_device(response, action)
+        return self._serve_device(response, action, [request.joint_name])
 
     def _on_take_picture(self, request, response):
         def action(device: KosDevice) -> str:

@@ -201,8 +201,10 @@ class _Playback:
     status: int = PlaybackState.NO_MOVE
 
 
-class KosDevice:
-    """The simulated device: state shared by every TCP connection (it survives link drops)."""
+class SimulatedRig:
+    """The simulated kOS device (motors, calibration, playback): state shared by every TCP
+    and USB session (it survives link drops). Named apart from the driver's adapter,
+    :class:`kessler_kos_driver.device.KosDevice`, which talks to it."""
 
     def __init__(self, settings: SimSettings) -> None:
         self.settings = settings
@@ -733,7 +735,7 @@ class KosDevice:
 class KosSession:
     """One TCP connection or USB HID link: framing, lock state, keep-alive, reply queue."""
 
-    def __init__(self, device: KosDevice, usb: bool = False) -> None:
+    def __init__(self, device: SimulatedRig, usb: bool = False) -> None:
         self.device = device
         self.usb = usb
         self.parser = FrameParser()
@@ -792,13 +794,13 @@ class SimHidDevice:
     """The simulated device seen through USB HID, with the methods of `hid.device`.
 
     `write` takes output reports (report ID 0x01 + message bytes, zero padded) and feeds the
-    reassembled kOS bytes to a USB session of the shared `KosDevice`; `read` returns one
+    reassembled kOS bytes to a USB session of the shared `SimulatedRig`; `read` returns one
     input report (report ID first, padded to `report_size`) per call, polling the session
     for notifications while it waits. A session silent for the keep-alive timeout, or a
     device unplugged with `unplug()`, makes `read`/`write` raise OSError like hidapi does.
     """
 
-    def __init__(self, device: KosDevice, report_size: int = REPORT_SIZE) -> None:
+    def __init__(self, device: SimulatedRig, report_size: int = REPORT_SIZE) -> None:
         self.device = device
         self.report_size = report_size
         self.session: KosSession | None = None
@@ -888,7 +890,7 @@ class KosSimulator:
 
     def __init__(self, settings: SimSettings, port: int = 0, discovery_port: int = 0,
                  control_port: int | None = None) -> None:
-        self.device = KosDevice(settings)
+        self.device = SimulatedRig(settings)
         self.server = TcpSimServer(lambda: KosSession(self.device), port=port)
         self.discovery_port = discovery_port
         self.control_port_requested = control_port

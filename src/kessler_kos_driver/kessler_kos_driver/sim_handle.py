@@ -3,7 +3,6 @@ cross-driver process tests)."""
 
 from __future__ import annotations
 
-import math
 import random
 import time
 from pathlib import Path
@@ -12,6 +11,8 @@ from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.testing.sim_handle import SimHandle
 
+from .registration import SIM_RIG
+
 
 class KesslerSimHandle(SimHandle):
     """The receive side logs kOS message types; Get* requests and the password handshake
@@ -19,8 +20,10 @@ class KesslerSimHandle(SimHandle):
 
     not_applicable = {'nack': 'kOS answers a bad request with ErrorStatus, injected as '
                               'fault_bits (device error broadcast)'}
-    far_move = ('pan', 600.0, 5.0)
-    takeover_goal = {'pan': 20.0, 'tilt': -20.0}
+    #: SI on the example rig (registration.SIM_RIG): from pan -pi toward +3 rad at 0.05 rad/s
+    #: (0.8 rotations/s) lasts about a minute of simulated time
+    far_move = ('pan', 3.0, 0.05)
+    takeover_goal = {'pan': 0.3, 'tilt': 0.2}
     READS = ('UserPassword', 'DevicePassword')
     #: the simulator's time scale with ``process_tests`` (their moves settle sooner)
     PROCESS_TESTS_TIME_SCALE = 2.0
@@ -67,11 +70,16 @@ class KesslerSimHandle(SimHandle):
             return motor.moving or abs(motor.velocity) > 1e-9
 
     def device_target(self, joint: str) -> float | None:
-        """The motor's target (rotations) in rad: every joint is 2π rad per rotation."""
+        """The motor's target (rotations) in SI on the example rig: offset + rotations *
+        span / end (registration.SIM_RIG, the spec's calibrated_spans/joint_offsets)."""
         addresses = dict(zip(self.spec.joints, self.spec.node_parameters['motor_addresses'],
                              strict=True))
-        target = self.sim.device.motors[addresses[joint]].target  # None: no move since rest
-        return None if target is None else target * math.tau
+        motor = self.sim.device.motors[addresses[joint]]
+        target = motor.target  # None: no move since rest
+        if target is None or not motor.end:
+            return None
+        rig = SIM_RIG[joint]
+        return rig.offset + target * rig.span / motor.end
 
     def malformed_frames(self, rng: random.Random) -> None:
         from kessler_kos_driver.protocol import MotorInfo, MotorInfoEntry

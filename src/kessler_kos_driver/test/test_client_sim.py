@@ -45,10 +45,12 @@ from kessler_kos_driver.protocol import (
     encode_frame,
 )
 from kessler_kos_driver.sim import KosSimulator, SimSettings
+from kessler_kos_driver.units import JointUnits
 
 PASSWORD = 'hunter2'
 TWO_PI = 2 * math.pi
-JOINTS = {n: JointMapping(n, a, TWO_PI) for n, a in (('slider', 1), ('pan', 2), ('tilt', 3))}
+JOINTS = {n: JointMapping(n, a, JointUnits(scale=TWO_PI))
+          for n, a in (('slider', 1), ('pan', 2), ('tilt', 3))}
 S = PlaybackState
 
 

@@ -14,12 +14,12 @@ from gimbal_driver_common.testing.conformance import DriverConformance
 class TestKesslerKosConformance(DriverConformance):
     __test__ = True
     driver = 'kessler_kos'
-    # rad (2*pi per motor rotation, the spec's joint_scales), in the spec's joint order,
-    # inside the simulator's calibrated ranges: pan 0..100 rot, tilt 0..-40 rot, slider 0..200
+    # SI on the simulator's example rig (the spec's calibrated_spans/joint_offsets,
+    # registration.SIM_RIG): pan -pi..pi rad, tilt -pi/2..pi/2 rad, slider 0..1.5 m
     joints = ('pan', 'tilt', 'slider')
-    small_move = {'pan': 20.0, 'tilt': -20.0}
-    far_move = ('pan', 600.0, 5.0)
-    jog = ('pan', 20.0)
+    small_move = {'pan': 0.3, 'tilt': 0.2}
+    far_move = ('pan', 3.0, 0.05)
+    jog = ('pan', 0.5)
     tolerance = 0.011
     preset_index = 4
-    scan = dict(pattern='sector', pan_min=10.0, pan_max=30.0, speed=10.0)
+    scan = dict(pattern='sector', pan_min=-0.5, pan_max=0.5, speed=0.5)

@@ -1,9 +1,13 @@
 """KosDevice under the shared GimbalController, against the kOS simulator over TCP loopback.
 
 No ROS: the controller (link supervision, command thread, jog watchdog) and the policies run
-in this process around the adapter, the simulator answers over a real socket. The tilt joint
-has a negative scale (-2*pi rad per rotation) so every test also crosses the sign flip; the
-simulator's calibrated tilt range is 0..-40 rotations, i.e. 0..+251 rad here.
+in this process around the adapter, the simulator answers over a real socket and records
+every motion command it receives (its receive side, in rotations).
+
+Units (issue 22): pan and tilt have calibrated spans on the simulator's calibrated ranges
+(pan 0..100 rotations = -pi..pi rad, tilt 0..-40 rotations = -pi/2..+pi/2 rad: the tilt
+motor counts down as the joint rises, so every test also crosses the sign flip); the slider
+has no span and reports motor radians (joint_scales 2*pi, offset 0) over 0..200 rotations.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import threading
 import pytest
 
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
+from gimbal_driver_common.diagnostics import Level
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest, LinkError
 from gimbal_driver_common.errors import DeviceTimeout as CoreDeviceTimeout
 from gimbal_driver_common.joint_command import JointLimits
@@ -29,24 +34,38 @@ from kessler_kos_driver.client import (
 )
 from kessler_kos_driver.device import KosDevice, KosSettings, joint_mappings
 from kessler_kos_driver.moves import Keyframe, PlaybackSettings
-from kessler_kos_driver.protocol import PlaybackState
+from kessler_kos_driver.protocol import PlaybackState, SetPositionSpeedAcceleration
 from kessler_kos_driver.sim import KosSimulator, SimSettings
+from kessler_kos_driver.units import MOTOR_RADIANS, JointUnits
 
 PASSWORD = 'dev-secret'
 TWO_PI = 2 * math.pi
 JOINTS = ['slider', 'pan', 'tilt']
-SCALES = [TWO_PI, TWO_PI, -TWO_PI]      # tilt counts the other way
+UNITS = [JointUnits(),                                     # slider: no span, motor radians
+         JointUnits(span=TWO_PI, offset=-math.pi),         # pan: -pi..pi over 0..100 rot
+         JointUnits(span=math.pi, offset=-math.pi / 2)]    # tilt: -pi/2..pi/2 over 0..-40
 ADDRESS = {'slider': 1, 'pan': 2, 'tilt': 3}
+PAN_RAD_PER_ROT = TWO_PI / 100.0
+TILT_RAD_PER_ROT = math.pi / -40.0
 TIMEOUT = 30.0
 LOG = logging.getLogger('test_device')
 
 
 class Rig:
-    """Simulator, client, adapter and controller."""
+    """Simulator (with its receive side recorded), client, adapter and controller."""
 
     def __init__(self, command_timeout: float = 0.3) -> None:
         self.sim = KosSimulator(SimSettings(password=PASSWORD, precalibrated=True,
                                             time_scale=10.0), port=0, discovery_port=0)
+        self.received: list[SetPositionSpeedAcceleration] = []
+        handle = self.sim.device.handle
+
+        def recorded(message, frame, session):
+            if isinstance(message, SetPositionSpeedAcceleration):
+                self.received.append(message)
+            return handle(message, frame, session)
+
+        self.sim.device.handle = recorded
         self.sim.start()
         self.client = KosClient('127.0.0.1', self.sim.port, password=PASSWORD,
                                 poll_period=0.02, reply_timeout=2.0)
@@ -55,7 +74,7 @@ class Rig:
             JOINTS, limits, publish_rate=50.0, command_timeout=command_timeout,
             reconnect_period=0.05, goal_tolerance=0.011, move_timeout=TIMEOUT)
         self.playback: list = []
-        self.device = KosDevice(self.client, joint_mappings(JOINTS, [1, 2, 3], SCALES),
+        self.device = KosDevice(self.client, joint_mappings(JOINTS, [1, 2, 3], UNITS),
                                 self.config, KosSettings(playback_timeout=TIMEOUT),
                                 on_playback=self.playback.append)
         self.link_states: list[bool] = []
@@ -90,6 +109,17 @@ class Rig:
     def motor_moving(self, joint: str) -> bool:
         with self.sim.device.lock:
             return self.motor(joint).moving
+
+    def received_for(self, joint: str) -> list[SetPositionSpeedAcceleration]:
+        """The motion commands the simulator received for the joint's motor."""
+        return [m for m in list(self.received) if m.motor_address == ADDRESS[joint]]
+
+    def position_reads(self, joint: str, value: float, tolerance: float = 1e-3) -> bool:
+        return abs(self.controller.positions()[joint] - value) < tolerance
+
+    def axis_diagnostics(self, joint: str):
+        part = next(p for p in self.device.status.parts() if p.part == joint)
+        return part, dict(part.values)
 
     def close(self) -> None:
         self.controller.shutdown()
@@ -128,7 +158,7 @@ def test_wrong_password_fails_open_as_a_refusal():
     try:
         client = KosClient('127.0.0.1', sim.port, password='wrong', poll_period=0)
         config = ControllerConfig(JOINTS, {n: JointLimits() for n in JOINTS})
-        ctl = GimbalController(KosDevice(client, joint_mappings(JOINTS, [1, 2, 3], SCALES),
+        ctl = GimbalController(KosDevice(client, joint_mappings(JOINTS, [1, 2, 3], UNITS),
                                          config), config, LOG)
         with pytest.raises(DeviceRefused, match='password'):
             ctl.open()
@@ -138,69 +168,108 @@ def test_wrong_password_fails_open_as_a_refusal():
         sim.stop()
 
 
-def test_move_converges_with_units_and_signs_both_ways(rig):
+def test_calibrated_axes_report_si_and_an_axis_without_a_span_motor_radians(rig):
+    """Motors moved on the device directly (rotations) read back in SI: pan and tilt by
+    offset + rotations * span / end, the slider (no span) as motor radians."""
+    # every motor starts at its begin mark: the offsets
+    assert rig.controller.positions() == pytest.approx(
+        {'slider': 0.0, 'pan': -math.pi, 'tilt': -math.pi / 2}, abs=1e-6)
+    rig.client.move_to(ADDRESS['pan'], 75.0, 50.0)       # 3/4 of the range: +pi/2
+    rig.client.move_to(ADDRESS['tilt'], -10.0, 20.0)     # 1/4 of 0..-40: -pi/4
+    rig.client.move_to(ADDRESS['slider'], 2.0, 50.0)     # two motor turns: 4 pi
+    wait_for(lambda: rig.position_reads('pan', math.pi / 2)
+             and rig.position_reads('tilt', -math.pi / 4)
+             and rig.position_reads('slider', 4 * math.pi), TIMEOUT, 'the SI positions')
+    assert rig.device.units_report() == {'slider': MOTOR_RADIANS,
+                                         'pan': 'SI (calibrated_spans)',
+                                         'tilt': 'SI (calibrated_spans)'}
+    slider, values = rig.axis_diagnostics('slider')
+    assert slider.level == Level.OK and values['units'] == 'motor radians'
+    assert float(values['si_per_rotation']) == pytest.approx(TWO_PI, abs=1e-5)
+    pan, values = rig.axis_diagnostics('pan')
+    assert pan.level == Level.OK and values['units'] == 'SI (calibrated_spans)'
+    assert float(values['begin_position']) == pytest.approx(-math.pi, abs=1e-5)
+    assert float(values['end_position']) == pytest.approx(math.pi, abs=1e-5)
+    assert float(values['max_setup_speed']) == pytest.approx(165.0 * PAN_RAD_PER_ROT, abs=1e-4)
+    _, values = rig.axis_diagnostics('tilt')
+    assert float(values['si_per_rotation']) == pytest.approx(TILT_RAD_PER_ROT, abs=1e-6)
+    assert float(values['end_position']) == pytest.approx(math.pi / 2, abs=1e-5)
+
+
+def test_an_si_move_lands_on_the_right_rotations_on_the_receive_side(rig):
     samples = []
     rig.controller.on_sample = samples.append
-    targets = rig.motion.start_move(['pan', 'tilt'], [20.0, 20.0])
+    targets = rig.motion.start_move(['pan', 'tilt', 'slider'], [math.pi / 2, 0.25, 3.0],
+                                    [1.0, 0.5, 5.0])   # slow enough to sample the velocity
     outcome = rig.motion.wait_move(targets)
     assert outcome.success, outcome.message
-    # SI -> rotations: pan +20 rad is +20/2pi rot, tilt +20 rad is -20/2pi rot (scale < 0)
-    assert rig.motor_position('pan') == pytest.approx(20.0 / TWO_PI, abs=1e-3)
-    assert rig.motor_position('tilt') == pytest.approx(-20.0 / TWO_PI, abs=1e-3)
-    # ... and the tilt velocity read while it moved is positive in SI (motor turned negative)
+    # what the device received, in rotations (Float32 on the wire)
+    expected = {'pan': 75.0,                                   # (pi/2 + pi) * 100 / 2pi
+                'tilt': (0.25 + math.pi / 2) * -40.0 / math.pi,  # -23.18: counts down
+                'slider': 3.0 / TWO_PI}                        # motor radians
+    for joint, rotations in expected.items():
+        assert rig.received_for(joint)[-1].position == pytest.approx(rotations, abs=1e-4)
+        assert rig.motor_position(joint) == pytest.approx(rotations, abs=1e-3)
+    # the tilt rose in SI while its motor turned negative
     assert any(s.velocities.get('tilt', 0.0) > 0.1 for s in samples)
     assert not any(s.velocities.get('tilt', 0.0) < -0.1 for s in samples)
-    assert rig.controller.commanded_targets == {'pan': 20.0, 'tilt': 20.0}
-    # rotations -> SI: a move made on the device directly reads back scaled and flipped
-    rig.client.move_to(ADDRESS['tilt'], -5.0, 5.0)
-    wait_for(lambda: abs(rig.controller.positions()['tilt'] - 5.0 * TWO_PI) < 1e-3,
-             TIMEOUT, 'tilt at +5 turns in SI')
+    assert rig.controller.commanded_targets == {'pan': math.pi / 2, 'tilt': 0.25, 'slider': 3.0}
 
 
 def test_move_speed_converts_to_rotations_per_second(rig):
-    rig.device.move({'pan': (30.0, TWO_PI)})    # 1 rot/s
+    rig.device.move({'pan': (2.0, 5 * PAN_RAD_PER_ROT)})    # 5 rot/s
     wait_for(lambda: rig.motor_moving('pan'), TIMEOUT, 'pan moving')
+    sent = rig.received_for('pan')[-1]
+    assert sent.speed == pytest.approx(5.0)
+    assert sent.position == pytest.approx((2.0 + math.pi) / PAN_RAD_PER_ROT, abs=1e-4)
     with rig.sim.device.lock:
         motor = rig.motor('pan')
-        assert motor.speed == pytest.approx(1.0)
+        assert motor.speed == pytest.approx(5.0)
         assert motor.acceleration == pytest.approx(motor.max_acceleration * 0.5)
-        assert motor.target == pytest.approx(30.0 / TWO_PI)
 
 
 def test_jog_is_stopped_by_the_watchdog(rig):
     ctl = rig.controller
+    rig.motion.wait_move(rig.motion.start_move(['tilt'], [-1.0]))
     start = rig.motor_position('tilt')
-    ctl.command(['tilt'], [], [5.0])       # +5 rad/s: the motor turns toward negative
+    ctl.command(['tilt'], [], [0.5])       # +0.5 rad/s: the motor turns toward negative
     wait_for(lambda: rig.motor_moving('tilt'), TIMEOUT, 'tilt jogging')
     assert ctl.watchdog.jogging == ['tilt']
+    assert rig.received_for('tilt')[-1].speed == pytest.approx(0.5 / -TILT_RAD_PER_ROT)
     # nothing feeds the jog: the watchdog stops it after command_timeout
     wait_for(lambda: not ctl.watchdog.jogging, TIMEOUT, 'the jog watchdog to expire')
     wait_for(lambda: not rig.motor_moving('tilt'), TIMEOUT, 'tilt stopped')
     stopped_at = rig.motor_position('tilt')
     assert -40.0 < stopped_at < start       # moved the SI-positive way, short of the end
-    assert ctl.positions()['tilt'] > 0.0
+    assert ctl.positions()['tilt'] > -1.0
 
 
 def test_stop_halts_a_move(rig):
     ctl = rig.controller
-    rig.motion.start_move(['slider'], [900.0], [30.0])
+    rig.motion.start_move(['slider'], [900.0], [30.0])      # motor radians: 143 rotations
     wait_for(lambda: rig.motor_moving('slider'), TIMEOUT, 'slider moving')
     assert 'stopped' in ctl.stop()
     wait_for(lambda: not rig.motor_moving('slider'), TIMEOUT, 'slider stopped')
     assert rig.motor_position('slider') < 900.0 / TWO_PI - 1.0
 
 
-def test_refusal_reasons_and_nothing_sent(rig):
+def test_refusal_reasons_in_si_and_nothing_sent(rig):
     ctl = rig.controller
-    before = rig.motor_commands()
-    # outside the calibrated tilt range (0..+251 rad here): the device limit, before sending
-    with pytest.raises(InvalidRequest, match=r"joint 'tilt'.*calibrated range"):
-        rig.motion.start_move(['tilt'], [-1.0])
-    with pytest.raises(InvalidRequest, match=r"joint 'pan'.*MaxMaxSetupSpeed"):
-        rig.device.move({'pan': (10.0, 170.0 * TWO_PI)})
+    before, received = rig.motor_commands(), len(rig.received)
+    # outside the calibrated tilt range (-pi/2..pi/2 here): the device limit, before sending
+    with pytest.raises(InvalidRequest, match=r"joint 'tilt': -2.0000 is outside the "
+                                             r'calibrated range \[-1.5708, 1.5708\]'):
+        rig.motion.start_move(['tilt'], [-2.0])
+    with pytest.raises(InvalidRequest, match=r"joint 'pan': speed 11.0000 exceeds the motor "
+                                             r'maximum 10.3673 \(MaxMaxSetupSpeed'):
+        rig.device.move({'pan': (1.0, 11.0)})
     with pytest.raises(InvalidRequest, match=r"joint 'pan'.*exceeds the motor maximum"):
-        rig.device.jog({'pan': 170.0 * TWO_PI})
+        rig.device.jog({'pan': -11.0})
+    with pytest.raises(InvalidRequest, match=r"joint 'slider'.*calibrated range \[0.0000, "
+                                             r'1256.6371\] \(motor radians'):
+        rig.device.move({'slider': (-1.0, None)})
     assert rig.motor_commands() == before     # no motion command reached the device
+    assert len(rig.received) == received
     assert rig.sim.command('offline 2') == 'ok'
     wait_for(lambda: ctl.refusal(['pan']), TIMEOUT, 'pan offline')
     assert ctl.refusal(['pan']) == "joint 'pan': motor 2 is offline"
@@ -215,10 +284,75 @@ def test_refusal_reasons_and_nothing_sent(rig):
     ctl.activate()
 
 
+def test_keyframe_playback_in_si(rig):
+    frames = [Keyframe(0.0, {'pan': -1.0, 'tilt': -0.5}),
+              Keyframe(2.0, {'pan': 1.0, 'tilt': 0.5})]
+    trajectory = rig.device.load_keyframes(frames, PlaybackSettings())
+    # normalised on the device: pan (SI + pi) / 2pi, tilt (SI + pi/2) / pi
+    pan = trajectory.axes[ADDRESS['pan']]
+    tilt = trajectory.axes[ADDRESS['tilt']]
+    assert pan[0].p0_position == pytest.approx((-1.0 + math.pi) / TWO_PI, abs=1e-6)
+    assert pan[-1].p3_position == pytest.approx((1.0 + math.pi) / TWO_PI, abs=1e-6)
+    assert tilt[-1].p3_position == pytest.approx((0.5 + math.pi / 2) / math.pi, abs=1e-6)
+    rig.device.setup_playback(delay_return=False)
+    rig.device.start_playback()
+    wait_for(lambda: PlaybackState.FULL_STOP in rig.client.playback.history, TIMEOUT,
+             'FullStop')
+    report = next(r for r in rig.playback if r.status == PlaybackState.FULL_STOP)
+    assert report.positions == pytest.approx({'pan': 1.0, 'tilt': 0.5}, abs=1e-4)
+    assert rig.motor_position('pan') == pytest.approx((1.0 + math.pi) / PAN_RAD_PER_ROT,
+                                                      abs=1e-3)
+    assert rig.motor_position('tilt') == pytest.approx(
+        (0.5 + math.pi / 2) / TILT_RAD_PER_ROT, abs=1e-3)
+    wait_for(lambda: rig.position_reads('pan', 1.0) and rig.position_reads('tilt', 0.5),
+             TIMEOUT, 'joint positions at the last key frame')
+    # outside the calibrated range in SI: refused with the SI range, nothing loaded
+    with pytest.raises(DeviceRefused, match=r"'tilt'.*calibrated range \[-1.5708, 1.5708\]"):
+        rig.device.load_keyframes([Keyframe(0.0, {'tilt': 0.0}), Keyframe(1.0, {'tilt': 1.6})],
+                                  PlaybackSettings())
+    assert not rig.client.playback.loaded    # FullStop consumed the move; nothing new sent
+
+
+def test_a_recalibration_changes_the_conversion(rig, caplog):
+    """A new end mark: the pan's span (-pi..pi) now lies over the new range, at once."""
+    outcome = rig.motion.wait_move(rig.motion.start_move(['pan'], [-2.0]))
+    assert outcome.success, outcome.message
+    rig.device.mark_begin('pan')
+    begin = rig.motor_position('pan')
+    rig.client.move_to(ADDRESS['pan'], begin + 50.0, 50.0)  # on the device, in rotations
+    wait_for(lambda: abs(rig.motor_position('pan') - (begin + 50.0)) < 1e-3, TIMEOUT,
+             'pan 50 rotations on')
+    with caplog.at_level(logging.INFO, logger='kessler_kos_driver.device'):
+        assert rig.device.mark_end('pan') == pytest.approx((-math.pi, math.pi), abs=1e-5)
+    assert "joint 'pan': end mark now 50 rotations (was 100)" in caplog.text
+    # the device says: begin 0, end 50, position 50 = the end mark = +pi
+    wait_for(lambda: rig.position_reads('pan', math.pi), TIMEOUT, 'pan at +pi')
+    _, values = rig.axis_diagnostics('pan')
+    assert float(values['end_position_rotations']) == pytest.approx(50.0)
+    # commands follow the new span: 0 rad is now 25 rotations (was 50)
+    outcome = rig.motion.wait_move(rig.motion.start_move(['pan'], [0.0]))
+    assert outcome.success, outcome.message
+    assert rig.received_for('pan')[-1].position == pytest.approx(25.0, abs=1e-4)
+    assert rig.motor_position('pan') == pytest.approx(25.0, abs=1e-3)
+
+
+def test_new_units_keep_the_motor_positions_of_the_commanded_targets(rig):
+    outcome = rig.motion.wait_move(rig.motion.start_move(['pan', 'slider'], [0.0, 3.0]))
+    assert outcome.success, outcome.message
+    targets = rig.controller.commanded_targets
+    # pan: a quarter turn offset; slider: a 0.01 m per rotation belt instead of motor radians
+    rig.device.set_units([JointUnits(scale=0.01), JointUnits(span=TWO_PI, offset=-math.pi / 2),
+                          UNITS[2]], targets)
+    assert targets == pytest.approx({'pan': math.pi / 2, 'slider': 0.03 / TWO_PI})
+    wait_for(lambda: rig.position_reads('pan', math.pi / 2)
+             and rig.position_reads('slider', 0.03 / TWO_PI, 1e-6), TIMEOUT, 'the new units')
+    assert rig.device.units_report()['slider'] == 'SI (joint_scales)'
+
+
 def test_playback_owns_the_motors(rig):
     ctl = rig.controller
-    frames = [Keyframe(0.0, {'pan': 10.0, 'tilt': 10.0}),
-              Keyframe(4.0, {'pan': 100.0, 'tilt': 100.0})]
+    frames = [Keyframe(0.0, {'pan': -2.0, 'tilt': 0.2}),
+              Keyframe(4.0, {'pan': 2.0, 'tilt': 1.0})]
     rig.device.load_keyframes(frames, PlaybackSettings(loop_count=255, rapid_reverse=True))
     rig.device.start_playback()
     wait_for(lambda: rig.client.playback_running, TIMEOUT, 'playback running')
@@ -234,19 +368,23 @@ def test_playback_owns_the_motors(rig):
 
 
 def test_home_moves_calibrated_joints_to_their_begin_mark(rig):
-    outcome = rig.motion.wait_move(rig.motion.start_move(['pan', 'tilt'], [15.0, 15.0]))
+    outcome = rig.motion.wait_move(rig.motion.start_move(['pan', 'tilt'], [1.5, 0.5]))
     assert outcome.success, outcome.message
     message = rig.motion.home(['pan', 'tilt'], lambda state: None)
     assert message == "at the begin mark: ['pan', 'tilt']"
-    assert rig.motor_position('pan') == pytest.approx(0.0, abs=1e-3)
-    assert rig.motor_position('tilt') == pytest.approx(0.0, abs=1e-3)
+    # done within goal_tolerance (SI); the device was sent the begin marks, 0 rotations
+    assert [m.position for m in rig.received[-2:]] == [0.0, 0.0]
+    wait_for(lambda: abs(rig.motor_position('pan')) < 1e-3
+             and abs(rig.motor_position('tilt')) < 1e-3, TIMEOUT, 'the motors at 0 rotations')
+    wait_for(lambda: rig.position_reads('pan', -math.pi)      # the begin marks: the offsets
+             and rig.position_reads('tilt', -math.pi / 2), TIMEOUT, 'the begin marks in SI')
 
 
 @pytest.mark.parametrize('end', ['cancel', 'stop'])
 def test_a_homing_on_its_way_ends_at_a_cancel_request_or_a_stop(rig, end):
     """kOS homing reports once and then waits for the begin marks: a cancel request or a
     ~/stop must end that wait at once (it used to run on until move_timeout)."""
-    outcome = rig.motion.wait_move(rig.motion.start_move(['pan'], [15.0]))
+    outcome = rig.motion.wait_move(rig.motion.start_move(['pan'], [2.0]))
     assert outcome.success, outcome.message
     with rig.sim.device.lock:
         rig.sim.device.settings.time_scale = 0.2  # a homing move that lasts
@@ -260,7 +398,7 @@ def test_a_homing_on_its_way_ends_at_a_cancel_request_or_a_stop(rig, end):
 
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
-    wait_for(lambda: rig.controller.positions()['pan'] < 14.0, TIMEOUT,
+    wait_for(lambda: rig.controller.positions()['pan'] < 1.9, TIMEOUT,
              'the homing move to start')
     if end == 'cancel':
         requested.set()
@@ -274,7 +412,7 @@ def test_a_homing_on_its_way_ends_at_a_cancel_request_or_a_stop(rig, end):
     else:
         assert isinstance(ended['error'], HomingSuperseded)
     wait_for(lambda: not rig.controller.moving('pan'), TIMEOUT, 'pan to stop')
-    assert rig.controller.positions()['pan'] > 1.0  # stopped short of the begin mark
+    assert rig.controller.positions()['pan'] > -math.pi + 0.1  # short of the begin mark
 
 
 def test_link_drop_then_reconnect(rig):

@@ -1,9 +1,11 @@
 """~/look_at of kessler_kos_driver_node (process) against kessler_kos_sim (process).
 
 The chain is slider -> pan -> tilt: look_at holds the slider where it is and aims pan and
-tilt from the carriage. The simulator's default calibrated tilt range is 0..-40 rotations,
-so this rig maps REP-103 tilt with a negative joint scale (device tilt counts downward
-here) and narrows the node's tilt limits so that a low point is beyond them.
+tilt from the carriage, in SI through calibrated spans: the pan's begin mark is a quarter
+turn right (-pi/2 .. 3pi/2 over the simulator's 0..100 rotations, so a look to the back
+right is inside the node's +-pi limits but not the calibrated range), the tilt is
+-pi/2 .. pi/2 over 0..-40 rotations (the motor counts down as the tilt rises), and the
+node's tilt limits are narrowed so that a low point is beyond them.
 """
 
 from __future__ import annotations
@@ -45,8 +47,9 @@ def look_at_rig():
                 '--ros-args', '-p', 'host:=127.0.0.1', '-p', f'port:={port}',
                 '-p', f'password:={PASSWORD}', '-p', 'reconnect_period:=0.2',
                 '-p', 'publish_rate:=20.0',
-                '-p', f'joint_scales:=[{TWO_PI}, {TWO_PI}, {-TWO_PI}]',
-                '-p', 'position_min:=[-1000.0, -1000.0, -0.8]'])
+                '-p', f'calibrated_spans:=[1.5, {TWO_PI}, {math.pi}]',
+                '-p', f'joint_offsets:=[0.0, {-math.pi / 2}, {-math.pi / 2}]',
+                '-p', f'position_min:=[0.0, {-math.pi}, -0.8]'])
 
         with look_at_rig_against(PKG, domain, sim, start_node,
                                  lambda: motor_rotations(control_port)) as rig:
@@ -59,14 +62,17 @@ class TestLookAt(LookAtSuite):
         slider = look_at_rig.device_state()['slider']
         look_at_rig.check.look_and_reach(math.pi / 2, LookAtSuite.UP)
         rotations = look_at_rig.device_state()
-        assert rotations['pan'] == pytest.approx(0.25, abs=0.01)
-        assert rotations['tilt'] == pytest.approx(-LookAtSuite.UP / TWO_PI, abs=0.01)
+        # pan: (pi/2 + pi/2) / 2pi of 100 rotations; tilt: (UP + pi/2) / pi of -40
+        assert rotations['pan'] == pytest.approx(50.0, abs=0.02)
+        assert rotations['tilt'] == pytest.approx(
+            -40.0 * (LookAtSuite.UP + math.pi / 2) / math.pi, abs=0.02)
         assert rotations['slider'] == pytest.approx(slider, abs=1e-3)
 
-    def test_look_at_outside_the_calibrated_range_is_refused_by_the_client_check(
+    def test_look_at_outside_the_calibrated_range_is_refused_in_si(
             self, look_at_rig: LookAtRig) -> None:
         check = look_at_rig.check
-        check.look_and_reach(0.0, 0.0)  # from pan 0, -90 deg is nearer than +270 deg
-        # pan -90 deg is inside the node's limits but below the pan motor's begin mark (0 rot)
-        check.refused(check.point_for(-math.pi / 2, 0.0), 'calibrated range',
-                      device_commands=look_at_rig.device_state)
+        check.look_and_reach(0.0, 0.0)
+        # pan -135 deg is inside the node's +-pi limits but right of the begin mark (-90 deg)
+        result = check.refused(check.point_for(-3 * math.pi / 4, 0.0), 'calibrated range',
+                               device_commands=look_at_rig.device_state)
+        assert '[-1.5708, 4.7124]' in result.message, result.message

@@ -19,8 +19,10 @@ from kessler_kos_driver.protocol import (
     position_at,
     validate,
 )
+from kessler_kos_driver.units import JointUnits
 
-JOINTS = {'pan': JointMapping('pan', 2, -2 * math.pi), 'tilt': JointMapping('tilt', 3, 0.5)}
+JOINTS = {'pan': JointMapping('pan', 2, JointUnits(scale=-2 * math.pi)),
+          'tilt': JointMapping('tilt', 3, JointUnits(scale=0.5))}
 RANGES = {2: AxisRange(0.0, 100.0), 3: AxisRange(0.0, -40.0)}
 
 
@@ -112,3 +114,24 @@ def test_start_time_is_delay_mode_2_with_a_unixtime():
                        PlaybackSettings(start_time=1_900_000_000, start_delay=1.0))
     with pytest.raises(TrajectoryError, match='UnixTime'):
         from_keyframes(keyframes, JOINTS, RANGES, PlaybackSettings(start_time=2**32))
+
+
+def test_a_span_and_an_offset_normalise_through_the_end_mark():
+    """Tilt: pi from -pi/2 (begin) to +pi/2 over 0..-40 rotations: SI maps straight onto
+    the normalised range whatever the motor's direction."""
+    joints = {'tilt': JointMapping('tilt', 3, JointUnits(span=math.pi, offset=-math.pi / 2))}
+    keyframes = [Keyframe(0.0, {'tilt': -math.pi / 2}, {'tilt': 0.0}),
+                 Keyframe(2.0, {'tilt': 0.0}, {'tilt': 0.5}),
+                 Keyframe(4.0, {'tilt': math.pi / 4}, {'tilt': 0.0})]
+    traj = from_keyframes(keyframes, joints, RANGES, PlaybackSettings())
+    validate(traj)
+    assert position_at(curve(traj, 3), 0.0) == pytest.approx(0.0)
+    assert position_at(curve(traj, 3), 0.5) == pytest.approx(0.5)
+    assert position_at(curve(traj, 3), 1.0) == pytest.approx(0.75)
+    first = traj.axes[3][0]
+    # 0.5 rad/s over a pi span, times the 4 s move: 2/pi normalised per normalised time
+    slope_at_end = (first.p3_position - first.p2_position) / (first.p3_time - first.p2_time)
+    assert slope_at_end == pytest.approx(2.0 / math.pi)
+    with pytest.raises(TrajectoryError, match=r'outside its calibrated range \[-1.5708, 1.5708\]'):
+        from_keyframes([Keyframe(0, {'tilt': 0.0}), Keyframe(1, {'tilt': 1.6})], joints,
+                       RANGES, PlaybackSettings())

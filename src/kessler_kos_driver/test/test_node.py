@@ -7,6 +7,7 @@ simulator and node (module scope) and run in file order: playback first, faults 
 from __future__ import annotations
 
 import itertools
+import math
 import time
 
 import pytest
@@ -35,6 +36,7 @@ from gimbal_driver_common.testing.ros import (
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import AxisTrajectory, BezierSegment, GimbalStatus, PlaybackStatus
 from gimbal_msgs.srv import Calibrate, DeviceCommand, LoadTrajectory
+from kessler_kos_driver.registration import sim_rig_parameters
 from kessler_kos_driver.sim import control
 
 pytestmark = pytest.mark.ros
@@ -43,10 +45,13 @@ PKG = 'kessler_kos_driver'
 NODE = 'kessler_kos_driver'
 PASSWORD = 'Zq8-kos-secret'
 JOINTS = ['slider', 'pan', 'tilt']
-# rad, within the simulator's default calibrated ranges (slider 0..200 rot, pan 0..100,
-# tilt 0..-40; joint_scales 2*pi): the move takes 6 s simulated, 3 s at time scale 2.
-KEYFRAMES = [(0.0, [5.0, 10.0, -10.0]), (3.0, [60.0, 150.0, -80.0]),
-             (6.0, [30.0, 300.0, -150.0])]
+#: the simulator's example rig in SI (slider 0..1.5 m, pan -pi..pi, tilt -pi/2..pi/2 over its
+#: calibrated ranges), with tilt limits wider than the calibrated tilt range so that the
+#: adapter's calibrated-range check is reached as well as the node's limits
+RIG = {**sim_rig_parameters(tuple(JOINTS)), 'position_min': [0.0, -math.pi, -2.0],
+       'position_max': [1.5, math.pi, 2.0]}
+# (s, [slider m, pan rad, tilt rad]): the move takes 6 s simulated, 3 s at time scale 2.
+KEYFRAMES = [(0.0, [0.1, -2.0, -1.0]), (3.0, [0.9, 0.5, 0.3]), (6.0, [0.5, 2.5, 1.2])]
 
 
 def srv(name: str) -> str:
@@ -63,7 +68,8 @@ def rig():
             '{"ready": "kessler_kos_sim"', 'kessler_kos_driver_node',
             ['host:=127.0.0.1', f'port:={port}', f'password:={PASSWORD}',
              'reconnect_period:=0.2', 'diagnostics_period:=0.25',
-             'command_timeout:=0.4'],  # publish_rate: default
+             'command_timeout:=0.4',   # publish_rate: default
+             *(f'{name}:={values}' for name, values in RIG.items())],
             record=[('/rosout', Log)]) as started:
         yield started.ros, control_port, started.node, started.recorded['/rosout']
 
@@ -105,7 +111,11 @@ def test_joint_states_status_and_identity(rig):
     assert status.device_model == 'Kessler CineShooter'
     assert [a.name for a in status.axes] == JOINTS and all(a.calibrated for a in status.axes)
     diag = wait_diag(ros, 'device', lambda s: True)
-    assert find_diagnostic(diag, NODE, 'pan').level[0] == 0
+    pan = find_diagnostic(diag, NODE, 'pan')
+    assert pan.level[0] == 0
+    assert {kv.key: kv.value for kv in pan.values}['units'] == 'SI (calibrated_spans)'
+    # joint_states in SI: every motor starts at its begin mark, the joint's offset
+    assert list(msg.position) == pytest.approx([0.0, -math.pi, -math.pi / 2], abs=1e-5)
     device = find_diagnostic(diag, NODE, 'device')
     assert dict((kv.key, kv.value) for kv in device.values)['lock'] == 'unlocked'
 
@@ -200,11 +210,11 @@ def test_load_and_play_three_axis_keyframes(rig):
     assert list(final.position) == final_position
     # joint_states followed the path: pan (monotone keyframes) rose through the move
     pan = [joint_positions(m)['pan'] for m in samples[start:]]
-    intermediate = [p for p in pan if 11.0 < p < 299.0]
+    intermediate = [p for p in pan if -1.99 < p < 2.49]
     assert len(intermediate) >= 3
     assert all(b >= a - 1e-6 for a, b in itertools.pairwise(pan))
     slider = [joint_positions(m)['slider'] for m in samples[start:]]
-    assert max(slider) > 40.0      # went up towards 60 then came back to 30
+    assert max(slider) > 0.7       # went out towards 0.9 m then came back to 0.5 m
     # FullStop consumed the move
     again = trigger(ros, 'start_playback')
     assert not again.success and 'load it again' in again.message
@@ -212,11 +222,16 @@ def test_load_and_play_three_axis_keyframes(rig):
 
 def test_load_refusals_send_nothing(rig):
     ros, control_port, _, _ = rig
-    bad = keyframe_request([(0.0, [5.0, 10.0, -10.0]), (3.0, [5.0, 10.0, 10.0])])
+    # inside the node's tilt limits (+-2 rad), outside the calibrated tilt (+-pi/2)
+    bad = keyframe_request([(0.0, [0.1, 0.0, 0.0]), (3.0, [0.1, 0.0, 1.8])])
     reply = ros.call(LoadTrajectory, srv('load_trajectory'), bad)
     assert not reply.success and "'tilt'" in reply.message
-    assert 'calibrated range' in reply.message
-    fast = keyframe_request([(0.0, [5.0, 10.0, -10.0]), (0.1, [900.0, 10.0, -10.0])])
+    assert 'calibrated range [-1.5708, 1.5708]' in reply.message, reply.message
+    beyond = keyframe_request([(0.0, [0.1, 0.0, 0.0]), (3.0, [0.1, 0.0, 2.5])])
+    reply = ros.call(LoadTrajectory, srv('load_trajectory'), beyond)
+    assert not reply.success and "joint 'tilt' position 2.5 is outside [-2.0, 2.0]" in \
+        reply.message, reply.message
+    fast = keyframe_request([(0.0, [0.1, 0.0, 0.0]), (0.1, [1.4, 0.0, 0.0])])
     reply = ros.call(LoadTrajectory, srv('load_trajectory'), fast)
     assert not reply.success and 'MaxMaxMoveSpeed' in reply.message
     looped = keyframe_request(loop_count=2, interval=1.0, move_photos=5)
@@ -278,17 +293,17 @@ def test_start_at_a_date_with_delay_return(rig):
 
 def test_move_to_and_joint_command(rig):
     ros, _, node, _ = rig
-    goal = MoveTo.Goal(joint_names=['pan', 'tilt'], positions=[20.0, -20.0],
-                       velocities=[30.0, 30.0])
+    goal = MoveTo.Goal(joint_names=['pan', 'tilt'], positions=[1.0, -0.5],
+                       velocities=[1.0, 1.0])
     result, _, feedback = ros.run_action(MoveTo, srv('move_to'), goal, timeout=30)
     assert result.success, result.message
-    assert result.positions == pytest.approx([20.0, -20.0], abs=0.011) and feedback
-    outside = MoveTo.Goal(joint_names=['tilt'], positions=[50.0])   # tilt range is 0..-251
+    assert result.positions == pytest.approx([1.0, -0.5], abs=0.011) and feedback
+    outside = MoveTo.Goal(joint_names=['tilt'], positions=[1.8])   # tilt range is +-pi/2
     result, _, _ = ros.run_action(MoveTo, srv('move_to'), outside)
     assert not result.success and 'calibrated range' in result.message
-    ros.publish('joint_command', JointState(name=['slider'], position=[12.0]))
+    ros.publish('joint_command', JointState(name=['slider'], position=[0.6]))
     ros.wait_for_message('joint_states', JointState,
-                         lambda m: abs(joint_positions(m)['slider'] - 12.0) < 1e-3, timeout=20)
+                         lambda m: abs(joint_positions(m)['slider'] - 0.6) < 1e-3, timeout=20)
     ros.publish('joint_command', JointState(name=['roll'], position=[1.0]))
     node.wait_for_output("unknown joint(s) ['roll']")
 
@@ -296,22 +311,33 @@ def test_move_to_and_joint_command(rig):
 
 
 def test_calibrate_take_picture_and_home(rig):
-    ros, control_port, _, _ = rig
+    ros, control_port, node, _ = rig
     reply = ros.call(Calibrate, srv('calibrate'),
                      Calibrate.Request(joint_name='slider', action=Calibrate.Request.RESET))
     assert reply.success, reply.message
-    wait_diag(ros, 'slider', lambda s: s.level[0] == 1 and 'not calibrated' in s.message)
+    # not calibrated: the span waits for the end mark, the slider reads motor radians
+    diag = wait_diag(ros, 'slider', lambda s: s.level[0] == 1 and 'not calibrated' in s.message)
+    values = {kv.key: kv.value for kv in find_diagnostic(diag, NODE, 'slider').values}
+    assert values['units'] == 'motor radians'
+    assert values['calibrated_span'] == '1.5 (applies once the axis is calibrated)'
     result, _, _ = ros.run_action(Home, srv('home'), Home.Goal(joint_names=['slider']))
     assert result.success and 'not calibrated' in result.message
     reply = ros.call(Calibrate, srv('calibrate'), Calibrate.Request(
         joint_name='slider', action=Calibrate.Request.MARK_BEGIN))
     assert reply.success, reply.message
-    goal = MoveTo.Goal(joint_names=['slider'], positions=[50.0], velocities=[50.0])
+    # 1.2 motor radians: 0.19 rotations on, the new end mark
+    goal = MoveTo.Goal(joint_names=['slider'], positions=[1.2], velocities=[0.5])
     assert ros.run_action(MoveTo, srv('move_to'), goal, timeout=30)[0].success
     reply = ros.call(Calibrate, srv('calibrate'), Calibrate.Request(
         joint_name='slider', action=Calibrate.Request.MARK_END))
     assert reply.success, reply.message
-    assert 'range 0.0000 .. 50.0000' in reply.message
+    # the 1.5 m span now lies over 0..0.19 rotations: the slider reads its end, 1.5 m
+    assert 'range 0.0000 .. 1.5000' in reply.message, reply.message
+    node.wait_for_output("joint 'slider': end mark now 0.1")   # 0.19 rotations (was 0)
+    ros.wait_for_message('joint_states', JointState,
+                         lambda m: abs(joint_positions(m)['slider'] - 1.5) < 1e-3, timeout=10)
+    wait_diag(ros, 'slider', lambda s: s.level[0] == 0 and any(
+        kv.key == 'units' and kv.value == 'SI (calibrated_spans)' for kv in s.values))
     result, _, _ = ros.run_action(Home, srv('home'), Home.Goal(joint_names=['slider', 'pan']),
                                   timeout=60)
     assert result.success, result.message
@@ -330,9 +356,10 @@ def test_password_never_leaves_the_node(rig):
     assert reply.values[0].string_value == '********'
     diag = ros.wait_for_message('/diagnostics', DiagnosticArray)
     status = ros.wait_for_message(srv('status'), GimbalStatus)
-    # the start-up lines may come before /rosout matched this subscriber: make one more
-    assert ros.set_parameter(NODE, 'diagnostics_period', 0.3).successful
-    wait_for(lambda: logs, 10.0, 'a /rosout line of the node')
+    # a log line of its own (the tests share the node in any order: the start-up lines may
+    # have gone out before the recorder was matched)
+    ros.publish('joint_command', JointState(name=['elbow'], position=[0.0]))
+    wait_for(lambda: any('elbow' in m.msg for m in logs), 10.0, 'a log line on /rosout')
     for message in (*logs, diag, status):
         assert PASSWORD not in str(message)
 
@@ -354,6 +381,12 @@ def test_axis_fault_offline_motor_and_reset(rig):
     wait_diag(ros, 'pan', lambda s: s.level[0] == 0)
 
 
+
+
+def test_unit_parameters_are_checked_at_startup():
+    output = node_refusing_to_start(PKG, 'kessler_kos_driver_node',
+                                    ['calibrated_spans:=[1.5, 6.28]'])
+    assert 'parameter calibrated_spans: need 3 finite values' in output
 
 
 def test_usb_transport_parameters_are_checked_at_startup():

@@ -1,22 +1,32 @@
 """kOS parameters changed while the node runs (`ros2 param set`), node against kessler_kos_sim.
 
-joint_scales are the interesting one: they change the conversion of every reading and
-command, so they are taken only while the axes are idle.
+The unit parameters (calibrated_spans, joint_offsets, joint_scales) are the interesting ones:
+they change the conversion of every reading and command, so they are taken only while the
+axes are idle. The rig is the simulator's example rig in SI for pan and tilt, and a slider
+without a span: it reports motor radians (joint_scales 2*pi) and the node says so.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 
 pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
+from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common.testing import free_tcp_port
-from gimbal_driver_common.testing.ros import RosTestClient, driver_rig, joint_positions
+from gimbal_driver_common.testing.ros import (
+    RosTestClient,
+    driver_rig,
+    find_diagnostic,
+    joint_positions,
+)
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import AxisState, AxisTrajectory, BezierSegment, GimbalStatus
 from gimbal_msgs.srv import LoadTrajectory
@@ -26,6 +36,9 @@ pytestmark = pytest.mark.ros
 PKG = 'kessler_kos_driver'
 NODE = 'kessler_kos_driver'
 TWO_PI = 2.0 * math.pi
+SPANS = [0.0, TWO_PI, math.pi]                # slider: no span
+OFFSETS = [0.0, -math.pi, -math.pi / 2]
+SCALES = [TWO_PI, TWO_PI, TWO_PI]
 
 
 @pytest.fixture(scope='module')
@@ -36,55 +49,138 @@ def rig():
             '--discovery-port', '0', '--password', 'pw-runtime', '--precalibrated',
             '--time-scale', '2'], '{"ready": "kessler_kos_sim"', 'kessler_kos_driver_node', [
             'host:=127.0.0.1', f'port:={port}', 'password:=pw-runtime',
-            'reconnect_period:=0.2', 'command_timeout:=0.0']) as rig:
+            'reconnect_period:=0.2', 'command_timeout:=0.0', 'diagnostics_period:=0.25',
+            f'calibrated_spans:={SPANS}', f'joint_offsets:={OFFSETS}',
+            'position_max:=[200.0, 3.141592653589793, 1.5707963267948966]',
+            'velocity_max:=[100.0, 1.5, 1.0]']) as rig:
         yield rig.ros, rig.node
 
 
-def pan_near(ros: RosTestClient, value: float, timeout: float = 20.0) -> JointState:
+def joint_near(ros: RosTestClient, joint: str, value: float,
+               timeout: float = 20.0) -> JointState:
+    """A joint_states message with ``joint`` at rest at ``value``."""
     return ros.wait_for_message(
         'joint_states', JointState,
-        lambda m: abs(joint_positions(m).get('pan', math.inf) - value) < 1e-3
-        and abs(m.velocity[m.name.index('pan')]) < 1e-4, timeout=timeout)
+        lambda m: abs(joint_positions(m).get(joint, math.inf) - value) < 1e-3
+        and abs(m.velocity[m.name.index(joint)]) < 1e-4, timeout=timeout)
+
+
+def move(ros: RosTestClient, **targets: float) -> None:
+    goal = MoveTo.Goal(joint_names=list(targets), positions=list(targets.values()))
+    result, _, _ = ros.run_action(MoveTo, f'/{NODE}/move_to', goal, timeout=30)
+    assert result.success, result.message
+
+
+def axis_units(ros: RosTestClient, joint: str, units: str) -> dict[str, str]:
+    """The joint's diagnostics values once its ``units`` key reads ``units``."""
+    def matches(array: DiagnosticArray) -> bool:
+        status = find_diagnostic(array, NODE, joint)
+        return status is not None and any(kv.key == 'units' and kv.value == units
+                                           for kv in status.values)
+
+    array = ros.wait_for_message('/diagnostics', DiagnosticArray, matches, timeout=15)
+    status = find_diagnostic(array, NODE, joint)
+    assert status.level[0] == 0     # OK: motor radians are a fact to state, not a fault
+    return {kv.key: kv.value for kv in status.values}
+
+
+@contextmanager
+def restored(ros: RosTestClient) -> Iterator[None]:
+    """Put the unit parameters back afterwards (tests share the node, in any order)."""
+    try:
+        yield
+    finally:
+        assert ros.call(Trigger, f'/{NODE}/stop', Trigger.Request()).success
+        ros.wait_for_message('joint_states', JointState,
+                             lambda m: all(abs(v) < 1e-4 for v in m.velocity), timeout=20)
+        for name, values in (('joint_scales', SCALES), ('calibrated_spans', SPANS),
+                             ('joint_offsets', OFFSETS)):
+            result = ros.set_parameter(NODE, name, values)
+            assert result.successful, result.reason
+
+
+def test_an_axis_without_a_span_reports_motor_radians_and_says_so(rig) -> None:
+    ros, node = rig
+    # once in the log at configure, naming the axis and the parameters to set
+    node.wait_for_output("joint 'slider' reports motor-shaft radians")
+    output = node.output()
+    assert output.count("reports motor-shaft radians") == 1, output
+    line = next(x for x in output.splitlines() if 'motor-shaft radians' in x)
+    assert 'calibrated_spans' in line and 'joint_scales' in line
+    assert ("joint units: slider motor radians, pan SI (calibrated_spans), tilt SI "
+            "(calibrated_spans)") in output
+    values = axis_units(ros, 'slider', 'motor radians')
+    assert float(values['si_per_rotation']) == pytest.approx(TWO_PI, abs=1e-5)
+    assert axis_units(ros, 'pan', 'SI (calibrated_spans)')['calibrated_span'] == '6.28319'
 
 
 def test_joint_scales_apply_while_idle(rig) -> None:
     ros, _ = rig
-    goal = MoveTo.Goal(joint_names=['pan'], positions=[20.0])
-    result, _, _ = ros.run_action(MoveTo, f'/{NODE}/move_to', goal, timeout=30)
-    assert result.success, result.message
-    pan_near(ros, 20.0)
-    # Half the SI units per rotation: the same motor position now reads 10 rad.
-    result = ros.set_parameter(NODE, 'joint_scales', [TWO_PI, math.pi, TWO_PI])
-    assert result.successful, result.reason
-    pan_near(ros, 10.0)
-    status = ros.wait_for_message(f'/{NODE}/status', GimbalStatus, timeout=15)
-    assert status.axes[1].target_position == pytest.approx(10.0)  # the target converts too
-    # ... and commands convert with the new scale too.
-    goal = MoveTo.Goal(joint_names=['pan'], positions=[15.0])
-    result, _, _ = ros.run_action(MoveTo, f'/{NODE}/move_to', goal, timeout=30)
-    assert result.success, result.message
-    assert ros.set_parameter(NODE, 'joint_scales', [TWO_PI, TWO_PI, TWO_PI]).successful
-    pan_near(ros, 30.0)
+    with restored(ros):
+        move(ros, slider=10.0)              # motor radians: 1.59 rotations
+        joint_near(ros, 'slider', 10.0)
+        # Half the SI units per rotation: the same motor position now reads 5.
+        result = ros.set_parameter(NODE, 'joint_scales', [math.pi, TWO_PI, TWO_PI])
+        assert result.successful, result.reason
+        joint_near(ros, 'slider', 5.0)
+        status = ros.wait_for_message(f'/{NODE}/status', GimbalStatus, timeout=15)
+        assert status.axes[0].target_position == pytest.approx(5.0)  # the target converts
+        axis_units(ros, 'slider', 'SI (joint_scales)')
+        # ... and commands convert with the new scale too.
+        move(ros, slider=7.5)
+        assert ros.set_parameter(NODE, 'joint_scales', SCALES).successful
+        joint_near(ros, 'slider', 15.0)
+        axis_units(ros, 'slider', 'motor radians')
 
 
-def scale_change_refusal(ros: RosTestClient) -> str:
-    """Try a joint_scales change that the node must refuse while the axes move; the reason."""
-    refused = ros.set_parameter(NODE, 'joint_scales', [TWO_PI, math.pi, TWO_PI])
-    assert not refused.successful
-    assert 'axes must be idle' in refused.reason
+def test_calibrated_spans_and_offsets_apply_while_idle(rig) -> None:
+    ros, _ = rig
+    with restored(ros):
+        move(ros, pan=0.0)                  # 50 rotations: the middle of 0..100
+        # the begin mark a quarter turn further left: the same motor position reads +pi/2
+        result = ros.set_parameter(NODE, 'joint_offsets', [0.0, -math.pi / 2, -math.pi / 2])
+        assert result.successful, result.reason
+        joint_near(ros, 'pan', math.pi / 2)
+        # a half turn from begin to end mark: 50 rotations are now a quarter turn on
+        result = ros.set_parameter(NODE, 'calibrated_spans', [0.0, math.pi, math.pi])
+        assert result.successful, result.reason
+        joint_near(ros, 'pan', 0.0)
+        move(ros, pan=-math.pi / 4)        # a quarter of the half turn: 25 rotations
+        # the slider gets a span: 1.5 m over its 0..200 calibrated rotations, in SI at once
+        move(ros, slider=TWO_PI * 20)       # 20 rotations
+        result = ros.set_parameter(NODE, 'calibrated_spans', [1.5, math.pi, math.pi])
+        assert result.successful, result.reason
+        joint_near(ros, 'slider', 0.15)
+        axis_units(ros, 'slider', 'SI (calibrated_spans)')
+        refused = ros.set_parameter(NODE, 'calibrated_spans', [1.5, math.inf, math.pi])
+        assert not refused.successful and 'calibrated_spans: need 3 finite' in refused.reason
+        refused = ros.set_parameter(NODE, 'joint_offsets', [0.0])
+        assert not refused.successful and 'joint_offsets: need 3' in refused.reason
+    joint_near(ros, 'pan', -math.pi / 2)   # restored: 25 rotations of -pi..pi over 0..100
+
+
+def units_change_refusal(ros: RosTestClient) -> str:
+    """Try unit changes that the node must refuse while the axes move; the reason."""
+    for name, values in (('joint_scales', [math.pi, TWO_PI, TWO_PI]),
+                         ('calibrated_spans', [1.5, TWO_PI, math.pi]),
+                         ('joint_offsets', [0.0, 0.0, 0.0])):
+        refused = ros.set_parameter(NODE, name, values)
+        assert not refused.successful, name
+        assert 'axes must be idle' in refused.reason
     return refused.reason
 
 
 def test_joint_scales_refused_while_jogging_and_when_invalid(rig) -> None:
     ros, _ = rig
-    ros.publish('joint_command', JointState(name=['pan'], velocity=[2.0]))
+    ros.publish('joint_command', JointState(name=['pan'], velocity=[0.2]))
     try:
         ros.wait_for_message('joint_states', JointState,
-                             lambda m: abs(m.velocity[m.name.index('pan')]) > 1.0, timeout=10)
-        assert 'pan' in scale_change_refusal(ros)
+                             lambda m: abs(m.velocity[m.name.index('pan')]) > 0.1, timeout=10)
+        assert 'pan' in units_change_refusal(ros)
     finally:
         assert ros.call(Trigger, f'/{NODE}/stop', Trigger.Request()).success
-    assert ros.get_parameter(NODE, 'joint_scales') == [TWO_PI, TWO_PI, TWO_PI]
+    assert ros.get_parameter(NODE, 'joint_scales') == SCALES
+    assert ros.get_parameter(NODE, 'calibrated_spans') == SPANS
     refused = ros.set_parameter(NODE, 'joint_scales', [TWO_PI, 0.0, TWO_PI])
     assert not refused.successful and 'finite non-zero' in refused.reason
     refused = ros.set_parameter(NODE, 'joint_scales', [TWO_PI])
@@ -104,10 +200,11 @@ def test_joint_scales_refused_while_a_move_plays(rig) -> None:
     try:
         ros.wait_for_message(f'/{NODE}/status', GimbalStatus,
                              lambda s: s.axes[1].state == AxisState.STATE_PLAYBACK, timeout=15)
-        assert 'a move is playing' in scale_change_refusal(ros)
+        assert 'a move is playing' in units_change_refusal(ros)
     finally:
         assert ros.call(Trigger, f'/{NODE}/stop_playback', Trigger.Request()).success
-    assert ros.get_parameter(NODE, 'joint_scales') == [TWO_PI, TWO_PI, TWO_PI]
+    assert ros.get_parameter(NODE, 'joint_scales') == SCALES
+    assert ros.get_parameter(NODE, 'joint_offsets') == OFFSETS
 
 
 def test_other_kos_parameters(rig) -> None:

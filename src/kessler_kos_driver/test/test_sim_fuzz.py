@@ -12,7 +12,7 @@ from kessler_kos_driver.protocol import (
     decode,
     encode_frame,
 )
-from kessler_kos_driver.sim import KosDevice, KosSession, SimSettings
+from kessler_kos_driver.sim import KosSession, SimSettings, SimulatedRig
 
 frames = st.builds(
     lambda mid, mtype, payload: encode_frame(mid, mtype, payload),
@@ -26,7 +26,7 @@ frames = st.builds(
 @settings(max_examples=200, deadline=None)
 @given(st.lists(frames | st.binary(max_size=20), max_size=8))
 def test_session_survives_arbitrary_input(chunks):
-    device = KosDevice(SimSettings(password='pw', precalibrated=True, time_scale=50.0))
+    device = SimulatedRig(SimSettings(password='pw', precalibrated=True, time_scale=50.0))
     session = KosSession(device)
     session.on_bytes(UserPassword('pw').encode())
     for chunk in chunks:

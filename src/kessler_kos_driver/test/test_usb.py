@@ -41,7 +41,8 @@ from kessler_kos_driver.protocol import (
     decode,
     encode_reports,
 )
-from kessler_kos_driver.sim import KosDevice, SimHidDevice, SimSettings
+from kessler_kos_driver.sim import SimHidDevice, SimSettings, SimulatedRig
+from kessler_kos_driver.units import JointUnits
 from kessler_kos_driver.usb_link import HidStream, UsbTarget
 
 TWO_PI = 2 * math.pi
@@ -202,7 +203,7 @@ def test_stream_failures_are_transport_errors():
 # ------------------------------------------------ client over USB against the device model
 @pytest.fixture
 def usb_rig():
-    device = KosDevice(SimSettings(password='not-used-on-usb', precalibrated=True,
+    device = SimulatedRig(SimSettings(password='not-used-on-usb', precalibrated=True,
                                    time_scale=20.0))
     hid_device = SimHidDevice(device)
     client = KosClient(usb=TARGET, usb_keepalive_period=0.1, poll_period=0.05,
@@ -235,7 +236,8 @@ def test_client_moves_and_plays_a_multi_report_trajectory_over_usb(usb_rig):
     client.move_to(2, 20.0, 50.0)
     assert wait_until(lambda: abs(client.motors[2].position - 20.0) < 1e-3)
     ranges = {a: AxisRange(m.begin_position, m.end_position) for a, m in client.motors.items()}
-    joints = {n: JointMapping(n, a, TWO_PI) for n, a in (('slider', 1), ('pan', 2), ('tilt', 3))}
+    joints = {n: JointMapping(n, a, JointUnits(scale=TWO_PI))
+              for n, a in (('slider', 1), ('pan', 2), ('tilt', 3))}
     keyframes = [Keyframe(0.0, {'slider': 0.0, 'pan': 10.0, 'tilt': -10.0}),
                  Keyframe(2.0, {'slider': 60.0, 'pan': 150.0, 'tilt': -100.0})]
     trajectory = from_keyframes(keyframes, joints, ranges, PlaybackSettings(duration=2.0))
@@ -275,7 +277,8 @@ def test_unplugged_usb_device_is_a_lost_link_and_reconnects(usb_rig):
     config = ControllerConfig(joints, {n: JointLimits() for n in joints}, reconnect_period=0.05)
     errors = []
     controller = GimbalController(
-        KosAdapter(client, joint_mappings(joints, [1, 2, 3], [TWO_PI] * 3), config), config,
+        KosAdapter(client, joint_mappings(joints, [1, 2, 3], [JointUnits(scale=TWO_PI)] * 3),
+                   config), config,
         logging.getLogger('test_usb'), on_link_change=lambda: errors.append(controller.link_error))
     controller.open()
     try:
