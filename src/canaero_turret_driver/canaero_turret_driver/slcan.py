@@ -12,7 +12,8 @@ all waiting bytes at once with one read() on the descriptor
 BEL (error).
 
 Written against python-can 4.6.1 (pinned in requirements.txt): it overrides the
-private `_read` and `flush` of `slcanBus`; re-check both when upgrading python-can.
+private `_read`, `_write` and `flush` of `slcanBus`; re-check them when upgrading
+python-can.
 """
 
 from __future__ import annotations
@@ -26,11 +27,13 @@ import serial
 from can.exceptions import error_check
 from can.interfaces.slcan import slcanBus
 
-from gimbal_driver_common.transport import read_ready
+from gimbal_driver_common.transport import read_ready, write_all
 
 # A record ends at CR (also the adapter's bare OK) or BEL (the adapter's error reply).
 RECORD = re.compile(rb"[^\r\x07]*[\r\x07]")
 MAX_RECORD = 64  # longer than any slcan record of a classic CAN frame (T + 8 + 1 + 16)
+#: how long a send without a timeout of its own waits for room (the adapter stopped reading)
+SEND_TIMEOUT_S = 2.0
 
 
 class ChunkedSlcanBus(slcanBus):
@@ -81,6 +84,26 @@ class ChunkedSlcanBus(slcanBus):
                 elif expiry.expired():
                     return None
             return self._records.popleft()
+
+    def _write(self, string: str) -> None:
+        """One record to the adapter (`slcanBus._write` without its pyserial write):
+        :func:`write_all` on the port's descriptor, bounded by the send's timeout.
+
+        pyserial's timed `write()` reported a record that went out as a write timeout when
+        the sending thread was descheduled past the timeout (the turret link dropped under
+        load), and `slcanBus._write`'s `flush()` (tcdrain) waits without a bound for a pty
+        or adapter to take the bytes: the kernel sends what was written anyway.
+        """
+        port = self.serialPortOrig
+        data = string.encode() + self.LINE_TERMINATOR
+        with error_check("Could not write to serial device"):
+            try:
+                fd = port.fileno()
+            except (AttributeError, OSError, ValueError, NotImplementedError):
+                port.write(data)  # a URL port without a descriptor
+                return
+            timeout = port.write_timeout
+            write_all(fd, data, SEND_TIMEOUT_S if timeout is None else timeout)
 
     def flush(self) -> None:
         self._records.clear()

@@ -95,3 +95,26 @@ def test_split_keeps_a_partial_record_for_the_next_chunk(bus):
     bus._records.clear()
     bus._split(b"x" * 70)
     assert bus._records and bus._records[-1].endswith("\a")  # resynchronised
+
+
+def test_a_send_that_went_out_is_not_a_write_timeout(adapter, bus, monkeypatch):
+    """The node sends with a 0.2 s timeout. A sending thread descheduled for longer used to
+    get pyserial's SerialTimeoutException after every byte was written (the link was then
+    dropped); the record arrives and the send succeeds."""
+    import gimbal_driver_common.transport as transport
+
+    simulator, _ = adapter
+    write = transport.os.write
+
+    def descheduled(fd, data):
+        time.sleep(0.3)
+        return write(fd, data)
+
+    monkeypatch.setattr(transport.os, "write", descheduled)
+    command = CanAerospaceMessage.build(1300, 100, DataType.FLOAT, 20.0, 0, 0)
+    bus.send(can.Message(arbitration_id=1300, is_extended_id=False, data=command.to_bytes()),
+             timeout=0.2)
+    deadline = time.monotonic() + 10.0
+    while simulator.state()["axes"]["yaw"]["mode"] != "position":
+        assert time.monotonic() < deadline, "the position set-point never arrived"
+        time.sleep(0.02)

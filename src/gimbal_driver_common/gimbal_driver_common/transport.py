@@ -124,21 +124,11 @@ class TcpStream(ByteStream):
         (a device that stops reading fills it; the link is then reported lost)."""
         sock = self._require()
         with self._write_lock:
-            pending = memoryview(data)
-            deadline = None
             try:
-                while pending:
-                    try:
-                        pending = pending[sock.send(pending):]
-                    except BlockingIOError:
-                        now = time.monotonic()
-                        deadline = deadline or now + self.write_timeout
-                        if now >= deadline or not wait_ready(sock.fileno(), select.POLLOUT,
-                                                             deadline - now):
-                            raise LinkClosed(
-                                f'{self.description}: send stalled for '
-                                f'{self.write_timeout:g} s (the device does not read)'
-                            ) from None
+                write_all(sock.fileno(), data, self.write_timeout)
+            except TimeoutError:
+                raise LinkClosed(f'{self.description}: send stalled for '
+                                 f'{self.write_timeout:g} s (the device does not read)') from None
             except OSError as exc:
                 raise LinkClosed(f'{self.description}: send failed: {exc}') from exc
 
@@ -174,6 +164,30 @@ def wait_ready(fd: int, event: int, timeout: float | None) -> bool:
     return bool(poller.poll(None if timeout is None else max(timeout, 0.0) * 1000.0))
 
 
+def write_all(fd: int, data: bytes, timeout: float) -> None:
+    """Write all of ``data`` to the non-blocking descriptor ``fd``, waiting in poll() for
+    room; raise TimeoutError when bytes are still unwritten ``timeout`` s after the
+    descriptor first had none (the device or peer stopped reading). OSError passes.
+
+    The wait starts only when the descriptor is full. pyserial's ``write()`` with a
+    ``write_timeout`` instead raises SerialTimeoutException whenever the timeout has
+    expired by the time ``os.write`` returned, even if every byte was written: a thread
+    descheduled under load then reported a frame that went out as lost, and the turret's
+    slcan link was dropped for it (seen in the parallel test runs).
+    """
+    pending = memoryview(data)
+    deadline: float | None = None
+    while pending:
+        try:
+            pending = pending[os.write(fd, pending):]
+        except BlockingIOError:
+            now = time.monotonic()
+            deadline = deadline or now + timeout
+            if now >= deadline or not wait_ready(fd, select.POLLOUT, deadline - now):
+                raise TimeoutError(f'no room to write for {timeout:g} s (the device does '
+                                   'not read)') from None
+
+
 def read_ready(fd: int, max_bytes: int, timeout: float | None) -> bytes | None:
     """Up to ``max_bytes`` bytes waiting on descriptor ``fd``, after up to ``timeout`` s
     for the first: None when none came, b'' when the descriptor is at its end (the peer
@@ -206,6 +220,7 @@ class SerialStream(ByteStream):
     ) -> None:
         self.port = port
         self.baudrate = int(baudrate)
+        self.write_timeout = 2.0
         self._settings = {'bytesize': bytesize, 'parity': parity, 'stopbits': stopbits}
         self._serial: serial.Serial | None = None
         self._write_lock = threading.Lock()
@@ -222,7 +237,7 @@ class SerialStream(ByteStream):
         self.close()
         try:
             self._serial = serial.Serial(
-                self.port, self.baudrate, timeout=0.1, write_timeout=2.0, **self._settings
+                self.port, self.baudrate, timeout=0.1, **self._settings
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise TransportError(f'cannot open {self.description}: {exc}') from exc
@@ -240,11 +255,17 @@ class SerialStream(ByteStream):
         return port
 
     def write(self, data: bytes) -> None:
+        """Write everything, waiting up to ``write_timeout`` for room (:func:`write_all` on
+        the port's non-blocking descriptor, not pyserial's timed write)."""
         port = self._require()
         with self._write_lock:
             try:
-                port.write(data)
-            except (serial.SerialException, OSError) as exc:
+                write_all(port.fileno(), data, self.write_timeout)
+            except TimeoutError:
+                raise LinkClosed(f'{self.description}: write stalled for '
+                                 f'{self.write_timeout:g} s (the device does not read)') from None
+            except (serial.SerialException, OSError, TypeError, AttributeError,
+                    ValueError) as exc:
                 raise LinkClosed(f'{self.description}: write failed: {exc}') from exc
 
     def read(self, max_bytes: int, timeout: float) -> bytes:

@@ -16,6 +16,7 @@ from gimbal_driver_common.transport import (
     TcpStream,
     TransportError,
     read_exactly,
+    write_all,
 )
 
 
@@ -127,6 +128,49 @@ def test_serial_over_pty_round_trip() -> None:
     finally:
         os.close(master)
         os.close(slave)
+
+
+def slow_os_write(monkeypatch: pytest.MonkeyPatch, seconds: float) -> None:
+    """Every os.write takes ``seconds`` first: the writing thread descheduled under load."""
+    import gimbal_driver_common.transport as transport
+
+    write = os.write
+
+    def slow(fd: int, data: bytes) -> int:
+        threading.Event().wait(seconds)
+        return write(fd, data)
+
+    monkeypatch.setattr(transport.os, 'write', slow)
+
+
+def test_a_write_that_went_out_is_not_a_timeout_however_long_it_took(monkeypatch) -> None:
+    """pyserial's timed write raised SerialTimeoutException after writing every byte when
+    the timeout had expired meanwhile; write_all counts only time without room."""
+    master, name, slave = _raw_pty()
+    try:
+        with SerialStream(name, 115200) as stream:
+            stream.write_timeout = 0.05
+            slow_os_write(monkeypatch, 0.2)
+            stream.write(b'ping')
+            assert os.read(master, 100) == b'ping'
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_write_all_times_out_only_while_the_reader_stalls() -> None:
+    read_end, write_end = os.pipe()
+    os.set_blocking(write_end, False)
+    try:
+        with pytest.raises(TimeoutError, match=r'no room to write for 0\.1 s'):
+            write_all(write_end, b'x' * (1 << 20), 0.1)  # more than a pipe holds
+        drained = threading.Thread(target=lambda: os.read(read_end, 1 << 20))
+        drained.start()
+        drained.join()
+        write_all(write_end, b'y' * 1000, 0.1)  # room again: no timeout
+    finally:
+        os.close(read_end)
+        os.close(write_end)
 
 
 def test_serial_missing_port_is_a_clear_error() -> None:
