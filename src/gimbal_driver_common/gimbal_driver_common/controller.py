@@ -34,6 +34,7 @@ from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, LinkError, device_boundary
 from gimbal_driver_common.joint_command import validate_joint_command
 from gimbal_driver_common.periodic import Periodic
+from gimbal_driver_common.rejections import CommandRejections
 from gimbal_driver_common.watchdog import JogWatchdog
 
 T = TypeVar('T')
@@ -71,6 +72,7 @@ class GimbalController:
         on_sample: Callable[[JointSample], None] | None = None,
         on_link_change: Callable[[], None] | None = None, periodic: Periodic | None = None,
         sensors: Periodic | None = None,
+        rejections: CommandRejections | None = None,
     ) -> None:
         self.device = device
         self.config = config
@@ -93,6 +95,9 @@ class GimbalController:
         self.periodic = periodic or Periodic(on_error=log.error)
         #: jobs that do device I/O (sensor topics): never on the watchdog's thread
         self.sensors = sensors or Periodic(on_error=log.error, name='sensors')
+        #: refused joint_commands, counted and logged by reason (the node keeps one across
+        #: configure/cleanup and passes it in)
+        self.rejections = rejections or CommandRejections(log)
         self.periodic.add(self._watchdog_period(), self.watchdog.check)
         self.halt_hooks: list[Callable[[], None]] = []  # stop and halt call these (policies)
         self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
@@ -180,19 +185,23 @@ class GimbalController:
     # ------------------------------------------------------------- refusals
     def refusal(self, joints: Sequence[str] | None = None) -> str | None:
         """Why a command cannot be served now, or None; with ``joints``: why they cannot move."""
+        refused = self._refusal(joints)
+        return refused[1] if refused else None
+
+    def _refusal(self, joints: Sequence[str] | None) -> tuple[str, str] | None:
+        """(reason without details, message) of :meth:`refusal`, or None."""
         if not self.active:
-            return 'node is not active (lifecycle); activate it first'
+            return 'node not active', 'node is not active (lifecycle); activate it first'
         if not self.connected:
-            return f'device not connected ({self.link_error})'
-        if joints:
-            return self.device.refusal(list(joints))
-        return None
+            return 'device not connected', f'device not connected ({self.link_error})'
+        message = self.device.refusal(list(joints)) if joints else None
+        return ('the device cannot move the axes', message) if message else None
 
     def require(self, joints: Sequence[str] | None = None) -> None:
         """Raise :class:`DeviceRefused` with :meth:`refusal`'s reason, if there is one."""
-        reason = self.refusal(joints)
-        if reason:
-            raise DeviceRefused(reason)
+        refused = self._refusal(joints)
+        if refused:
+            raise DeviceRefused(refused[1], reason=refused[0])
 
     def call(self, request: Callable[[], T], joints: Sequence[str] | None = None) -> T:
         """Run a device request from a service: refused while it cannot be served, and
@@ -225,10 +234,13 @@ class GimbalController:
         joint wins); a device that sends without waiting for a reply gets it from this
         thread at once when the link is free. The caller never waits for a device reply
         nor behind another send. Raises (nothing sent) when the command is invalid or the
-        axes cannot move.
+        axes cannot move. A joint with NaN has no command and is left alone; a command
+        with nothing but NaN does nothing (not even refused).
         """
-        self.require()
         plan = validate_joint_command(names, positions, velocities, self.config.limits)
+        if plan.empty:
+            return
+        self.require()
         movers = list(plan.moves) + [j for j, v in plan.jogs.items() if v != 0.0]
         if movers:
             self.require(movers)
@@ -328,7 +340,11 @@ class GimbalController:
         """Send the queued commands, moves first (caller holds the send lock)."""
         with self._pending_lock:
             pending, self._pending = self._pending, {}
-        if not pending or not self.connected:
+        if not pending:
+            return
+        if not self.connected:  # the link dropped after the command was accepted
+            self.rejections.record(DeviceRefused(
+                f'device not connected ({self.link_error})', reason='device not connected'))
             return
         moves = {j: (v, s) for j, (kind, v, s) in pending.items() if kind == 'move'}
         jogs = {j: v for j, (kind, v, _) in pending.items() if kind == 'jog'}
@@ -339,7 +355,7 @@ class GimbalController:
                 if jogs:
                     self.device.jog(jogs)
         except GimbalError as exc:
-            self.log.error(f'joint_command failed on the device: {exc}')
+            self.rejections.record(exc, sent=True)
             return
         self.commanded_targets.update({joint: move[0] for joint, move in moves.items()})
 

@@ -14,27 +14,50 @@ from contextlib import contextmanager
 
 
 class GimbalError(Exception):
-    """Anything a device request or a command can fail with; the message is for people."""
+    """Anything a device request or a command can fail with; the message is for people.
+
+    ``reason`` is a short name of what went wrong that does not change with the values in
+    the message ("pan: position outside the limits", "node not active"): what the
+    diagnostics count refused commands by and what their log lines are throttled by. The
+    class gives a default; ``reason=`` names it more precisely.
+    """
+
+    reason = 'device error'
+
+    def __init__(self, *args: object, reason: str = '') -> None:
+        super().__init__(*args)
+        if reason:
+            self.reason = reason
 
 
 class LinkError(GimbalError):
     """The link is down or dropped during the request (the supervisor reconnects)."""
 
+    reason = 'link lost'
+
 
 class DeviceTimeout(GimbalError, TimeoutError):
     """The device did not answer in time."""
+
+    reason = 'no answer from the device'
 
 
 class DeviceRefused(GimbalError):
     """The device, or the driver on its behalf, refused: NACK, off/faulted axis, busy."""
 
+    reason = 'refused by the device'
+
 
 class Unsupported(DeviceRefused):
     """The device (or this driver for it) does not know the command."""
 
+    reason = 'not supported by the device'
+
 
 class InvalidRequest(GimbalError, ValueError):
     """The request itself is wrong (out of range, unknown joint); nothing was sent."""
+
+    reason = 'invalid request'
 
 
 #: exceptions that mean "the link is gone" (pyserial's SerialException is an OSError;

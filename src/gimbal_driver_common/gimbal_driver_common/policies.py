@@ -22,7 +22,7 @@ from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidReque
 from gimbal_driver_common.joint_command import (
     check_positions,
     resolve_targets,
-    validate_joint_command,
+    validate_targets,
 )
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.scan import ScanRequest, plan_scan
@@ -307,10 +307,10 @@ class Motion:
         names = [n for n in preset.positions if n in ctl.config.limits]
         ctl.require(names)
         speeds = [speed] * len(names) if speed > 0 else []
-        plan = validate_joint_command(names, [preset.positions[n] for n in names], speeds,
-                                      ctl.config.limits)
+        moves = validate_targets(names, [preset.positions[n] for n in names],
+                                 ctl.config.limits, speeds)
         self.preempt()
-        ctl.send_moves(plan.moves)
+        ctl.send_moves(moves)
         return f'moving to preset {index} ({preset.name})'
 
     def list_presets(self) -> list[Preset]:

@@ -264,12 +264,63 @@ def test_commands_are_refused_while_disconnected_or_inactive(controller, device)
 # ------------------------------------------------------------- commands
 def test_invalid_commands_send_nothing(controller, device) -> None:
     for names, positions, velocities in [
-        (['roll'], [0.1], []), (['pan'], [math.nan], []), (['pan'], [math.inf], []),
+        (['roll'], [0.1], []), (['pan'], [-math.inf], [math.nan]), (['pan'], [math.inf], []),
         (['pan', 'tilt'], [0.1], []), (['pan'], [5.0], []), (['pan'], [], [9.0]),
     ]:
         with pytest.raises(InvalidRequest):
             controller.command(names, positions, velocities)
     assert device.kinds() == []
+
+
+def test_nan_joints_are_left_alone_and_all_nan_does_nothing(motion, controller,
+                                                           device) -> None:
+    controller.command(['pan', 'tilt'], [0.3, math.nan], [])
+    wait_for(lambda: device.kinds() == ['move'], 2.0, 'the move of pan alone')
+    assert device.sent[0][1] == {'pan': (0.3, None)}
+    # nothing but NaN: no send, no refusal even while inactive, a running scan goes on
+    motion.start_scan(ScanRequest('sector', -0.2, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0))
+    controller.command(['pan', 'tilt'], [math.nan, math.nan], [math.nan, math.nan])
+    assert motion.scanning and not motion._scan_stop.is_set()  # not preempted
+    motion.stop_scan()
+    sent = len(device.sent)
+    controller.active = False
+    controller.command(['pan', 'tilt'], [math.nan, math.nan], [])
+    assert len(device.sent) == sent
+    assert controller.rejections.counts() == {'rejected': {}, 'refused': {}}
+
+
+def test_every_refusal_path_is_counted_by_reason(controller, device) -> None:
+    """Validation, inactive, disconnected, the device refusing the axes and a failed send
+    all end in the controller's CommandRejections (the node's joint_command part)."""
+    rejections = controller.rejections
+
+    def refused(*command: list) -> None:
+        with pytest.raises(GimbalError) as caught:
+            controller.command(*command)
+        rejections.record(caught.value)  # what the node does with it
+
+    refused(['pan'], [5.0], [])
+    refused(['pan'], [-5.0], [])
+    device.refuse = 'pan drive is off'
+    refused(['pan'], [0.1], [])
+    device.refuse = None
+    controller.active = False
+    refused(['pan'], [0.1], [])
+    controller.active = True
+    device.nack_moves = True
+    controller.command(['pan'], [0.2], [])  # accepted; the device refuses the send
+    wait_for(lambda: rejections.counts()['refused'].get(
+        'failed on the device: refused by the device'), 2.0, 'the failed send')
+    device.nack_moves = False
+    assert rejections.counts() == {
+        'rejected': {'pan: position outside the limits': 2},
+        'refused': {'failed on the device: refused by the device': 1,
+                    'node not active': 1, 'the device cannot move the axes': 1}}
+    device.open_failures = 10**6
+    device.broken = True
+    wait_for(lambda: not controller.connected, 2.0, 'the link loss')
+    refused(['pan'], [0.1], [])
+    assert rejections.counts()['refused']['device not connected'] == 1
 
 
 def test_device_refusal_sends_nothing(controller, device) -> None:

@@ -24,6 +24,7 @@ from gimbal_driver_common.joint_command import (
     limits_from_parameters,
     resolve_targets,
     validate_joint_command,
+    validate_targets,
 )
 from gimbal_driver_common.presets import PresetError, PresetStore
 from gimbal_driver_common.scan import ScanError, ScanRequest, plan_scan
@@ -118,8 +119,9 @@ def test_joint_command_moves_and_jogs() -> None:
     ('names', 'positions', 'velocities', 'message'),
     [
         (['roll'], [0.0], [], 'unknown joint'),
-        (['pan'], [math.nan], [math.nan], 'neither a position nor a velocity'),
         (['pan'], [math.inf], [], 'not a finite number'),
+        (['pan', 'tilt'], [math.nan, -math.inf], [], 'not a finite number'),
+        (['pan'], [math.nan], [math.inf], 'not a finite number'),
         (['pan'], [3.5], [], r'outside \[-3.0000, 3.0000\]'),
         (['tilt'], [], [0.6], 'exceeds velocity_max'),
         (['pan', 'pan'], [0.0, 0.0], [], 'twice'),
@@ -130,6 +132,52 @@ def test_joint_command_moves_and_jogs() -> None:
 def test_joint_command_rejections(names, positions, velocities, message) -> None:
     with pytest.raises(CommandError, match=message):
         validate_joint_command(names, positions, velocities, LIMITS)
+
+
+def test_nan_means_no_command_for_that_joint() -> None:
+    """ros2_control's topic interface sends NaN for joints whose controller has not
+    written a command: those joints are left out, the others carried out."""
+    plan = validate_joint_command(['pan', 'tilt'], [0.5, math.nan], [], LIMITS)
+    assert plan.moves == {'pan': (0.5, None)} and plan.jogs == {}
+    plan = validate_joint_command(['pan', 'tilt'], [math.nan, math.nan], [math.nan, 0.2],
+                                  LIMITS)
+    assert plan.moves == {} and plan.jogs == {'tilt': 0.2}
+    for positions, velocities in (([math.nan] * 2, []), ([math.nan] * 2, [math.nan] * 2),
+                                  ([], [math.nan] * 2)):
+        assert validate_joint_command(['pan', 'tilt'], positions, velocities, LIMITS).empty
+    # a NaN speed beside a position: the default speed
+    assert validate_joint_command(['pan'], [0.1], [math.nan], LIMITS).moves == {
+        'pan': (0.1, None)}
+
+
+def test_targets_that_must_be_reached_refuse_nan() -> None:
+    """A MoveTo goal or a preset names every joint it wants: NaN is an error there."""
+    with pytest.raises(CommandError, match="'tilt': position NaN is not a target"):
+        validate_targets(['pan', 'tilt'], [0.1, math.nan], LIMITS)
+    with pytest.raises(CommandError, match='NaN is not a target'):
+        resolve_targets(['pan'], [math.nan], {'pan': 0.0}, LIMITS)
+    with pytest.raises(CommandError, match='NaN is not a target'):
+        resolve_targets(['pan'], [math.nan], {'pan': 0.0}, LIMITS, relative=True)
+    with pytest.raises(CommandError, match='received yet'):
+        resolve_targets(['pan'], [0.1], {}, LIMITS, relative=True)
+    with pytest.raises(CommandError, match='exceeds velocity_max'):
+        validate_targets(['pan'], [0.1], LIMITS, speeds=[5.0])
+    assert validate_targets(['pan', 'tilt'], [0.1, 0.2], LIMITS, speeds=[0.5, 0.0]) == {
+        'pan': (0.1, 0.5), 'tilt': (0.2, None)}
+
+
+def test_rejection_reasons_leave_the_values_out() -> None:
+    """Two rejections for the same cause share one reason (what is counted and throttled)."""
+    reasons = set()
+    for position in (3.5, 4.25, -7.0):
+        with pytest.raises(CommandError) as caught:
+            validate_joint_command(['pan'], [position], [], LIMITS)
+        assert str(position) in str(caught.value) or f'{position:.4f}' in str(caught.value)
+        reasons.add(caught.value.reason)
+    assert reasons == {'pan: position outside the limits'}
+    with pytest.raises(CommandError) as caught:
+        validate_joint_command(['tilt'], [], [0.9], LIMITS)
+    assert caught.value.reason == 'tilt: velocity above velocity_max'
 
 
 @given(

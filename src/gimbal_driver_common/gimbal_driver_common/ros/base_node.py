@@ -40,6 +40,7 @@ from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.periodic import Periodic
 from gimbal_driver_common.policies import DRIVER_SCAN_PATTERNS, Motion
 from gimbal_driver_common.presets import PresetStore
+from gimbal_driver_common.rejections import CommandRejections
 from gimbal_driver_common.ros import messages
 from gimbal_driver_common.ros.actions import MotionActions, guard_change_state_service
 from gimbal_driver_common.ros.common_parameters import declare_common_parameters, limits_from
@@ -81,6 +82,9 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         self.periodic = Periodic(on_error=self.get_logger().error)
         #: a driver's jobs that do device I/O (sensor topics): off the watchdog's thread
         self.sensor_jobs = Periodic(on_error=self.get_logger().error, name='sensors')
+        #: refused joint_commands by reason (the ``joint_command`` diagnostics part), kept
+        #: across configure/cleanup
+        self.rejections = CommandRejections(self.get_logger())
         self._active = False
         self._joint_rate = FrequencyMonitor(self.publish_rate)
         self.service_group = ReentrantCallbackGroup()
@@ -312,7 +316,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
             controller = GimbalController(
                 device, self.config, self.get_logger(), on_sample=self._publish_joint_state,
                 on_link_change=self._publish_diagnostics, periodic=self.periodic,
-                sensors=self.sensor_jobs)
+                sensors=self.sensor_jobs, rejections=self.rejections)
             self.controller = controller
             self.motion = Motion(controller, store, self.SCAN_PATTERNS)
             controller.open()
@@ -361,6 +365,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         self._joint_rate.sample(time.monotonic())
         ctl = self.controller
         parts = messages.diagnostic_parts(ctl, self.joint_names, self._joint_rate, self._active)
+        parts.append(self.rejections.status_part())
         hardware_id = ctl.device_info.hardware_id if ctl else DeviceInfo().hardware_id
         self._diag_pub.publish(messages.diagnostic_array(
             self.get_name(), self.get_clock().now().to_msg(), hardware_id, parts))
@@ -378,13 +383,10 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
     def _on_joint_command(self, msg: JointState) -> None:
         try:
             if self.controller is None:
-                raise DeviceRefused(self.command_refusal())
+                raise DeviceRefused(self.command_refusal(), reason='node not active')
             self.controller.command(msg.name, msg.position, msg.velocity)
-        except InvalidRequest as exc:
-            self.get_logger().warning(f'joint_command rejected, nothing sent: {exc}')
-        except GimbalError as exc:
-            self.get_logger().warning(f'joint_command refused, nothing sent: {exc}',
-                                      throttle_duration_sec=2.0)
+        except GimbalError as exc:  # counted by reason, logged once per reason every 5 s
+            self.rejections.record(exc)
 
     # ---------------------------------------------------------- services
     def _on_stop(self, request: Trigger.Request, response: Trigger.Response):

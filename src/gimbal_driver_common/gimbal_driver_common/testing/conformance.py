@@ -17,6 +17,7 @@ simulator, and the next test that needs the shared node starts it again. Every w
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator, Sequence
 
 import pytest
@@ -26,6 +27,7 @@ from std_srvs.srv import Trigger
 
 from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.testing.conformance_rig import (
+    COMMAND_PART,
     OK,
     REJECTED,
     ConformanceRig,
@@ -160,23 +162,24 @@ class DriverConformance(RestartConformance):
         self.assert_short_of_far_target(rig)
 
     @pytest.mark.ros
-    @pytest.mark.parametrize(('case', 'reason'), [
-        ('unknown joint', 'unknown joint'),
-        ('nan position', 'neither a position nor a velocity'),  # NaN = "not given"
-        ('inf position', 'not a finite number'),
-        ('inf velocity', 'not a finite number'),
-        ('velocity above velocity_max', 'exceeds velocity_max'),
-        ('position outside the limits', 'outside'),
-        ('names and positions differ in length', 'joint names but'),
-        ('names and velocities differ in length', 'joint names but'),
+    @pytest.mark.parametrize(('case', 'message', 'reason'), [
+        ('unknown joint', 'unknown joint', 'unknown joint'),
+        ('inf position', 'not a finite number', '{first}: position not finite'),
+        ('inf velocity', 'not a finite number', '{first}: velocity not finite'),
+        ('velocity above velocity_max', 'exceeds velocity_max',
+         '{first}: velocity above velocity_max'),
+        ('position outside the limits', 'outside', '{first}: position outside the limits'),
+        ('names and positions differ in length', 'joint names but',
+         'position values do not match the names'),
+        ('names and velocities differ in length', 'joint names but',
+         'velocity values do not match the names'),
     ])
     def test_bad_joint_command_is_rejected_and_nothing_sent(
-            self, rig: ConformanceRig, case: str, reason: str) -> None:
+            self, rig: ConformanceRig, case: str, message: str, reason: str) -> None:
         first, second = list(self.joints)[:2]
         msg = {
             'unknown joint': JointState(name=['elbow'], position=[0.1]),
-            'nan position': JointState(name=[first], position=[math.nan]),
-            'inf position': JointState(name=[first], position=[math.inf]),
+            'inf position': JointState(name=[first, second], position=[math.inf, math.nan]),
             'inf velocity': JointState(name=[first], velocity=[-math.inf]),
             'position outside the limits': JointState(name=[first], position=[1e6]),
             'velocity above velocity_max': JointState(name=[first], position=[math.nan],
@@ -186,20 +189,60 @@ class DriverConformance(RestartConformance):
             'names and velocities differ in length': JointState(
                 name=[first], velocity=[0.1, 0.1]),
         }[case]
-        before_log = rig.node.output().count(REJECTED)
+        key = f'rejected: {reason.format(first=first)}'
+        counted = self.rejections(rig.ros).get(key, 0)
         before = rig.sim.motion_received()
         rig.ros.publish('joint_command', msg)
-        wait_for(lambda: rig.node.output().count(REJECTED) > before_log, 20.0,
-                 f'the node to reject a joint_command with {case}')
-        assert reason in rig.node.output().split(REJECTED)[-1].splitlines()[0]
+        self.rejections(rig.ros, lambda counts: counts.get(key, 0) > counted)
+        # the reason is logged (once per reason every few seconds, so maybe by an earlier one)
+        lines = [line for line in rig.node.output().splitlines() if REJECTED in line]
+        assert any(message in line.split(REJECTED)[-1] for line in lines), lines[-5:]
         assert rig.sim.motion_received() == before
+
+    @pytest.mark.ros
+    def test_a_stream_of_rejected_commands_is_counted_and_logged_once(
+            self, rig: ConformanceRig) -> None:
+        """A controller streaming refused commands (100 Hz) must not flood the log: each
+        reason at most once every few seconds, every message counted in diagnostics."""
+        first = self.joints[0]
+        key = f'rejected: {first}: position outside the limits'
+        counted = self.rejections(rig.ros).get(key, 0)
+        logged = len(rig.node.output())
+        for i in range(50):  # 0.5 s of a 100 Hz stream, every message out of the limits
+            rig.ros.publish('joint_command', JointState(name=[first], position=[1e6 + i]))
+            time.sleep(0.01)
+        counts = self.rejections(rig.ros, lambda counts: counts.get(key, 0) >= counted + 20)
+        assert counts['rejected'] >= counts[key]
+        lines = [line for line in rig.node.output()[logged:].splitlines()
+                 if f"joint {first!r}: position" in line]
+        assert len(lines) <= 1, lines
+        level = rig.ros.wait_for_diagnostic(self.node_name, COMMAND_PART).level[0]
+        assert level == OK  # the client's fault, not the device's
+
+    @pytest.mark.ros
+    def test_nan_joints_are_left_alone_and_the_others_carried_out(
+            self, rig: ConformanceRig) -> None:
+        """NaN = no command for that joint (ros2_control's topic interface sends it for
+        joints whose controller has not started)."""
+        first, second = list(self.small_move)[:2]
+        assert self.move_to(rig.ros, self.small_move)[0].success
+        away = self.small_move[second] + (0.1 if self.small_move[second] <= 0 else -0.1)
+        counted = self.rejections(rig.ros)
+        rig.ros.publish('joint_command', JointState(name=[first, second],
+                                                    position=[math.nan, away]))
+        self.wait_positions(rig.ros, {first: self.small_move[first], second: away})
+        assert not rig.sim.moving(first)
+        after = self.rejections(rig.ros)
+        assert (after['rejected'], after['refused']) == (counted['rejected'],
+                                                         counted['refused'])
 
     @pytest.mark.ros
     def test_bad_move_to_goals_are_refused_and_nothing_sent(self, rig: ConformanceRig) -> None:
         first = self.joints[0]
         before = rig.sim.motion_received()
+        # NaN stays an error in a goal: it names the joints it promises to reach
         for targets, reason in (({'elbow': 0.0}, 'unknown joint'),
-                                ({first: math.nan}, 'neither a position'),
+                                ({first: math.nan}, 'NaN is not a target'),
                                 ({first: math.inf}, 'not a finite number'),
                                 ({first: 1e6}, 'outside')):
             result, status, _ = self.move_to(rig.ros, targets)

@@ -6,7 +6,7 @@ Split from :mod:`conformance_testing` (the tests themselves) so each stays short
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -23,9 +23,16 @@ if TYPE_CHECKING:
     from gimbal_driver_common.testing.conformance import DriverConformance
 
 REJECTED = 'joint_command rejected, nothing sent'
+#: the diagnostics part that counts refused joint_commands (gimbal_driver_common.rejections)
+COMMAND_PART = 'joint_command'
 OK = 0
 ERROR = 2
 STALE = 3
+
+
+def command_counts(status: DiagnosticStatus) -> dict[str, int]:
+    """The counts of a ``joint_command`` diagnostics part, by key."""
+    return {kv.key: int(kv.value) for kv in status.values}
 
 
 class GoalStatus:
@@ -177,6 +184,16 @@ class ConformanceHelpers(RegisteredDriver):
         assert rig.ros is not None
         msg = rig.ros.wait_for_message('joint_states', JointState, timeout=20)
         assert abs(joint_positions(msg)[joint] - position) > 0.1, 'stopped short of target'
+
+    def rejections(self, ros: RosTestClient,
+                   predicate: Callable[[dict[str, int]], bool] = lambda counts: True,
+                   timeout: float = 30.0) -> dict[str, int]:
+        """The node's refused-command counts (the ``joint_command`` diagnostics part: totals
+        ``rejected``/``refused`` and ``<kind>: <reason>``) from a fresh /diagnostics message,
+        the first one whose counts satisfy ``predicate``."""
+        status = ros.wait_for_diagnostic(
+            self.node_name, COMMAND_PART, lambda s: predicate(command_counts(s)), timeout)
+        return command_counts(status)
 
     def node_statuses(self, array: DiagnosticArray) -> list[DiagnosticStatus]:
         prefix = f'{self.node_name}: '

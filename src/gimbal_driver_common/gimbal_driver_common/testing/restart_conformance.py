@@ -63,6 +63,12 @@ class RestartConformance(ConformanceHelpers):
         before = rig.sim.motion_received()
         result, _, _ = self.move_to(ros, self.small_move)
         assert not result.success and 'not active' in result.message, result.message
+        # a joint_command is refused too, and counted by its reason
+        key = 'refused: node not active'
+        counted = self.rejections(ros).get(key, 0)
+        ros.publish('joint_command', JointState(name=list(self.small_move),
+                                                position=list(self.small_move.values())))
+        self.rejections(ros, lambda counts: counts.get(key, 0) > counted)
         assert rig.sim.motion_received() == before
         assert ros.lifecycle_transition(name, Transition.TRANSITION_ACTIVATE)
         assert ros.lifecycle_state(name) == 'active'
@@ -85,9 +91,19 @@ class RestartConformance(ConformanceHelpers):
         # a reconnect that comes quickly cannot hide the disconnected messages
         statuses = ros.subscribe(self.srv('status'), GimbalStatus)
         wait_for(lambda: statuses, 15.0, 'a first ~/status')
-        rig.sim.drop_link(1.0)
+        rig.sim.drop_link(2.0)
         status = self.wait_connection(ros, ERROR)
         assert self.link_lost_text in status.message, status.message
+        # a joint_command while the link is down is refused and counted by its reason
+        key = 'refused: device not connected'
+        counted = self.rejections(ros).get(key, 0)
+        command = JointState(name=list(self.small_move), position=list(self.small_move.values()))
+
+        def refused_while_down() -> bool:
+            ros.publish('joint_command', command)
+            return self.rejections(ros).get(key, 0) > counted
+
+        wait_for(refused_while_down, 20.0, 'a joint_command refused while disconnected')
         # the axes' last values are stale, and ~/status says the link is down
         ros.wait_for_diagnostic(self.node_name, self.joints[0], lambda s: s.level[0] == STALE)
         wait_for(lambda: any(m.connection != GimbalStatus.CONNECTION_CONNECTED
