@@ -22,6 +22,7 @@ SPEC = DriverSpec(
                      'can_options': ['sleep_after_open=0'], 'service_timeout': 0.3,
                      'transmission_intervals': ['yaw_position=20', 'pitch_position=20'],
                      'actuator_mode': 'auto_brake'},
+    launch_sim_arguments=('--link', '/tmp/canaero_turret'),
     sim_handle='canaero_turret_driver.sim_handle:CanaeroSimHandle',
     demo=DemoSettings(
         jog_velocity=0.3,

@@ -7,6 +7,8 @@ Bring the CAN interface up first (see the package README), e.g.
     sudo ip link set can0 type can bitrate 500000 && sudo ip link set can0 up
 use_description:=true also starts robot_state_publisher with urdf/canaero_turret_driver.urdf
 (or description_file:=...), which the node uses for ~/look_at too.
+sim:=true also starts canaero_turret_sim (slcan on /tmp/canaero_turret,
+config/canaero_turret_driver_sim.yaml).
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """
 

@@ -20,6 +20,7 @@ SPEC = DriverSpec(
     sim_arguments=('--port', '{port}'),
     node_parameters={'transport': 'tcp', 'host': '127.0.0.1', 'port': '{port}',
                      'status_period': 0.2, 'default_speed': 1.0, 'acceleration': 6.0},
+    launch_sim_arguments=('--port', '4949'),
     sim_handle='capture_driver.sim_handle:CaptureSimHandle',
     demo=DemoSettings(
         jog_velocity=0.3,

@@ -4,6 +4,7 @@ ros2 launch capture_driver capture_driver.launch.py [params_file:=...] [autostar
 With autostart false (the default here) a lifecycle manager configures and activates it.
 use_description:=true also starts robot_state_publisher with urdf/capture_driver.urdf
 (or description_file:=...), which the node uses for ~/look_at too.
+sim:=true also starts capture_sim on TCP 127.0.0.1:4949 (config/capture_driver_sim.yaml).
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """
 

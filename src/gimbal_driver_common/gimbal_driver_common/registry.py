@@ -107,6 +107,10 @@ class DriverSpec:
     move_goal: tuple[float, ...]  # a reachable goal for the first joints (rad/m)
     sim_arguments: tuple[str, ...] = ()
     node_parameters: Mapping[str, Any] = field(default_factory=dict)
+    #: the simulator's arguments under the launch file's ``sim:=true``: it serves the address
+    #: the package's simulator YAML (config/<package>_sim.yaml, or config/<package>.yaml for
+    #: the reference) connects to, so no placeholder here
+    launch_sim_arguments: tuple[str, ...] = ()
     password: str = ''           # the simulator's device password (never logged)
     sim_handle: str = ''         # 'module:Class' of the in-process simulator handle
     demo: DemoSettings = field(default_factory=DemoSettings)
@@ -200,6 +204,15 @@ def drivers() -> list[DriverSpec]:
                                 f'{other.package} and {spec.package}')
         found[spec.name] = spec
     return sorted(found.values(), key=lambda s: (not s.is_reference, s.name))
+
+
+def driver_of_package(package: str) -> DriverSpec:
+    """The registered driver of ``package`` (KeyError naming the registered packages)."""
+    for spec in drivers():
+        if spec.package == package:
+            return spec
+    raise KeyError(f'no driver is registered for package {package!r}; registered: '
+                   f'{[s.package for s in drivers()]}')
 
 
 def driver(name: str) -> DriverSpec:
