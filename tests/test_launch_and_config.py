@@ -69,8 +69,10 @@ def share(pkg: str, *parts: str) -> Path:
 
 
 def config_files() -> list[tuple[str, Path]]:
+    """The node parameter files (not the ros2_control controllers' YAML)."""
     return [(pkg, path) for pkg in DRIVERS
-            for path in sorted((SRC / pkg / 'config').glob('*.yaml'))]
+            for path in sorted((SRC / pkg / 'config').glob('*.yaml'))
+            if not path.name.endswith('_controllers.yaml')]
 
 
 def test_every_driver_ships_launch_and_configs() -> None:
@@ -81,6 +83,9 @@ def test_every_driver_ships_launch_and_configs() -> None:
         assert f'{pkg}.yaml' in configs, f'{pkg}: no real-hardware YAML'
         if pkg != REFERENCE_PACKAGE:  # the reference's device is its simulator
             assert f'{pkg}_sim.yaml' in configs, f'{pkg}: no simulator YAML'
+        # the ros2_control example (tests/test_ros2_control_examples.py), installed
+        for name in (f'{pkg}.ros2_control.xacro', f'{pkg}_controllers.yaml'):
+            assert share(pkg, 'config', name).is_file(), f'{pkg}: {name} not installed'
 
 
 @pytest.mark.parametrize('pkg', list(DRIVERS))

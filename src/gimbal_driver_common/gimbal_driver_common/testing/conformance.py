@@ -35,13 +35,14 @@ from gimbal_driver_common.testing.conformance_rig import (
     SimulatorHandle,
 )
 from gimbal_driver_common.testing.restart_conformance import RestartConformance
+from gimbal_driver_common.testing.topic_system_conformance import TopicInterfaceConformance
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
 
 __all__ = ['ConformanceRig', 'DriverConformance', 'GoalStatus', 'SimulatorHandle']
 
 
-class DriverConformance(RestartConformance):
+class DriverConformance(TopicInterfaceConformance, RestartConformance):
     """The common contract of every gimbal driver node, tested through the real transport.
 
     Subclasses set the attributes below; the package, node and simulator come from the

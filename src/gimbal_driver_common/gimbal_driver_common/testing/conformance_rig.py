@@ -73,16 +73,21 @@ class ConformanceRig:
         return [*self.sim.link_parameters(), f'presets_file:={self.presets_file}',
                 *self.suite.node_parameters(), *extra]
 
-    def start_node(self, *extra: str, wait_active: bool = True) -> ManagedProcess:
-        """(Re)start the node with the suite's parameters plus ``extra``."""
+    def start_node(self, *extra: str, wait_active: bool = True,
+                   namespace: str = '') -> ManagedProcess:
+        """(Re)start the node with the suite's parameters plus ``extra``, in ``namespace``
+        (``-r __ns:=``) if given."""
         self.stop_node()
         args = ['--ros-args', *[x for p in self.node_parameters(extra) for x in ('-p', p)]]
+        if namespace:
+            args += ['-r', f'__ns:={namespace}']
         assert self.ros is not None
-        states = self.ros.subscribe('joint_states', JointState)
+        states = self.ros.subscribe(f'{namespace}/joint_states' if namespace else
+                                    'joint_states', JointState)
         seen = len(states)
         self.node = ManagedProcess.ros(self.suite.package, self.suite.node_executable,
                                        self.domain, args)
-        self._node_extra = tuple(extra)
+        self._node_extra = (*extra, *([f'__ns:={namespace}'] if namespace else []))
         if wait_active:
             wait_for(lambda: len(states) > seen or not self.node.running, 60.0,
                      f'joint_states from {self.suite.node_executable}')
