@@ -112,13 +112,16 @@ def codec_figures(frame: str, frame_bytes: int, encode: Callable[[], object],
 
 
 def start_node(domain: int, package: str, parameters: dict[str, object],
-               params_file: bool = True, executable: str = '') -> ManagedProcess:
+               params_file: bool = True, executable: str = '',
+               namespace: str = '') -> ManagedProcess:
     """``<package>_node`` (or ``executable``) with its simulator YAML (if any) and
-    ``parameters`` on top."""
+    ``parameters`` on top, in ``namespace`` if given."""
     args = ['--ros-args']
     config = ROOT / 'src' / package / 'config' / f'{package}_sim.yaml'
     if params_file and Path(config).is_file():
         args += ['--params-file', str(config)]
+    if namespace:
+        args += ['-r', f'__ns:={namespace}']
     return ManagedProcess.ros(package, executable or f'{package}_node', domain,
                               args + parameter_arguments(parameters), extra_env=node_hook_env())
 

@@ -26,6 +26,7 @@ sys.path.insert(0, str(HERE))
 
 from driver_bench import generic_run  # noqa: E402
 from harness import ROOT, git_revision, loopback_rtt_us, rclpy_reference  # noqa: E402
+from tracking import tracking_figures  # noqa: E402
 
 from gimbal_driver_common.registry import DriverSpec, drivers  # noqa: E402
 from gimbal_driver_common.testing import DomainLease  # noqa: E402
@@ -73,6 +74,13 @@ def main() -> int:
             except Exception as exc:  # noqa: BLE001 - one failing bench must not hide the others
                 traceback.print_exc()
                 results[name] = {'error': f'{type(exc).__name__}: {exc}'}
+                continue
+            print(f'bench: {name} tracking ...', file=sys.stderr, flush=True)
+            try:
+                results[name]['tracking'] = tracking_figures(registered[name], domain)
+            except Exception as exc:  # noqa: BLE001
+                traceback.print_exc()
+                results[name]['tracking'] = {'error': f'{type(exc).__name__}: {exc}'}
         add_cpu_ratio_targets(results)
     output.parent.mkdir(exist_ok=True)
     output.write_text(json.dumps(results, indent=2))
@@ -137,7 +145,27 @@ def markdown(results: dict) -> str:
                         f'{data.get("rate_target", "")} |')
         if 'cpu_percent' in data:
             rows.append(cpu_row(name, data))
+        if 'tracking' in data:
+            rows.append(tracking_row(name, data['tracking']))
     return '\n'.join(rows)
+
+
+def tracking_row(name: str, tracking: dict) -> str:
+    """The 100 Hz trajectory through ros2_control's topic interface (bench/tracking.py)."""
+    if 'error' in tracking:
+        return f'| {name} | tracking | error: {tracking["error"].splitlines()[0]} | | |'
+    late = tracking.get('publisher_late_ms', {})
+    view = tracking.get('controller_view', {})
+    return (f'| {name} | tracking {tracking["trajectory"]}, {tracking["joint"]}: error '
+            f'p50/p99/max | {tracking["error_p50"]} / {tracking["error_p99"]} / '
+            f'{tracking["error_max"]} ({tracking["runs"]} runs; controller view max '
+            f'{view.get("error_max")}, state age max {view.get("state_age_max_ms")} ms; '
+            f'publisher late max {late.get("max")} ms) | device limits allow '
+            f'{tracking["allowed_by_device_limits"]} (one period '
+            f'{tracking["allowed_terms"]["one_control_period"]} + v²/2a '
+            f'{tracking["allowed_terms"]["acceleration"]}, a = '
+            f'{tracking["device_acceleration"]}) | '
+            f'{"within" if tracking["within_allowed"] else "over"} |')
 
 
 def cpu_row(name: str, data: dict) -> str:

@@ -3,6 +3,7 @@ its receive side (the cross-driver process tests)."""
 
 from __future__ import annotations
 
+import math
 import random
 import time
 from pathlib import Path
@@ -60,6 +61,10 @@ class CanaeroSimHandle(SimHandle):
 
     def controls(self) -> SimControl:
         return self._controls
+
+    def axis_limits(self, joint: str) -> tuple[float, float]:
+        axis = self.simulator.axes[joint]  # degrees; set-points carry no speed
+        return math.radians(axis.move_speed), math.radians(axis.acceleration)
 
     def _recording(self, simulator):
         """The simulator's frame handler, logging the commands and service requests."""

@@ -43,6 +43,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gimbal_driver_common import errors
+from gimbal_driver_common.fair_lock import FairRLock
 from gimbal_driver_common.transport import ByteStream, TransportError
 
 from .protocol import (
@@ -173,7 +174,8 @@ class CaptureClient:
         self.keepalive_count = keepalive_count
         self.resync_gap = resync_gap
         self.max_timeouts = max_timeouts
-        self._lock = threading.RLock()
+        # fair: a command stream must not starve the joint poll (gimbal_driver_common.fair_lock)
+        self._lock = FairRLock()
         self._stream: ByteStream | None = None
         self._decoder = StreamDecoder()
         self._connected = False
@@ -693,7 +695,7 @@ class CaptureClient:
         current = self.request('MOT_GetMotorCurrent', axis) if with_current else None
         return position, speed, current
 
-    def exclusive(self) -> threading.RLock:
+    def exclusive(self) -> FairRLock:
         """The request lock, for a caller that sends a whole motion set-up (several axes)
         without the poll thread's requests in between: ``with client.exclusive(): ...``."""
         return self._lock

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import random
 from pathlib import Path
 
@@ -84,6 +85,12 @@ class CaptureSimHandle(SimHandle):
 
     def controls(self) -> SimControl:
         return self.sim.controls
+
+    def axis_limits(self, joint: str) -> tuple[float, float]:
+        model = self.sim.model
+        with model.lock:  # load degrees; the profile the driver's MOT_Set* wrote
+            axis = model.axes[AXIS_IDS[joint]]
+            return math.radians(axis.move_speed), math.radians(axis.acceleration)
 
     def lost_frames(self, rng: random.Random) -> None:
         self.sim.model.lose_replies(rng.randrange(1, 4))

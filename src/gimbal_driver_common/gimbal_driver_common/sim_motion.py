@@ -77,6 +77,12 @@ class AxisMotion:
         return 'stopping' if self.velocity != 0.0 else 'idle'
 
     @property
+    def move_speed(self) -> float:
+        """The speed limit a position move runs at now: the move's ``speed`` within
+        ``max_speed``."""
+        return self.max_speed if self.speed is None else min(abs(self.speed), self.max_speed)
+
+    @property
     def moving(self) -> bool:
         """The axis turns, or has a move or a non-zero jog still to run."""
         return (self.velocity != 0.0 or self.target is not None

@@ -81,6 +81,15 @@ class KesslerSimHandle(SimHandle):
         rig = SIM_RIG[joint]
         return rig.offset + target * rig.span / motor.end
 
+    def axis_limits(self, joint: str) -> tuple[float, float]:
+        """Motor rotations in SI on the example rig: |span / end| per rotation
+        (registration.SIM_RIG, as :meth:`device_target`)."""
+        device = self.sim.device
+        with device.lock:
+            motor = next(m for m in device.motors.values() if m.role == joint)
+            scale = abs(SIM_RIG[joint].span / motor.end) if motor.end else 0.0
+            return motor.move_speed * scale, motor.acceleration * scale
+
     def malformed_frames(self, rng: random.Random) -> None:
         from kessler_kos_driver.protocol import MotorInfo, MotorInfoEntry
 

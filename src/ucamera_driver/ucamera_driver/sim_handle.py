@@ -86,6 +86,12 @@ class UCameraSimHandle(SimHandle):
         with self.sim.model.lock:
             return self.sim.model.vehicle_angles
 
+    def axis_limits(self, joint: str) -> tuple[float, float]:
+        model = self.sim.model
+        with model.lock:  # rad; the gimbal has no speed input: its own rate and acceleration
+            axis = getattr(model, joint)
+            return axis.move_speed, axis.acceleration
+
     def controls(self) -> SimControl:
         return self.sim.controls
 

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import threading
 import time
 
 from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout
+from gimbal_driver_common.fair_lock import FairRLock
 from gimbal_driver_common.transport import TcpStream
 
 from .protocol import Refused, check_reply, verb
@@ -17,7 +17,8 @@ class VirtualGimbalClient:
     def __init__(self, host: str, port: int, timeout: float = 1.0) -> None:
         self.stream = TcpStream(host, port)
         self.timeout = timeout
-        self._lock = threading.Lock()
+        # fair: a command stream must not starve the joint poll (gimbal_driver_common.fair_lock)
+        self._lock = FairRLock()
         self._buffer = b''
 
     def open(self) -> None:

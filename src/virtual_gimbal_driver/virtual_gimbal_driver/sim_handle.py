@@ -60,6 +60,10 @@ class VirtualGimbalSim(SimHandle):
         # a MOVE line sets the target as it is handled
         return self.device.axes[joint].target
 
+    def axis_limits(self, joint: str) -> tuple[float, float]:
+        axis = self.device.axes[joint]  # rad
+        return axis.move_speed, axis.acceleration
+
     def malformed_frames(self, rng: random.Random) -> None:
         # a reply line that does not parse (no newline: it prefixes the next real reply)
         self.server.inject(b'POS nan x')

@@ -218,6 +218,12 @@ class SimHandle:
         the generic benchmark watches it for commands arriving. None: not known."""
         raise NotImplementedError(f'{type(self).__name__} does not expose device targets')
 
+    def axis_limits(self, joint: str) -> tuple[float, float]:
+        """(speed limit of a position move now, acceleration) of ``joint``'s axis on the
+        device model, in the joint's units (rad/s and rad/s², m/s and m/s²): what the
+        tracking benchmark compares its error with."""
+        raise NotImplementedError(f'{type(self).__name__} does not expose its axis limits')
+
     # faults every server has
     def drop_link(self, seconds: float) -> None:
         """Cut the link to the node and refuse a new one for ``seconds`` (returns at once)."""

@@ -1,0 +1,64 @@
+"""A reentrant lock that goes to its waiters in the order they asked (no ROS).
+
+A request/reply client serialises its link with one lock that two threads share: the
+device thread's joint poll and the command path. Python's ``threading.RLock`` is not fair:
+a thread that releases it and asks again at once (a command stream sending its next
+command, each one several request/reply transactions) takes it back before a waiting
+thread has even been scheduled. Measured on the Capture client: with commands back to
+back (faster than the link takes them: a loaded machine, or 115200 baud serial, where one
+two-axis command is about as long as a 100 Hz period), the poll waited up to 778 ms for its
+turn, so joint_states stopped while the axes moved, and a ros2_control stack reading them
+saw a tracking error of a quarter radian where the device was on track. With
+:class:`FairRLock` each waiter gets the lock after the current holder, in turn.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+
+
+class FairRLock:
+    """Reentrant, first come first served: ``release`` hands the lock to the oldest waiter."""
+
+    def __init__(self) -> None:
+        self._mutex = threading.Lock()
+        self._owner: int | None = None
+        self._count = 0
+        self._waiters: deque[tuple[int, threading.Lock]] = deque()
+
+    def acquire(self) -> bool:
+        me = threading.get_ident()
+        with self._mutex:
+            if self._owner == me:
+                self._count += 1
+                return True
+            if self._owner is None:
+                self._owner, self._count = me, 1
+                return True
+            gate = threading.Lock()
+            gate.acquire()
+            self._waiters.append((me, gate))
+        gate.acquire()  # released by the holder that hands the lock to this thread
+        return True
+
+    def release(self) -> None:
+        with self._mutex:
+            if self._owner != threading.get_ident():
+                raise RuntimeError('cannot release a FairRLock held by another thread')
+            self._count -= 1
+            if self._count:
+                return
+            if self._waiters:
+                self._owner, gate = self._waiters.popleft()
+                self._count = 1
+                gate.release()
+            else:
+                self._owner = None
+
+    def __enter__(self) -> FairRLock:
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.release()

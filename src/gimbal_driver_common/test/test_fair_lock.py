@@ -1,0 +1,65 @@
+"""FairRLock: reentrant, and a waiter gets the lock before its releasing holder asks again."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from gimbal_driver_common.fair_lock import FairRLock
+from gimbal_driver_common.testing import wait_for
+
+
+def test_a_waiter_goes_before_the_holder_that_asks_again() -> None:
+    """What starved the Capture poll: the holder releases and asks again at once."""
+    lock, order = FairRLock(), []
+    lock.acquire()
+
+    def waiter() -> None:
+        with lock:
+            order.append('waiter')
+
+    thread = threading.Thread(target=waiter)
+    thread.start()
+    wait_for(lambda: lock._waiters, 5.0, 'the waiter to queue')
+    lock.release()
+    with lock:  # at once, as a command stream's next command does
+        order.append('holder')
+    thread.join(5.0)
+    assert order == ['waiter', 'holder']
+
+
+def test_waiters_are_served_in_the_order_they_asked() -> None:
+    lock, order = FairRLock(), []
+    lock.acquire()
+    threads = []
+    for index in range(5):
+        thread = threading.Thread(target=lambda i=index: (lock.acquire(), order.append(i),
+                                                          lock.release()))
+        thread.start()
+        wait_for(lambda n=index + 1: len(lock._waiters) == n, 5.0, f'waiter {index}')
+        threads.append(thread)
+    lock.release()
+    for thread in threads:
+        thread.join(5.0)
+    assert order == [0, 1, 2, 3, 4]
+
+
+def test_it_is_reentrant_and_only_its_holder_releases_it() -> None:
+    lock, refused = FairRLock(), []
+
+    def release_from_elsewhere() -> None:
+        try:
+            lock.release()
+        except RuntimeError as exc:
+            refused.append(str(exc))
+
+    with lock, lock:
+        other = threading.Thread(target=release_from_elsewhere)
+        other.start()
+        other.join(5.0)
+    assert refused == ['cannot release a FairRLock held by another thread']
+    with lock:  # free again after the nested holds
+        pass
+    with pytest.raises(RuntimeError, match='held by another thread'):
+        lock.release()
