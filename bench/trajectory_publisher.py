@@ -3,7 +3,8 @@
 The joint_state_topic_hardware_interface stand-in (``gimbal_driver_common.testing.
 topic_system``: write() with its threshold rule, read() on SensorDataQoS) cycles at 100 Hz
 with the package's ``<ros2_control>`` example, as a controller manager with a
-joint_trajectory_controller would: it holds the joints where they are, then runs each
+joint_trajectory_controller would: NaN commands until it starts, then it holds the joints
+where they are, then runs each
 trajectory (the JTC's rest-to-rest quintic of ``joint`` by ``amplitude``, alternating
 direction, the other joints held), then holds the goal for ``settle_s``. Every joint_states
 message the interface reads is kept with its stamp. Writes JSON to ``output``: the runs
@@ -36,6 +37,8 @@ from gimbal_driver_common.testing.topic_system import (
     rest_to_rest,
 )
 
+#: before the controllers start, the interface publishes NaN commands
+NAN_S = 0.2
 #: the JTC holds the joints where they are when it starts
 HOLD_S = 0.5
 
@@ -71,11 +74,12 @@ def main() -> int:
     wait(stand_in.subscribed, 30.0, f'subscriber on {config.joint_commands_topic}')
     wait(lambda: stand_in.states_received > 5, 30.0, f'states on {config.joint_states_topic}')
     time.sleep(1.0)  # the node sees the publisher after the publisher sees it (discovery)
-    hold = {name: stand_in.state(name) for name in config.joint_names}
+    stand_in.run(NAN_S, lambda t: {})  # the controllers not started yet: NaN commands
+    hold = {name: stand_in.state(name) for name in config.joint_names}  # what read() took
     stand_in.run(HOLD_S, lambda t: hold)
     runs = []
     cycles: list[tuple[float, float, float]] = []  # (wall time, state stamp, state position)
-    late: list[float] = []
+    late_from = len(stand_in.late)
     for index in range(settings['runs']):
         start = stand_in.state(joint)
         goal = start + (amplitude if index % 2 == 0 else -amplitude)
@@ -85,8 +89,7 @@ def main() -> int:
                      began: list[float] = began) -> dict[str, float]:
             now = time.time()
             if not began:
-                began.append(now)
-            late.append(now - began[0] - t)  # this cycle behind the controller's schedule
+                began.append(now - t)
             # what a controller sees this cycle: the latest state read() took, and its stamp
             if states:
                 cycles.append((now, *states[-1]))
@@ -94,6 +97,7 @@ def main() -> int:
 
         stand_in.run(duration + settle, commands)
         runs.append({'t0': began[0], 'start': start, 'goal': goal, 'duration': duration})
+    late = stand_in.late[late_from:]  # how late the trajectory cycles ran
     output.write_text(json.dumps({'runs': runs, 'states': states, 'seen': cycles, 'late': late,
                                   'cycles': stand_in.cycles,
                                   'published': len(stand_in.published)}))

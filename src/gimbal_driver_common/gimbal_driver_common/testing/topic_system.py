@@ -172,7 +172,8 @@ class TopicSystemStandIn:
     Each :meth:`cycle` does what one controller-manager cycle does for this hardware: read()
     the latest state, let the controllers set the commands (``commands``: joint -> value
     for each joint's command interface; a joint left out keeps its command, NaN at start),
-    write(). ``published`` keeps every message sent and ``cycles`` how many ran.
+    write(). ``published`` keeps every message sent, ``cycles`` how many ran and ``late``
+    how late each of :meth:`run` ran (a machine busy with other work).
     """
 
     def __init__(self, node: Node, config: TopicSystemConfig) -> None:
@@ -182,6 +183,7 @@ class TopicSystemStandIn:
         self.states_received = 0
         self.published: list[JointState] = []
         self.cycles = 0
+        self.late: list[float] = []  # s each cycle of run() ran behind its schedule
         # rclcpp::QoS(1): reliable, volatile, keep-last 1
         self._publisher = node.create_publisher(JointState, config.joint_commands_topic,
                                                 QoSProfile(depth=1))
@@ -232,12 +234,16 @@ class TopicSystemStandIn:
 
     def run(self, seconds: float, commands: Callable[[float], Mapping[str, float]],
             interface: str | None = None, rate_hz: float = UPDATE_RATE_HZ) -> None:
-        """Cycle at ``rate_hz`` for ``seconds``; ``commands(t)`` gives the controllers'
-        commands at ``t`` s into the run (a steady timer, as the controller manager's)."""
+        """Cycle at ``rate_hz`` for ``seconds`` (a steady timer, as the controller manager's);
+        ``commands(t)`` gives the controllers' commands ``t`` s into the run, ``t`` the time
+        the cycle really runs (the trajectory controller samples its trajectory at the
+        cycle's time). How late each cycle ran behind its schedule goes to ``late``."""
         period = 1.0 / rate_hz
         start = time.monotonic()
         for k in range(round(seconds * rate_hz)):
             delay = start + k * period - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            self.cycle(commands(k * period), interface)
+            t = time.monotonic() - start
+            self.late.append(t - k * period)
+            self.cycle(commands(t), interface)
