@@ -52,13 +52,13 @@ class CommandRejections:
         nothing went to the device; True: the device failed the send."""
         if sent:
             key = (REFUSED, f'failed on the device: {error.reason}')
-            text, write = f'joint_command failed on the device: {error}', self.log.error
+            text = f'joint_command failed on the device: {error}'
         elif isinstance(error, InvalidRequest):
             key = (REJECTED, error.reason)
-            text, write = f'joint_command rejected, nothing sent: {error}', self.log.warning
+            text = f'joint_command rejected, nothing sent: {error}'
         else:
             key = (REFUSED, error.reason)
-            text, write = f'joint_command refused, nothing sent: {error}', self.log.warning
+            text = f'joint_command refused, nothing sent: {error}'
         now = self._clock()
         with self._lock:
             self._counts[key] = self._counts.get(key, 0) + 1
@@ -69,7 +69,12 @@ class CommandRejections:
             unlogged = self._unlogged.pop(key, 0)
         if unlogged:
             text += f' ({unlogged} more for this reason since the last such line)'
-        write(text)
+        # one call site per severity: rclpy's logger refuses a call site whose severity
+        # changes between calls ("Logger severity cannot be changed between calls")
+        if sent:
+            self.log.error(text)
+        else:
+            self.log.warning(text)
 
     def counts(self) -> dict[str, dict[str, int]]:
         """kind (``rejected``/``refused``) -> reason -> how many so far."""

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from gimbal_driver_common.diagnostics import Level
 from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout
 from gimbal_driver_common.joint_command import CommandError, JointLimits, validate_joint_command
@@ -94,3 +96,16 @@ def test_the_diagnostics_part_counts_by_kind_and_reason_at_level_ok() -> None:
     assert part.values == [('rejected', '3'), ('refused', '1'),
                            ('rejected: pan: position outside the limits', '3'),
                            ('refused: the device cannot move the axes', '1')]
+
+
+def test_warnings_and_errors_go_through_rclpys_logger() -> None:
+    """rclpy remembers each call site's severity and raises if it changes: a refusal (a
+    warning) and a failed send (an error) must not share one call site. It did, and the
+    ValueError ended the controller's command thread (seen in the Capture soak)."""
+    rclpy_logging = pytest.importorskip('rclpy.logging')
+    rejections = CommandRejections(rclpy_logging.get_logger('test_rejections'), period=0.0)
+    for _ in range(2):
+        rejections.record(rejection(2.0))
+        rejections.record(DeviceTimeout('MOT_Update: no reply within 0.5 s'), sent=True)
+    assert rejections.counts()['refused'] == {
+        'failed on the device: no answer from the device': 2}
