@@ -208,20 +208,21 @@ def drivers() -> list[DriverSpec]:
 
 def driver_of_package(package: str) -> DriverSpec:
     """The registered driver of ``package`` (KeyError naming the registered packages)."""
-    for spec in drivers():
-        if spec.package == package:
-            return spec
-    raise KeyError(f'no driver is registered for package {package!r}; registered: '
-                   f'{[s.package for s in drivers()]}')
+    return _registered('package', package)
 
 
 def driver(name: str) -> DriverSpec:
     """The registered driver ``name`` (KeyError naming the registered ones)."""
-    for spec in drivers():
-        if spec.name == name:
+    return _registered('name', name)
+
+
+def _registered(field_name: str, value: str) -> DriverSpec:
+    specs = drivers()
+    for spec in specs:
+        if getattr(spec, field_name) == value:
             return spec
-    raise KeyError(f'no driver {name!r} is registered; registered: '
-                   f'{[s.name for s in drivers()]}')
+    raise KeyError(f'no driver with {field_name} {value!r} is registered; registered: '
+                   f'{[getattr(s, field_name) for s in specs]}')
 
 
 
