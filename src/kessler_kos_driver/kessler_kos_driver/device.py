@@ -232,11 +232,18 @@ class KosDevice(Device):
 
         kOS has no per-motor "moving" bit, but a playing move owns every motor: then every
         joint reads moving; otherwise the controller's velocity rule applies.
+
+        The stamp is the oldest report in the sample: the motors' positions arrive at
+        different times (the MotorInfo poll for all, MotorPosition notifications for one),
+        and one JointState stamp must not claim a position fresher than it is. With the
+        newest report as the stamp, a held joint's notification every cycle made a moving
+        joint's 20 ms old position look current (the tracking bench read it as 10 mrad of
+        extra error).
         """
         client = self.client
         positions: dict[str, float] = {}
         velocities: dict[str, float] = {}
-        stamp = 0.0
+        stamp = math.inf
         self._note_calibration()
         for name, mapping in self.joints.items():
             motor = client.motors.get(mapping.address)
@@ -245,7 +252,7 @@ class KosDevice(Device):
             units = self.conversion(name)
             positions[name] = units.to_si(motor.position)
             velocities[name] = units.rate_to_si(motor.velocity)
-            stamp = max(stamp, motor.stamp)
+            stamp = min(stamp, motor.stamp)
         if not positions:
             return None
         moving = dict.fromkeys(positions, True) if client.playback_running else {}

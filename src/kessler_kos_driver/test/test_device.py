@@ -146,6 +146,29 @@ def test_connect_and_identity(rig):
     assert rig.device.capabilities.scans is None   # the driver-side sector scan serves kOS
 
 
+def test_a_sample_is_stamped_with_its_oldest_motor_report():
+    """Positions arrive at different times (the MotorInfo poll for every motor, a
+    MotorPosition notification for one): the one JointState stamp must not make an older
+    position look current."""
+    sim = KosSimulator(SimSettings(password=PASSWORD, precalibrated=True), port=0,
+                       discovery_port=0)
+    sim.start()
+    client = KosClient('127.0.0.1', sim.port, password=PASSWORD, poll_period=60.0,
+                       reply_timeout=2.0)
+    limits = {n: JointLimits(-1000.0, 1000.0, 60.0) for n in JOINTS}
+    device = KosDevice(client, joint_mappings(JOINTS, [1, 2, 3], UNITS),
+                       ControllerConfig(JOINTS, limits))
+    try:
+        device.open()
+        polled = device.read().stamp   # one MotorInfo: every motor reported at once
+        assert {m.stamp for m in client.motors.values()} == {polled}
+        client.motors[ADDRESS['slider']].stamp = polled + 0.02  # a newer report of one
+        assert device.read().stamp == polled
+    finally:
+        device.close()
+        sim.stop()
+
+
 def test_client_errors_are_in_the_shared_hierarchy():
     assert issubclass(NotConnected, LinkError)
     assert issubclass(DeviceTimeout, CoreDeviceTimeout)
