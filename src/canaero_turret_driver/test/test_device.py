@@ -38,9 +38,12 @@ class Rig:
                                  link_path=str(tmp_path / "tty")).start()
         self.samples = 0
         self.config = config
+        # node_timeout: silence that counts as a lost link. 0.6 s was shorter than the
+        # simulator thread's worst stall under the parallel suite (a move failed with
+        # "turret node 1 silent for 0.6 s"); the silence tests wait for it anyway.
         client_config = ClientConfig(interface="slcan", channel=self.link.port_name,
                                      bus_options={"sleep_after_open": 0},
-                                     service_timeout=0.3, node_timeout=0.6, stale_timeout=0.6)
+                                     service_timeout=0.3, node_timeout=2.0, stale_timeout=0.6)
         self.device = TurretDevice(TurretClient(client_config), settings or TurretSettings(),
                                    lambda: self.config.publish_rate, LOG)
         self.controller = GimbalController(self.device, self.config, LOG,
