@@ -256,7 +256,7 @@ def declared_parameters(pkg: str) -> set[str]:
         try:
             with RosTestClient(domain, 'launch_check') as ros:
                 reply = ros.call(ListParameters, f'/{pkg}/list_parameters',
-                                 ListParameters.Request(), timeout=30)
+                                 ListParameters.Request(), timeout=30, idempotent=True)
         finally:
             node.stop()
     names = set(reply.result.names)
