@@ -140,6 +140,23 @@ IDENTITY_GETTERS = (('serial_number', 'COM_GetSn'), ('firmware', 'COM_GetFw'),
 
 
 @dataclass
+class PostedMoves:
+    """A stream move written by :meth:`CaptureClient.post_moves` whose ACKs nobody has read
+    yet: per axis ``(position_deg, speed_deg_s, acceleration)`` and the frames, in order."""
+
+    moves: dict[int, tuple[float, float, float]]
+    frames: list[tuple[str, Frame]]
+    settled: bool = False
+    #: the client's count of setters sent when this was written (see finish_posted)
+    setters_at_post: int = 0
+    #: the device's refusal, or the link lost, found when the ACKs were read
+    error: CaptureError | None = None
+    #: some ACK never came, or a NACK says the packet was not executed (0xF6): the moves
+    #: are sent again, one request at a time (the same target twice is harmless)
+    resend: bool = False
+
+
+@dataclass
 class Identity:
     serial_number: str = ''
     firmware: str = ''
@@ -193,12 +210,16 @@ class CaptureClient:
         self.batch_reads = batch_reads
         self.batching = batch_reads
         self._batch_failures = 0
+        #: a stream move written without waiting for its ACKs (see :meth:`post_moves`)
+        self._posted: PostedMoves | None = None
+        #: setters sent on this client (a posted move is not re-sent after another one)
+        self._setters_sent = 0
         self._worker: threading.Thread | None = None
         self._stop = threading.Event()
         self.last_error = 'not connected'
         self.connects = 0
         self.stats = {'requests': 0, 'timeouts': 0, 'nacks': 0, 'wrong_replies': 0,
-                      'stale': 0, 'incomplete_batches': 0}
+                      'stale': 0, 'incomplete_batches': 0, 'posted_moves': 0}
         # Commands the host sends on its own that the device answered with 0xA6 or with the
         # wrong kind of reply (name -> its answer); never sent again on this connection.
         self.unsupported: dict[str, str] = {}
@@ -298,6 +319,11 @@ class CaptureClient:
     def _close_locked(self) -> None:
         self._connected = False
         self._setups.clear()
+        posted = self._posted
+        if posted is not None and not posted.settled:
+            posted.settled = True
+            posted.error = NotConnected(f'stream move: link closed before its ACKs came '
+                                        f'({self.last_error})')
         stream, self._stream = self._stream, None
         if stream is not None:
             stream.close()
@@ -352,8 +378,10 @@ class CaptureClient:
         frame = cmd.frame(axis, value, self.group if group is None else group)
         if self._stream is None:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
-        if not cmd.replies_with_data and not self._in_setup:
-            self._setups.clear()  # anything may have changed an axis' mode or profile
+        if not cmd.replies_with_data:
+            self._setters_sent += 1
+            if not self._in_setup:
+                self._setups.clear()  # anything may have changed an axis' mode or profile
         for attempt in (1, 2):
             try:
                 reply = self._transact(name, frame, cmd.replies_with_data,
@@ -500,7 +528,13 @@ class CaptureClient:
     def _send(self, stream: ByteStream, data: bytes) -> bool:
         """Write one request (or a batch), after draining stale input if there can be any;
         until its reply is in, input may hold a stale reply again. Returns True when a late
-        reply to an earlier request may still arrive (one was left unanswered)."""
+        reply to an earlier request may still arrive (one was left unanswered).
+
+        A posted stream move's ACKs are read first (:meth:`_settle_posted`): whoever takes
+        the link next, the poll included, finds the link as if that move had been sent by
+        :meth:`request`."""
+        if self._posted is not None and not self._posted.settled:
+            self._settle_posted(stream)
         late_possible = self._stale_possible
         if late_possible:
             self._drain(stream)
@@ -754,6 +788,135 @@ class CaptureClient:
         finally:
             self._in_setup = False
         return True
+
+    def post_moves(self, moves: dict[int, tuple[float, float, float]]) -> bool:
+        """Write a stream move at once, without waiting for any reply: True when written.
+
+        ``moves``: axis -> (position_deg, speed_deg_s, acceleration). Only the common case
+        of a command stream is posted: every axis already set up by this client for
+        absolute moves at this speed and acceleration, with a TUM armed (see
+        :meth:`move_absolute`), so the move is MOT_SendPosition + MOT_Update per axis. They
+        go out in one write, as :meth:`read_many` writes its getters (the same reading of
+        the document: the controller answers requests in the order they came; and the
+        same way back: :attr:`batching` off means one request at a time). False, and
+        nothing written, when the link is busy (another thread holds it: never waited
+        for), an earlier post is not finished, or the move needs more than that; the
+        caller then sends it with :meth:`move_absolute`.
+
+        The ACKs are read by whoever takes the link next (:meth:`_send`), and
+        :meth:`finish_posted` reports them and arms the next TUM. A NACK to SendPosition
+        leaves the MOT_Update that follows it to re-run the previous profile: the target
+        the axis already has.
+        """
+        if not self._lock.acquire(blocking=False):
+            return False
+        try:
+            stream = self._stream
+            if self._posted is not None or stream is None or not self.batching:
+                return False
+            if any(self._setups.get(axis) != ('absolute', acceleration, abs(speed), True)
+                   for axis, (_, speed, acceleration) in moves.items()):
+                return False
+            try:
+                frames = [(name, command(name).frame(axis, value, self.group))
+                          for axis, (position, _, _) in moves.items()
+                          for name, value in (('MOT_SendPosition', position),
+                                              ('MOT_Update', None))]
+            except ProtocolError:
+                return False  # move_absolute raises it, with nothing sent
+            for axis, (_, speed, acceleration) in moves.items():
+                self._setups[axis] = ('absolute', acceleration, abs(speed), False)
+            self.stats['requests'] += len(frames)
+            try:
+                self._send(stream, b''.join(frame.encode() for _, frame in frames))
+            except TransportError as exc:
+                self._link_lost(f'stream move: {exc}')
+                raise NotConnected(f'stream move: link lost ({exc})') from exc
+            self._setters_sent += 1
+            self.stats['posted_moves'] += 1
+            self._posted = PostedMoves(dict(moves), frames, setters_at_post=self._setters_sent)
+            return True
+        finally:
+            self._lock.release()
+
+    def finish_posted(self) -> None:
+        """Read the ACKs of the last :meth:`post_moves` (if nobody has yet) and arm the next
+        TUM; raises the device's refusal. A post that lost an ACK is sent again with
+        :meth:`move_absolute`, unless another setter (a stop, a newer move) went out since:
+        a stale target is never sent after it."""
+        with self._lock:
+            posted = self._posted
+            if posted is None:
+                return
+            try:
+                if not posted.settled:
+                    stream = self._stream
+                    if stream is None:
+                        posted.settled = True
+                        posted.error = NotConnected(f'stream move: not connected '
+                                                    f'({self.last_error})')
+                    else:
+                        self._settle_posted(stream)
+            finally:
+                self._posted = None
+            superseded = self._setters_sent != posted.setters_at_post
+            if posted.error is not None and (superseded or not posted.resend):
+                for axis in posted.moves:
+                    self._setups.pop(axis, None)
+                raise posted.error
+            if superseded:
+                return
+            for axis, (position, speed, acceleration) in posted.moves.items():
+                if posted.resend:
+                    self._setups.pop(axis, None)
+                    self.move_absolute(axis, position, speed, acceleration)
+                elif self._setups.get(axis) == ('absolute', acceleration, abs(speed), False):
+                    self._setups[axis] = ('absolute', acceleration, abs(speed),
+                                          self._arm_tum(axis))
+
+    def _settle_posted(self, stream: ByteStream) -> None:
+        """Read the ACK of each posted frame, in order (under the lock)."""
+        posted = self._posted
+        assert posted is not None
+        posted.settled = True
+        answers: list[ReplyByte] = []
+        deadline = self._last_activity + self.timeout
+        try:
+            while len(answers) < len(posted.frames) and \
+                    (remaining := deadline - time.monotonic()) > 0:
+                wait = min(remaining, self.resync_gap) if self._decoder.has_partial \
+                    else remaining
+                data = stream.read(4096, wait)
+                for item in self._decoder.feed(data) if data else \
+                        self._decoder.flush_partial():
+                    if isinstance(item, ReplyByte) and len(answers) < len(posted.frames):
+                        answers.append(item)
+                    else:
+                        self.stats['stale'] += 1
+        except TransportError as exc:
+            self._link_lost(f'stream move: {exc}')
+            posted.error = NotConnected(f'stream move: link lost ({exc})')
+            return
+        for (name, frame), answer in zip(posted.frames, answers, strict=False):
+            if not answer.is_ack:
+                self.stats['nacks'] += 1
+                if posted.error is None:
+                    posted.error = DeviceNack(self._label(name, frame), answer.code)
+                    posted.resend = answer.code == ReplyCode.WRONG_CHECKSUM
+        if len(answers) == len(posted.frames):
+            self._stale_possible = False
+            self._consecutive_timeouts = 0
+            self._batch_failures = 0
+            return
+        posted.resend = True
+        self.stats['incomplete_batches'] += 1
+        self._batch_failures += 1
+        if self._batch_failures >= BATCH_FAILURES:
+            self.batching = False
+            LOG.info('%d stream moves or batched reads in a row came back incomplete: one '
+                     'request at a time on this connection', self._batch_failures)
+        if not answers:
+            self._count_timeout('stream move')
 
     def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:
         """Speed mode (4.2.9): the axis turns at ``velocity_deg_s`` until told otherwise.

@@ -468,13 +468,30 @@ class CaptureDevice(Device):
     def move(self, moves: Moves) -> None:
         """Absolute moves; the whole set-up of every axis under one hold of the client's
         lock, so the poll does not interleave its reads."""
-        acceleration = math.degrees(self.settings.acceleration)
         with self.client.exclusive():
             self.leave_device_programs()
-            for joint, (target, speed) in moves.items():
-                self.client.move_absolute(
-                    self.axis(joint), self.to_device(joint, target),
-                    math.degrees(speed if speed else self.settings.default_speed), acceleration)
+            for axis, (position, speed, acceleration) in self._axis_moves(moves).items():
+                self.client.move_absolute(axis, position, speed, acceleration)
+
+    def _axis_moves(self, moves: Moves) -> dict[int, tuple[float, float, float]]:
+        """Joint moves in the client's terms: axis -> (position, speed, acceleration)."""
+        acceleration = math.degrees(self.settings.acceleration)
+        return {self.axis(joint): (self.to_device(joint, target),
+                                   math.degrees(speed if speed else self.settings.default_speed),
+                                   acceleration)
+                for joint, (target, speed) in moves.items()}
+
+    def post_move(self, moves: Moves) -> bool:
+        """A stream move written at once when the axes are already set up for it (the
+        client's ``post_moves``: SendPosition + MOT_Update, ACKs read later), so the
+        joint_command callback writes it without waiting; not while a device program runs
+        (a move ends it first, with requests that wait)."""
+        if self.device_scanning or self.preset_looping or self.target_looping:
+            return False
+        return self.client.post_moves(self._axis_moves(moves))
+
+    def finish_move(self) -> None:
+        self.client.finish_posted()
 
     def jog(self, velocities: dict[str, float]) -> None:
         with self.client.exclusive():

@@ -95,6 +95,22 @@ def test_move_to_reaches_target_and_joint_states_show_it(rig):
 
 
 
+def test_a_joint_command_stream_is_written_without_waiting_for_acks(rig):
+    """Once a move has set the axis up, each command of a stream at that speed goes out as
+    MOT_SendPosition + MOT_Update in one write from the callback; the command thread reads
+    the ACKs (``link.posted_moves`` in the device diagnostics counts them)."""
+    ros, *_ = rig
+
+    def posted(status) -> int:
+        return int({kv.key: kv.value for kv in status.values}['link.posted_moves'])
+
+    before = posted(ros.wait_for_diagnostic(NODE, 'device'))
+    for target in (0.10, 0.14, 0.18):  # the first may need the whole set-up
+        ros.publish('joint_command', JointState(name=['tilt'], position=[target]))
+        wait_position(ros, {'tilt': target})
+    ros.wait_for_diagnostic(NODE, 'device', lambda s: posted(s) >= before + 2)
+
+
 def test_home_action_uses_device_homing(rig):
     ros, control_port, *_ = rig
     control(control_port, 'pose 1 20')

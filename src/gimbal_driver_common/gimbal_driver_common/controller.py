@@ -9,11 +9,13 @@ watchdog, ``stop`` and the refusal rules.
 The thread rule: :meth:`GimbalController.command` (the joint_command callback) never
 waits for a device reply. It validates and queues; the command thread sends. Only a
 device whose sends wait for no reply (``Device.sends_without_reply``) is sent to from
-the caller's thread, when the link is free. Periodic work runs on two plain threads:
-``periodic`` (housekeeping: the jog watchdog, diagnostics, ~/status, all quick) and
-``sensors`` (the driver's extra topics that read the device), so a slow or silent
-sensor read never delays a dead-man stop. Moves, homing, scans and presets are
-policies in :mod:`gimbal_driver_common.policies` built on this class.
+the caller's thread, when the link is free; a device that ACKs may write a stream move
+there without waiting and leave its replies to the command thread (``post_move``).
+Periodic work runs on two plain threads: ``periodic`` (housekeeping: the jog
+watchdog, diagnostics, ~/status, all quick) and ``sensors`` (the driver's extra topics
+that read the device), so a slow or silent sensor read never delays a dead-man stop.
+Moves, homing, scans and presets are policies in :mod:`gimbal_driver_common.policies`
+built on this class.
 
 The ROS node is an adapter around one controller (see ``ros/base_node.py``),
 like ros2_canopen's node around its driver object; the controller is
@@ -103,6 +105,9 @@ class GimbalController:
         self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
         self._send_lock = threading.Lock()  # one motion set-up at a time; stop goes last
         self._pending: dict[str, tuple[str, float, float | None]] = {}  # joint -> kind, value, v
+        # moves written by device.post_move whose replies the command thread has not read
+        # (None: none); a joint leaves it when a newer send for it (stop, move_to) goes first
+        self._posted: Moves | None = None
         self._pending_lock = threading.Lock()
         self._command_ready = threading.Event()
         self._stopping = threading.Event()
@@ -240,10 +245,8 @@ class GimbalController:
         plan = validate_joint_command(names, positions, velocities, self.config.limits)
         if plan.empty:
             return
-        self.require()
         movers = list(plan.moves) + [j for j, v in plan.jogs.items() if v != 0.0]
-        if movers:
-            self.require(movers)
+        self.require(movers or None)  # active and connected; and the movers can move
         for hook in self.preempt_hooks:
             hook()
         with self._pending_lock:
@@ -253,20 +256,59 @@ class GimbalController:
                 self._pending[joint] = ('jog', velocity, None)
         self.watchdog.cancel(list(plan.moves) + [j for j, v in plan.jogs.items() if v == 0.0])
         self.watchdog.feed([j for j, v in plan.jogs.items() if v != 0.0])
-        # Fast path, for a write-only device: send from the caller's thread when the link is
-        # free (no thread hand-off). Otherwise the command thread sends it as soon as the
-        # current send is done.
-        if self.device.sends_without_reply and self._send_lock.acquire(blocking=False):
+        # Fast paths, when the link is free: a write-only device gets the command from the
+        # caller's thread (no thread hand-off); a device that ACKs may write a stream move
+        # at once and leave the replies to the command thread (post_move). Otherwise the
+        # command thread sends it as soon as the current send is done.
+        if self._send_lock.acquire(blocking=False):
             try:
-                self._flush_pending()
+                if self.device.sends_without_reply:
+                    self._flush_pending()
+                    return
+                posted = self._post_pending()
             finally:
                 self._send_lock.release()
-        else:
-            self._command_ready.set()
-            # Let the command thread take the GIL now. Otherwise it waits until this
-            # (executor) thread blocks again, after rclpy's wait-set rebuild: measured in
-            # a loop with 300 us of Python after the set(), hand-off p50 330 -> 50 us.
-            time.sleep(0)
+            if posted:
+                self._command_ready.set()  # the command thread reads the replies
+                return
+        self._command_ready.set()
+        # Let the command thread take the GIL now. Otherwise it waits until this
+        # (executor) thread blocks again, after rclpy's wait-set rebuild: measured in
+        # a loop with 300 us of Python after the set(), hand-off p50 330 -> 50 us.
+        time.sleep(0)
+
+    def _post_pending(self) -> bool:
+        """Write the queued moves with ``device.post_move`` (caller holds the send lock);
+        True when written. Jogs, and moves the device cannot post, stay queued."""
+        with self._pending_lock:
+            if not self._pending or any(kind != 'move' for kind, _, _ in
+                                        self._pending.values()):
+                return False
+            moves = {j: (v, s) for j, (_, v, s) in self._pending.items()}
+            try:
+                with device_boundary():
+                    posted = self.device.post_move(moves)
+            except GimbalError as exc:
+                self._pending.clear()
+                self.rejections.record(exc, sent=True)
+                return False
+            if posted:
+                self._pending.clear()
+                self._posted = moves
+            return posted
+
+    def _finish_posted(self) -> None:
+        """The replies of a posted move (caller holds the send lock)."""
+        moves, self._posted = self._posted, None
+        if moves is None:
+            return
+        try:
+            with device_boundary():
+                self.device.finish_move()
+        except GimbalError as exc:
+            self.rejections.record(exc, sent=True)
+            return
+        self.commanded_targets.update({joint: move[0] for joint, move in moves.items()})
 
     def send_moves(self, moves: Moves, offsets: dict[str, float] | None = None) -> None:
         """Send absolute moves now (move_to, presets, scans), after the queued commands."""
@@ -315,11 +357,16 @@ class GimbalController:
             self.device.stop(None if joints is None else list(joints))
 
     def _drop_pending(self, joints: Sequence[str] | None) -> None:
+        """Forget queued commands (and the targets of posted ones) for a newer send."""
         with self._pending_lock:
             if joints is None:
                 self._pending.clear()
+                if self._posted is not None:
+                    self._posted.clear()
             for joint in joints or ():
                 self._pending.pop(joint, None)
+                if self._posted is not None:
+                    self._posted.pop(joint, None)
 
     def _on_jog_expired(self, joints: list[str]) -> None:
         self.log.warning(
@@ -334,6 +381,7 @@ class GimbalController:
             self._command_ready.wait()
             self._command_ready.clear()
             with self._send_lock:
+                self._finish_posted()
                 self._flush_pending()
 
     def _flush_pending(self) -> None:

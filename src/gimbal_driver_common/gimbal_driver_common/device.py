@@ -213,7 +213,9 @@ class Device(abc.ABC):
     #: True when :meth:`move` and :meth:`jog` only write (a CAN frame, a serial packet, a
     #: TCP message) and wait for no reply: the controller may then send a joint_command
     #: from the subscription callback's own thread. Otherwise (a device that ACKs each
-    #: set-up request) the command thread sends, so the callback never waits on the device.
+    #: set-up request) the command thread sends, so the callback never waits on the device;
+    #: such a device may still write a stream move at once and leave its replies to the
+    #: command thread (:meth:`post_move`).
     sends_without_reply: bool = False
 
     def __init__(self) -> None:
@@ -246,6 +248,20 @@ class Device(abc.ABC):
     @abc.abstractmethod
     def move(self, moves: Moves) -> None:
         """Absolute position moves (targets already checked against the limits)."""
+
+    def post_move(self, moves: Moves) -> bool:
+        """Write these moves at once without waiting for any reply, when that is all they
+        need (the link is free, the device already set up for them): True when written;
+        the command thread then calls :meth:`finish_move`. False: nothing was written, and
+        the command thread sends them with :meth:`move`. Must never wait: the
+        joint_command callback calls it. A device whose every send waits for no reply
+        (``sends_without_reply``) has no use for it."""
+        return False
+
+    def finish_move(self) -> None:
+        """Read the replies to the last :meth:`post_move` (command thread); raise the
+        device's refusal of it. Only called after :meth:`post_move` returned True."""
+        raise NotImplementedError(f'{type(self).__name__} posts moves but cannot finish them')
 
     def move_relative(self, offsets: dict[str, float], moves: Moves) -> bool:
         """Send a relative move as the device's own relative set-points; False: use move()."""

@@ -27,7 +27,9 @@ class FairRLock:
         self._count = 0
         self._waiters: deque[tuple[int, threading.Lock]] = deque()
 
-    def acquire(self) -> bool:
+    def acquire(self, blocking: bool = True) -> bool:
+        """Take the lock; ``blocking=False`` returns False at once when another thread
+        holds it or waits for it (a waiter is not overtaken)."""
         me = threading.get_ident()
         with self._mutex:
             if self._owner == me:
@@ -36,6 +38,8 @@ class FairRLock:
             if self._owner is None:
                 self._owner, self._count = me, 1
                 return True
+            if not blocking:
+                return False
             gate = threading.Lock()
             gate.acquire()
             self._waiters.append((me, gate))

@@ -367,6 +367,89 @@ def test_a_write_only_device_is_sent_to_from_the_callers_thread(controller, devi
     assert device.move_threads == [threading.current_thread().name]
 
 
+class PostingDevice(FakeDevice):
+    """Writes a stream move at once and reads its replies later (Capture's post_moves)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.can_post = True
+        self.finish_error: Exception | None = None
+        self.post_threads: list[str] = []
+        self.finish_threads: list[str] = []
+
+    def post_move(self, moves: Moves) -> bool:
+        if not self.can_post:
+            return False
+        self.post_threads.append(threading.current_thread().name)
+        with self.lock:
+            self.sent.append(('post', dict(moves)))
+            self.targets.update({joint: target for joint, (target, _) in moves.items()})
+        return True
+
+    def finish_move(self) -> None:
+        self.finish_threads.append(threading.current_thread().name)
+        error, self.finish_error = self.finish_error, None
+        if error is not None:
+            raise error
+
+
+@pytest.fixture
+def posting():
+    device = PostingDevice()
+    ctl = GimbalController(device, config(), logging.getLogger('test'))
+    ctl.open()
+    ctl.activate()
+    yield ctl, device
+    ctl.shutdown()
+    ctl.periodic.stop()
+    ctl.sensors.stop()
+
+
+def test_a_posted_move_is_written_by_the_caller_and_finished_by_the_command_thread(
+        posting) -> None:
+    controller, device = posting
+    controller.command(['pan'], [0.2], [])
+    assert device.post_threads == [threading.current_thread().name]
+    wait_for(lambda: device.finish_threads == ['commands'], 2.0, 'the replies read')
+    wait_for(lambda: controller.commanded_targets.get('pan') == 0.2, 2.0, 'the target')
+    assert device.move_threads == []
+
+
+def test_a_refusal_in_a_posted_moves_replies_is_counted_and_sets_no_target(posting) -> None:
+    controller, device = posting
+    device.finish_error = DeviceRefused('device NACK: axis disabled')
+    controller.command(['pan'], [0.2], [])
+    wait_for(lambda: controller.rejections.counts()['refused'].get(
+        'failed on the device: refused by the device'), 2.0, 'the refusal counted')
+    assert 'pan' not in controller.commanded_targets
+
+
+def test_a_move_the_device_cannot_post_goes_to_the_command_thread(posting) -> None:
+    controller, device = posting
+    device.can_post = False
+    controller.command(['pan'], [0.2], [])
+    wait_for(lambda: device.move_threads == ['commands'], 2.0, 'the move sent')
+    controller.command(['tilt'], [], [0.3])  # a jog is never posted
+    wait_for(lambda: ('jog', {'tilt': 0.3}) in device.sent, 2.0, 'the jog sent')
+    assert device.post_threads == device.finish_threads == []
+
+
+def test_a_newer_move_keeps_its_target_over_an_unfinished_posted_one(posting) -> None:
+    """move_to goes out between the post and the reading of its replies: the posted target
+    must not overwrite the newer one when the replies come in."""
+    controller, device = posting
+    ready = controller._command_ready
+    controller._command_ready = threading.Event()  # the command thread does not wake yet
+    try:
+        controller.command(['pan'], [0.2], [])
+        controller.send_moves({'pan': (0.5, None)})
+    finally:
+        controller._command_ready = ready
+    ready.set()
+    wait_for(lambda: device.finish_threads == ['commands'], 2.0, 'the replies read')
+    assert controller.commanded_targets['pan'] == 0.5
+
+
 def test_a_blocked_sensor_read_does_not_delay_the_dead_man_stop(controller, device) -> None:
     """Sensor jobs (device I/O of a driver's extra topics) run on their own thread: one
     that hangs on a silent device leaves the jog watchdog's thread free."""

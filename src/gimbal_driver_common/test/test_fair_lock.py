@@ -63,3 +63,21 @@ def test_it_is_reentrant_and_only_its_holder_releases_it() -> None:
         pass
     with pytest.raises(RuntimeError, match='held by another thread'):
         lock.release()
+
+
+def test_a_non_blocking_acquire_fails_while_another_thread_holds_it() -> None:
+    """The command callback's try: it must never wait behind the poll."""
+    lock, results = FairRLock(), []
+    lock.acquire()
+    other = threading.Thread(target=lambda: results.append(lock.acquire(blocking=False)))
+    other.start()
+    other.join(5.0)
+    assert results == [False]
+    assert lock.acquire(blocking=False)  # its holder takes it again (reentrant)
+    lock.release()
+    lock.release()
+    other = threading.Thread(target=lambda: (results.append(lock.acquire(blocking=False)),
+                                             lock.release()))
+    other.start()
+    other.join(5.0)
+    assert results == [False, True]
