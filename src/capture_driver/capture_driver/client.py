@@ -38,7 +38,7 @@ import contextlib
 import logging
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -468,26 +468,22 @@ class CaptureClient:
         waiting = len(frames)
         try:
             self._send(stream, b''.join(frame.encode() for frame in frames))
-            deadline = self._last_activity + self.timeout
-            while waiting and (remaining := deadline - time.monotonic()) > 0:
-                wait = min(remaining, self.resync_gap) if self._decoder.has_partial \
-                    else remaining
-                data = stream.read(4096, wait)
-                for item in self._decoder.feed(data) if data else \
-                        self._decoder.flush_partial():
-                    if isinstance(item, ReplyByte):
-                        if not item.is_ack:
-                            self.stats['nacks'] += 1
-                        waiting -= 1  # one of the reads answered without data
-                    elif isinstance(item, Frame):
-                        slot = next((i for i, frame in enumerate(frames) if replies[i] is None
-                                     and (frame.opcode, frame.axis) == (item.opcode,
-                                                                        item.axis)), None)
-                        if slot is None:
-                            self.stats['stale'] += 1
-                        else:
-                            replies[slot] = item
-                            waiting -= 1
+            for item in self._input_until(stream, self._last_activity + self.timeout):
+                if isinstance(item, ReplyByte):
+                    if not item.is_ack:
+                        self.stats['nacks'] += 1
+                    waiting -= 1  # one of the reads answered without data
+                elif isinstance(item, Frame):
+                    slot = next((i for i, frame in enumerate(frames) if replies[i] is None
+                                 and (frame.opcode, frame.axis) == (item.opcode, item.axis)),
+                                None)
+                    if slot is None:
+                        self.stats['stale'] += 1
+                    else:
+                        replies[slot] = item
+                        waiting -= 1
+                if not waiting:
+                    break
         except TransportError as exc:
             self._link_lost(f'batched read: {exc}')
             raise NotConnected(f'batched read: link lost ({exc})') from exc
@@ -543,6 +539,15 @@ class CaptureClient:
         self._stale_possible = True
         return late_possible
 
+    def _input_until(self, stream: ByteStream, deadline: float) -> Iterator[Frame | ReplyByte]:
+        """Decoded input as it arrives, until ``deadline``; a packet left partial for
+        ``resync_gap`` is given up (the decoder resynchronises). The caller stops iterating
+        once it has its answer: what else came in the same read was not asked for."""
+        while (remaining := deadline - time.monotonic()) > 0:
+            wait = min(remaining, self.resync_gap) if self._decoder.has_partial else remaining
+            data = stream.read(4096, wait)
+            yield from self._decoder.feed(data) if data else self._decoder.flush_partial()
+
     def _drain(self, stream: ByteStream) -> None:
         """Discard stale input before a new request.
 
@@ -575,36 +580,28 @@ class CaptureClient:
         answers nothing at all times out.
         """
         unexpected = ''  # the first answer of the wrong kind that may have been stale
-        deadline = time.monotonic() + timeout
-        while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                break
-            wait = min(remaining, self.resync_gap) if self._decoder.has_partial else remaining
-            data = stream.read(4096, wait)
-            items = self._decoder.feed(data) if data else self._decoder.flush_partial()
-            for item in items:
-                if isinstance(item, ReplyByte):
-                    if not item.is_ack:
-                        self.stats['nacks'] += 1
-                        raise DeviceNack(self._label(name, frame), item.code)
-                    if not expect_data:
-                        return frame
-                    if not late_possible:
-                        self._stale_possible = False
-                        raise self._wrong_reply(name, frame, 'ACK', 'data')
-                    unexpected = unexpected or 'ACK'
-                    self.stats['stale'] += 1
-                elif isinstance(item, Frame):
-                    if (item.opcode, item.axis) == (frame.opcode, frame.axis):
-                        if expect_data:
-                            return item
-                        self._stale_possible = False
-                        raise self._wrong_reply(name, frame, 'data', 'ACK')
-                    self.stats['stale'] += 1
-                    if not (0x0700 <= item.opcode <= 0x07FF and not item.data):  # greeting
-                        unexpected = unexpected or (
-                            f'data of opcode 0x{item.opcode:04X} (axis {item.axis})')
+        for item in self._input_until(stream, time.monotonic() + timeout):
+            if isinstance(item, ReplyByte):
+                if not item.is_ack:
+                    self.stats['nacks'] += 1
+                    raise DeviceNack(self._label(name, frame), item.code)
+                if not expect_data:
+                    return frame
+                if not late_possible:
+                    self._stale_possible = False
+                    raise self._wrong_reply(name, frame, 'ACK', 'data')
+                unexpected = unexpected or 'ACK'
+                self.stats['stale'] += 1
+            elif isinstance(item, Frame):
+                if (item.opcode, item.axis) == (frame.opcode, frame.axis):
+                    if expect_data:
+                        return item
+                    self._stale_possible = False
+                    raise self._wrong_reply(name, frame, 'data', 'ACK')
+                self.stats['stale'] += 1
+                if not (0x0700 <= item.opcode <= 0x07FF and not item.data):  # greeting
+                    unexpected = unexpected or (
+                        f'data of opcode 0x{item.opcode:04X} (axis {item.axis})')
         if unexpected:
             raise self._wrong_reply(name, frame, unexpected, 'data' if expect_data else 'ACK')
         self._count_timeout(name)
@@ -880,19 +877,14 @@ class CaptureClient:
         assert posted is not None
         posted.settled = True
         answers: list[ReplyByte] = []
-        deadline = self._last_activity + self.timeout
         try:
-            while len(answers) < len(posted.frames) and \
-                    (remaining := deadline - time.monotonic()) > 0:
-                wait = min(remaining, self.resync_gap) if self._decoder.has_partial \
-                    else remaining
-                data = stream.read(4096, wait)
-                for item in self._decoder.feed(data) if data else \
-                        self._decoder.flush_partial():
-                    if isinstance(item, ReplyByte) and len(answers) < len(posted.frames):
-                        answers.append(item)
-                    else:
-                        self.stats['stale'] += 1
+            for item in self._input_until(stream, self._last_activity + self.timeout):
+                if not isinstance(item, ReplyByte):
+                    self.stats['stale'] += 1
+                    continue
+                answers.append(item)
+                if len(answers) == len(posted.frames):
+                    break
         except TransportError as exc:
             self._link_lost(f'stream move: {exc}')
             posted.error = NotConnected(f'stream move: link lost ({exc})')
