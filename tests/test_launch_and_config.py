@@ -26,7 +26,6 @@ from rcl_interfaces.srv import ListParameters
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.registry import (
-    REFERENCE_PACKAGE,
     DriverSpec,
     drivers,
     parameter_arguments,
@@ -81,8 +80,7 @@ def test_every_driver_ships_launch_and_configs() -> None:
             f'{pkg}.launch.py'], f'{pkg}: one launch file, named after the package'
         configs = [p.name for p in (SRC / pkg / 'config').glob('*.yaml')]
         assert f'{pkg}.yaml' in configs, f'{pkg}: no real-hardware YAML'
-        if pkg != REFERENCE_PACKAGE:  # the reference's device is its simulator
-            assert f'{pkg}_sim.yaml' in configs, f'{pkg}: no simulator YAML'
+        assert f'{pkg}_sim.yaml' in configs, f'{pkg}: no simulator YAML'
         # the ros2_control example (tests/test_ros2_control_examples.py), installed
         for name in (f'{pkg}.ros2_control.xacro', f'{pkg}_controllers.yaml'):
             assert share(pkg, 'config', name).is_file(), f'{pkg}: {name} not installed'
@@ -200,8 +198,7 @@ def test_sim_true_starts_the_simulator_and_the_node_connects_to_it(
     assert simulator.kind == 'process' and '--ros-args' not in simulator.cmd
     assert simulator.cmd == [find_executable(pkg, spec.sim_executable),
                              *spec.launch_sim_arguments]
-    sim_yaml = share(pkg, 'config', f'{pkg}_sim.yaml' if pkg != REFERENCE_PACKAGE
-                     else f'{pkg}.yaml')
+    sim_yaml = share(pkg, 'config', f'{pkg}_sim.yaml')
     assert node.parameters[0] == sim_yaml
     assert node.parameters[1]['autostart'] is True
     option = next(o for o in ('--port', '--link') if o in simulator.cmd)

@@ -108,8 +108,8 @@ class DriverSpec:
     sim_arguments: tuple[str, ...] = ()
     node_parameters: Mapping[str, Any] = field(default_factory=dict)
     #: the simulator's arguments under the launch file's ``sim:=true``: it serves the address
-    #: the package's simulator YAML (config/<package>_sim.yaml, or config/<package>.yaml for
-    #: the reference) connects to, so no placeholder here
+    #: the package's simulator YAML (config/<package>_sim.yaml) connects to, so no
+    #: placeholder here
     launch_sim_arguments: tuple[str, ...] = ()
     password: str = ''           # the simulator's device password (never logged)
     sim_handle: str = ''         # 'module:Class' of the in-process simulator handle

@@ -55,8 +55,8 @@ def default_description(package: str) -> str:
 
 
 def default_params_file(package: str, sim: bool) -> str:
-    """config/<package>_sim.yaml with ``sim`` (where the package has one), else
-    config/<package>.yaml (the reference driver's one YAML is for its simulator)."""
+    """config/<package>_sim.yaml with ``sim`` (where the package has one: every driver
+    here does), else config/<package>.yaml."""
     config = os.path.join(get_package_share_directory(package), 'config')
     simulator = os.path.join(config, f'{package}_sim.yaml')
     return simulator if sim and os.path.isfile(simulator) else os.path.join(

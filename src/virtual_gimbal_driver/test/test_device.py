@@ -1,0 +1,109 @@
+"""GimbalController + VirtualGimbalDevice against the simulator in-process, over its real
+TCP link; no ROS (ARCHITECTURE.md, "Adding a driver", item 4).
+
+Waits are "up to a timeout" for a condition, never timing assertions.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import pytest
+
+from gimbal_driver_common.controller import ControllerConfig, GimbalController
+from gimbal_driver_common.joint_command import JointLimits
+from gimbal_driver_common.testing import wait_for
+from virtual_gimbal_driver.device import VirtualGimbalDevice
+from virtual_gimbal_driver.sim import make_server
+
+LOG = logging.getLogger('test_device')
+JOINTS = ['pan', 'tilt']
+
+
+class Rig:
+    """The simulator's TCP server, the adapter and a started controller."""
+
+    def __init__(self) -> None:
+        self.server, self.sim = make_server()
+        self.device = VirtualGimbalDevice('127.0.0.1', self.server.port)
+        config = ControllerConfig(
+            joint_names=list(JOINTS),
+            limits={'pan': JointLimits(-math.pi, math.pi, 1.5),
+                    'tilt': JointLimits(-math.pi / 2, math.pi / 2, 1.5)},
+            publish_rate=50.0, command_timeout=0.3, reconnect_period=0.1,
+            goal_tolerance=1e-3, move_timeout=10.0)
+        self.controller = GimbalController(self.device, config, LOG)
+        self.controller.open()
+        self.controller.activate()
+        wait_for(lambda: self.controller.latest is not None, 10.0, 'a first sample')
+
+    def axis(self, joint: str) -> dict:
+        return self.sim.state()['axes'][joint]
+
+    def close(self) -> None:
+        self.controller.shutdown()
+        self.server.stop()
+
+
+@pytest.fixture
+def rig():
+    started = Rig()
+    yield started
+    started.close()
+
+
+def test_identity_and_samples_come_from_the_device(rig):
+    info = rig.controller.device_info
+    assert (info.model, info.serial_number, info.firmware_version) == (
+        'virtual-gimbal', 'VG-0001', '1.0.0')
+    assert rig.controller.positions() == {'pan': 0.0, 'tilt': 0.0}
+
+
+def test_a_joint_command_reaches_the_device_and_the_samples(rig):
+    rig.controller.command(['pan', 'tilt'], [0.3, -0.2], [])
+    wait_for(lambda: rig.axis('pan')['target'] == pytest.approx(0.3), 5.0, 'the pan target')
+    wait_for(lambda: abs(rig.controller.positions()['tilt'] + 0.2) < 1e-3, 10.0,
+             'tilt at -0.2 in the samples')
+    assert rig.controller.commanded_targets == {'pan': 0.3, 'tilt': -0.2}
+
+
+def test_a_jog_stops_when_its_commands_stop_coming(rig):
+    rig.controller.command(['pan'], [], [0.4])
+    wait_for(lambda: rig.axis('pan')['velocity'] > 0.1, 5.0, 'the jog at the device')
+    wait_for(lambda: rig.axis('pan')['velocity'] == 0.0, 5.0, 'the dead-man stop')
+    assert rig.controller.watchdog.jogging == []
+
+
+def test_stop_halts_a_move(rig):
+    rig.controller.command(['pan'], [3.0], [0.5])
+    wait_for(lambda: rig.axis('pan')['velocity'] > 0.1, 5.0, 'the move under way')
+    assert rig.controller.stop().startswith('all axes stopped')
+    wait_for(lambda: rig.axis('pan')['velocity'] == 0.0, 5.0, 'the axis stopped')
+    assert rig.axis('pan')['position'] < 2.0
+
+
+def test_a_refused_request_is_counted_with_the_devices_answer(rig):
+    rig.sim.control_nack(['MOVE'])
+    rig.controller.command(['pan'], [0.1], [])
+    wait_for(lambda: rig.controller.rejections.counts()['refused'].get(
+        'failed on the device: refused by the device'), 5.0, 'the refusal counted')
+    rig.controller.command(['pan'], [0.1], [])  # the next one is carried out
+    wait_for(lambda: rig.axis('pan')['target'] == pytest.approx(0.1), 5.0, 'the move')
+
+
+def test_fault_bits_are_decoded_and_reset_clears_them(rig):
+    rig.sim.control_fault(['overtemp'])
+    wait_for(lambda: rig.device.errors() == ['overtemperature'], 5.0, 'the fault decoded')
+    assert rig.controller.reset_faults() == 'faults cleared'
+    wait_for(lambda: rig.device.errors() == [], 5.0, 'the fault cleared')
+
+
+def test_a_dropped_link_is_reported_and_reopened(rig):
+    connects = rig.controller.reconnects
+    rig.server.drop_link()
+    wait_for(lambda: rig.controller.reconnects > connects and rig.controller.connected, 10.0,
+             'the link reopened')
+    rig.controller.command(['tilt'], [0.25], [])
+    wait_for(lambda: rig.axis('tilt')['target'] == pytest.approx(0.25), 5.0,
+             'a command after the reconnect')
