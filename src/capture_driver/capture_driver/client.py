@@ -489,19 +489,26 @@ class CaptureClient:
             raise NotConnected(f'batched read: link lost ({exc})') from exc
         if waiting == len(frames):  # not one answer: a timeout, as for a single request
             self._count_timeout('batched read')
-        if not waiting:  # each read answered (a NACK or ACK too): nothing late can come,
-            # and the controller handles queued requests (those reads are named alone)
+        # each read answered (a NACK or ACK too): nothing late can come, and the controller
+        # handles queued requests (those reads are named alone)
+        self._count_batch(complete=not waiting)
+        return replies
+
+    def _count_batch(self, complete: bool) -> None:
+        """One batch (the poll's getters, or a posted stream move) came back whole or not.
+        A whole one leaves nothing late to come; ``BATCH_FAILURES`` incomplete ones in a
+        row end batching for the connection (one request at a time)."""
+        if complete:
             self._stale_possible = False
             self._consecutive_timeouts = 0
             self._batch_failures = 0
-        else:
-            self.stats['incomplete_batches'] += 1
-            self._batch_failures += 1
-            if self._batch_failures >= BATCH_FAILURES:
-                self.batching = False
-                LOG.info('%d batched reads in a row came back incomplete: reading one '
-                         'request at a time on this connection', self._batch_failures)
-        return replies
+            return
+        self.stats['incomplete_batches'] += 1
+        self._batch_failures += 1
+        if self._batch_failures >= BATCH_FAILURES:
+            self.batching = False
+            LOG.info('%d batches in a row came back incomplete: one request at a time on '
+                     'this connection', self._batch_failures)
 
     def _transact(self, name: str, frame: Frame, expect_data: bool, timeout: float) -> Frame:
         stream = self._stream
@@ -895,18 +902,10 @@ class CaptureClient:
                 if posted.error is None:
                     posted.error = DeviceNack(self._label(name, frame), answer.code)
                     posted.resend = answer.code == ReplyCode.WRONG_CHECKSUM
+        self._count_batch(complete=len(answers) == len(posted.frames))
         if len(answers) == len(posted.frames):
-            self._stale_possible = False
-            self._consecutive_timeouts = 0
-            self._batch_failures = 0
             return
         posted.resend = True
-        self.stats['incomplete_batches'] += 1
-        self._batch_failures += 1
-        if self._batch_failures >= BATCH_FAILURES:
-            self.batching = False
-            LOG.info('%d stream moves or batched reads in a row came back incomplete: one '
-                     'request at a time on this connection', self._batch_failures)
         if not answers:
             self._count_timeout('stream move')
 
