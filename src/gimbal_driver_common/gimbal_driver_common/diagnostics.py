@@ -106,8 +106,17 @@ class FrequencyMonitor:
     def tick(self) -> None:
         self._count += 1
 
-    def sample(self, now: float) -> None:
-        """Call periodically (each diagnostics period) to close a window slot."""
+    def sample(self, now: float, live: bool = True) -> None:
+        """Call periodically (each diagnostics period) to close a window slot.
+
+        ``live`` False (not publishing: inactive, or the link down): the window starts
+        again. A window that spans such a pause reads as a low rate for up to ``window``
+        periods after publishing resumes: a healthy device read WARN "frequency too low"
+        for a few seconds after activation (seen in a full test run).
+        """
+        if not live:
+            self._counts.clear()
+            return
         self._counts.append((now, self._count))
         if len(self._counts) > self._window:
             self._counts.pop(0)

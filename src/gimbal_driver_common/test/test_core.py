@@ -253,6 +253,22 @@ def test_worst_level_and_frequency_monitor() -> None:
     assert monitor.status() == (Level.ERROR, 'no events')
 
 
+
+def test_a_pause_in_publishing_does_not_read_as_a_low_rate_afterwards() -> None:
+    """Samples taken while the node was inactive (or the link down) would put a stretch
+    without joint_states in the window: a healthy device read WARN after activation."""
+    monitor = FrequencyMonitor(50.0)
+    monitor.sample(0.0, live=False)  # inactive: no joint_states yet
+    monitor.sample(1.0, live=False)
+    for _ in range(25):  # activated at 1.5 s: 50 Hz from then on
+        monitor.tick()
+    monitor.sample(2.0)
+    assert monitor.status() == (Level.OK, 'measuring')
+    for _ in range(50):
+        monitor.tick()
+    monitor.sample(3.0)
+    assert monitor.status() == (Level.OK, '50.0 Hz')
+
 # --------------------------------------------------------------------- scans
 def scan(pattern: str, **overrides: float) -> ScanRequest:
     fields = dict(pan_min=-1.0, pan_max=1.0, tilt_min=-0.4, tilt_max=0.4, speed=0.5,

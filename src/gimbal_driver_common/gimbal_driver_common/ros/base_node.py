@@ -362,8 +362,9 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
             self._joint_rate.tick()
 
     def _publish_diagnostics(self) -> None:
-        self._joint_rate.sample(time.monotonic())
         ctl = self.controller
+        self._joint_rate.sample(time.monotonic(),
+                                live=self._active and ctl is not None and ctl.connected)
         parts = messages.diagnostic_parts(ctl, self.joint_names, self._joint_rate, self._active)
         parts.append(self.rejections.status_part())
         hardware_id = ctl.device_info.hardware_id if ctl else DeviceInfo().hardware_id

@@ -111,7 +111,7 @@ class TopicInterfaceConformance(ConformanceHelpers):
         # nothing of it was rejected or refused
         after = self.rejections(ros)
         assert (after['rejected'], after['refused']) == (counted['rejected'],
-                                                         counted['refused'])
+                                                         counted['refused']), (counted, after)
         assert REJECTED not in rig.node.output()[logged:]
 
     def wait_states(self, ros: object, namespace: str, targets: dict[str, float]) -> None:
