@@ -43,7 +43,10 @@ class Rig:
     def __init__(self, sim: UCameraSim, **settings: object) -> None:
         self.sim = sim
         self.reports: list[object] = []
-        self.settings = UCameraSettings(serial_port=sim.port_name, silence_timeout=1.0,
+        # silence_timeout: 1.0 s was shorter than the in-process simulator's worst stall
+        # under the parallel suite (a move failed with "no telemetry for 1.0 s" in a full
+        # run); the link-drop test destroys the pty, which is seen at once anyway.
+        self.settings = UCameraSettings(serial_port=sim.port_name, silence_timeout=3.0,
                                         request_timeout=1.0, **settings)
         self.config = ControllerConfig(
             joint_names=list(JOINTS),
