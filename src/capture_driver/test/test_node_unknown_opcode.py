@@ -75,8 +75,12 @@ def test_healthy_device_with_default_parameters_is_all_ok(default_node):
         assert 'does not know' not in device.message
         wait_for(lambda: sim_state(control_port)['requests_by_command'].get(
             'GPS_GetLatitude', 0) >= 1, 15.0, 'the fix poll (fix_rate 1 Hz) to read the GPS')
-        array = ros.wait_for_message('/diagnostics', DiagnosticArray, timeout=30)
-        assert all_ok(array), [(s.name, s.level, s.message) for s in array.status]
+        # every part OK again after the fix poll: a GPS getter the device did not answer
+        # would leave a lasting WARN (unsupported.*); joint_states frequency may dip for a
+        # moment while 8 test workers share 2 cores (a transient WARN failed a full run)
+        array = ros.wait_for_message('/diagnostics', DiagnosticArray, all_ok, timeout=30)
+        assert not any(kv.key.startswith(('unsupported.', 'wrong_reply.'))
+                       for kv in device_status(array).values)
 
 
 def test_device_without_gps_latitude_stops_that_poll_and_stays_ok(default_node):
