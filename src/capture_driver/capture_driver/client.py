@@ -853,14 +853,8 @@ class CaptureClient:
             if posted is None:
                 return
             try:
-                if not posted.settled:
-                    stream = self._stream
-                    if stream is None:
-                        posted.settled = True
-                        posted.error = NotConnected(f'stream move: not connected '
-                                                    f'({self.last_error})')
-                    else:
-                        self._settle_posted(stream)
+                if not posted.settled:  # a link that closed settled it (_close_locked)
+                    self._settle_posted(self._stream)
             finally:
                 self._posted = None
             superseded = self._setters_sent != posted.setters_at_post
@@ -878,8 +872,10 @@ class CaptureClient:
                     self._setups[axis] = ('absolute', acceleration, abs(speed),
                                           self._arm_tum(axis))
 
-    def _settle_posted(self, stream: ByteStream) -> None:
-        """Read the ACK of each posted frame, in order (under the lock)."""
+    def _settle_posted(self, stream: ByteStream | None) -> None:
+        """Read the ACK of each posted frame, in order (under the lock); the stream is
+        there while a post is unsettled (closing the link settles it)."""
+        assert stream is not None
         posted = self._posted
         assert posted is not None
         posted.settled = True
