@@ -173,7 +173,9 @@ class TopicSystemStandIn:
     the latest state, let the controllers set the commands (``commands``: joint -> value
     for each joint's command interface; a joint left out keeps its command, NaN at start),
     write(). ``published`` keeps every message sent, ``cycles`` how many ran and ``late``
-    how late each of :meth:`run` ran (a machine busy with other work).
+    how late each of :meth:`run` ran (a machine busy with other work). :meth:`longest_gap`
+    tells whether either side stalled: the stand-in between two publishes, or the node
+    between two joint_states it stamped.
     """
 
     def __init__(self, node: Node, config: TopicSystemConfig) -> None:
@@ -184,6 +186,8 @@ class TopicSystemStandIn:
         self.published: list[JointState] = []
         self.cycles = 0
         self.late: list[float] = []  # s each cycle of run() ran behind its schedule
+        self.published_at: list[float] = []  # monotonic s of each publish
+        self.state_stamps: list[float] = []  # header stamps (s) of the joint_states read
         # rclcpp::QoS(1): reliable, volatile, keep-last 1
         self._publisher = node.create_publisher(JointState, config.joint_commands_topic,
                                                 QoSProfile(depth=1))
@@ -194,6 +198,7 @@ class TopicSystemStandIn:
         with self._lock:
             self._latest = msg
             self.states_received += 1
+            self.state_stamps.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
 
     @property
     def config(self) -> TopicSystemConfig:
@@ -230,7 +235,22 @@ class TopicSystemStandIn:
         if msg is not None:
             self._publisher.publish(msg)
             self.published.append(msg)
+            self.published_at.append(time.monotonic())
         return msg
+
+    def mark(self) -> tuple[int, int]:
+        """Where the records stand now: the start of a window for :meth:`longest_gap`."""
+        with self._lock:
+            return len(self.published_at), len(self.state_stamps)
+
+    def longest_gap(self, since: tuple[int, int]) -> float:
+        """The longest pause (s) since ``since`` between two of this stand-in's publishes
+        or two joint_states stamps of the node: a process starved of CPU for that long."""
+        with self._lock:
+            stamps = sorted(self.state_stamps[since[1]:])
+        gaps = [b - a for series in (self.published_at[since[0]:], stamps)
+                for a, b in zip(series, series[1:])]
+        return max(gaps, default=0.0)
 
     def run(self, seconds: float, commands: Callable[[float], Mapping[str, float]],
             interface: str | None = None, rate_hz: float = UPDATE_RATE_HZ) -> None:
