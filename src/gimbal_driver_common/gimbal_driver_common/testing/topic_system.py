@@ -39,6 +39,7 @@ import time
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
+from itertools import pairwise
 
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
@@ -249,7 +250,7 @@ class TopicSystemStandIn:
         with self._lock:
             stamps = sorted(self.state_stamps[since[1]:])
         gaps = [b - a for series in (self.published_at[since[0]:], stamps)
-                for a, b in zip(series, series[1:])]
+                for a, b in pairwise(series)]
         return max(gaps, default=0.0)
 
     def run(self, seconds: float, commands: Callable[[float], Mapping[str, float]],
