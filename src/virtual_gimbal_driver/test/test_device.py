@@ -12,9 +12,12 @@ import math
 import pytest
 
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
+from gimbal_driver_common.errors import DeviceRefused
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.testing import wait_for
+from virtual_gimbal_driver.client import VirtualGimbalClient
 from virtual_gimbal_driver.device import VirtualGimbalDevice
+from virtual_gimbal_driver.protocol import move_request, parse_position
 from virtual_gimbal_driver.sim import make_server
 
 LOG = logging.getLogger('test_device')
@@ -107,3 +110,64 @@ def test_a_dropped_link_is_reported_and_reopened(rig):
     rig.controller.command(['tilt'], [0.25], [])
     wait_for(lambda: rig.axis('tilt')['target'] == pytest.approx(0.25), 5.0,
              'a command after the reconnect')
+
+
+def test_posted_requests_are_answered_in_order_around_a_request():
+    """post() writes and returns; the next request reads the posted replies before its own,
+    and finish_posted() raises the device's ERR to one of them."""
+    server, sim = make_server()
+    client = VirtualGimbalClient('127.0.0.1', server.port)
+    try:
+        client.open()
+        assert client.post([move_request('pan', 0.2, 0.5), 'BOGUS'])
+        assert not client.post([move_request('pan', 0.3, 0.5)]), 'the first post is unread'
+        assert parse_position(client.request('GET')).positions['pan'] < 0.2
+        with pytest.raises(DeviceRefused, match='unknown command BOGUS'):
+            client.finish_posted()
+        client.finish_posted()  # read and reported once
+        assert sim.state()['axes']['pan']['target'] == pytest.approx(0.2)
+        assert client.post([move_request('tilt', -0.1, 0.5)])
+        client.finish_posted()
+        assert sim.state()['axes']['tilt']['target'] == pytest.approx(-0.1)
+    finally:
+        client.close()
+        server.stop()
+
+
+def test_a_command_stream_is_written_from_the_callback(rig):
+    """With the link free, a move goes out from the caller's thread (post_move) and the
+    command thread reads its OK; a refused posted move is counted like any refusal."""
+    post, nack = rig.device.client.post, False
+    posted: list[tuple[list[str], int]] = []  # lines, refusals counted when they went out
+
+    def total_refused() -> int:
+        return sum(rig.controller.rejections.counts()['refused'].values())
+
+    def spy(lines: list[str]) -> bool:
+        if nack and not rig.sim.nack_pending:
+            rig.sim.control_nack(['MOVE'])  # the next MOVE line: this one if it goes out
+        written = post(lines)
+        if written:
+            posted.append((lines, total_refused()))
+        return written
+
+    rig.device.client.post = spy
+    targets = iter(0.01 * k for k in range(1, 1000))
+
+    def stream_until_posted() -> bool:
+        if not posted:
+            rig.controller.command(['pan'], [next(targets)], [])
+        return bool(posted)
+
+    wait_for(stream_until_posted, 10.0, 'a move posted (the link free)')
+    target = float(posted[0][0][0].split()[2])
+    wait_for(lambda: rig.controller.commanded_targets.get('pan') == target, 5.0,
+             'its OK read')
+    assert rig.axis('pan')['target'] == pytest.approx(target)
+    assert total_refused() == 0
+    # a post goes out only while no other send runs, and the stream stops at the first
+    # one: a refusal counted after it is the posted move's
+    nack = True
+    posted.clear()
+    wait_for(stream_until_posted, 10.0, 'a move posted to the refusing device')
+    wait_for(lambda: total_refused() > posted[0][1], 5.0, 'the posted move refused')

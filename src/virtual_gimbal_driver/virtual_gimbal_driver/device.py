@@ -70,6 +70,15 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
         for joint, (position, speed) in moves.items():
             self.client.request(move_request(joint, position, speed))
 
+    def post_move(self, moves: Moves) -> bool:
+        """A stream move's MOVE lines written at once, their OKs read by the command thread
+        (:meth:`finish_move`): the joint_command callback never waits for a reply."""
+        return self.client.post([move_request(joint, position, speed)
+                                 for joint, (position, speed) in moves.items()])
+
+    def finish_move(self) -> None:
+        self.client.finish_posted()
+
     def jog(self, velocities: dict[str, float]) -> None:
         for joint, velocity in velocities.items():
             self.client.request(jog_request(joint, velocity))
