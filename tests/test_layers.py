@@ -4,12 +4,15 @@
 - runtime code never imports the test scaffolding (``gimbal_driver_common.testing``): only
   tests, the tools (``scripts/``, ``bench/``) and the tool code a driver registers for them
   (``<driver>/sim_handle.py`` for the soak, bench and tests; ``<driver>/demo_steps.py`` for
-  the demo) do.
+  the demo) do;
+- ARCHITECTURE.md names only what exists: every file it names (``<pkg>`` and the like
+  stand for each driver) and every ``module.name`` it cites.
 """
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -66,3 +69,45 @@ def test_runtime_code_never_imports_the_test_scaffolding(path: Path) -> None:
                          if name == 'gimbal_driver_common.testing'
                          or name.startswith('gimbal_driver_common.testing.'))
     assert scaffolding == [], f'{path.relative_to(SRC)} imports {scaffolding}'
+
+
+#: what ARCHITECTURE.md cites from other projects (python-can's test suite)
+EXTERNAL_FILES = ('back2back_test.py',)
+PLACEHOLDER = re.compile(r'<(pkg|driver|device)>')
+SKIPPED_PARTS = {'.venv', 'build', 'install', 'log', '.git', 'bench_output'}
+
+
+def architecture_citations() -> tuple[list[str], list[str]]:
+    """(file paths, dotted names) in ARCHITECTURE.md's backquotes."""
+    text = (ROOT / 'ARCHITECTURE.md').read_text(encoding='utf-8')
+    files = re.findall(r'`([^`\s]+\.(?:py|md|yaml|xacro|xml|cfg|sh))(?:::\w+)?`', text)
+    names = re.findall(r'`([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)+)(?:\(\))?`', text)
+    return sorted(set(files)), sorted({n for n in names if n not in files
+                                       and not n.endswith(('.py', '.md', '.cfg'))})
+
+
+def test_every_file_architecture_names_exists() -> None:
+    repository = [p.relative_to(ROOT) for p in ROOT.rglob('*')
+                  if p.is_file() and not SKIPPED_PARTS & set(p.relative_to(ROOT).parts)]
+    files, _ = architecture_citations()
+    missing = [cited for cited in files if cited not in EXTERNAL_FILES
+               and not any(path.match(PLACEHOLDER.sub('*', cited)) for path in repository)]
+    assert missing == []
+
+
+def test_every_name_architecture_cites_is_defined() -> None:
+    """``controller.yield_core``, ``Device.post_move``: the last part is defined (def,
+    class or assignment) in the code, or the whole is a module or package of it."""
+    code = '\n'.join(p.read_text(encoding='utf-8') for p in SRC.rglob('*.py')
+                     if not SKIPPED_PARTS & set(p.parts))
+    _, names = architecture_citations()
+    assert names, 'no citations found: the pattern is wrong'
+
+    def defined(dotted: str) -> bool:
+        module = SRC / dotted.split('.')[0] / dotted.replace('.', '/')
+        last = re.escape(dotted.rsplit('.', 1)[1])
+        return (module.with_suffix('.py').is_file() or module.is_dir() or bool(re.search(
+            rf'^\s*(?:async\s+)?(?:def|class)\s+{last}\b|^\s*(?:self\.)?{last}\s*[:=]',
+            code, re.M)))
+
+    assert [name for name in names if not defined(name)] == []
