@@ -43,7 +43,8 @@ def find_diagnostic(array: DiagnosticArray, node: str, part: str) -> DiagnosticS
 # creation is serialised.
 _TYPE_SUPPORT_LOCK = threading.Lock()
 
-# How long an idempotent service call waits for its reply before sending the request again.
+# How long an idempotent service call waits for its reply, or an action client for its
+# goal to be accepted, before sending the request again.
 RESEND_S = 3.0
 
 
@@ -227,14 +228,23 @@ class RosTestClient:
         self, action_type: type, name: str, goal: Any, timeout: float = 30.0,
         cancel_after: float | None = None,
     ) -> tuple[Any, int, list[Any]]:
-        """Send a goal and wait for its result: (result, status, feedback messages)."""
+        """Send a goal and wait for its result: (result, status, feedback messages).
+
+        A goal not accepted within :data:`RESEND_S` is sent again, and the newest one sent
+        is the one waited for. The first goal of a new client can be accepted and its
+        answer lost: rmw_fastrtps' ``__rmw_send_response`` (rmw_fastrtps_shared_cpp
+        ``src/rmw_response.cpp``) waits only the writer's ``max_blocking_time`` for the
+        server to match this client's reader, then drops the answer ("failed to send
+        response (timeout): client will not receive response", seen in the demo under
+        the parallel suite). The drivers' action servers accept every goal and a newer
+        one supersedes the older, so the goal runs once, as the newest.
+        """
         client = self._clients.get((action_type, name))
         new_client = client is None
         if client is None:
             with _TYPE_SUPPORT_LOCK:
                 client = ActionClient(self.node, action_type, name)
             self._clients[(action_type, name)] = client
-        feedback: list[Any] = []
         if not client.wait_for_server(timeout_sec=timeout):
             raise TimeoutError(f'action {name} not available after {timeout:g} s')
         if new_client:
@@ -242,11 +252,23 @@ class RosTestClient:
             # before it has matched this client's reply readers, and its goal-accept reply
             # sent then is lost (seen under load: a first goal never accepted).
             time.sleep(0.5)
-        send = self._on_spin_thread(
-            lambda: client.send_goal_async(
-                goal, feedback_callback=lambda f: feedback.append(f.feedback)),
-            timeout, f'{name} to send the goal')
-        wait_for(send.done, timeout, f'{name} to accept the goal')
+        deadline, sent = time.monotonic() + timeout, 0
+        while True:
+            feedback: list[Any] = []  # the newest goal's
+            send = self._on_spin_thread(
+                lambda received=feedback: client.send_goal_async(
+                    goal, feedback_callback=lambda f: received.append(f.feedback)),
+                timeout, f'{name} to send the goal')
+            sent += 1
+            left = deadline - time.monotonic()
+            try:
+                wait_for(send.done, max(0.0, min(RESEND_S, left)),
+                         f'{name} to accept the goal')
+                break
+            except TimeoutError:
+                if left <= RESEND_S:
+                    raise TimeoutError(f'{name} accepted none of {sent} goals sent in '
+                                       f'{timeout:g} s') from None
         handle = send.result()
         if not handle.accepted:
             raise AssertionError(f'{name} rejected the goal')

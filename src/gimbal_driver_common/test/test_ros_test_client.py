@@ -1,0 +1,90 @@
+"""RosTestClient.run_action against a real action server in another context: a goal whose
+acceptance does not come within RESEND_S is sent again, and the newest is waited for."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from rclpy.action import ActionServer, GoalResponse  # noqa: E402
+from rclpy.callback_groups import ReentrantCallbackGroup  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+
+from gimbal_driver_common.testing import DomainLease  # noqa: E402
+from gimbal_driver_common.testing import ros as ros_testing  # noqa: E402
+from gimbal_msgs.action import MoveTo  # noqa: E402
+
+
+class SlowFirstAcceptServer:
+    """A MoveTo server that answers its first goal request only after ``hold`` seconds
+    (what a lost goal response looks like to the client); each goal's result names its
+    order of arrival."""
+
+    def __init__(self, domain_id: int, hold: float) -> None:
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node('slow_accept_server', context=self.context)
+        self.goals = 0
+        self.hold = hold
+        self.first_answered = threading.Event()
+        self._lock = threading.Lock()
+        self.server = ActionServer(self.node, MoveTo, 'move_to', execute_callback=self._execute,
+                                   goal_callback=self._on_goal,
+                                   callback_group=ReentrantCallbackGroup())
+        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self._thread.start()
+
+    def _on_goal(self, goal: MoveTo.Goal) -> GoalResponse:
+        with self._lock:
+            self.goals += 1
+            first = self.goals == 1
+        if first:
+            time.sleep(self.hold)
+            self.first_answered.set()
+        return GoalResponse.ACCEPT
+
+    def _execute(self, goal_handle) -> MoveTo.Result:
+        with self._lock:
+            order = self.goals
+        goal_handle.succeed()
+        return MoveTo.Result(success=True, message=f'goal {order}')
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+@pytest.mark.ros
+def test_a_goal_not_accepted_in_time_is_sent_again(monkeypatch) -> None:
+    monkeypatch.setattr(ros_testing, 'RESEND_S', 0.5)
+    with DomainLease() as domain:
+        server = SlowFirstAcceptServer(domain, hold=2.0)
+        client = ros_testing.RosTestClient(domain)
+        try:
+            result, _, _ = client.run_action(MoveTo, '/move_to', MoveTo.Goal(), timeout=20.0)
+            assert server.goals >= 2
+            assert result.success and result.message != 'goal 1', result.message
+            assert server.first_answered.wait(10.0)  # before the server goes away
+        finally:
+            client.close()
+            server.close()
+
+
+@pytest.mark.ros
+def test_a_goal_accepted_at_once_is_sent_once() -> None:
+    with DomainLease() as domain:
+        server = SlowFirstAcceptServer(domain, hold=0.0)
+        client = ros_testing.RosTestClient(domain)
+        try:
+            result, _, _ = client.run_action(MoveTo, '/move_to', MoveTo.Goal(), timeout=20.0)
+            assert (server.goals, result.message) == (1, 'goal 1')
+        finally:
+            client.close()
+            server.close()
