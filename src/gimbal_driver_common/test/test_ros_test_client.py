@@ -1,5 +1,6 @@
-"""RosTestClient.run_action against a real action server in another context: a goal whose
-acceptance does not come within RESEND_S is sent again, and the newest is waited for."""
+"""RosTestClient.run_action and call against real servers in another context: a goal whose
+acceptance, or an idempotent call whose reply, does not come within RESEND_S is sent
+again, and the newest is waited for; anything else is sent once."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from rclpy.action import ActionServer, GoalResponse  # noqa: E402
 from rclpy.callback_groups import ReentrantCallbackGroup  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
 
 from gimbal_driver_common.testing import DomainLease  # noqa: E402
 from gimbal_driver_common.testing import ros as ros_testing  # noqa: E402
@@ -20,18 +22,22 @@ from gimbal_msgs.action import MoveTo  # noqa: E402
 
 
 class SlowFirstAcceptServer:
-    """A MoveTo server that answers its first goal request only after ``hold`` seconds
-    (what a lost goal response looks like to the client); each goal's result names its
-    order of arrival."""
+    """A MoveTo server and a Trigger service ``read`` that answer their first request only
+    after ``hold`` seconds (what a lost answer looks like to the client); each result
+    names its order of arrival."""
 
     def __init__(self, domain_id: int, hold: float) -> None:
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain_id)
         self.node = rclpy.create_node('slow_accept_server', context=self.context)
         self.goals = 0
+        self.reads = 0
         self.hold = hold
         self.first_answered = threading.Event()
+        self.first_read_answered = threading.Event()
         self._lock = threading.Lock()
+        self.service = self.node.create_service(Trigger, 'read', self._on_read,
+                                                callback_group=ReentrantCallbackGroup())
         self.server = ActionServer(self.node, MoveTo, 'move_to', execute_callback=self._execute,
                                    goal_callback=self._on_goal,
                                    callback_group=ReentrantCallbackGroup())
@@ -48,6 +54,17 @@ class SlowFirstAcceptServer:
             time.sleep(self.hold)
             self.first_answered.set()
         return GoalResponse.ACCEPT
+
+    def _on_read(self, request: Trigger.Request, response: Trigger.Response):
+        """Answers its first call after ``hold`` seconds, each with its order of arrival."""
+        with self._lock:
+            self.reads += 1
+            order = self.reads
+        if order == 1:
+            time.sleep(self.hold)
+            self.first_read_answered.set()
+        response.success, response.message = True, f'read {order}'
+        return response
 
     def _execute(self, goal_handle) -> MoveTo.Result:
         with self._lock:
@@ -85,6 +102,26 @@ def test_a_goal_accepted_at_once_is_sent_once() -> None:
         try:
             result, _, _ = client.run_action(MoveTo, '/move_to', MoveTo.Goal(), timeout=20.0)
             assert (server.goals, result.message) == (1, 'goal 1')
+        finally:
+            client.close()
+            server.close()
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('idempotent', [True, False])
+def test_only_an_idempotent_call_is_sent_again(monkeypatch, idempotent: bool) -> None:
+    monkeypatch.setattr(ros_testing, 'RESEND_S', 0.5)
+    with DomainLease() as domain:
+        server = SlowFirstAcceptServer(domain, hold=2.0)
+        client = ros_testing.RosTestClient(domain)
+        try:
+            reply = client.call(Trigger, '/read', Trigger.Request(), timeout=20.0,
+                                idempotent=idempotent)
+            if idempotent:
+                assert server.reads >= 2 and reply.message != 'read 1', reply.message
+            else:
+                assert (server.reads, reply.message) == (1, 'read 1')
+            assert server.first_read_answered.wait(10.0)  # before the server goes away
         finally:
             client.close()
             server.close()

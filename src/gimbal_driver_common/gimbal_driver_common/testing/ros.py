@@ -48,6 +48,29 @@ _TYPE_SUPPORT_LOCK = threading.Lock()
 RESEND_S = 3.0
 
 
+def newest_answered(send: Callable[[], Any], timeout: float, what: str,
+                    resend: bool) -> Any:
+    """The future of the newest request ``send()`` made, once done. With ``resend``, a
+    request not answered within :data:`RESEND_S` is sent again: its answer may be lost.
+    rmw_fastrtps' ``__rmw_send_response`` (rmw_fastrtps_shared_cpp
+    ``src/rmw_response.cpp``) waits only the writer's ``max_blocking_time`` for the server
+    to match this client's reader, then drops the answer ("failed to send response
+    (timeout): client will not receive response"); ``wait_for_service`` and
+    ``wait_for_server`` only say that this side has matched."""
+    deadline, sent = time.monotonic() + timeout, 0
+    while True:
+        future = send()
+        sent += 1
+        left = deadline - time.monotonic()
+        try:
+            wait_for(future.done, max(0.0, min(RESEND_S, left) if resend else left), what)
+            return future
+        except TimeoutError:
+            if not resend or left <= RESEND_S:
+                raise TimeoutError(f'timed out after {timeout:g} s waiting for {what} '
+                                   f'({sent} sent)') from None
+
+
 class RosTestClient:
     """Publishes, subscribes, calls services and actions against nodes in ``domain_id``."""
 
@@ -180,10 +203,9 @@ class RosTestClient:
         """Call a service and return its reply.
 
         ``idempotent``: send the request again every :data:`RESEND_S` while no reply came
-        (for reads such as the parameter services). ``wait_for_service`` says that this
-        client's side of the service matched; the server's response writer may not yet have
-        matched this client's reader, and a reply sent then is lost (seen once in five full
-        runs: list_parameters never answered). Only a request that may run twice is resent.
+        (:func:`newest_answered`; for reads such as the parameter services: seen once in five
+        full runs, list_parameters never answered). Only a request that may run twice is
+        resent.
         """
         # Clients are kept, not destroyed: destroying an entity while the executor
         # thread waits on it can end the spin.
@@ -194,18 +216,8 @@ class RosTestClient:
             self._clients[(srv_type, name)] = client
         if not client.wait_for_service(timeout_sec=timeout):
             raise TimeoutError(f'service {name} not available after {timeout:g} s')
-        futures = [client.call_async(request)]
-        last_sent = time.monotonic()
-
-        def answered() -> Any:
-            nonlocal last_sent
-            done = next((f for f in futures if f.done()), None)
-            if done is None and idempotent and time.monotonic() - last_sent >= RESEND_S:
-                futures.append(client.call_async(request))
-                last_sent = time.monotonic()
-            return done
-
-        reply = wait_for(answered, timeout, f'the reply of {name}')
+        reply = newest_answered(lambda: client.call_async(request), timeout,
+                                f'the reply of {name}', resend=idempotent)
         return reply.result()
 
     # parameters (what `ros2 param set/get` do: the node's parameter services)
@@ -231,44 +243,30 @@ class RosTestClient:
         """Send a goal and wait for its result: (result, status, feedback messages).
 
         A goal not accepted within :data:`RESEND_S` is sent again, and the newest one sent
-        is the one waited for. The first goal of a new client can be accepted and its
-        answer lost: rmw_fastrtps' ``__rmw_send_response`` (rmw_fastrtps_shared_cpp
-        ``src/rmw_response.cpp``) waits only the writer's ``max_blocking_time`` for the
-        server to match this client's reader, then drops the answer ("failed to send
-        response (timeout): client will not receive response", seen in the demo under
-        the parallel suite). The drivers' action servers accept every goal and a newer
-        one supersedes the older, so the goal runs once, as the newest.
+        is the one waited for (:func:`newest_answered`: the first goal of a new client can
+        be accepted and its answer lost, seen in the demo under the parallel suite). The
+        drivers' action servers accept every goal and a newer one supersedes the older, so
+        the goal runs once, as the newest.
         """
         client = self._clients.get((action_type, name))
-        new_client = client is None
         if client is None:
             with _TYPE_SUPPORT_LOCK:
                 client = ActionClient(self.node, action_type, name)
             self._clients[(action_type, name)] = client
         if not client.wait_for_server(timeout_sec=timeout):
             raise TimeoutError(f'action {name} not available after {timeout:g} s')
-        if new_client:
-            # As in publish(): discovery is not symmetric. The server can be visible here
-            # before it has matched this client's reply readers, and its goal-accept reply
-            # sent then is lost (seen under load: a first goal never accepted).
-            time.sleep(0.5)
-        deadline, sent = time.monotonic() + timeout, 0
-        while True:
-            feedback: list[Any] = []  # the newest goal's
-            send = self._on_spin_thread(
-                lambda received=feedback: client.send_goal_async(
-                    goal, feedback_callback=lambda f: received.append(f.feedback)),
+        received: list[list[Any]] = []  # each goal's feedback
+
+        def send_goal() -> Any:
+            feedback: list[Any] = []
+            received.append(feedback)
+            return self._on_spin_thread(
+                lambda: client.send_goal_async(
+                    goal, feedback_callback=lambda f: feedback.append(f.feedback)),
                 timeout, f'{name} to send the goal')
-            sent += 1
-            left = deadline - time.monotonic()
-            try:
-                wait_for(send.done, max(0.0, min(RESEND_S, left)),
-                         f'{name} to accept the goal')
-                break
-            except TimeoutError:
-                if left <= RESEND_S:
-                    raise TimeoutError(f'{name} accepted none of {sent} goals sent in '
-                                       f'{timeout:g} s') from None
+
+        send = newest_answered(send_goal, timeout, f'{name} to accept the goal', resend=True)
+        feedback = received[-1]
         handle = send.result()
         if not handle.accepted:
             raise AssertionError(f'{name} rejected the goal')
