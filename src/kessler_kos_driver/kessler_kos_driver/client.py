@@ -26,31 +26,37 @@ Design notes:
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
-import socket
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 from gimbal_driver_common import errors
 from gimbal_driver_common.session import Protocol, Session, StreamLink
 from gimbal_driver_common.transport import ByteStream, TcpStream, TransportError
 
+from .client_commands import KosCommands
+from .client_types import (
+    CommandRejected,
+    DeviceTimeout,
+    ErrorEvent,
+    KosError,
+    MessageUnsupported,
+    MotorState,
+    NotConnected,
+    PasswordRejected,
+    PlaybackInfo,
+    discover,
+)
 from .protocol import (
-    ALL_MOTORS,
     DEFAULT_TCP_PORT,
     HEADER_SIZE,
     KEEPALIVE_PERIOD_S,
-    PLAYBACK_RUNNING_STATES,
     REPORT_SIZE,
-    UNCALIBRATED_TARGET,
     USB_KEEPALIVE_PERIOD_S,
     AuxInputStatus,
-    BumpPositionSpeedAcceleration,
     DeviceGuid,
     DeviceInfo,
     ErrorCode,
@@ -58,155 +64,27 @@ from .protocol import (
     FrameParser,
     GetDeviceGuid,
     GetDeviceInfo,
-    GetLedStatus,
     GetMotorInfo,
     GetNetworkInfo,
-    GetSoftwareId,
-    GetTrajectoryData,
-    LedState,
-    LedStatus,
-    MarkBeginPosition,
-    MarkEndPosition,
     Message,
     MessageId,
     MotorCalibrated,
     MotorInfo,
     MotorPosition,
     MotorStatus,
-    NetworkInfo,
     PlaybackState,
     PlaybackStatus,
     ProtocolError,
-    RapidToFirstKeyFrame,
-    ResetAxis,
-    SetPositionSpeedAcceleration,
-    SetupPlayback,
-    SoftwareId,
-    StartPlayback,
-    StopPlayback,
-    TakePicture,
-    Trajectory,
-    TrajectoryData,
     UnknownMessage,
     UnsupportedMessage,
     UserPassword,
     decode,
     describe_error,
     unpack_header,
-    validate,
 )
-from .protocol.trajectory import AxisLimits
 from .usb_link import HidDevice, HidStream, UsbTarget
 
 LOG = logging.getLogger('kessler_kos_driver.client')
-
-
-class KosError(errors.GimbalError):
-    """Base of the client's errors (in the shared hierarchy); messages say what to do."""
-
-
-class NotConnected(KosError, errors.LinkError):
-    """No link (unreachable, no discovery datagram, USB device missing) or the link dropped."""
-
-
-class DeviceTimeout(KosError, errors.DeviceTimeout):
-    """The device did not answer a Get in time."""
-
-
-class MessageUnsupported(KosError, errors.Unsupported):
-    """The device answered a request with UnsupportedMessage: it answered, it is not silent."""
-
-
-class PasswordRejected(KosError, errors.DeviceRefused):
-    """The password does not match (checked locally) or the device locked us out."""
-
-
-class CommandRejected(KosError, errors.DeviceRefused):
-    """A command refused before sending (limits, unknown motor) or by the device."""
-
-
-@dataclass
-class MotorState:
-    address: int
-    position: float = 0.0          # rotations
-    velocity: float = 0.0          # rotations/s (estimated from successive reports)
-    begin_position: float = 0.0
-    end_position: float = 0.0
-    max_setup_speed: float = 0.0
-    max_move_speed: float = 0.0
-    max_acceleration: float = 0.0
-    is_fiz: bool = False
-    online: bool = True
-    stamp: float = 0.0             # time.time() of the last position report
-    last_error: int | None = None
-
-    @property
-    def calibrated(self) -> bool:
-        return self.end_position != 0.0
-
-    def travel(self) -> tuple[float, float]:
-        """Allowed target range in rotations."""
-        if self.calibrated:
-            return (min(self.begin_position, self.end_position),
-                    max(self.begin_position, self.end_position))
-        return -UNCALIBRATED_TARGET, UNCALIBRATED_TARGET
-
-    def limits(self) -> AxisLimits:
-        return AxisLimits(self.begin_position, self.end_position, self.max_move_speed,
-                          self.max_acceleration)
-
-
-@dataclass
-class PlaybackInfo:
-    status: int = PlaybackState.NO_MOVE
-    elapsed: float = 0.0
-    photo_count: int = 0
-    positions: dict[int, float] = field(default_factory=dict)
-    loaded: bool = False           # TrajectoryData accepted and not yet consumed by FullStop
-    set_up: bool = False
-    history: list[int] = field(default_factory=list)   # statuses since the last load
-
-
-@dataclass
-class ErrorEvent:
-    code: int
-    motor_address: int
-    description: str
-    stamp: float
-
-
-def discover(discovery_port: int, timeout: float, bind_address: str = '0.0.0.0') -> str:
-    """Listen for NetworkInfo datagrams; return the first device's IP address as text."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        sock.bind((bind_address, discovery_port))
-    except OSError as exc:
-        sock.close()
-        raise NotConnected(f'cannot listen for discovery on UDP {bind_address}:'
-                           f'{discovery_port}: {exc}') from exc
-    deadline = time.monotonic() + timeout
-    try:
-        while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise NotConnected(
-                    f'no kOS device announced itself on UDP port {discovery_port} within '
-                    f'{timeout:.1f} s; set the host parameter or check the network')
-            sock.settimeout(remaining)
-            try:
-                data, sender = sock.recvfrom(2048)
-            except TimeoutError:
-                continue
-            for frame in FrameParser().feed(data):
-                with contextlib.suppress(ProtocolError):
-                    message = decode(frame)
-                    if isinstance(message, NetworkInfo):
-                        # The datagram's source is what we can reach; the payload may carry
-                        # a private address behind NAT.
-                        return message.ip_text if message.ip_address else sender[0]
-    finally:
-        sock.close()
 
 
 #: messages that are notifications, never the answer to a Get
@@ -214,7 +92,7 @@ NOTIFICATIONS = (PlaybackStatus, MotorPosition, MotorCalibrated, MotorStatus, Er
                  AuxInputStatus, UnsupportedMessage, UnknownMessage)
 
 
-class KosClient(Protocol):
+class KosClient(KosCommands, Protocol):
     """A session with one kOS device. Thread-safe; callbacks run on the reader thread."""
 
     def __init__(
@@ -636,185 +514,3 @@ class KosClient(Protocol):
             first = errors[0]
             raise CommandRejected(f'{what}: device reported error {first.code} '
                                   f'({first.description}, motor {first.motor_address})')
-
-    # ------------------------------------------------------------------ motion
-    # Motor messages in rotations, unchecked: the adapter (device.py) checks every target
-    # and speed against the motor's range and maxima, in SI, before calling these.
-    @property
-    def playback_running(self) -> bool:
-        """True while the device executes a move (it then owns the motors)."""
-        return self.playback.status in PLAYBACK_RUNNING_STATES
-
-    def move_to(self, address: int, position: float, speed: float,
-                acceleration: float | None = None) -> None:
-        """Absolute move in rotations (SetPositionSpeedAcceleration)."""
-        motor = self.motor(address)
-        accel = motor.max_acceleration if acceleration is None else acceleration
-        self.send(SetPositionSpeedAcceleration(address, position, speed, accel))
-
-    def bump(self, address: int, delta: float, speed: float,
-             acceleration: float | None = None) -> None:
-        """Relative move (BumpPositionSpeedAcceleration), refused when it would end outside
-        the range (the adapter has no relative move: this is its only check)."""
-        motor = self.motor(address)
-        accel = motor.max_acceleration if acceleration is None else acceleration
-        lo, hi = motor.travel()
-        target = motor.position + delta
-        if not math.isfinite(delta) or not lo <= target <= hi:
-            raise CommandRejected(f'motor {address}: bump by {delta:.4f} rot would end at '
-                                  f'{target:.4f}, outside [{lo:.4f}, {hi:.4f}]')
-        self.send(BumpPositionSpeedAcceleration(address, delta, speed, accel))
-
-    def jog(self, address: int, velocity: float, acceleration: float | None = None) -> None:
-        """Move at `velocity` rot/s toward the end of travel (0 stops)."""
-        motor = self.motor(address)
-        if velocity == 0:
-            self.stop_motor(address)
-            return
-        accel = motor.max_acceleration if acceleration is None else acceleration
-        lo, hi = motor.travel()
-        self.send(SetPositionSpeedAcceleration(address, hi if velocity > 0 else lo,
-                                               abs(velocity), accel))
-
-    def stop_motor(self, address: int) -> None:
-        motor = self.motor(address)
-        self.send(SetPositionSpeedAcceleration(address, motor.position, 0.0,
-                                               motor.max_acceleration))
-
-    def stop_all(self) -> None:
-        """StopPlayback (stops every motor immediately) and speed 0 for each motor."""
-        self.send(StopPlayback())
-        for address, motor in list(self.motors.items()):
-            if motor.online:
-                self.send(SetPositionSpeedAcceleration(address, motor.position, 0.0,
-                                                       motor.max_acceleration))
-
-    def take_picture(self, exposure: float = 0.0) -> None:
-        if not math.isfinite(exposure) or exposure < 0:
-            raise CommandRejected(f'exposure must be >= 0 s, got {exposure}')
-        self._checked(TakePicture(ALL_MOTORS, exposure), 'TakePicture')
-
-    # ------------------------------------------------------------ device settings
-    def led_status(self) -> tuple[int, int]:
-        """(Get)LEDStatus: (master, slave), each a LedState (0 off, 1 on, 2/3 blink)."""
-        reply = self.request(GetLedStatus())
-        assert isinstance(reply, LedStatus)
-        return reply.master_status, reply.slave_status
-
-    def set_led_status(self, master: int, slave: int) -> tuple[int, int]:
-        """(Set)LEDStatus, then read the LEDs back (a Set has no reply)."""
-        allowed = [int(s) for s in LedState]
-        for name, value in (('master', master), ('slave', slave)):
-            if value not in allowed:
-                raise CommandRejected(f'{name} LED status {value!r} is not one of {allowed} '
-                                      '(0 off, 1 on, 2 slow blink, 3 fast blink)')
-        self.send(LedStatus(int(master), int(slave)))
-        return self.led_status()
-
-    def software_id(self) -> int:
-        """(Get)SoftwareID: the platform id of the last client that used the device."""
-        reply = self.request(GetSoftwareId())
-        assert isinstance(reply, SoftwareId)
-        return reply.device_type
-
-    def set_software_id(self, platform: int) -> int:
-        """(Set)SoftwareID, read back; the caller decides whether writing it is allowed."""
-        if isinstance(platform, bool) or not isinstance(platform, int) \
-                or not 0 <= platform <= 0xFF:
-            raise CommandRejected(f'SoftwareID must be an integer 0..255, got {platform!r}')
-        self.send(SoftwareId(platform))
-        return self.software_id()
-
-    # ------------------------------------------------------------- calibration
-    def mark_begin(self, address: int) -> None:
-        self.motor(address)
-        self._checked(MarkBeginPosition(address), f'MarkBeginPosition motor {address}')
-
-    def _await_calibrated(self, address: int, seq0: int, timeout: float, what: str) -> None:
-        key = -2000 - address
-        if not self.wait_for(lambda: self._seq.get(key, 0) > seq0, timeout):
-            errors = [e for e in self.errors if e.motor_address == address]
-            reason = f' (device error {errors[-1].code}: {errors[-1].description})' \
-                if errors else ''
-            raise DeviceTimeout(f'{what}: no MotorCalibrated notification for motor '
-                                f'{address}{reason}')
-
-    def mark_end(self, address: int, timeout: float | None = None) -> tuple[float, float]:
-        """MarkEndPosition; returns (begin, end) from the MotorCalibrated notification."""
-        self.motor(address)
-        with self._lock:
-            seq0 = self._seq.get(-2000 - address, 0)
-        marker = self.error_total
-        self.send(MarkEndPosition(address))
-        self.barrier()
-        failed = [e for e in self._errors_since(marker) if e.code == ErrorCode.CALIBRATION]
-        if failed:
-            raise CommandRejected(f'motor {address}: calibration failed (error 14: the end '
-                                  'mark must differ from the begin mark); the axis was reset')
-        self._await_calibrated(address, seq0, timeout or self.reply_timeout, 'MarkEndPosition')
-        motor = self.motors[address]
-        return motor.begin_position, motor.end_position
-
-    def reset_axis(self, address: int, timeout: float | None = None) -> None:
-        """Clear calibration (address 0: every axis, no notification expected)."""
-        if address != ALL_MOTORS:
-            self.motor(address)
-        with self._lock:
-            seq0 = self._seq.get(-2000 - address, 0)
-        self.send(ResetAxis(address))
-        if address == ALL_MOTORS:
-            self.barrier()
-            self.refresh_motors()
-            return
-        self._await_calibrated(address, seq0, timeout or self.reply_timeout, 'ResetAxis')
-
-    # ---------------------------------------------------------------- playback
-    def load_trajectory(self, trajectory: Trajectory) -> None:
-        """Validate against the motors' calibration and maxima, send, and confirm."""
-        self.refresh_motors()
-        limits = {a: m.limits() for a, m in self.motors.items() if m.online}
-        try:
-            validate(trajectory, limits)
-        except ProtocolError as exc:
-            raise CommandRejected(f'trajectory refused before sending: {exc}') from exc
-        with self._lock:
-            self.playback.loaded = False
-            self.playback.set_up = False
-            self.playback.history = []
-        marker = self.error_total
-        self.send(trajectory.to_message())
-        echo = self.request(GetTrajectoryData())   # barrier + confirmation
-        errors = self._errors_since(marker)
-        if errors:
-            raise CommandRejected(f'device rejected the trajectory: error {errors[0].code} '
-                                  f'({errors[0].description})')
-        expected = len(trajectory.to_message().blocks)
-        if not isinstance(echo, TrajectoryData) or len(echo.blocks) != expected:
-            raise CommandRejected('device did not store the trajectory (GetTrajectoryData '
-                                  'returned a different move)')
-        with self._lock:
-            self.playback.loaded = True
-
-    def setup_playback(self, delay_return: bool = False) -> None:
-        if not self.playback.loaded:
-            raise CommandRejected('no trajectory loaded (a FullStop consumes the move; load '
-                                  'it again)')
-        self._checked(SetupPlayback(0, 0.0, delay_return), 'SetupPlayback')
-
-    def start_playback(self) -> None:
-        if not self.playback.loaded:
-            raise CommandRejected('no trajectory loaded (a FullStop consumes the move; load '
-                                  'it again)')
-        self._checked(StartPlayback(0, 0.0), 'StartPlayback')
-
-    def stop_playback(self) -> None:
-        self.send(StopPlayback())
-
-    def rapid_to_first_key_frame(self) -> None:
-        if not self.playback.loaded:
-            raise CommandRejected('RapidToFirstKeyFrame needs a loaded trajectory')
-        self._checked(RapidToFirstKeyFrame(), 'RapidToFirstKeyFrame')
-
-    def wait_playback(self, status: int, timeout: float) -> bool:
-        """Wait until a PlaybackStatus `status` has been seen since the last load."""
-        return self.wait_for(lambda: status in self.playback.history, timeout)
