@@ -176,8 +176,8 @@ class Session:
 
     @property
     def alive(self) -> bool:
-        """True from :meth:`start` until the link is lost or the session closed."""
-        return self._reader is not None and not self._stop.is_set()
+        """True until the link is lost or the session closed."""
+        return not self._stop.is_set()
 
     @property
     def reader(self) -> threading.Thread | None:
