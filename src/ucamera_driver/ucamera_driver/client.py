@@ -144,7 +144,7 @@ class UCameraClient(Protocol):
 
     # --- lifecycle -------------------------------------------------------
     def start(self, timeout: float = 3.0) -> VersionReport:
-        """Open the port, start the I/O thread and read the device identity.
+        """Open the port, start the session and read the device identity.
 
         Raises :class:`NotConnectedError` when the port does not open or the link dies
         meanwhile, :class:`RequestTimeoutError` when the gimbal does not answer within
