@@ -213,7 +213,7 @@ class Session:
     def write(self, data: Any) -> None:
         """Write to the link; a failure is the link's loss (reported, then raised)."""
         if self._stop.is_set():
-            raise self.error or self.link_error(f'{self.link.description} is not open')
+            raise self._down()
         try:
             self.link.write(data)
         except (LinkError, OSError) as exc:
@@ -228,8 +228,8 @@ class Session:
         is queued for it (register before writing, so no answer is missed)."""
         pending: Pending[Any] = Pending(match)
         with self._lock:
-            if self.error is not None:
-                raise self.error
+            if self._stop.is_set():
+                raise self._down()
             self._pending.append(pending)
         try:
             yield pending
@@ -267,6 +267,13 @@ class Session:
                 request.offer(message)
             except Exception:
                 LOG.exception('%s: error while matching %s', self.name, type(message).__name__)
+
+    def _down(self) -> LinkError:
+        """A new error saying why the session is down (a fresh instance for each raise:
+        re-raising one instance from many threads would grow its traceback)."""
+        if self.error is not None:
+            return type(self.error)(str(self.error))
+        return self.link_error(f'{self.link.description} is not open')
 
     def _fail_pending(self, error: BaseException) -> None:
         with self._lock:
