@@ -216,3 +216,46 @@ def test_close_ends_the_reader_closes_the_link_and_fails_pending_requests(link) 
     assert protocol.lost == [None] and session.error is None
     assert device.recv(100) == b''  # the link was closed
     session.close()
+
+
+def test_over_a_pty_garbage_is_skipped_and_the_device_going_away_is_one_loss() -> None:
+    """The same session over a serial link (a pseudo-terminal): the device end closing is
+    a read failure, reported once, and the reader closes the port."""
+    import os
+    import tty
+
+    from gimbal_driver_common.transport import SerialStream
+
+    device, port = os.openpty()
+    tty.setraw(device)
+    stream = SerialStream(os.ttyname(port))
+    stream.open()
+    os.close(port)  # the client's stream has its own descriptor
+    protocol = LineProtocol()
+    notes: list[str] = []
+    session = Session(StreamLink(stream), protocol, 'pty')
+    session.on(Note, lambda note: notes.append(str(note)))
+    session.start()
+    try:
+        os.write(device, b'\x00\x01 noise\nNOTE over serial\n')
+        assert protocol.made.is_set()
+
+        def answer() -> None:
+            request = b''
+            while not request.endswith(b'\n'):
+                request += os.read(device, 100)
+            os.write(device, b'ANS 9 serial\n')
+
+        threading.Thread(target=answer, daemon=True).start()
+        assert session.request(b'REQ 9\n', reply_to('9'), 2.0) == '9 serial'
+        assert notes == ['over serial']
+        assert protocol.garbage == [b'\x00\x01 noise']
+        os.close(device)
+        device = -1
+        assert protocol.ended.wait(2.0)
+        assert len(protocol.lost) == 1 and isinstance(protocol.lost[0], LinkError)
+        assert not stream.is_open
+    finally:
+        session.close()
+        if device >= 0:
+            os.close(device)
