@@ -45,6 +45,7 @@ from .protocol.identifiers import ActuatorMode, AxisStatus, TargetState
 from .status import TurretStatus
 
 MODE_NAMES = {mode.name.lower(): mode for mode in ActuatorMode}
+ICD_POSITION_LIMIT_DEG = 180.0  # set-point range "-180 ÷ 180" (6.1.2, 6.1.1 pitch)
 #: how long activation waits for both axes to report their actuator mode (the simulator's
 #: status byte comes every 100 ms, its mode state every 500 ms)
 MODE_REPORT_WAIT_S = 1.0
@@ -258,6 +259,19 @@ class TurretDevice(Device):
         return float(self.settings.yaw_direction if axis == "yaw"
                      else self.settings.pitch_direction)
 
+    def _to_device(self, axis: str, value: float) -> float:
+        """An SI value (rad, rad/s) of a joint in REP-103 direction, in the ICD's degrees
+        and the device's own direction: the one conversion of commands."""
+        return math.degrees(value * self._direction(axis))
+
+    def _position_setpoint(self, axis: str, position: float) -> float:
+        """The position set-point in degrees, refused outside the ICD's -180..180."""
+        degrees = self._to_device(axis, position)
+        if not abs(degrees) <= ICD_POSITION_LIMIT_DEG + 1e-9:
+            raise CommandError(f"{axis} position {position:.4f} rad is outside the "
+                               f"device range -pi..pi")
+        return max(-ICD_POSITION_LIMIT_DEG, min(ICD_POSITION_LIMIT_DEG, degrees))
+
     def _joint_value(self, axis: str, key: str) -> float | None:
         """The SI value of `<axis>_<key>` in REP-103 direction (None: not received)."""
         sample = self.client.latest(f"{axis}_{key}")
@@ -372,9 +386,10 @@ class TurretDevice(Device):
 
     def move(self, moves: Moves) -> None:
         self._warn_speed_once(moves)
-        for joint, (position, _speed) in moves.items():
-            axis = self.axis_of[joint]
-            self.client.move_to(axis, position * self._direction(axis))
+        setpoints = {self.axis_of[joint]: self._position_setpoint(self.axis_of[joint], position)
+                     for joint, (position, _speed) in moves.items()}
+        for axis, degrees in setpoints.items():
+            self.client.move_to(axis, degrees)
 
     def move_relative(self, offsets: dict[str, float], moves: Moves) -> bool:
         """A relative move as the turret's relative set-points (6.1.4, ids 1302/1312).
@@ -386,7 +401,7 @@ class TurretDevice(Device):
         self._warn_speed_once(moves)
         for joint, offset in offsets.items():
             axis = self.axis_of[joint]
-            self.client.move_by(axis, offset * self._direction(axis))
+            self.client.move_by(axis, self._to_device(axis, offset))
         return True
 
     def _warn_speed_once(self, moves: Moves) -> None:
@@ -402,7 +417,7 @@ class TurretDevice(Device):
             if velocity == 0.0:
                 self.client.stop([axis])
             else:
-                self.client.jog(axis, velocity * self._direction(axis))
+                self.client.jog(axis, self._to_device(axis, velocity))
 
     def stop(self, joints: Sequence[str] | None = None) -> None:
         axes = list(AXES) if joints is None else [self.axis_of[j] for j in joints]

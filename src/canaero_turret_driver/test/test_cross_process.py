@@ -1,3 +1,4 @@
+
 """Client against `canaero_turret_sim` in another process, over slcan on a pseudo-terminal.
 
 This is the real cross-process transport of this machine (no SocketCAN here): the
@@ -8,6 +9,7 @@ port on 127.0.0.1.
 
 import contextlib
 import json
+import math
 import os
 import pathlib
 import sys
@@ -71,7 +73,7 @@ def test_identify_move_and_data_across_processes(sim_process, remote_client):
     _, control = sim_process
     assert remote_client.identify().software_revision == 7
     assert wait_for(lambda: remote_client.latest("yaw_position") is not None)
-    remote_client.move_to("yaw", 0.35)
+    remote_client.move_to("yaw", math.degrees(0.35))
     assert wait_for(lambda: abs(remote_client.latest("yaw_position").si - 0.35) < 1e-3)
     assert abs(control.state()["axes"]["yaw"]["position"] - 20.0535) < 0.01
 
@@ -170,7 +172,7 @@ def test_socketcand_bridge_is_a_shared_bus(socketcand_sim, supervised):
     try:
         with supervised(first) as controller:
             assert first.identify().software_revision == 7
-            first.move_to("pitch", 0.3)
+            first.move_to("pitch", math.degrees(0.3))
             assert wait_for(lambda: second.latest("pitch_position") is not None
                             and abs(second.latest("pitch_position").si - 0.3) < 1e-3)
             assert control.command("node_silence turret") == "ok"

@@ -13,7 +13,7 @@ import math
 
 import pytest
 
-from canaero_turret_driver.client import ClientConfig, TurretClient
+from canaero_turret_driver.client import ClientConfig, CommandError, TurretClient
 from canaero_turret_driver.device import TurretDevice, TurretSettings
 from canaero_turret_driver.protocol.identifiers import STOP_PITCH_BIT, ActuatorMode
 from canaero_turret_driver.sim import YAW, SimConfig, SlcanSession, TurretSimulator
@@ -105,6 +105,16 @@ def test_move_converges_in_si_units(rig):
     assert rig.sim_axis("yaw")["position"] == pytest.approx(math.degrees(0.4), abs=0.01)
     assert rig.sim_axis("pitch")["position"] == pytest.approx(math.degrees(0.2), abs=0.01)
     assert rig.controller.commanded_targets == {"yaw": 0.4, "pitch": 0.2}
+
+
+def test_a_setpoint_outside_the_icd_range_is_refused_by_the_adapter(rig):
+    """-180..180 degrees (6.1.2): checked in the adapter, in SI, before any frame."""
+    before = rig.commands_received()
+    with pytest.raises(CommandError, match="outside the device range"):
+        rig.device.move({"yaw": (4.0, None)})
+    with pytest.raises(CommandError, match="outside the device range"):
+        rig.device.move({"pitch": (0.1, None), "yaw": (-4.0, None)})
+    assert rig.commands_received() == before
 
 
 def test_relative_move_goes_out_as_the_relative_setpoint(rig):

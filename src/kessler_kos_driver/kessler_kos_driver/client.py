@@ -3,50 +3,60 @@
 Responsibilities: discovery (listen for NetworkInfo datagrams), the initialisation sequence
 (DeviceInfo, UserPassword, MotorInfo, DeviceGUID), request/response matching, notification
 handling (motor, playback, error state, aux inputs), the 10 s keep-alive, periodic state
-polling and checked commands (limits are checked before any byte is sent). Reconnecting is not
-the client's job: the controller's supervisor (gimbal_driver_common.controller) calls
-:meth:`KosClient.connect` again after a loss, which the client reports through `connected`
-and `last_error_text`. Over USB (`usb=UsbTarget(...)`) the link is a
-:class:`~.usb_link.HidStream` (report framing and the 4 s USB keep-alive) and no password
-message is sent: the document's USB notes say UserPassword and DevicePassword are "not
-required or supported".
+polling (both in the tick of the session's one reader thread, ``kos-reader``: the link is
+a :class:`gimbal_driver_common.session.Session` and the client its protocol) and the
+commands in the device's own units (rotations); the adapter checks limits, in SI, before it
+calls them. Reconnecting is not the client's job: the controller's supervisor
+(gimbal_driver_common.controller) calls :meth:`KosClient.connect` again after a loss,
+which the client reports through `connected` and `last_error_text`. Over USB
+(`usb=UsbTarget(...)`) the link is a :class:`~.usb_link.HidStream` (report framing and the
+4 s USB keep-alive) and no password message is sent: the document's USB notes say
+UserPassword and DevicePassword are "not required or supported".
 
 Design notes:
 - Set messages and actions have no reply. Where the caller needs to know the outcome the client
   follows them with a Get as a *barrier*: the device handles messages in order, so any
   ErrorStatus caused by the action arrives before the barrier's response.
-- Responses are matched by MessageID with a per-id sequence counter, so unsolicited responses
-  (the device sends NetworkInfo over TCP while connected, polls overlap) are harmless.
+- Responses are matched by MessageID (a request takes the first one after it was sent), so
+  unsolicited responses (the device sends NetworkInfo over TCP while connected, polls
+  overlap) are harmless.
 - The password is never logged or put in exception text; DeviceInfo carries the device password
   and its repr hides it.
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
-import socket
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 from gimbal_driver_common import errors
+from gimbal_driver_common.session import Protocol, Session, StreamLink
 from gimbal_driver_common.transport import ByteStream, TcpStream, TransportError
 
+from .client_commands import KosCommands
+from .client_types import (
+    CommandRejected,
+    DeviceTimeout,
+    ErrorEvent,
+    KosError,
+    MessageUnsupported,
+    MotorState,
+    NotConnected,
+    PasswordRejected,
+    PlaybackInfo,
+    discover,
+)
 from .protocol import (
-    ALL_MOTORS,
     DEFAULT_TCP_PORT,
     HEADER_SIZE,
     KEEPALIVE_PERIOD_S,
-    PLAYBACK_RUNNING_STATES,
     REPORT_SIZE,
-    UNCALIBRATED_TARGET,
     USB_KEEPALIVE_PERIOD_S,
     AuxInputStatus,
-    BumpPositionSpeedAcceleration,
     DeviceGuid,
     DeviceInfo,
     ErrorCode,
@@ -54,158 +64,35 @@ from .protocol import (
     FrameParser,
     GetDeviceGuid,
     GetDeviceInfo,
-    GetLedStatus,
     GetMotorInfo,
     GetNetworkInfo,
-    GetSoftwareId,
-    GetTrajectoryData,
-    LedState,
-    LedStatus,
-    MarkBeginPosition,
-    MarkEndPosition,
     Message,
     MessageId,
     MotorCalibrated,
     MotorInfo,
     MotorPosition,
     MotorStatus,
-    NetworkInfo,
     PlaybackState,
     PlaybackStatus,
     ProtocolError,
-    RapidToFirstKeyFrame,
-    ResetAxis,
-    SetPositionSpeedAcceleration,
-    SetupPlayback,
-    SoftwareId,
-    StartPlayback,
-    StopPlayback,
-    TakePicture,
-    Trajectory,
-    TrajectoryData,
     UnknownMessage,
     UnsupportedMessage,
     UserPassword,
     decode,
     describe_error,
     unpack_header,
-    validate,
 )
-from .protocol.trajectory import AxisLimits
 from .usb_link import HidDevice, HidStream, UsbTarget
 
 LOG = logging.getLogger('kessler_kos_driver.client')
 
 
-class KosError(errors.GimbalError):
-    """Base of the client's errors (in the shared hierarchy); messages say what to do."""
+#: messages that are notifications, never the answer to a Get
+NOTIFICATIONS = (PlaybackStatus, MotorPosition, MotorCalibrated, MotorStatus, ErrorStatus,
+                 AuxInputStatus, UnsupportedMessage, UnknownMessage)
 
 
-class NotConnected(KosError, errors.LinkError):
-    """No link (unreachable, no discovery datagram, USB device missing) or the link dropped."""
-
-
-class DeviceTimeout(KosError, errors.DeviceTimeout):
-    """The device did not answer a Get in time."""
-
-
-class MessageUnsupported(KosError, errors.Unsupported):
-    """The device answered a request with UnsupportedMessage: it answered, it is not silent."""
-
-
-class PasswordRejected(KosError, errors.DeviceRefused):
-    """The password does not match (checked locally) or the device locked us out."""
-
-
-class CommandRejected(KosError, errors.DeviceRefused):
-    """A command refused before sending (limits, unknown motor) or by the device."""
-
-
-@dataclass
-class MotorState:
-    address: int
-    position: float = 0.0          # rotations
-    velocity: float = 0.0          # rotations/s (estimated from successive reports)
-    begin_position: float = 0.0
-    end_position: float = 0.0
-    max_setup_speed: float = 0.0
-    max_move_speed: float = 0.0
-    max_acceleration: float = 0.0
-    is_fiz: bool = False
-    online: bool = True
-    stamp: float = 0.0             # time.time() of the last position report
-    last_error: int | None = None
-
-    @property
-    def calibrated(self) -> bool:
-        return self.end_position != 0.0
-
-    def travel(self) -> tuple[float, float]:
-        """Allowed target range in rotations."""
-        if self.calibrated:
-            return (min(self.begin_position, self.end_position),
-                    max(self.begin_position, self.end_position))
-        return -UNCALIBRATED_TARGET, UNCALIBRATED_TARGET
-
-    def limits(self) -> AxisLimits:
-        return AxisLimits(self.begin_position, self.end_position, self.max_move_speed,
-                          self.max_acceleration)
-
-
-@dataclass
-class PlaybackInfo:
-    status: int = PlaybackState.NO_MOVE
-    elapsed: float = 0.0
-    photo_count: int = 0
-    positions: dict[int, float] = field(default_factory=dict)
-    loaded: bool = False           # TrajectoryData accepted and not yet consumed by FullStop
-    set_up: bool = False
-    history: list[int] = field(default_factory=list)   # statuses since the last load
-
-
-@dataclass
-class ErrorEvent:
-    code: int
-    motor_address: int
-    description: str
-    stamp: float
-
-
-def discover(discovery_port: int, timeout: float, bind_address: str = '0.0.0.0') -> str:
-    """Listen for NetworkInfo datagrams; return the first device's IP address as text."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        sock.bind((bind_address, discovery_port))
-    except OSError as exc:
-        sock.close()
-        raise NotConnected(f'cannot listen for discovery on UDP {bind_address}:'
-                           f'{discovery_port}: {exc}') from exc
-    deadline = time.monotonic() + timeout
-    try:
-        while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise NotConnected(
-                    f'no kOS device announced itself on UDP port {discovery_port} within '
-                    f'{timeout:.1f} s; set the host parameter or check the network')
-            sock.settimeout(remaining)
-            try:
-                data, sender = sock.recvfrom(2048)
-            except TimeoutError:
-                continue
-            for frame in FrameParser().feed(data):
-                with contextlib.suppress(ProtocolError):
-                    message = decode(frame)
-                    if isinstance(message, NetworkInfo):
-                        # The datagram's source is what we can reach; the payload may carry
-                        # a private address behind NAT.
-                        return message.ip_text if message.ip_address else sender[0]
-    finally:
-        sock.close()
-
-
-class KosClient:
+class KosClient(KosCommands, Protocol):
     """A session with one kOS device. Thread-safe; callbacks run on the reader thread."""
 
     def __init__(
@@ -245,22 +132,18 @@ class KosClient:
             self._stream_factory = stream_factory or (
                 lambda h, p: TcpStream(h, p, connect_timeout))
         self._stream: ByteStream | None = None
+        self._session: Session | None = None
+        self._parser = FrameParser()
         self._connected_host = ''
         self._lock = threading.RLock()
         self._cond = threading.Condition(self._lock)
-        self._seq: dict[int, int] = {}
-        #: MessageID -> UnsupportedMessage replies naming it (the offending message's header)
-        self._refused: dict[int, int] = {}
-        self._latest: dict[int, Message] = {}
+        self._seq: dict[int, int] = {}   # notifications counted by kind (see _completed)
         self._motor_parts: list = []
-        self._request_lock = threading.Lock()
         self._last_tx = 0.0
         self._last_rx = 0.0
         self._unanswered_since: float | None = None   # first send after the last receive
         self.silence_timeout = max(2.0 * reply_timeout, 1.0)
-        self._reader: threading.Thread | None = None
-        self._ticker: threading.Thread | None = None
-        self._session_stop = threading.Event()
+        self._next_poll = 0.0
         self.connected = False
         self.device_info: DeviceInfo | None = None
         self.guid = ''
@@ -308,23 +191,18 @@ class KosClient:
         with self._lock:
             self._stream = stream
             self._seq.clear()
-            self._refused.clear()
-            self._latest.clear()
             self._motor_parts = []
-            self._session_stop = threading.Event()
             self._unanswered_since = None
-        self._reader = threading.Thread(target=self._read_loop, args=(stream,
-                                         self._session_stop), name='kos-reader', daemon=True)
-        self._reader.start()
+        self._parser = FrameParser()
+        self._session = Session(StreamLink(stream), self, 'kos', read_timeout=0.02,
+                                link_error=NotConnected).start()
         try:
             self._initialise()
         except Exception:
             self.close()
             raise
+        self._next_poll = time.monotonic()
         self.connected = True
-        self._ticker = threading.Thread(target=self._tick_loop, args=(self._session_stop,),
-                                        name='kos-keepalive', daemon=True)
-        self._ticker.start()
         self.last_error_text = ''
         LOG.info('connected to %s (%s firmware %s, %d motors)', self.description,
                  self.device_info.device_type if self.device_info else '?',
@@ -366,28 +244,25 @@ class KosClient:
             self.playback.status = info.playback_status
 
     def close(self) -> None:
-        """Close the link and end the session's threads (safe to call repeatedly)."""
+        """Close the link and end the session's reader (safe to call repeatedly)."""
         self.connected = False
+        session, self._session = self._session, None
+        if session is not None:
+            session.close()
         with self._lock:
-            stream, stop = self._stream, self._session_stop
-        self._end_session(stream, stop)
-        for thread in (self._reader, self._ticker):
-            if thread is not None and thread is not threading.current_thread():
-                thread.join(timeout=2.0)
-        self._reader = self._ticker = None
+            self._stream = None
+            self._cond.notify_all()
 
     # ------------------------------------------------------------------- messaging
     def send(self, message: Message) -> None:
         """Encode (checks ranges) and send one message."""
         data = message.encode()
-        with self._lock:
-            stream = self._stream
-        if stream is None:
+        session = self._session
+        if session is None or not session.alive:
             raise NotConnected(f'not connected to {self.description}')
         try:
-            stream.write(data)
-        except TransportError as exc:
-            self._link_lost(str(exc))
+            session.write(data)
+        except errors.LinkError as exc:
             raise NotConnected(f'link to {self.description} lost: {exc}') from exc
         self._last_tx = time.monotonic()
         if self._unanswered_since is None:
@@ -400,126 +275,94 @@ class KosClient:
         raises :class:`MessageUnsupported` at once instead of a "no reply" timeout."""
         message_id = message.MESSAGE_ID
         timeout = self.reply_timeout if timeout is None else timeout
-        with self._request_lock:
-            with self._lock:
-                seq0 = self._seq.get(message_id, 0)
-                refused0 = self._refused.get(message_id, 0)
-            self.send(message)
-            deadline = time.monotonic() + timeout
-            with self._cond:
-                while self._seq.get(message_id, 0) == seq0:
-                    remaining = deadline - time.monotonic()
-                    what = type(message).__name__
-                    if self._refused.get(message_id, 0) != refused0:
-                        raise MessageUnsupported(f'{self.description} answered {what} with '
-                                                 'UnsupportedMessage: the device does not '
-                                                 'support it')
-                    if self._stream is None:   # the link was lost (or closed) meanwhile
-                        raise NotConnected(f'link to {self.description} lost while waiting '
-                                           f'for the reply to {what}')
-                    if remaining <= 0:
-                        raise DeviceTimeout(f'no reply to {what} from {self.description} '
-                                            f'within {timeout:.1f} s')
-                    if self._reader is not None and not self._reader.is_alive():
-                        # the peer closed the link during the handshake (before `connected`,
-                        # so no link-lost teardown): fail now, not after the reply timeout
-                        raise NotConnected(f'link to {self.description} closed while '
-                                           f'waiting for the reply to {what}')
-                    self._cond.wait(min(remaining, 0.05))
-                return self._latest[message_id]
+        what = type(message).__name__
+
+        def answers(reply: Message) -> bool | KosError:
+            if isinstance(reply, UnsupportedMessage):
+                if len(reply.offending) >= HEADER_SIZE \
+                        and unpack_header(reply.offending).message_id == message_id:
+                    return MessageUnsupported(f'{self.description} answered {what} with '
+                                              'UnsupportedMessage: the device does not '
+                                              'support it')
+                return False
+            return not isinstance(reply, NOTIFICATIONS) and message_id == reply.MESSAGE_ID
+
+        session = self._session
+        if session is None:
+            raise NotConnected(f'not connected to {self.description}')
+        try:
+            with session.expect(answers) as pending:
+                self.send(message)
+                return pending.next(timeout)
+        except errors.LinkError as exc:
+            raise NotConnected(f'link to {self.description} lost while waiting for the '
+                               f'reply to {what}') from exc
+        except errors.DeviceTimeout as exc:
+            raise DeviceTimeout(f'no reply to {what} from {self.description} '
+                                f'within {timeout:.1f} s') from exc
 
     def barrier(self) -> None:
         """Wait until the device has handled everything sent so far."""
         self.request(GetNetworkInfo(False))
 
-    def _read_loop(self, stream: ByteStream, stop: threading.Event) -> None:
-        parser = FrameParser()
-        while not stop.is_set():
+    # ------------------------------------------------------- session (reader thread)
+    def connection_made(self, session: Session) -> None:
+        session.on(Message, self._dispatch)
+
+    def data_received(self, data: bytes) -> None:
+        """Frames → messages (MotorInfo parts joined into one) → the session's dispatch."""
+        self._last_rx = time.monotonic()
+        self._unanswered_since = None
+        parser, session = self._parser, self._session
+        before = parser.discarded_bytes
+        for frame in parser.feed(data):
             try:
-                data = stream.read(4096, 0.2)
-            except (TransportError, OSError) as exc:
-                # OSError: TcpStream.read's settimeout() on a socket closed by another
-                # thread raises EBADF outside its own TransportError mapping.
-                if not stop.is_set():
-                    self._link_lost(str(exc))
-                return
-            if not data:
-                continue
-            self._last_rx = time.monotonic()
-            self._unanswered_since = None
-            before = parser.discarded_bytes
-            for frame in parser.feed(data):
-                try:
-                    message = decode(frame)
-                except ProtocolError as exc:
-                    self.malformed_frames += 1
-                    LOG.warning('ignoring malformed kOS frame: %s', exc)
-                    continue
-                try:
-                    self._dispatch(message)
-                except Exception:  # a callback bug must not kill the session
-                    LOG.exception('error while handling %s', type(message).__name__)
-            if parser.discarded_bytes != before:
+                message = decode(frame)
+            except ProtocolError as exc:
                 self.malformed_frames += 1
-                LOG.warning('skipped %d garbage bytes from %s while resynchronising',
-                            parser.discarded_bytes - before, self.description)
+                LOG.warning('ignoring malformed kOS frame: %s', exc)
+                continue
+            if isinstance(message, MotorInfo):
+                self._motor_parts.extend(message.motors)
+                if message.more_follows:
+                    continue
+                message, self._motor_parts = MotorInfo(self._motor_parts), []
+            if session is not None:
+                session.dispatch(message)
+        if parser.discarded_bytes != before:
+            self.malformed_frames += 1
+            LOG.warning('skipped %d garbage bytes from %s while resynchronising',
+                        parser.discarded_bytes - before, self.description)
 
-    def _link_lost(self, reason: str) -> None:
-        if not self.connected:
-            return
-        self.connected = False
-        LOG.warning('kOS link to %s lost: %s', self.description, reason)
-        self.last_error_text = f'link lost: {reason}'
+    def connection_lost(self, error: errors.LinkError | None) -> None:
+        """The link is gone (``error``) or was closed: requests and the poll stop."""
+        was_connected, self.connected = self.connected, False
+        if error is not None and was_connected:
+            self.last_error_text = f'link lost: {error}'
         with self._lock:
-            stream, stop = self._stream, self._session_stop
-        # Not inline: this runs on the session's own threads or a caller's, and closing a
-        # HID stream waits for a read in progress.
-        threading.Thread(target=self._end_session, args=(stream, stop), name='kos-teardown',
-                         daemon=True).start()
-
-    def _end_session(self, stream: ByteStream | None, stop: threading.Event) -> None:
-        """End one session: its threads see `stop`, its stream closes. A session opened since
-        (the controller reconnects while this runs late) is left alone."""
-        stop.set()
-        with self._lock:
-            if self._stream is stream:
-                self._stream = None
             self._cond.notify_all()
-        if stream is not None:
-            stream.close()
 
-    def _tick_wait(self, next_poll: float) -> float:
-        if self.poll_period <= 0:
-            return 0.02
-        return max(0.0, min(0.02, next_poll - time.monotonic()))
-
-    def _tick_loop(self, stop: threading.Event) -> None:
+    def tick(self, now: float) -> float | None:
         """State polling (GetMotorInfo), the keep-alive (GetNetworkInfo when idle) and the
-        silent-device check (requests sent, nothing received for silence_timeout)."""
-        next_poll = time.monotonic()
-        # Wake for the next poll exactly (a fixed 20 ms tick made a 50 ms poll period 60 ms),
-        # and at least every 20 ms for the silence and keep-alive checks.
-        while not stop.wait(self._tick_wait(next_poll)):
-            now = time.monotonic()
-            waiting = self._unanswered_since
-            if waiting is not None and now - waiting > self.silence_timeout:
-                self._link_lost(f'device silent: no reply for {now - waiting:.1f} s')
-                return
-            try:
-                if self.poll_period > 0 and now >= next_poll:
-                    next_poll += self.poll_period
-                    if next_poll <= now:  # fell behind: do not burst to catch up
-                        next_poll = now + self.poll_period
-                    self.send(GetMotorInfo())
-                elif self.keepalive_period > 0 and now - self._last_tx >= self.keepalive_period:
-                    self.send(GetNetworkInfo(False))
-            except KosError:
-                return
+        silent-device check (requests sent, nothing received for silence_timeout); the
+        answer is when the next poll is due (the reader wakes for it exactly)."""
+        if not self.connected:
+            return None
+        waiting = self._unanswered_since
+        if waiting is not None and now - waiting > self.silence_timeout:
+            raise NotConnected(f'device silent: no reply for {now - waiting:.1f} s')
+        if self.poll_period > 0 and now >= self._next_poll:
+            self._next_poll += self.poll_period
+            if self._next_poll <= now:  # fell behind: do not burst to catch up
+                self._next_poll = now + self.poll_period
+            self.send(GetMotorInfo())
+        elif self.keepalive_period > 0 and now - self._last_tx >= self.keepalive_period:
+            self.send(GetNetworkInfo(False))
+        return self._next_poll if self.poll_period > 0 else None
 
     # --------------------------------------------------------------- notifications
-    def _completed(self, message_id: int, message: Message) -> None:
-        self._latest[message_id] = message
-        self._seq[message_id] = self._seq.get(message_id, 0) + 1
+    def _completed(self, key: int) -> None:
+        self._seq[key] = self._seq.get(key, 0) + 1
         self._cond.notify_all()
 
     def _dispatch(self, message: Message) -> None:
@@ -527,22 +370,18 @@ class KosClient:
         callback = None
         with self._cond:
             if isinstance(message, MotorInfo):
-                self._motor_parts.extend(message.motors)
-                if message.more_follows:
-                    return
-                entries, self._motor_parts = self._motor_parts, []
-                self._apply_motor_info(entries, now)
-                self._completed(MessageId.MOTOR_INFO, MotorInfo(entries))
+                self._apply_motor_info(message.motors, now)
+                self._cond.notify_all()
                 callback = self.on_motor_update
             elif isinstance(message, PlaybackStatus):
                 self._apply_playback(message, now)
-                self._completed(-MessageId.NOTIFICATION, message)
+                self._completed(-MessageId.NOTIFICATION)
                 callback = self.on_playback and (lambda: self.on_playback(message))
             elif isinstance(message, MotorPosition):
                 motor = self.motors.get(message.motor_address)
                 if motor is not None and math.isfinite(message.position):
                     motor.position, motor.velocity, motor.stamp = message.position, 0.0, now
-                self._completed(-1000 - message.motor_address, message)
+                self._completed(-1000 - message.motor_address)
                 callback = self.on_motor_update
             elif isinstance(message, MotorCalibrated):
                 motor = self.motors.get(message.motor_address)
@@ -553,7 +392,7 @@ class KosClient:
                         motor.position = 0.0
                     else:
                         motor.position = message.end_position
-                self._completed(-2000 - message.motor_address, message)
+                self._completed(-2000 - message.motor_address)
             elif isinstance(message, MotorStatus):
                 for entry in message.motors:
                     motor = self.motors.setdefault(entry.address, MotorState(entry.address))
@@ -573,7 +412,7 @@ class KosClient:
                 motor = self.motors.get(message.motor_address)
                 if motor is not None:
                     motor.last_error = message.error_code
-                self._completed(-MessageId.NOTIFICATION - 3, message)
+                self._completed(-MessageId.NOTIFICATION - 3)
                 LOG.warning('device error %d (%s), motor %d', event.code, event.description,
                             event.motor_address)
                 callback = self.on_error and (lambda: self.on_error(event))
@@ -584,14 +423,10 @@ class KosClient:
             elif isinstance(message, UnsupportedMessage):
                 self.unsupported_replies += 1
                 LOG.warning('device did not support a message: %s', message.offending.hex())
-                if len(message.offending) >= HEADER_SIZE:  # names the request it refuses
-                    refused = unpack_header(message.offending).message_id
-                    self._refused[refused] = self._refused.get(refused, 0) + 1
-                    self._cond.notify_all()
             elif isinstance(message, UnknownMessage):
                 LOG.debug('ignoring unknown message id %#x', message.message_id)
-            else:   # responses: DeviceInfo, DeviceGuid, NetworkInfo, TrajectoryData, ...
-                self._completed(message.MESSAGE_ID, message)
+            else:   # responses (DeviceInfo, DeviceGuid, ...): the session answers requests
+                self._cond.notify_all()
         if callback:
             callback()
 
@@ -679,208 +514,3 @@ class KosClient:
             first = errors[0]
             raise CommandRejected(f'{what}: device reported error {first.code} '
                                   f'({first.description}, motor {first.motor_address})')
-
-    # ------------------------------------------------------------------ motion
-    def _check_speed(self, motor: MotorState, speed: float, acceleration: float) -> None:
-        if not math.isfinite(speed) or speed < 0:
-            raise CommandRejected(f'speed must be a finite value >= 0, got {speed}')
-        if speed > motor.max_setup_speed:
-            raise CommandRejected(f'motor {motor.address}: speed {speed:.3f} rot/s exceeds '
-                                  f'MaxMaxSetupSpeed {motor.max_setup_speed:.3f}')
-        if not math.isfinite(acceleration) or acceleration < 0:
-            raise CommandRejected(f'acceleration must be finite and >= 0, got {acceleration}')
-        if acceleration > motor.max_acceleration:
-            raise CommandRejected(f'motor {motor.address}: acceleration {acceleration:.3f} '
-                                  f'rot/s^2 exceeds MaxMaxAcceleration '
-                                  f'{motor.max_acceleration:.3f}')
-
-    @property
-    def playback_running(self) -> bool:
-        """True while the device executes a move (it then owns the motors)."""
-        return self.playback.status in PLAYBACK_RUNNING_STATES
-
-    def check_move(self, address: int, position: float, speed: float,
-                   acceleration: float | None = None) -> SetPositionSpeedAcceleration:
-        """The message for an absolute move, or CommandRejected (nothing is sent)."""
-        motor = self.motor(address)
-        accel = motor.max_acceleration if acceleration is None else acceleration
-        self._check_speed(motor, speed, accel)
-        lo, hi = motor.travel()
-        if not math.isfinite(position) or not lo - 1e-9 <= position <= hi + 1e-9:
-            state = 'calibrated range' if motor.calibrated else 'uncalibrated travel'
-            raise CommandRejected(f'motor {address}: position {position:.4f} rot is outside '
-                                  f'the {state} [{lo:.4f}, {hi:.4f}]')
-        return SetPositionSpeedAcceleration(address, min(max(position, lo), hi), speed, accel)
-
-    def move_to(self, address: int, position: float, speed: float,
-                acceleration: float | None = None) -> None:
-        """Absolute move in rotations (calibrated: within 0..EndPosition)."""
-        self.send(self.check_move(address, position, speed, acceleration))
-
-    def bump(self, address: int, delta: float, speed: float,
-             acceleration: float | None = None) -> None:
-        """Relative move (BumpPositionSpeedAcceleration), checked against the range."""
-        motor = self.motor(address)
-        accel = motor.max_acceleration if acceleration is None else acceleration
-        self._check_speed(motor, speed, accel)
-        lo, hi = motor.travel()
-        target = motor.position + delta
-        if not math.isfinite(delta) or not lo <= target <= hi:
-            raise CommandRejected(f'motor {address}: bump by {delta:.4f} rot would end at '
-                                  f'{target:.4f}, outside [{lo:.4f}, {hi:.4f}]')
-        self.send(BumpPositionSpeedAcceleration(address, delta, speed, accel))
-
-    def jog(self, address: int, velocity: float, acceleration: float | None = None) -> None:
-        """Move at `velocity` rot/s toward the end of travel (0 stops)."""
-        motor = self.motor(address)
-        if velocity == 0:
-            self.stop_motor(address)
-            return
-        accel = motor.max_acceleration if acceleration is None else acceleration
-        self._check_speed(motor, abs(velocity), accel)
-        lo, hi = motor.travel()
-        self.send(SetPositionSpeedAcceleration(address, hi if velocity > 0 else lo,
-                                               abs(velocity), accel))
-
-    def stop_motor(self, address: int) -> None:
-        motor = self.motor(address)
-        self.send(SetPositionSpeedAcceleration(address, motor.position, 0.0,
-                                               motor.max_acceleration))
-
-    def stop_all(self) -> None:
-        """StopPlayback (stops every motor immediately) and speed 0 for each motor."""
-        self.send(StopPlayback())
-        for address, motor in list(self.motors.items()):
-            if motor.online:
-                self.send(SetPositionSpeedAcceleration(address, motor.position, 0.0,
-                                                       motor.max_acceleration))
-
-    def take_picture(self, exposure: float = 0.0) -> None:
-        if not math.isfinite(exposure) or exposure < 0:
-            raise CommandRejected(f'exposure must be >= 0 s, got {exposure}')
-        self._checked(TakePicture(ALL_MOTORS, exposure), 'TakePicture')
-
-    # ------------------------------------------------------------ device settings
-    def led_status(self) -> tuple[int, int]:
-        """(Get)LEDStatus: (master, slave), each a LedState (0 off, 1 on, 2/3 blink)."""
-        reply = self.request(GetLedStatus())
-        assert isinstance(reply, LedStatus)
-        return reply.master_status, reply.slave_status
-
-    def set_led_status(self, master: int, slave: int) -> tuple[int, int]:
-        """(Set)LEDStatus, then read the LEDs back (a Set has no reply)."""
-        allowed = [int(s) for s in LedState]
-        for name, value in (('master', master), ('slave', slave)):
-            if value not in allowed:
-                raise CommandRejected(f'{name} LED status {value!r} is not one of {allowed} '
-                                      '(0 off, 1 on, 2 slow blink, 3 fast blink)')
-        self.send(LedStatus(int(master), int(slave)))
-        return self.led_status()
-
-    def software_id(self) -> int:
-        """(Get)SoftwareID: the platform id of the last client that used the device."""
-        reply = self.request(GetSoftwareId())
-        assert isinstance(reply, SoftwareId)
-        return reply.device_type
-
-    def set_software_id(self, platform: int) -> int:
-        """(Set)SoftwareID, read back; the caller decides whether writing it is allowed."""
-        if isinstance(platform, bool) or not isinstance(platform, int) \
-                or not 0 <= platform <= 0xFF:
-            raise CommandRejected(f'SoftwareID must be an integer 0..255, got {platform!r}')
-        self.send(SoftwareId(platform))
-        return self.software_id()
-
-    # ------------------------------------------------------------- calibration
-    def mark_begin(self, address: int) -> None:
-        self.motor(address)
-        self._checked(MarkBeginPosition(address), f'MarkBeginPosition motor {address}')
-
-    def _await_calibrated(self, address: int, seq0: int, timeout: float, what: str) -> None:
-        key = -2000 - address
-        if not self.wait_for(lambda: self._seq.get(key, 0) > seq0, timeout):
-            errors = [e for e in self.errors if e.motor_address == address]
-            reason = f' (device error {errors[-1].code}: {errors[-1].description})' \
-                if errors else ''
-            raise DeviceTimeout(f'{what}: no MotorCalibrated notification for motor '
-                                f'{address}{reason}')
-
-    def mark_end(self, address: int, timeout: float | None = None) -> tuple[float, float]:
-        """MarkEndPosition; returns (begin, end) from the MotorCalibrated notification."""
-        self.motor(address)
-        with self._lock:
-            seq0 = self._seq.get(-2000 - address, 0)
-        marker = self.error_total
-        self.send(MarkEndPosition(address))
-        self.barrier()
-        failed = [e for e in self._errors_since(marker) if e.code == ErrorCode.CALIBRATION]
-        if failed:
-            raise CommandRejected(f'motor {address}: calibration failed (error 14: the end '
-                                  'mark must differ from the begin mark); the axis was reset')
-        self._await_calibrated(address, seq0, timeout or self.reply_timeout, 'MarkEndPosition')
-        motor = self.motors[address]
-        return motor.begin_position, motor.end_position
-
-    def reset_axis(self, address: int, timeout: float | None = None) -> None:
-        """Clear calibration (address 0: every axis, no notification expected)."""
-        if address != ALL_MOTORS:
-            self.motor(address)
-        with self._lock:
-            seq0 = self._seq.get(-2000 - address, 0)
-        self.send(ResetAxis(address))
-        if address == ALL_MOTORS:
-            self.barrier()
-            self.refresh_motors()
-            return
-        self._await_calibrated(address, seq0, timeout or self.reply_timeout, 'ResetAxis')
-
-    # ---------------------------------------------------------------- playback
-    def load_trajectory(self, trajectory: Trajectory) -> None:
-        """Validate against the motors' calibration and maxima, send, and confirm."""
-        self.refresh_motors()
-        limits = {a: m.limits() for a, m in self.motors.items() if m.online}
-        try:
-            validate(trajectory, limits)
-        except ProtocolError as exc:
-            raise CommandRejected(f'trajectory refused before sending: {exc}') from exc
-        with self._lock:
-            self.playback.loaded = False
-            self.playback.set_up = False
-            self.playback.history = []
-        marker = self.error_total
-        self.send(trajectory.to_message())
-        echo = self.request(GetTrajectoryData())   # barrier + confirmation
-        errors = self._errors_since(marker)
-        if errors:
-            raise CommandRejected(f'device rejected the trajectory: error {errors[0].code} '
-                                  f'({errors[0].description})')
-        expected = len(trajectory.to_message().blocks)
-        if not isinstance(echo, TrajectoryData) or len(echo.blocks) != expected:
-            raise CommandRejected('device did not store the trajectory (GetTrajectoryData '
-                                  'returned a different move)')
-        with self._lock:
-            self.playback.loaded = True
-
-    def setup_playback(self, delay_return: bool = False) -> None:
-        if not self.playback.loaded:
-            raise CommandRejected('no trajectory loaded (a FullStop consumes the move; load '
-                                  'it again)')
-        self._checked(SetupPlayback(0, 0.0, delay_return), 'SetupPlayback')
-
-    def start_playback(self) -> None:
-        if not self.playback.loaded:
-            raise CommandRejected('no trajectory loaded (a FullStop consumes the move; load '
-                                  'it again)')
-        self._checked(StartPlayback(0, 0.0), 'StartPlayback')
-
-    def stop_playback(self) -> None:
-        self.send(StopPlayback())
-
-    def rapid_to_first_key_frame(self) -> None:
-        if not self.playback.loaded:
-            raise CommandRejected('RapidToFirstKeyFrame needs a loaded trajectory')
-        self._checked(RapidToFirstKeyFrame(), 'RapidToFirstKeyFrame')
-
-    def wait_playback(self, status: int, timeout: float) -> bool:
-        """Wait until a PlaybackStatus `status` has been seen since the last load."""
-        return self.wait_for(lambda: status in self.playback.history, timeout)

@@ -299,14 +299,14 @@ class KosDevice(Device):
         return motor.max_acceleration * self.settings.acceleration_scale
 
     def move(self, moves: Moves) -> None:
-        """Absolute moves: every target and speed is checked (in SI, then by the client in
-        rotations) before anything is sent.
+        """Absolute moves: every target and speed is checked, here and once, before anything
+        is sent (the client sends rotations unchecked).
 
         No speed: the joint's velocity_max, capped at the motor's MaxMaxSetupSpeed.
         """
         self.require_idle()
         client = self.client
-        messages = []
+        checked = []
         for name, (target, speed) in moves.items():
             motor = self._motor(name)
             units = self.conversion(name)
@@ -316,19 +316,15 @@ class KosDevice(Device):
                 speed_rot = min(speed_rot, motor.max_setup_speed)
             else:
                 self._check_speed(name, units, motor, abs(wanted))
-            self._check_travel(name, units, motor, target)
-            try:
-                messages.append(client.check_move(
-                    motor.address, units.to_rotations(target), speed_rot,
-                    self._acceleration(motor)))
-            except DeviceRefused as exc:
-                raise InvalidRequest(f'joint {name!r}: {exc}') from exc
-        for message in messages:
-            client.send(message)
+            rotations = self._check_travel(name, units, motor, target)
+            checked.append((motor.address, rotations, speed_rot, self._acceleration(motor)))
+        for address, rotations, speed_rot, acceleration in checked:
+            client.move_to(address, rotations, speed_rot, acceleration)
 
     @staticmethod
-    def _check_travel(name: str, units: Conversion, motor: MotorState, target: float) -> None:
-        """The calibrated range (or the uncalibrated travel) in SI, before any byte is sent."""
+    def _check_travel(name: str, units: Conversion, motor: MotorState, target: float) -> float:
+        """The calibrated range (or the uncalibrated travel) in SI, before any byte is sent;
+        the target in rotations (kept inside the range)."""
         low, high = motor.travel()
         rotations = units.to_rotations(target) if math.isfinite(target) else math.nan
         if not low - 1e-9 <= rotations <= high + 1e-9:
@@ -338,10 +334,13 @@ class KosDevice(Device):
                 f'joint {name!r}: {target:.4f} is outside the {state} [{si_low:.4f}, '
                 f'{si_high:.4f}] ({units.describe()}; motor {motor.address}: {low:g} .. '
                 f'{high:g} rotations)')
+        return min(max(rotations, low), high)
 
     @staticmethod
     def _check_speed(name: str, units: Conversion, motor: MotorState, speed: float) -> None:
         """A speed (SI, no direction) against the motor's MaxMaxSetupSpeed, in SI."""
+        if not math.isfinite(speed):
+            raise InvalidRequest(f'joint {name!r}: speed must be a finite number, got {speed}')
         if abs(units.rate_to_rotations(speed)) > motor.max_setup_speed:
             raise InvalidRequest(
                 f'joint {name!r}: speed {speed:.4f} exceeds the motor maximum '

@@ -1,12 +1,14 @@
 """U-Camera device session over a serial port (no ROS).
 
-:meth:`UCameraClient.start` opens the port and starts one I/O thread that
-parses the telemetry stream (resynchronising after noise), answers request
-waiters and re-sends the current mode and angles/rates command at
-``refresh_rate`` (the manual recommends at least 10 Hz, 5.1). When the port
-fails or the telemetry stops for ``silence_timeout`` seconds the thread closes
-the port and ends with the reason in :attr:`UCameraClient.last_error`; the
-client never reopens it by itself: the controller's connection supervisor
+:meth:`UCameraClient.start` opens the port and starts a
+:class:`gimbal_driver_common.session.Session` on it (its reader thread is
+``ucamera-reader``) that parses the telemetry stream (resynchronising after
+noise), answers pending requests and, in its tick, re-sends the current mode
+and angles/rates command at ``refresh_rate`` (the manual recommends at least
+10 Hz, 5.1). When the port fails or the telemetry stops for
+``silence_timeout`` seconds the session closes the port and ends with the
+reason in :attr:`UCameraClient.last_error`; the client never reopens it by
+itself: the controller's connection supervisor
 (``gimbal_driver_common.controller``) calls :meth:`stop` and :meth:`start`
 again. Errors are the core hierarchy (``gimbal_driver_common.errors``).
 
@@ -26,11 +28,21 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
-from gimbal_driver_common.errors import DeviceTimeout, GimbalError, LinkError
+from gimbal_driver_common.errors import DeviceTimeout, LinkError
+from gimbal_driver_common.session import Protocol, Session, StreamLink
 from gimbal_driver_common.transport import ByteStream, SerialStream, TransportError
 
+from .client_types import (
+    ONE_SHOT_MODES,
+    PERSISTENT_MODES,
+    ClientStats,
+    GimbalState,
+    NotConnectedError,
+    RequestTimeoutError,
+    UCameraError,
+)
 from .protocol import (
     AnglesReport,
     AntennaPositionReport,
@@ -45,7 +57,6 @@ from .protocol import (
     IrPaletteReport,
     ModeReport,
     Packet,
-    ParserStats,
     PayloadError,
     ProtocolError,
     RatesReport,
@@ -74,63 +85,10 @@ from .protocol import (
 
 LOG = logging.getLogger(__name__)
 
-PERSISTENT_MODES = frozenset({GimbalMode.ANGLES, GimbalMode.RATES, GimbalMode.STOW,
-                              GimbalMode.PILOT})
-ONE_SHOT_MODES = frozenset({GimbalMode.INIT, GimbalMode.GYRO_AUTOALIGN,
-                            GimbalMode.FULL_AUTOALIGN, GimbalMode.FFC_CALIBRATION})
+class UCameraClient(Protocol):
+    """Session with one U-Camera; thread-safe. The client is its session's protocol."""
 
-
-class UCameraError(GimbalError):
-    """Base class of client errors; the message says what to check."""
-
-
-class NotConnectedError(UCameraError, LinkError):
-    """The serial link is down (the supervisor reopens it)."""
-
-
-class RequestTimeoutError(UCameraError, DeviceTimeout):
-    """The gimbal did not answer a request."""
-
-
-@dataclass(frozen=True)
-class GimbalState:
-    """Latest reported values (None until first reported)."""
-
-    mode: int | None = None
-    pan: float | None = None
-    tilt: float | None = None
-    pan_rate: float | None = None
-    tilt_rate: float | None = None
-    zoom: float | None = None
-    gimbal_type: int | None = None
-    ir_palette: int | None = None
-    latitude: float | None = None
-    longitude: float | None = None
-    altitude: float | None = None
-    angles_time: float = 0.0  # time.time() when the last angles report arrived
-    position_time: float = 0.0
-
-
-@dataclass
-class ClientStats(ParserStats):
-    """Counters for diagnostics: the stream parser's (copied from it as bytes arrive;
-    ``frames`` here counts the packets decoded) and the session's own."""
-
-    unknown_packets: int = 0
-    bad_payloads: int = 0
-    reconnects: int = 0  # start() after an earlier session (the supervisor reopening)
-    silences: int = 0
-    commands_sent: int = 0
-
-
-class _Waiter:
-    def __init__(self) -> None:
-        self.event = threading.Event()
-        self.answer: Packet | None = None
-
-
-class UCameraClient:
-    """Session with one U-Camera; thread-safe."""
+    _reading: Session  # the session whose reader runs the protocol methods
 
     def __init__(
         self,
@@ -152,7 +110,7 @@ class UCameraClient:
         if refresh_rate <= 0:
             raise ValueError("refresh_rate must be > 0 Hz")
         self._stream_factory = stream_factory
-        self._stream: ByteStream | None = None
+        self._session: Session | None = None
         self.description = stream_factory().description
         self.refresh_period = 1.0 / refresh_rate
         self.silence_timeout = silence_timeout
@@ -162,9 +120,7 @@ class UCameraClient:
         self._on_report = on_report
 
         self._lock = threading.RLock()
-        self._write_lock = threading.Lock()
         self._parser = FrameParser(expected_payload_length)
-        self._waiters: dict[type[Packet], list[_Waiter]] = collections.defaultdict(list)
         self._state = GimbalState()
         self._angle_times: collections.deque[float] = collections.deque(maxlen=512)
         self.stats = ClientStats()
@@ -179,10 +135,7 @@ class UCameraClient:
         self._one_shot_seen = False
         self._one_shot_sent = 0.0
 
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._sessions = 0
-        self._link_broken = False
         self._last_rx = 0.0
         self._last_packet = 0.0  # any well-framed packet, understood or not
         self._quiet_until = 0.0
@@ -191,13 +144,13 @@ class UCameraClient:
 
     # --- lifecycle -------------------------------------------------------
     def start(self, timeout: float = 3.0) -> VersionReport:
-        """Open the port, start the I/O thread and read the device identity.
+        """Open the port, start the session and read the device identity.
 
         Raises :class:`NotConnectedError` when the port does not open or the link dies
         meanwhile, :class:`RequestTimeoutError` when the gimbal does not answer within
         ``timeout``; nothing is left running then. Callable again after :meth:`stop`.
         """
-        if self._thread is not None:
+        if self._session is not None:
             raise UCameraError("client already started")
         stream = self._stream_factory()
         try:
@@ -208,8 +161,6 @@ class UCameraClient:
         if self._sessions:
             self.stats.reconnects += 1
         self._sessions += 1
-        with self._write_lock:
-            self._stream, self._link_broken = stream, False
         self._parser.reset()
         with self._lock:  # the mode may have changed while the link was down: unknown again
             self._state = replace(self._state, mode=None)
@@ -217,20 +168,19 @@ class UCameraClient:
         self._next_refresh = 0.0
         self.last_error = ""
         LOG.info("opened %s", stream.description)
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._io_loop, name="ucamera-io", daemon=True)
-        self._thread.start()
+        self._session = Session(StreamLink(stream, 1024), self, "ucamera", read_timeout=0.02,
+                                link_error=NotConnectedError).start()
         deadline = time.monotonic() + timeout
         last_failure = "no answer"
-        while time.monotonic() < deadline and self._stream is not None:
+        while time.monotonic() < deadline and not self.link_down:
             try:
                 return self.request_version(min(self.request_timeout,
                                                 max(0.05, deadline - time.monotonic())))
             except UCameraError as exc:
                 last_failure = str(exc)
                 time.sleep(0.05)
-        # the I/O thread's reason (read failure, no telemetry) says more than a timeout
-        link_died = self._stream is None
+        # the session's reason (read failure, no telemetry) says more than a timeout
+        link_died = self.link_down
         reason = self.last_error or last_failure
         self.stop()
         raise self._no_answer(NotConnectedError if link_died else RequestTimeoutError,
@@ -243,16 +193,15 @@ class UCameraClient:
         )
 
     def stop(self) -> None:
-        """Stop the I/O thread and close the port (commands already sent stay in effect)."""
-        self._stop.set()
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout=2.0)
-        self._thread = None
-        self._close()
+        """End the session and close the port (commands already sent stay in effect)."""
+        session, self._session = self._session, None
+        if session is not None:
+            session.close()
+        self._alive = False
 
     @property
     def running(self) -> bool:
-        return self._thread is not None
+        return self._session is not None
 
     @property
     def connected(self) -> bool:
@@ -261,8 +210,9 @@ class UCameraClient:
 
     @property
     def link_down(self) -> bool:
-        """True once the I/O thread gave the link up (reason in :attr:`last_error`)."""
-        return self._thread is not None and self._stream is None
+        """True once the session gave the link up (reason in :attr:`last_error`)."""
+        session = self._session
+        return session is not None and not session.alive
 
     def state(self) -> GimbalState:
         with self._lock:
@@ -293,18 +243,12 @@ class UCameraClient:
         """Send ``packet`` and wait for the ``answer`` packet type."""
         timeout = self.request_timeout if timeout is None else timeout
         for _ in range(max(1, attempts)):
-            waiter = _Waiter()
-            with self._lock:
-                self._waiters[answer].append(waiter)
-            try:
+            with self._live_session().expect(lambda reply: type(reply) is answer) as pending:
                 self.send(packet)
-                if waiter.event.wait(timeout):
-                    assert waiter.answer is not None
-                    return waiter.answer
-            finally:
-                with self._lock:
-                    if waiter in self._waiters[answer]:
-                        self._waiters[answer].remove(waiter)
+                try:
+                    return pending.next(timeout)
+                except DeviceTimeout:
+                    continue
         raise RequestTimeoutError(
             f"no {answer.TITLE} from the U-Camera within {timeout:g} s "
             f"({attempts} attempt(s)) on {self.description}"
@@ -327,22 +271,24 @@ class UCameraClient:
         return (report.x, report.y, report.z)
 
     # --- commands --------------------------------------------------------
+    def _live_session(self) -> Session:
+        session = self._session
+        if session is None or not session.alive:
+            raise NotConnectedError(
+                f"U-Camera link {self.description} is down"
+                + (f" ({self.last_error})" if self.last_error else "")
+            )
+        return session
+
     def send(self, packet: Packet) -> None:
         """Encode (range-checked first) and write one packet."""
         data = packet.encode()  # raises RangeError before anything is written
-        with self._write_lock:
-            stream = self._stream
-            if stream is None or not stream.is_open or self._link_broken:
-                raise NotConnectedError(
-                    f"U-Camera link {self.description} is down"
-                    + (f" ({self.last_error})" if self.last_error else "")
-                )
-            try:
-                stream.write(data)
-            except TransportError as exc:
-                self._link_broken = True
-                self.last_error = str(exc)
-                raise NotConnectedError(f"write to U-Camera failed: {exc}") from exc
+        session = self._live_session()
+        try:
+            session.write(data)
+        except LinkError as exc:
+            self.last_error = f"write failed: {exc}"
+            raise NotConnectedError(f"write to U-Camera failed: {exc}") from exc
         self.stats.commands_sent += 1
 
     def set_mode(self, mode: int) -> None:
@@ -438,30 +384,28 @@ class UCameraClient:
     def save_ffc(self) -> None:
         self.send(SaveFfc())
 
-    # --- I/O thread ------------------------------------------------------
-    def _io_loop(self) -> None:
-        """Read and refresh until stopped or the link dies (then close and end)."""
-        while not self._stop.is_set():
-            if self._link_broken:
-                self._drop("write failed: " + self.last_error)
-                return
-            try:
-                data = self._stream.read(1024, 0.02)
-            except (TransportError, AttributeError) as exc:  # AttributeError: closed by stop
-                self._drop(f"link lost: {exc}")
-                return
-            if data:
-                self._receive(data)
-            now = time.monotonic()
-            quiet = self.silence_timeout + (self.save_pause_grace if now < self._quiet_until
-                                            else 0.0)
-            if now - self._last_rx > quiet:
-                self.stats.silences += 1
-                self._drop(self._no_telemetry(now))
-                return
-            if now >= self._next_refresh:
-                self._next_refresh = now + self.refresh_period
-                self._refresh(now)
+    # --- session protocol (on the reader thread) ---------------------------------
+    def connection_made(self, session: Session) -> None:
+        self._reading = session
+        session.on(Packet, self._dispatch)
+
+    def tick(self, now: float) -> float | None:
+        """Give the link up after a silence; re-send the mode and set-point when due."""
+        quiet = self.silence_timeout + (self.save_pause_grace if now < self._quiet_until
+                                        else 0.0)
+        if now - self._last_rx > quiet:
+            self.stats.silences += 1
+            raise NotConnectedError(self._no_telemetry(now))
+        if now >= self._next_refresh:
+            self._next_refresh = now + self.refresh_period
+            self._refresh(now)
+        return None
+
+    def connection_lost(self, error: LinkError | None) -> None:
+        """The session ended: keep why (a write failure already said it)."""
+        if error is not None and not self.last_error.startswith("write failed"):
+            self.last_error = str(error)
+        self._alive = False
 
     def _no_telemetry(self, now: float) -> str:
         """Why the link is given up: the gimbal sent nothing, or only packets the driver
@@ -473,21 +417,7 @@ class UCameraClient:
                     f"bad payloads ({self.stats.bad_payloads}); another firmware?")
         return f"no telemetry for {quiet}"
 
-    def _close(self) -> None:
-        with self._write_lock:
-            stream, self._stream = self._stream, None
-        if stream is not None:
-            stream.close()
-        self._alive = False
-
-    def _drop(self, reason: str) -> None:
-        if self._stop.is_set():
-            return  # stop() is closing the port: not a link loss
-        self.last_error = reason
-        LOG.warning("U-Camera %s: %s", self.description, reason)
-        self._close()
-
-    def _receive(self, data: bytes) -> None:
+    def data_received(self, data: bytes) -> None:
         frames = self._parser.feed(data)
         stats = self._parser.stats
         self.stats.checksum_errors = stats.checksum_errors
@@ -507,7 +437,7 @@ class UCameraClient:
             self.stats.frames += 1
             self._last_rx = time.monotonic()
             self._alive = True
-            self._dispatch(packet)
+            self._reading.dispatch(packet)
 
     def _dispatch(self, packet: Packet) -> None:
         wall = time.time()
@@ -531,10 +461,6 @@ class UCameraClient:
                 state = replace(state, latitude=packet.latitude, longitude=packet.longitude,
                                 altitude=packet.altitude, position_time=wall)
             self._state = state
-            waiters = self._waiters.pop(type(packet), [])
-        for waiter in waiters:
-            waiter.answer = packet
-            waiter.event.set()
         if self._on_report is not None:
             try:
                 self._on_report(packet, wall)

@@ -9,7 +9,7 @@ the "moving" bits, and the external-feed frames (ENU/FLU in, NED/FRD out).
 What lives where:
 
 * ``protocol/``: the codec (packets, scaling, range checks);
-* ``client.py``: the serial session (I/O thread, requests, refresh at >= 10 Hz,
+* ``client.py``: the serial session (reader thread, requests, refresh at >= 10 Hz,
   link loss detection; no reconnect loop);
 * this module: the adapter and its capability objects (:class:`PilotHoming`,
   :class:`UCameraStatus`) and the device extras the node exposes (modes, zoom,
@@ -307,7 +307,7 @@ class UCameraDevice(Device):
                     self._setpoint[name] += math.copysign(step, error)
             try:
                 self.client.set_angles(*self.to_device(self._setpoint))
-            except Exception as exc:  # noqa: BLE001 - the I/O thread must go on
+            except Exception as exc:  # noqa: BLE001 - the reader thread must go on
                 self._ramp.clear()
                 self.log.warning(f"move set-point not sent, ramp dropped: {exc}")
 
@@ -352,7 +352,7 @@ class UCameraDevice(Device):
         return self.from_device(state.pan, state.tilt)
 
     def _on_report(self, packet: Packet, stamp: float) -> None:
-        """Runs on the client's I/O thread for every received packet."""
+        """Runs on the client's reader thread for every received packet."""
         if isinstance(packet, AnglesReport):
             self.step_ramp()
             self.notify_data()  # publish joint_states now

@@ -209,7 +209,7 @@ class UCameraDriverNode(GimbalDriverNode):
 
     # ------------------------------------------------------ reports -> topics
     def _on_report(self, packet: Packet, stamp: float) -> None:
-        """Runs on the client's I/O thread for every received packet: zoom, palette and
+        """Runs on the client's reader thread for every received packet: zoom, palette and
         position reports become ~/zoom, ~/ir_palette and ~/fix while they have a
         subscriber, at most ``report_publish_rate``."""
         if not self.active or not self.context.ok():

@@ -1,0 +1,288 @@
+"""CANaerospace node services of the turret client: IDS, TIS, NIS, FPS and the DDS/DUS
+memory transfers (no ROS).
+
+A mixin of :class:`~.client.TurretClient`, which gives it the session (``send``,
+``_expect``: a pending request that collects the node's responses, in order) and the
+configuration and identifier table. One service exchange at a time (``_service_lock``).
+"""
+
+from __future__ import annotations
+
+import time
+
+from gimbal_driver_common import errors
+from gimbal_driver_common.session import Pending
+
+from .client_types import (
+    CommandError,
+    LinkError,
+    NotAllowedError,
+    ServiceError,
+    ServiceRefused,
+    ServiceTimeout,
+)
+from .protocol import nodeservice as ns
+from .protocol.datatypes import DataType
+from .protocol.errors import CodecError
+from .protocol.identifiers import (
+    Direction,
+    Identifier,
+)
+from .protocol.message import CanAerospaceMessage
+
+
+class NodeServices:
+    """Node-service requests on the client's service channel."""
+
+    def request(self, message: CanAerospaceMessage) -> CanAerospaceMessage:
+        """Send a node-service request and wait for its response (ICD: within 100 ms)."""
+        service = ns.ServiceCode(message.service_code).name
+        attempts = max(1, self.config.service_attempts)
+        with self._service_lock:
+            for _ in range(attempts):
+                with self._expect(message) as exchange:
+                    self.send(message)
+                    response = self._next(exchange, self.config.service_timeout)
+                if response is not None:
+                    return response
+                if not self.connected:
+                    raise LinkError(f"CAN interface {self.description} lost during {service}"
+                                    f": {self.last_link_error}")
+        raise ServiceTimeout(
+            f"no {service} response from node {message.node_id} within "
+            f"{self.config.service_timeout * 1000:.0f} ms ({attempts} attempts) on "
+            f"{self.description}")
+
+    @staticmethod
+    def _next(pending: Pending, timeout: float) -> CanAerospaceMessage | None:
+        """The node's next response, None when none came in time or the link went."""
+        try:
+            return pending.next(timeout)
+        except (errors.DeviceTimeout, errors.LinkError):
+            return None
+
+    def download(self, memory_id: int, data: bytes, node_id: int | None = None) -> int:
+        """DDS: write a 1..1020 byte block to node memory; returns the verified checksum.
+
+        Follows the node's XON/XOFF flow control; ABORT/INVALID or a checksum that does not
+        match the bytes sent raise ServiceError.
+        """
+        node = self.config.turret_node_id if node_id is None else node_id
+        first = self.config.transfer_first_number
+        try:
+            request_id, _ = ns.service_channel_ids(self.config.service_channel)
+            messages = ns.transfer_messages(request_id, node, ns.ServiceCode.DDS, bytes(data),
+                                            first)
+            start = ns.start_transfer_request(node, ns.ServiceCode.DDS, memory_id,
+                                              len(messages), self.config.service_channel)
+        except CodecError as exc:
+            raise CommandError(f"DDS: {exc}") from exc
+        timeout = self.config.service_timeout
+        with self._service_lock, self._expect(start) as exchange:
+            flow = ns.response_status(self._start_transfer(exchange, start, "DDS", node))
+            final = None
+            for message in messages:
+                while flow != ns.ServiceStatus.XON:
+                    if flow in (ns.ServiceStatus.ABORT, ns.ServiceStatus.INVALID):
+                        raise ServiceRefused(self._download_ended(node, flow))
+                    reply = self._next(exchange, timeout * 10)  # XOFF: wait for XON
+                    if reply is None:
+                        raise ServiceTimeout(f"node {node} paused the download (XOFF) and "
+                                           "never resumed")
+                    flow = ns.response_status(reply)
+                self.send(message)
+                for pending in exchange.drain():
+                    if pending.data_type == DataType.CHKSUM:
+                        final = pending
+                    else:
+                        flow = self._download_reply(pending, node)
+            deadline = time.monotonic() + timeout * 5
+            while final is None:
+                reply = self._next(exchange, max(0.0, deadline - time.monotonic()))
+                if reply is None:
+                    raise ServiceTimeout(f"node {node} sent no DDS checksum")
+                if reply.data_type == DataType.CHKSUM:
+                    final = reply
+                else:
+                    self._download_reply(reply, node)
+            reply = final
+        expected = ns.block_checksum(bytes(data))
+        if reply.value != expected:
+            raise ServiceError(f"DDS checksum mismatch: node {node} reports {reply.value}, "
+                               f"sent bytes sum to {expected}")
+        last = messages[-1].message_code
+        if reply.message_code != last:
+            raise ServiceError(f"DDS checksum response of node {node} carries message "
+                               f"number {reply.message_code}, the last data message was "
+                               f"{last}: {self._numbering_hint()}")
+        return expected
+
+    def _start_transfer(self, exchange: Pending, start: CanAerospaceMessage, service: str,
+                        node: int) -> CanAerospaceMessage:
+        """Send a DDS/DUS start request (no retry: a repeated start would restart the
+        transfer) and return the node's first response."""
+        self.send(start)
+        timeout = self.config.service_timeout
+        reply = self._next(exchange, timeout)
+        if reply is None:
+            raise ServiceTimeout(f"no {service} response from node {node} within "
+                                 f"{timeout * 1000:.0f} ms")
+        return reply
+
+    def _numbering_hint(self) -> str:
+        first = self.config.transfer_first_number
+        return (f"this client counts DDS/DUS data messages from {first}; the node may count "
+                f"from {1 - first} (transfer_first_number)")
+
+    def _download_ended(self, node: int, status: int) -> str:
+        text = (f"node {node} ended the download: "
+                f"{ns.status_text(ns.ServiceCode.DDS, status)}")
+        if status == ns.ServiceStatus.ABORT:
+            text += f" (a node aborts on an unexpected message number; {self._numbering_hint()})"
+        return text
+
+    def _download_reply(self, reply: CanAerospaceMessage, node: int) -> int:
+        status = ns.response_status(reply)
+        if status in (ns.ServiceStatus.ABORT, ns.ServiceStatus.INVALID):
+            raise ServiceRefused(self._download_ended(node, status))
+        return status
+
+    def upload(self, memory_id: int, length: int, node_id: int | None = None) -> bytes:
+        """DUS: read `length` (1..1020) bytes of node memory, checking numbers and checksum."""
+        node = self.config.turret_node_id if node_id is None else node_id
+        if not 1 <= length <= ns.MAX_BLOCK_BYTES:
+            raise CommandError(f"DUS: length {length} is outside 1..{ns.MAX_BLOCK_BYTES}")
+        count = (length + 3) // 4
+        try:
+            start = ns.start_transfer_request(node, ns.ServiceCode.DUS, memory_id, count,
+                                              self.config.service_channel)
+        except CodecError as exc:
+            raise CommandError(f"DUS: {exc}") from exc
+        timeout = self.config.service_timeout
+        received: dict[int, bytes] = {}
+        with self._service_lock, self._expect(start) as exchange:
+            status = ns.response_status(self._start_transfer(exchange, start, "DUS", node))
+            if status != ns.ServiceStatus.OK:
+                raise ServiceRefused(f"node {node} refused the upload of memory {memory_id}: "
+                                   f"{ns.status_text(ns.ServiceCode.DUS, status)}")
+            deadline = time.monotonic() + timeout + 0.01 * count + 0.5
+            while True:
+                reply = self._next(exchange, max(0.0, deadline - time.monotonic()))
+                if reply is None:
+                    raise ServiceTimeout(f"DUS from node {node}: {len(received)} of {count} "
+                                       "data messages, then silence")
+                if reply.data_type == DataType.CHKSUM:
+                    break
+                if reply.data_type == DataType.LONG:
+                    raise ServiceRefused(f"node {node} aborted the upload: "
+                                       f"{ns.status_text(ns.ServiceCode.DUS, int(reply.value))}")
+                value = reply.value
+                received[reply.message_code] = bytes(value if isinstance(value, tuple)
+                                                     else (value,))
+        numbers = ns.data_numbers(count, self.config.transfer_first_number)
+        missing = [n for n in numbers if n not in received]
+        if missing:
+            raise ServiceError(f"DUS from node {node}: data messages {missing} missing "
+                               f"(received {sorted(received)}; {self._numbering_hint()})")
+        if reply.message_code != numbers[-1]:
+            raise ServiceError(f"DUS checksum response of node {node} carries message "
+                               f"number {reply.message_code}, expected {numbers[-1]}: "
+                               f"{self._numbering_hint()}")
+        data = b"".join(received[n] for n in numbers)
+        if reply.value != ns.block_checksum(data):
+            raise ServiceError(f"DUS checksum mismatch: node {node} reports {reply.value}, "
+                               f"received bytes sum to {ns.block_checksum(data)}")
+        return data[:length]
+
+    def identify(self, node_id: int | None = None) -> ns.IdentificationInfo:
+        node = self.config.turret_node_id if node_id is None else node_id
+        response = self.request(ns.ids_request(node, self.config.service_channel))
+        try:
+            return ns.parse_ids_response(response)
+        except CodecError as exc:
+            raise ServiceError(f"IDS response from node {node} is malformed: {exc}") from exc
+
+    def set_transmission_interval(self, key: str, interval_ms: int) -> None:
+        """TIS for one data identifier (0 stops it; the node decides the valid range)."""
+        ident = self._data_ident(key)
+        node = self._expected_node(ident)
+        try:
+            request = ns.tis_request(node, ident.can_id, int(interval_ms),
+                                     self.config.service_channel)
+        except CodecError as exc:
+            raise CommandError(f"TIS for {key}: {exc}") from exc
+        status = ns.response_status(self.request(request))
+        if status != ns.ServiceStatus.OK:
+            raise ServiceRefused(f"node {node} refused TIS {key} (id {ident.can_id}) = "
+                               f"{interval_ms} ms: {ns.status_text(ns.ServiceCode.TIS, status)}")
+        self._intervals_ms[key] = int(interval_ms)
+        self._observed_interval.pop(key, None)
+
+    def request_intervals(self, intervals: dict[str, int]) -> dict[str, str]:
+        """TIS for several identifiers; returns {key: reason} for those that were refused.
+
+        A refusal (negative status or no answer) is not an error: the identifier keeps the
+        rate the node chose, which staleness and rate checks then learn from the frames
+        (`interval_of`). A closed interface still raises LinkError.
+        """
+        refused: dict[str, str] = {}
+        for key, interval_ms in intervals.items():
+            try:
+                self.set_transmission_interval(key, interval_ms)
+            except ServiceError as exc:
+                if not self.connected:
+                    raise LinkError(str(exc)) from exc
+                refused[key] = str(exc)
+                self._intervals_ms.pop(key, None)
+        self.refused_intervals = refused
+        return refused
+
+    def interval_of(self, key: str) -> float | None:
+        """Seconds between two frames of `key`: the accepted TIS interval, else as observed."""
+        interval_ms = self._intervals_ms.get(key)
+        if interval_ms:
+            return interval_ms / 1000.0
+        return self._observed_interval.get(key)
+
+    def accepted_interval_ms(self, key: str) -> int | None:
+        """The interval (ms) a node accepted by TIS for `key`, None when never set."""
+        return self._intervals_ms.get(key)
+
+    def _data_ident(self, key: str) -> Identifier:
+        for ident in self._table.values():
+            if ident.key == key and ident.direction is Direction.DATA:
+                return ident
+        raise CommandError(f"{key!r} is not a data identifier of this driver")
+
+    def set_node_id(self, new_node_id: int, node_id: int | None = None) -> None:
+        """NIS: only when `allow_node_id_change` is set (changes the device's identity)."""
+        if not self.config.allow_node_id_change:
+            raise NotAllowedError("node-id changes (NIS) are disabled; enable "
+                                  "allow_node_id_change to use them")
+        node = self.config.turret_node_id if node_id is None else node_id
+        try:
+            request = ns.nis_request(node, new_node_id, self.config.service_channel)
+        except CodecError as exc:
+            raise CommandError(str(exc)) from exc
+        status = ns.response_status(self.request(request))
+        if status != ns.ServiceStatus.OK:
+            raise ServiceRefused(f"node {node} refused node-id {new_node_id}: "
+                               f"{ns.status_text(ns.ServiceCode.NIS, status)}")
+        for name in ("turret_node_id", "cover_node_id", "rover_gnss_node_id",
+                     "base_gnss_node_id", "zoom_node_id"):
+            if getattr(self.config, name) == node:
+                setattr(self.config, name, new_node_id)
+
+    def store_configuration(self, security_code: int, node_id: int | None = None) -> None:
+        """FPS: write the node's configuration to flash; only with allow_flash_programming."""
+        if not self.config.allow_flash_programming:
+            raise NotAllowedError("flash programming (FPS) is disabled; enable "
+                                  "allow_flash_programming to use it")
+        node = self.config.turret_node_id if node_id is None else node_id
+        if not 0 <= security_code <= 255:
+            raise CommandError(f"FPS security code {security_code} is outside 0..255")
+        status = ns.response_status(self.request(
+            ns.fps_request(node, security_code, self.config.service_channel)))
+        if status != ns.ServiceStatus.OK:
+            raise ServiceRefused(f"node {node} refused flash programming: "
+                               f"{ns.status_text(ns.ServiceCode.FPS, status)}")
