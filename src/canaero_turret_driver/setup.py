@@ -27,7 +27,7 @@ setup(
     entry_points={
         "console_scripts": [
             f"canaero_turret_driver_node = {PACKAGE}.node:main",
-            f"canaero_turret_sim = {PACKAGE}.sim:main",
+            f"canaero_turret_sim = {PACKAGE}.sim.cli:main",
         ],
         # the driver registry (gimbal_driver_common.registry): demo, soak, bench and tests
         "gimbal_driver_common.drivers": [

@@ -25,7 +25,7 @@ setup(
     entry_points={
         'console_scripts': [
             'capture_driver_node = capture_driver.node:main',
-            'capture_sim = capture_driver.sim:main',
+            'capture_sim = capture_driver.sim.cli:main',
         ],
         # the driver registry (gimbal_driver_common.registry): demo, soak, bench and tests
         'gimbal_driver_common.drivers': [

@@ -25,7 +25,7 @@ setup(
     entry_points={
         'console_scripts': [
             'kessler_kos_driver_node = kessler_kos_driver.node:main',
-            'kessler_kos_sim = kessler_kos_driver.sim:main',
+            'kessler_kos_sim = kessler_kos_driver.sim.cli:main',
         ],
         # the driver registry (gimbal_driver_common.registry): demo, soak, bench and tests
         'gimbal_driver_common.drivers': [

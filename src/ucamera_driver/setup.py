@@ -25,7 +25,7 @@ setup(
     entry_points={
         "console_scripts": [
             f"ucamera_driver_node = {PACKAGE}.node:main",
-            f"ucamera_sim = {PACKAGE}.sim:main",
+            f"ucamera_sim = {PACKAGE}.sim.cli:main",
         ],
         # the driver registry (gimbal_driver_common.registry): demo, soak, bench and tests
         'gimbal_driver_common.drivers': [
