@@ -11,14 +11,13 @@ device answered there, and reports what answered (:class:`Found`) or what was tr
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
 from gimbal_driver_common.errors import GimbalError
 from gimbal_driver_common.registry import DriverSpec, RegistryError, drivers, resolve
-from gimbal_driver_common.transport import ByteStream
+from gimbal_driver_common.transport import ByteStream, TransportError
 
 LINK_KINDS = ('serial', 'tcp', 'can')
 #: seconds an attempt may overrun its own timeout (closing a port, a thread's join)
@@ -227,6 +226,8 @@ def line_verdict(watched: Iterable[WatchedStream], protocol: str, error: BaseExc
     if not received:
         if not written:
             return f'{error}'
+        if link_failed(error):
+            return f'the link failed before any answer: {error}'
         return f'silent: no byte came back ({error})'
     if written and (received.startswith(written[:len(received)])
                     or written.startswith(received)):
@@ -237,11 +238,12 @@ def line_verdict(watched: Iterable[WatchedStream], protocol: str, error: BaseExc
             f'device, another baud rate, or noise ({error})')
 
 
-def wait_until(predicate: Callable[[], bool], timeout: float, period: float = 0.02) -> bool:
-    """Poll ``predicate`` until it holds or ``timeout`` s pass (for listen windows)."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
+def link_failed(error: BaseException) -> bool:
+    """The error (or one it was raised from) is the link closing, not a missing answer."""
+    seen: BaseException | None = error
+    while seen is not None:
+        if isinstance(seen, TransportError) or 'link lost' in str(seen):
             return True
-        time.sleep(period)
-    return predicate()
+        seen = seen.__cause__ or seen.__context__
+    return False
+
