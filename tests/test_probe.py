@@ -85,7 +85,12 @@ def test_a_device_with_a_password_is_found_and_the_probe_says_one_is_needed(
     assert status == probe_cli.EXIT_FOUND, text
     assert 'a password is needed' in text
     assert simulator.spec.password not in text
-    assert not [r for r in simulator.requests() if simulator.changing(r)]
+    status, text = run_probe(link_arguments(simulator.node_parameters(), 'not-the-password'))
+    assert status == probe_cli.EXIT_FOUND, text
+    assert 'does not match the device password (it was not sent)' in text
+    assert 'not-the-password' not in text and simulator.spec.password not in text
+    # the device got nothing but DeviceInfo requests: no login with a wrong password
+    assert set(simulator.requests()) == {'GetDeviceInfo'}
 
 
 def test_a_capture_pedestal_on_a_serial_port(tmp_path: Path) -> None:
@@ -113,14 +118,14 @@ def test_a_turret_at_another_node_id_is_found_by_listening(tmp_path: Path) -> No
     server = PtySimServer(lambda: SlcanSession(turret), link_path=link).start()
     output = tmp_path / 'turret.yaml'
     try:
-        status, text = run_probe(['--can', link, '--can-interface', 'slcan', '--output',
-                                  str(output)])
+        status, text = run_probe(['--can', link, '--can-interface', 'slcan', '--can-bitrate',
+                                  '500000', '--output', str(output)])
     finally:
         server.stop()
     assert status == probe_cli.EXIT_FOUND, text
     assert 'turret_node_id 7' in text
     found = yaml.safe_load(output.read_text())['canaero_turret_driver']['ros__parameters']
-    assert found['turret_node_id'] == 7
+    assert (found['turret_node_id'], found['can_bitrate']) == (7, 500000)
 
 
 class FakeLine:
@@ -183,6 +188,12 @@ def test_a_serial_port_that_does_not_exist(tmp_path: Path) -> None:
     status, text = run_probe(['--serial', str(tmp_path / 'ttyNONE')])
     assert status == probe_cli.EXIT_NOTHING
     assert 'cannot open' in text and 'Traceback' not in text
+
+
+def test_a_can_channel_that_does_not_exist(tmp_path: Path) -> None:
+    status, text = run_probe(['--can', str(tmp_path / 'ttyACM9'), '--can-interface', 'slcan'])
+    assert status == probe_cli.EXIT_NOTHING
+    assert 'cannot open CAN interface slcan:' in text and 'Traceback' not in text
 
 
 def test_nothing_listening_on_tcp() -> None:

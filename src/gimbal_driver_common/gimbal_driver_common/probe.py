@@ -110,12 +110,23 @@ ProbeFunction = Callable[[ProbeLink], Iterable[Attempt]]
 
 def registered_probes(specs: Iterable[DriverSpec] | None = None
                       ) -> list[tuple[DriverSpec, ProbeFunction]]:
-    """Every registered driver that names a probe, with its probe function."""
+    """Every registered driver that names a probe, with its probe function (one that
+    does not load is reported when it is run, see :func:`run_probes`)."""
     found = []
     for spec in drivers() if specs is None else specs:
         if spec.probe:
-            found.append((spec, resolve(spec.probe)))
+            try:
+                found.append((spec, resolve(spec.probe)))
+            except RegistryError as exc:  # one broken driver: the others still probe
+                found.append((spec, not_loaded(exc)))
     return found
+
+
+def not_loaded(error: RegistryError) -> ProbeFunction:
+    """A probe function that reports why the driver's probe did not load."""
+    def probe(link: ProbeLink) -> list[Attempt]:
+        raise error
+    return probe
 
 
 def run_probes(link: ProbeLink, probes: Iterable[tuple[DriverSpec, ProbeFunction]],

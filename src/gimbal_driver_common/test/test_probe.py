@@ -19,6 +19,7 @@ from gimbal_driver_common.probe import (
     ProbeLink,
     WatchedStream,
     line_verdict,
+    registered_probes,
     run_probes,
 )
 from gimbal_driver_common.registry import DriverSpec
@@ -104,6 +105,18 @@ def test_a_probe_that_cannot_plan_is_reported() -> None:
 
     report = run_probes(ProbeLink('tcp', host='h'), [(spec('a'), broken)])
     assert report.outcomes[0].reason == 'probe not run: no such channel'
+
+
+def test_a_probe_that_does_not_load_is_reported_and_the_others_run() -> None:
+    broken = DriverSpec(**{**spec('broken').__dict__, 'probe': 'no_such_module:probe'})
+    fine = DriverSpec(**{**spec('fine').__dict__, 'probe': 'gimbal_driver_common.probe:Found'})
+    probes = registered_probes([broken, fine])
+    assert [(s.name, f is Found) for s, f in probes] == [('broken', False), ('fine', True)]
+    report = run_probes(ProbeLink('tcp', host='h'),
+                        [probes[0], (spec('other'), FakeProbe({1: found(1)}, 1))])
+    assert report.outcomes[0].reason.startswith("probe not run: 'no_such_module:probe' does "
+                                                'not load')
+    assert [d.driver for d in report.found] == ['other']
 
 
 def test_the_parameters_file_has_the_ros2_params_shape() -> None:
