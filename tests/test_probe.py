@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import os
 import subprocess
+import sys
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,7 +21,7 @@ import pytest
 import yaml
 
 from gimbal_driver_common import probe_cli
-from gimbal_driver_common.registry import DriverSpec, drivers
+from gimbal_driver_common.registry import DriverSpec, drivers, resolve
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, find_executable, ros_env
 from gimbal_driver_common.testing.ros import RosTestClient
 from gimbal_driver_common.testing.sim_handle import SimHandle, make_handle
@@ -202,6 +203,31 @@ def test_nothing_listening_on_tcp() -> None:
     status, text = run_probe(['--tcp', f'127.0.0.1:{free_tcp_port()}'])
     assert status == probe_cli.EXIT_NOTHING
     assert 'cannot connect' in text and 'Traceback' not in text
+
+
+#: the module constant of each TCP driver's probe that holds its documented port
+DOCUMENTED_PORT = {'virtual_gimbal': 'DEFAULT_PORT', 'capture': 'TCP_PORT',
+                   'kessler_kos': 'DEFAULT_TCP_PORT'}
+
+
+@pytest.mark.parametrize('simulator', [s for s in PROBED if s.name in DOCUMENTED_PORT],
+                         ids=lambda s: s.name, indirect=True)
+def test_a_host_without_a_port_is_tried_on_each_documented_port(
+        simulator: SimHandle, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each device's documented port stands in for a free one here (the real ports may be
+    in use on a shared machine): the one of the simulator's device is its port."""
+    from gimbal_driver_common.testing import free_tcp_port
+
+    for spec in PROBED:
+        if spec.name in DOCUMENTED_PORT:
+            module = sys.modules[resolve(spec.probe).__module__]
+            port = simulator.port if spec is simulator.spec else free_tcp_port()
+            monkeypatch.setattr(module, DOCUMENTED_PORT[spec.name], port)
+    status, text = run_probe(['--tcp', '127.0.0.1', *(
+        ['--password', simulator.spec.password] if simulator.spec.password else [])])
+    assert status == probe_cli.EXIT_FOUND, text
+    assert f'({simulator.spec.name} driver' in text
+    assert text.count('ANSWERED') == 1 and text.count(' on TCP port ') == len(DOCUMENTED_PORT)
 
 
 def by_name(name: str) -> DriverSpec:
