@@ -205,6 +205,37 @@ def test_nothing_listening_on_tcp() -> None:
     assert 'cannot connect' in text and 'Traceback' not in text
 
 
+def test_a_tcp_peer_that_accepts_and_hangs_up() -> None:
+    """A half-open service: the connection is accepted and closed at once, each time."""
+    import socket
+
+    listener = socket.create_server(('127.0.0.1', 0))
+    stop = threading.Event()
+
+    def hang_up() -> None:
+        listener.settimeout(0.05)
+        while not stop.is_set():
+            try:
+                connection, _ = listener.accept()
+            except TimeoutError:
+                continue
+            connection.close()
+
+    thread = threading.Thread(target=hang_up, daemon=True)
+    thread.start()
+    try:
+        status, text = run_probe(['--tcp', f'127.0.0.1:{listener.getsockname()[1]}'])
+    finally:
+        stop.set()
+        thread.join(2.0)
+        listener.close()
+    assert status == probe_cli.EXIT_NOTHING, text
+    assert 'Traceback' not in text
+    attempts = [line for line in text.splitlines() if ' on TCP port ' in line and ': no: ' in line]
+    assert len(attempts) == 3 and all('closed' in line for line in attempts), text
+    assert 'silent' not in text
+
+
 #: the module constant of each TCP driver's probe that holds its documented port
 DOCUMENTED_PORT = {'virtual_gimbal': 'DEFAULT_PORT', 'capture': 'TCP_PORT',
                    'kessler_kos': 'DEFAULT_TCP_PORT'}

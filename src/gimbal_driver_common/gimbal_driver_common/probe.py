@@ -253,7 +253,8 @@ def link_failed(error: BaseException) -> bool:
     """The error (or one it was raised from) is the link closing, not a missing answer."""
     seen: BaseException | None = error
     while seen is not None:
-        if isinstance(seen, TransportError) or 'link lost' in str(seen):
+        if isinstance(seen, TransportError) or 'link lost' in str(seen) \
+                or 'closed' in str(seen):
             return True
         seen = seen.__cause__ or seen.__context__
     return False
