@@ -68,7 +68,7 @@ def identify(open_stream, expect_greeting: bool, timeout: float) -> Found:
         watched.append(WatchedStream(open_stream()))
         return watched[-1]
 
-    share = max(timeout / 3.0, 0.1)
+    share = round(max(timeout / 3.0, 0.1), 2)
     client = CaptureClient(factory, group=GROUP_ID, timeout=share, greeting_timeout=share,
                            expect_greeting=expect_greeting, batch_reads=False)
     try:

@@ -7,6 +7,7 @@ Exit status: 0 a device answered (its parameters printed, and written with ``--o
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -131,6 +132,9 @@ def print_summary(report: Report, out: TextIO) -> None:
 def main(argv: Sequence[str] | None = None, out: TextIO | None = None) -> int:
     out = out or sys.stdout
     args = parser().parse_args(argv)
+    # the clients' own log lines (a reconnect warning, a silence) would repeat what each
+    # attempt's line says; only errors get through
+    logging.basicConfig(level=logging.ERROR, format='gimbal_probe: %(name)s: %(message)s')
     try:
         link = link_from(args)
     except ValueError as exc:
