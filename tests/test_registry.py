@@ -69,13 +69,15 @@ def test_executables_exist_in_install(spec: DriverSpec) -> None:
 
 @pytest.mark.parametrize('spec', drivers(), ids=lambda spec: spec.name)
 def test_references_load(spec: DriverSpec) -> None:
-    """The node class, the simulator handle, the demo steps and the benchmark exist, and
-    the node's joints are the spec's (in some order: the spec may reorder them)."""
+    """The node class, the simulator handle, the probe, the demo steps and the benchmark
+    exist, and the node's joints are the spec's (in some order: the spec may reorder them)."""
     node = resolve(spec.node_class)
     assert sorted(node.DEFAULT_JOINT_NAMES) == sorted(spec.joints)
     assert len(spec.move_goal) <= len(spec.joints)
     assert (INSTALL / spec.package / 'share' / spec.package / 'urdf' / spec.description).is_file()
     assert issubclass(resolve(spec.sim_handle), SimHandle)
+    if spec.probe:  # gimbal_probe calls it with a ProbeLink
+        assert list(inspect.signature(resolve(spec.probe)).parameters) == ['link']
     for label, reference in spec.demo.extra_steps:
         if reference:
             step = resolve(reference)

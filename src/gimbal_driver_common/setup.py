@@ -12,6 +12,11 @@ setup(
     ],
     install_requires=['setuptools'],
     zip_safe=True,
+    entry_points={
+        'console_scripts': [
+            'gimbal_probe = gimbal_driver_common.probe_cli:main',
+        ],
+    },
     maintainer='Gimbal driver team',
     maintainer_email='drivers@example.com',
     description='Shared infrastructure of the gimbal driver suite',
