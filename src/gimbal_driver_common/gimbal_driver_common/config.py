@@ -32,6 +32,8 @@ class ControllerConfig:
     reconnect_period: float = 1.0
     goal_tolerance: float = 0.01
     move_timeout: float = 60.0
+    #: s before an accepted command that shows no motion is reported (<= 0: never)
+    motion_start_timeout: float = 1.0
     #: the (pan, tilt) joints a scan sweeps; empty: pan/tilt if named so, else the first two
     scan_joints: Sequence[str] = field(default_factory=tuple)
 

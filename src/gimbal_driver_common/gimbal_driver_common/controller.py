@@ -36,6 +36,7 @@ from gimbal_driver_common.config import ControllerConfig, Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, LinkError, device_boundary
 from gimbal_driver_common.joint_command import validate_joint_command
+from gimbal_driver_common.motion_watch import MotionWatch
 from gimbal_driver_common.periodic import Periodic
 from gimbal_driver_common.rejections import CommandRejections
 from gimbal_driver_common.watchdog import JogWatchdog
@@ -108,6 +109,9 @@ class GimbalController:
         self.latest: JointSample | None = None
         #: last position target sent per joint (AxisState.target_position)
         self.commanded_targets: dict[str, float] = {}
+        #: accepted commands that show no motion (motion_start_timeout): diagnostics, goals
+        self.motion_watch = MotionWatch(lambda: self.config.motion_start_timeout,
+                                        lambda: self.config.goal_tolerance, log)
         #: bumped by every stop and halt: a running move or scan sees it and ends
         self.motion_generation = 0
         self.watchdog = JogWatchdog(config.command_timeout, self._on_jog_expired)
@@ -328,7 +332,7 @@ class GimbalController:
         except GimbalError as exc:
             self.rejections.record(exc, sent=True)
             return
-        self.commanded_targets.update({joint: move[0] for joint, move in moves.items()})
+        self.targets_sent({joint: move[0] for joint, move in moves.items()})
 
     def send_moves(self, moves: Moves, offsets: dict[str, float] | None = None) -> None:
         """Send absolute moves now (move_to, presets, scans), after the queued commands."""
@@ -337,7 +341,13 @@ class GimbalController:
             self._drop_pending(moves)
             if not (offsets and self.device.move_relative(offsets, moves)):
                 self.device.move(moves)
-        self.commanded_targets.update({joint: move[0] for joint, move in moves.items()})
+        self.targets_sent({joint: move[0] for joint, move in moves.items()})
+
+    def targets_sent(self, targets: dict[str, float]) -> None:
+        """Position targets went to the device (by the controller, or by a policy through a
+        device capability): ~/status shows them and the motion watch waits for motion."""
+        self.commanded_targets.update(targets)
+        self.motion_watch.commanded(targets)
 
     def stop(self) -> str:
         """~/stop: cancel jogs, moves, scans and queued commands, then stop every axis."""
@@ -362,6 +372,7 @@ class GimbalController:
 
     def _cancel_motion(self) -> None:
         self.watchdog.cancel()
+        self.motion_watch.withdraw()
         self.motion_generation += 1
         with self._pending_lock:
             self._pending.clear()
@@ -375,6 +386,7 @@ class GimbalController:
             if scans is not None and joints is None:
                 scans.stop()
             self.device.stop(None if joints is None else list(joints))
+        self.motion_watch.withdraw(joints)
 
     def _drop_pending(self, joints: Sequence[str] | None) -> None:
         """Forget queued commands (and the targets of posted ones) for a newer send."""
@@ -425,7 +437,8 @@ class GimbalController:
         except GimbalError as exc:
             self.rejections.record(exc, sent=True)
             return
-        self.commanded_targets.update({joint: move[0] for joint, move in moves.items()})
+        self.motion_watch.jogged(jogs)
+        self.targets_sent({joint: move[0] for joint, move in moves.items()})
 
     # ------------------------------------------------------ device thread
     def _device_loop(self) -> None:
@@ -457,6 +470,7 @@ class GimbalController:
                 continue
             if sample is not None and not (self.device.streamed and sample.stamp == last_stamp):
                 self.latest, last_stamp = sample, sample.stamp
+                self.motion_watch.observe(sample)
                 if self.active:
                     self.on_sample(sample)
                     last_publish = time.monotonic()

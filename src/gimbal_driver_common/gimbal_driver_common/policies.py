@@ -130,6 +130,10 @@ class Motion:
                 return MoveOutcome('stopped', 'stopped (~/stop or a new command)', positions)
             if not ctl.connected:
                 return MoveOutcome('failed', f'device link lost ({ctl.link_error})', positions)
+            stalled = ctl.motion_watch.reason(names)
+            if stalled:
+                ctl.stop_joints(names)
+                return MoveOutcome('failed', stalled, positions)
             reached = all(abs(current.get(n, math.inf) - targets[n]) <= tolerance for n in names)
             if reached and not any(is_moving(ctl.latest, n) for n in names):
                 return MoveOutcome('reached', 'reached', positions)
@@ -149,7 +153,7 @@ class Motion:
         self.preempt()
         ctl.watchdog.cancel(list(targets))
         message = ctl.call(lambda: pointing.point_at(target))
-        ctl.commanded_targets.update(targets)
+        ctl.targets_sent(targets)
         return message
 
     def _scan_stop_current(self) -> None:
@@ -160,6 +164,7 @@ class Motion:
         (which then ends "stopped"), so waiting goals never pile up; a device scan ends
         with the device's new move."""
         self._scan_stop.set()
+        self.controller.motion_watch.withdraw()
         self.controller.motion_generation += 1
 
     # ---------------------------------------------------------------- homing
@@ -301,7 +306,7 @@ class Motion:
             ctl.require(ctl.config.joint_names)
             self.preempt()
             message = ctl.call(lambda: device.goto(index, speed))
-            ctl.commanded_targets.update(device.target(index) or {})
+            ctl.targets_sent(device.target(index) or {})
             return message
         preset = self.store.get(index)
         names = [n for n in preset.positions if n in ctl.config.limits]

@@ -10,7 +10,9 @@ own verbs beside the shared ones. One request line gives one answer line: ``ok``
     garbage [N] | garbage hex HEX   N random bytes (default 16) or these bytes on the link
     nack on|off|COMMAND [COUNT] negative-acknowledge every request / the next COUNT of one
     fault NAME|BITS [AXIS]      set device fault bits (names per simulator)
-    clear                       remove every injected fault (silence, NACKs, fault bits)
+    ignore_motion on|off        ACK move and jog commands but do not act on them
+    clear                       remove every injected fault (silence, NACKs, fault bits,
+                                ignore_motion)
     state                       ok {JSON}: "axes" and the device's own fields
     help                        the verbs of this simulator
     quit                        stop the simulator process
@@ -37,6 +39,7 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol, TextIO
 
+from gimbal_driver_common.sim_motion import AxisMotion
 from gimbal_driver_common.sim_server import LOOPBACK
 
 DEFAULT_GARBAGE_BYTES = 16
@@ -108,6 +111,8 @@ class SimControl:
     #: turret: its CAN nodes go quiet, the slcan adapter keeps answering)
     silence: Callable[[bool], None] | None = None
     on_quit: Callable[[], None] | None = None
+    #: the simulator's axis models, for ``ignore_motion`` (None: the verb is refused)
+    axes: Callable[[], Iterable[AxisMotion]] | None = None
     seed: int = 1
     verbs: dict[str, Verb] = field(default_factory=dict)
 
@@ -121,6 +126,7 @@ class SimControl:
             'garbage': Verb(self._garbage, 'garbage [N] | garbage hex HEX'),
             'nack': Verb(self._nack, 'nack on|off|COMMAND [COUNT]'),
             'fault': Verb(self._fault, 'fault NAME|BITS [AXIS]'),
+            'ignore_motion': Verb(self._ignore_motion, 'ignore_motion on|off'),
             'clear': Verb(self._clear, 'clear'),
             'state': Verb(self._state, 'state'),
             'help': Verb(self._help, 'help'),
@@ -203,9 +209,20 @@ class SimControl:
             raise ControlError(f'usage: fault NAME|BITS [AXIS]; names: {names}')
         return self.fault(args)
 
+    def _ignore_motion(self, args: list[str]) -> str:
+        if self.axes is None:
+            raise ControlError(f'not applicable to {self.name}: no axis models given')
+        ignore = parse_switch(args)
+        axes = list(self.axes())
+        for axis in axes:
+            axis.ignore_commands = ignore
+        return f'{len(axes)} axes {"ignore" if ignore else "act on"} move and jog commands'
+
     def _clear(self, args: list[str]) -> None:
         if self.silenced:
             self._silence(['off'])
+        if self.axes is not None:
+            self._ignore_motion(['off'])
         if self.clear_device is not None:
             self.clear_device()
 

@@ -43,6 +43,10 @@ class AxisMotion:
     target: float | None = None
     jog_velocity: float | None = None
     speed: float | None = None  # speed limit of the current move; None: max_speed
+    #: the fault ``ignore_motion``: the protocol still ACKs moves and jogs, but an axis at
+    #: rest drops them at its next step (a drive in a mode that ignores positions, a brake,
+    #: a stall). Motion already under way goes on; device-run goals (:meth:`goal`) too.
+    ignore_commands = False
 
     # ---------------------------------------------------------------- commands
     def move_to(self, target: float, speed: float | None = None) -> None:
@@ -122,6 +126,9 @@ class AxisMotion:
     def step(self, dt: float) -> bool:
         """Advance ``dt`` seconds; True when the axis came to rest during it (arrived at its
         target, braked to a stop or ran into a limit)."""
+        if self.ignore_commands and self.velocity == 0.0:
+            self.target = None  # taken (the protocol ACKed it) and forgotten
+            self.jog_velocity = None if self.jog_velocity is None else 0.0
         if self.velocity == 0.0 and not self.jog_velocity and self.goal()[0] is None:
             return False  # at rest with nothing to do (the common case: keep it cheap)
         came_to_rest = False

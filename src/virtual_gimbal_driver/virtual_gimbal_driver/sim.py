@@ -160,7 +160,8 @@ def make_control(server: TcpSimServer, device: VirtualGimbal) -> SimControl:
     """The shared control verbs for a running virtual gimbal."""
     return SimControl('virtual_gimbal_sim', device.state, links=[server],
                       nack=device.control_nack, fault=device.control_fault,
-                      fault_names=tuple(FAULT_NAMES), clear_device=device.control_clear)
+                      fault_names=tuple(FAULT_NAMES), clear_device=device.control_clear,
+                      axes=lambda: device.axes.values())
 
 
 def main(argv: list[str] | None = None) -> int:

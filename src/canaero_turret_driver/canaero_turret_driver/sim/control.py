@@ -70,7 +70,8 @@ def make_control(simulator: TurretSimulator, link: object | None = None) -> SimC
         silence=silence,
         no_nack="CANaerospace services have no negative acknowledge the turret sends; its "
                 "error path is the EED event (fault, eed)",
-        fault=fault, fault_names=FAULT_NAMES, clear_device=simulator.clear_faults)
+        fault=fault, fault_names=FAULT_NAMES, clear_device=simulator.clear_faults,
+        axes=lambda: simulator.axes.values())
     control.add_verb("node_silence", node_silence,
                      "node_silence NODE|all [on|off|SECONDS] "
                      "(NODE: turret, cover, rover_gnss, base_gnss, zoom)")

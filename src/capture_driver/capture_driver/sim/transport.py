@@ -110,7 +110,8 @@ class CaptureSimulator:
         links = [server for server in (self.tcp, self.pty) if server is not None]
         control = SimControl('capture_sim', self.state, links=links, nack=self._nack,
                              fault=self._fault, fault_names=(*FAULTS, *SYSTEM_FAULTS),
-                             clear_device=model.clear_injected)
+                             clear_device=model.clear_injected,
+                             axes=lambda: model.axes.values())
         control.add_verb('lose', lambda a: model.lose_replies(int(a[0]) if a else 1),
                          'lose [COUNT]')
         control.add_verb('unknown', lambda a: self._toggle(model.unknown_opcodes, a),

@@ -245,7 +245,8 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         self.runtime_parameter('publish_rate', set_publish_rate)
         self.runtime_parameter('diagnostics_period', set_diagnostics_period)
         self.runtime_parameter('command_timeout', set_command_timeout)
-        for name in ('reconnect_period', 'goal_tolerance', 'move_timeout'):
+        for name in ('reconnect_period', 'goal_tolerance', 'move_timeout',
+                     'motion_start_timeout'):
             self.runtime_parameter(name, set_config(name))
         limit_names = ('position_min', 'position_max', 'velocity_max')
         for name in limit_names:

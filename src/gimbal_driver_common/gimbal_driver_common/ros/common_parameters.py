@@ -65,10 +65,15 @@ def declare_common_parameters(node: Any) -> ControllerConfig:
     node.move_timeout = declare(node, 'move_timeout', 60.0,
                                 's: a MoveTo goal fails if not reached in time',
                                 value_range=(0.1, 3600.0))
+    node.motion_start_timeout = declare(
+        node, 'motion_start_timeout', 1.0,
+        's: an accepted move or jog whose axis shows no motion for this long is reported '
+        '(diagnostics WARN, a running goal ends); <= 0 disables', value_range=(-1.0, 600.0))
     node.autostart = declare(node, 'autostart', True,
                              'walk the lifecycle to active by itself (false for managed bring-up)')
     return ControllerConfig(
         joint_names=list(names), limits=limits_from(names, limits.__getitem__),
         publish_rate=node.publish_rate, command_timeout=node.command_timeout,
         reconnect_period=node.reconnect_period, goal_tolerance=node.goal_tolerance,
-        move_timeout=node.move_timeout, scan_joints=tuple(node.SCAN_JOINTS or ()))
+        move_timeout=node.move_timeout, motion_start_timeout=node.motion_start_timeout,
+        scan_joints=tuple(node.SCAN_JOINTS or ()))

@@ -63,6 +63,32 @@ def diagnostic_parts(
             parts.extend(report.parts())
         except Exception as exc:  # noqa: BLE001 - a status read may fail while the link drops
             parts.append(StatusPart('device', Level.WARN, f'status unavailable: {exc}'))
+    return with_axis_parts(parts, ctl, joint_names)
+
+
+def with_axis_parts(parts: list[StatusPart], ctl: GimbalController,
+                    joint_names: list[str]) -> list[StatusPart]:
+    """One status per axis (the contract), and an axis the motion watch found commanded but
+    not moving reads WARN in it. A device that reports no part of its own for an axis gets
+    one from what the controller knows (OK unless the watch says otherwise)."""
+    by_name = {part.part: part for part in parts}
+    for joint in joint_names:
+        if joint not in by_name:
+            by_name[joint] = StatusPart(joint, values=[('source', 'driver (the device '
+                                                        'reports no axis status)')])
+            parts.append(by_name[joint])
+    timeout = ctl.config.motion_start_timeout
+    for joint, episode in ctl.motion_watch.stalled().items():
+        part = by_name.get(joint)
+        if part is None:
+            continue
+        reason = episode.describe(joint, timeout).split(': ', 1)[1]
+        part.message = reason if part.level == Level.OK else f'{part.message}; {reason}'
+        part.level = max(part.level, Level.WARN)
+        part.values = [('motion', 'commanded but not moving'),
+                       ('commanded', 'jog' if episode.target is None
+                        else f'{episode.target:.4f}'),
+                       ('position', f'{episode.position:.4f}'), *part.values]
     return parts
 
 

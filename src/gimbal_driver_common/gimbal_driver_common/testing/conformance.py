@@ -35,6 +35,7 @@ from gimbal_driver_common.testing.conformance_rig import (
     GoalStatus,
     SimulatorHandle,
 )
+from gimbal_driver_common.testing.motion_start_conformance import MotionStartConformance
 from gimbal_driver_common.testing.restart_conformance import RestartConformance
 from gimbal_driver_common.testing.topic_system_conformance import TopicInterfaceConformance
 from gimbal_msgs.action import Home, MoveTo
@@ -46,7 +47,7 @@ __all__ = ['ConformanceRig', 'DriverConformance', 'GoalStatus', 'SimulatorHandle
 REJECTED_BURSTS = 6
 
 
-class DriverConformance(TopicInterfaceConformance, RestartConformance):
+class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionStartConformance):
     """The common contract of every gimbal driver node, tested through the real transport.
 
     Subclasses set the attributes below; the package, node and simulator come from the

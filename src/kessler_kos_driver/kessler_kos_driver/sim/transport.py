@@ -258,7 +258,8 @@ class KosSimulator:
             'kessler_kos_sim', self.state, links=[self.server],
             no_nack='kOS answers a bad request with ErrorStatus (see fault and error), '
                     'it has no negative acknowledge',
-            fault=self._fault, fault_names=('axis',), clear_device=self._clear_injected)
+            fault=self._fault, fault_names=('axis',), clear_device=self._clear_injected,
+            axes=lambda: device.motors.values())
         control.add_verb('offline', lambda a: device.set_motor_online(int(a[0]), False),
                          'offline MOTOR')
         control.add_verb('online', lambda a: device.set_motor_online(int(a[0]), True),

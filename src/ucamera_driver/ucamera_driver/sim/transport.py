@@ -167,7 +167,8 @@ class UCameraSim:
                 "ucamera_sim", self.state, links=[self.server],
                 no_nack="UCSP has no acknowledge or negative acknowledge",
                 no_fault="UCSP reports no fault register (and has no fault reset)",
-                clear_device=self._clear_injected)
+                clear_device=self._clear_injected,
+                axes=lambda: (self.model.pan, self.model.tilt))
             control.add_verb("noise", lambda a: self.inject_noise(int(a[0]) if a else 64),
                              "noise [N] (random bytes with false 0xCC syncs)")
             control.add_verb("noise_rate", lambda a: self.set_noise_rate(float(a[0])),

@@ -1,0 +1,153 @@
+"""Notice a motion command that the device accepted but does not carry out (no ROS).
+
+A controller whose TCP stack ACKs a position command it ignores (a drive in a mode that
+ignores positions, a brake, a mechanical stall, a controller that takes the target in
+another command) otherwise looks like a silent success: ``joint_command`` is accepted and
+the axis stays where it is. The controller tells a :class:`MotionWatch` what it sent
+(:meth:`commanded`, :meth:`jogged`), what it withdrew (:meth:`withdraw`) and each sample
+(:meth:`observe`). An axis whose target is further than the goal tolerance from its
+position, or which was told to jog, and which has not moved within
+``motion_start_timeout`` seconds, is *stalled*: diagnostics show it (WARN, target and
+position), it is logged once per axis and episode, and a running goal ends at once with
+:meth:`reason`.
+
+What counts as motion: a position that changed by more than :data:`MOTION_EPSILON` since
+the command, and nothing else. A "moving" bit or a speed is not trusted here: some
+adapters derive the bit from what was commanded (U-Camera), some devices report the
+commanded speed, and a drive that pushes against a brake or a stall reports itself busy
+while the axis stays where it is. A slow axis moves that far quickly (at 0.01 rad/s^2 it
+takes 0.45 s from rest), so it is not reported; a position that jitters by more than that
+hides a stall instead of inventing one. Motion the device runs by itself (its own scans,
+playback, homing) is never commanded here and so never watched.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+from gimbal_driver_common.config import Logger
+from gimbal_driver_common.device import JointSample
+
+#: a joint that moved further than this since its command has started (rad or m)
+MOTION_EPSILON = 1e-3
+
+
+@dataclass
+class Episode:
+    """One unmet command of one axis: from its first unmet command until it moves."""
+
+    target: float | None      # None: a jog (any motion meets it)
+    velocity: float           # the jog velocity (0 for a position target)
+    since: float              # monotonic time of the first unmet command
+    start: float | None       # the position when it was commanded (None: not known yet)
+    position: float = math.nan
+    stalled: bool = False
+
+    def describe(self, joint: str, timeout: float) -> str:
+        what = (f'target {self.target:.4f}' if self.target is not None
+                else f'jog {self.velocity:+.4f}/s')
+        return (f'{joint}: commanded but not moving ({what}, position {self.position:.4f}, '
+                f'no motion for {timeout:g} s)')
+
+
+class MotionWatch:
+    """Thread-safe: the command thread, the callback and the device thread all feed it."""
+
+    def __init__(self, timeout: Callable[[], float], tolerance: Callable[[], float],
+                 log: Logger) -> None:
+        self._timeout = timeout
+        self._tolerance = tolerance
+        self._log = log
+        self._lock = threading.Lock()
+        self._episodes: dict[str, Episode] = {}
+        self._latest: JointSample | None = None
+
+    # ------------------------------------------------------------ commands
+    def commanded(self, targets: dict[str, float]) -> None:
+        """Position targets were sent. A joint already waiting keeps the time of its first
+        unmet command (a command stream to an axis that ignores it is still reported)."""
+        with self._lock:
+            for joint, target in targets.items():
+                self._start(joint, target, 0.0)
+
+    def jogged(self, velocities: dict[str, float]) -> None:
+        """Jog velocities were sent; a zero velocity is a stop (withdraws the joint)."""
+        with self._lock:
+            for joint, velocity in velocities.items():
+                if velocity == 0.0:
+                    self._episodes.pop(joint, None)
+                else:
+                    self._start(joint, None, velocity)
+
+    def withdraw(self, joints: Iterable[str] | None = None) -> None:
+        """The commands were stopped or superseded (None: every joint)."""
+        with self._lock:
+            if joints is None:
+                self._episodes.clear()
+            for joint in joints or ():
+                self._episodes.pop(joint, None)
+
+    def _start(self, joint: str, target: float | None, velocity: float) -> None:
+        position = self._position(joint)
+        episode = self._episodes.get(joint)
+        if episode is None or (episode.target is None) != (target is None):
+            episode = Episode(target, velocity, time.monotonic(), position)
+            self._episodes[joint] = episode
+        episode.target, episode.velocity = target, velocity
+        if episode.start is None:
+            episode.start = position
+        if position is not None:
+            episode.position = position
+        if target is not None and position is not None and \
+                abs(position - target) <= self._tolerance():
+            self._episodes.pop(joint, None)   # already there: nothing to show
+
+    def _position(self, joint: str) -> float | None:
+        sample = self._latest
+        value = sample.positions.get(joint) if sample else None
+        return float(value) if value is not None and math.isfinite(value) else None
+
+    # ------------------------------------------------------------- samples
+    def observe(self, sample: JointSample) -> None:
+        """A new sample: episodes end when the joint moves or reaches its target; those
+        older than the timeout become stalled (logged once)."""
+        newly: list[str] = []
+        with self._lock:
+            self._latest = sample
+            if not self._episodes:
+                return
+            now, timeout, tolerance = time.monotonic(), self._timeout(), self._tolerance()
+            for joint, episode in list(self._episodes.items()):
+                position = sample.positions.get(joint)
+                if position is None or not math.isfinite(position):
+                    continue
+                episode.position = position
+                if episode.start is None:
+                    episode.start = position
+                reached = episode.target is not None and abs(position - episode.target) \
+                    <= tolerance
+                moved = abs(position - episode.start) > MOTION_EPSILON
+                if reached or moved:
+                    del self._episodes[joint]
+                elif timeout > 0 and now - episode.since >= timeout and not episode.stalled:
+                    episode.stalled = True
+                    newly.append(episode.describe(joint, timeout))
+        for message in newly:
+            self._log.warning(f'{message}: the device accepted the command but the axis '
+                              'does not move (drive off or in another mode, brake, stall?)')
+
+    # ------------------------------------------------------------- reading
+    def stalled(self) -> dict[str, Episode]:
+        """The stalled joints now (a copy)."""
+        with self._lock:
+            return {j: Episode(**vars(e)) for j, e in self._episodes.items() if e.stalled}
+
+    def reason(self, joints: Iterable[str]) -> str | None:
+        """Why a goal on ``joints`` cannot end well, or None."""
+        stalled = self.stalled()
+        found = [stalled[j].describe(j, self._timeout()) for j in joints if j in stalled]
+        return '; '.join(found) if found else None

@@ -1,0 +1,215 @@
+"""The motion watch under a controller: an accepted command that shows no motion is
+reported (diagnostics, one log line, a running goal ends at once), and nothing else is."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Sequence
+
+import pytest
+
+from gimbal_driver_common.controller import ControllerConfig, GimbalController
+from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
+from gimbal_driver_common.joint_command import JointLimits
+from gimbal_driver_common.policies import Motion
+from gimbal_driver_common.sim_control import SimControl
+from gimbal_driver_common.sim_motion import AxisMotion
+from gimbal_driver_common.testing import wait_for
+
+JOINTS = ['pan', 'tilt']
+#: the watch's timeout in these tests (s)
+TIMEOUT = 0.2
+
+
+class AxisDevice(Device):
+    """Two shared-model axes stepped at each read: the simulators' motion model in-process,
+    so ``ignore_commands`` is the simulators' ``ignore_motion`` fault."""
+
+    def __init__(self, speed: float = 2.0, acceleration: float = 20.0) -> None:
+        super().__init__()
+        self.axes = {j: AxisMotion(max_speed=speed, acceleration=acceleration,
+                                   min_position=-1.0, max_position=1.0) for j in JOINTS}
+        self.lock = threading.Lock()
+        self.last = time.monotonic()
+
+    def open(self) -> DeviceInfo:
+        return DeviceInfo('axes', 'SN2', '1.0')
+
+    def read(self) -> JointSample:
+        with self.lock:
+            now = time.monotonic()
+            for axis in self.axes.values():
+                axis.step(now - self.last)
+            self.last = now
+            return JointSample({j: a.position for j, a in self.axes.items()},
+                               {j: a.velocity for j, a in self.axes.items()})
+
+    def move(self, moves: Moves) -> None:
+        with self.lock:
+            for joint, (target, speed) in moves.items():
+                self.axes[joint].move_to(target, speed)
+
+    def jog(self, velocities: dict[str, float]) -> None:
+        with self.lock:
+            for joint, velocity in velocities.items():
+                self.axes[joint].jog(velocity)
+
+    def stop(self, joints: Sequence[str] | None = None) -> None:
+        with self.lock:
+            for joint in joints or JOINTS:
+                self.axes[joint].stop()
+
+    def ignore(self, ignored: bool) -> None:
+        for axis in self.axes.values():
+            axis.ignore_commands = ignored
+
+
+class Lines(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__()
+        self.lines: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.lines.append(record.getMessage())
+
+    def stalls(self) -> list[str]:
+        return [line for line in self.lines if 'commanded but not moving' in line]
+
+
+def make(device: AxisDevice, log: logging.Logger, **overrides) -> GimbalController:
+    values = dict(joint_names=list(JOINTS),
+                  limits={j: JointLimits(-1.0, 1.0, 2.0) for j in JOINTS},
+                  publish_rate=200.0, command_timeout=0.0, reconnect_period=0.01,
+                  goal_tolerance=0.01, move_timeout=20.0, motion_start_timeout=TIMEOUT)
+    values.update(overrides)
+    ctl = GimbalController(device, ControllerConfig(**values), log)
+    ctl.open()
+    ctl.activate()
+    wait_for(lambda: ctl.latest is not None, 2.0, 'a first sample')
+    return ctl
+
+
+@pytest.fixture
+def lines():
+    handler = Lines()
+    log = logging.getLogger(f'motion-watch-{id(handler)}')
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    log.propagate = False
+    return log, handler
+
+
+@pytest.fixture
+def rig(lines):
+    log, handler = lines
+    device = AxisDevice()
+    ctl = make(device, log)
+    yield ctl, device, handler
+    ctl.shutdown()
+    ctl.periodic.stop()
+    ctl.sensors.stop()
+
+
+def test_an_ignored_move_ends_the_goal_at_once_with_the_reason(rig) -> None:
+    ctl, device, lines = rig
+    device.ignore(True)
+    motion = Motion(ctl)
+    targets = motion.start_move(['pan'], [0.5])
+    started = time.monotonic()
+    outcome = motion.wait_move(targets)
+    assert outcome.state == 'failed', outcome
+    assert 'pan: commanded but not moving (target 0.5000, position 0.0000' in outcome.message
+    # ends at the watch's timeout, long before move_timeout (20 s)
+    assert time.monotonic() - started < ctl.config.move_timeout / 2
+    assert len(lines.stalls()) == 1, lines.lines
+    # the goal stopped the axis it could not move: the episode is over
+    assert ctl.motion_watch.stalled() == {}
+
+
+def test_a_command_stream_to_an_axis_that_ignores_it_is_reported_once(rig) -> None:
+    ctl, device, lines = rig
+    device.ignore(True)
+    deadline = time.monotonic() + 6 * TIMEOUT
+    target = 0.3
+    while time.monotonic() < deadline:  # a new target every 10 ms never resets the clock
+        target += 0.001
+        ctl.command(['tilt'], [target], [])
+        time.sleep(0.01)
+    wait_for(lambda: ctl.motion_watch.stalled().get('tilt') and
+             ctl.motion_watch.stalled()['tilt'].target == pytest.approx(target), 5.0,
+             'the newest target in the report')
+    stalled = ctl.motion_watch.stalled()
+    assert list(stalled) == ['tilt'], stalled
+    assert stalled['tilt'].position == 0.0
+    assert len(lines.stalls()) == 1, lines.lines
+    ctl.stop()  # withdrawn: diagnostics clear
+    assert ctl.motion_watch.stalled() == {}
+
+
+def test_an_ignored_jog_is_reported_and_a_stop_clears_it(rig) -> None:
+    ctl, device, lines = rig
+    device.ignore(True)
+    ctl.command(['pan'], [], [0.4])
+    wait_for(lambda: 'pan' in ctl.motion_watch.stalled(), 5.0, 'the jog to be reported')
+    assert ctl.motion_watch.stalled()['pan'].target is None
+    assert 'jog +0.4000/s' in ctl.motion_watch.reason(['pan'])
+    ctl.command(['pan'], [], [0.0])  # a zero jog is a stop: never reported
+    wait_for(lambda: not ctl.motion_watch.stalled(), 5.0, 'the zero jog to clear it')
+
+
+def test_moves_and_jogs_that_move_are_never_reported(lines) -> None:
+    log, handler = lines
+    # slow: 0.05 rad/s at 0.1 rad/s^2 moves far less than the goal tolerance per timeout
+    device = AxisDevice(speed=0.05, acceleration=0.1)
+    ctl = make(device, log)
+    try:
+        ctl.command(['pan'], [0.05], [])
+        ctl.command(['tilt'], [], [0.03])
+        time.sleep(6 * TIMEOUT)   # several timeouts while both axes creep
+        assert ctl.motion_watch.stalled() == {}
+        assert handler.stalls() == []
+        assert device.axes['pan'].position > 0.0 and device.axes['tilt'].position > 0.0
+    finally:
+        ctl.shutdown()
+        ctl.periodic.stop()
+        ctl.sensors.stop()
+
+
+def test_an_axis_at_its_target_or_a_disabled_watch_is_never_reported(lines) -> None:
+    log, handler = lines
+    device = AxisDevice()
+    ctl = make(device, log)
+    try:
+        device.ignore(True)
+        ctl.command(['pan'], [0.005], [])   # within goal_tolerance of 0.0
+        time.sleep(4 * TIMEOUT)
+        assert ctl.motion_watch.stalled() == {}
+        ctl.config.motion_start_timeout = 0.0   # disabled
+        ctl.command(['pan'], [0.5], [])
+        time.sleep(4 * TIMEOUT)
+        assert ctl.motion_watch.stalled() == {}
+        assert handler.stalls() == []
+    finally:
+        ctl.shutdown()
+        ctl.periodic.stop()
+        ctl.sensors.stop()
+
+
+def test_the_simulators_ignore_motion_verb_drops_commands_of_axes_at_rest() -> None:
+    axes = [AxisMotion(max_speed=1.0, acceleration=10.0) for _ in range(2)]
+    control = SimControl('sim', lambda: {}, axes=lambda: axes)
+    assert control.execute('ignore_motion on').startswith('ok 2 axes ignore')
+    axes[0].move_to(0.5)
+    axes[1].jog(0.5)
+    for axis in axes:
+        axis.step(0.1)
+    assert [a.position for a in axes] == [0.0, 0.0]
+    assert control.execute('clear') == 'ok'
+    axes[0].move_to(0.5)
+    axes[0].step(0.1)
+    assert axes[0].position > 0.0
+    no_axes = SimControl('other', lambda: {})
+    assert no_axes.execute('ignore_motion on').startswith('error ignore_motion: not applicable')
+
