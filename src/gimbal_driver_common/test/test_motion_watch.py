@@ -155,6 +155,7 @@ def test_an_ignored_jog_is_reported_and_a_stop_clears_it(rig) -> None:
     wait_for(lambda: 'pan' in ctl.motion_watch.stalled(), 5.0, 'the jog to be reported')
     assert ctl.motion_watch.stalled()['pan'].target is None
     assert 'jog +0.4000/s' in ctl.motion_watch.reason(['pan'])
+    assert len(lines.stalls()) == 1, lines.lines
     ctl.command(['pan'], [], [0.0])  # a zero jog is a stop: never reported
     wait_for(lambda: not ctl.motion_watch.stalled(), 5.0, 'the zero jog to clear it')
 
