@@ -29,8 +29,9 @@ LOOPBACK = '127.0.0.1'
 class SimSession(Protocol):
     """What a device simulator implements for one connection."""
 
-    def on_bytes(self, data: bytes) -> bytes:
-        """Consume received bytes; return the bytes to send back (may be empty)."""
+    def on_bytes(self, data: bytes) -> bytes | list[bytes]:
+        """Consume received bytes; return the bytes to send back (may be empty), or
+        each reply on its own (a server with ``nagle`` then sends each in its own write)."""
 
 
 SessionFactory = Callable[[], SimSession]
@@ -58,6 +59,9 @@ def _session_poll(session: SimSession) -> bytes:
 
 class _SimServerBase:
     """Threads and fault injection common to the TCP and pty servers."""
+
+    #: send each reply of a session in its own write (see :class:`TcpSimServer` ``nagle``)
+    separate_sends = False
 
     def __init__(self, session_factory: SessionFactory, poll_interval: float = 0.005) -> None:
         self._session_factory = session_factory
@@ -106,12 +110,14 @@ class _SimServerBase:
             try:
                 readable = wait_readable(timeout)
                 out = b''
+                replies: list[bytes] = []
                 if readable:
                     data = receive()
                     if not data:
                         return
                     if not self._faults.silent:
-                        out += session.on_bytes(data)
+                        answer = session.on_bytes(data)
+                        replies = [answer] if isinstance(answer, bytes | bytearray) else answer
                         for hook in self._receive_hooks:
                             hook()
                 now = time.monotonic()
@@ -120,7 +126,12 @@ class _SimServerBase:
                     streamed = _session_poll(session)
                     if not self._faults.silent:
                         out += streamed
-                out = self._faults.take_garbage() + out
+                if self.separate_sends:
+                    for reply in [self._faults.take_garbage(), *replies, out]:
+                        if reply:
+                            send(reply)
+                    continue
+                out = self._faults.take_garbage() + b''.join(replies) + out
                 if out:
                     send(out)
             except OSError:
@@ -136,8 +147,15 @@ class TcpSimServer(_SimServerBase):
         host: str = LOOPBACK,
         port: int = 0,
         poll_interval: float = 0.005,
+        nagle: bool = False,
     ) -> None:
+        """``nagle``: behave like an embedded TCP stack that leaves Nagle's algorithm on
+        and writes each reply on its own (the default sets TCP_NODELAY): a reply after
+        the first of a burst then waits for the ACK of the one before, which a client
+        that delays its ACKs holds back for up to 40 ms."""
         super().__init__(session_factory, poll_interval)
+        self.nagle = nagle
+        self.separate_sends = nagle
         if host not in (LOOPBACK, 'localhost', '::1'):
             raise ValueError('simulators bind to loopback only (127.0.0.1)')
         self.host = host
@@ -203,7 +221,8 @@ class TcpSimServer(_SimServerBase):
             if time.monotonic() < self._refuse_until:
                 client.close()
                 continue
-            client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            if not self.nagle:
+                client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             with self._clients_lock:
                 self._clients.add(client)
             self.connections += 1

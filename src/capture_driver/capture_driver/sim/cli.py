@@ -48,6 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--one-request-per-read', action='store_true',
                         help='play a controller that drops every packet after the first in '
                              'one receive (the driver then reads one request at a time)')
+    parser.add_argument('--nagle', action='store_true',
+                        help='play a controller whose TCP stack leaves Nagle\'s algorithm on '
+                             'and writes each reply in its own segment')
     parser.add_argument('--log-level', default='INFO')
     args = parser.parse_args(argv)
     for name in args.unknown:
@@ -68,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     model.digital_io_present = not args.no_digital_io
     model.one_request_per_read = args.one_request_per_read
     sim = CaptureSimulator(model, tcp_port=None if args.port < 0 else args.port,
-                           pty=args.pty, pty_link=args.pty_link)
+                           pty=args.pty, pty_link=args.pty_link, nagle=args.nagle)
     sim.start()
     try:
         run_simulator(sim.controls, {'port': sim.tcp.port if sim.tcp else None,

@@ -20,8 +20,9 @@ from .model import PedestalModel
 class CaptureSession:
     """One connection: byte parsing, the TCP greeting and reply generation."""
 
-    def __init__(self, model: PedestalModel, greet: bool) -> None:
+    def __init__(self, model: PedestalModel, greet: bool, each_reply: bool = False) -> None:
         self.model = model
+        self.each_reply = each_reply  # on_bytes gives the replies one by one (--nagle)
         self.decoder = StreamDecoder()
         self.connected = False
         self._greeting = COMMANDS['COM_Connect'].encode() if greet else b''
@@ -30,20 +31,20 @@ class CaptureSession:
         greeting, self._greeting = self._greeting, b''
         return greeting
 
-    def on_bytes(self, data: bytes) -> bytes:
-        out = bytearray()
+    def on_bytes(self, data: bytes) -> bytes | list[bytes]:
+        replies: list[bytes] = []
         handled = False
         for item in self.decoder.feed(data):
             if isinstance(item, Frame):
                 if handled and self.model.one_request_per_read:
                     continue
                 handled = True
-                out += self.model.handle(item, self)
+                replies.append(bytes(self.model.handle(item, self)))
             elif isinstance(item, ReplyByte):
                 continue  # the host never sends reply bytes; ignore
             elif item.reason == 'checksum mismatch':
-                out.append(ReplyCode.WRONG_CHECKSUM)  # 2.1: a bad checksum gets 0xF6
-        return bytes(out)
+                replies.append(bytes([ReplyCode.WRONG_CHECKSUM]))  # 2.1: bad checksum: 0xF6
+        return replies if self.each_reply else b''.join(replies)
 
     def on_disconnect(self) -> None:
         self.connected = False
@@ -53,9 +54,10 @@ class CaptureSimulator:
     """The model plus its TCP and/or pty servers."""
 
     def __init__(self, model: PedestalModel | None = None, tcp_port: int | None = 0,
-                 pty: bool = False, pty_link: str | None = None) -> None:
+                 pty: bool = False, pty_link: str | None = None, nagle: bool = False) -> None:
         self.model = model or PedestalModel()
-        self.tcp = (TcpSimServer(lambda: CaptureSession(self.model, greet=True), port=tcp_port)
+        self.tcp = (TcpSimServer(lambda: CaptureSession(self.model, greet=True, each_reply=nagle),
+                                 port=tcp_port, nagle=nagle)
                     if tcp_port is not None else None)
         self.pty = (PtySimServer(lambda: CaptureSession(self.model, greet=False), pty_link)
                     if pty else None)
