@@ -81,7 +81,15 @@ __all__ = ["AXES", "ClientConfig", "CommandError", "Counters", "LinkError", "Not
 
 
 def _default_bus_factory(config: ClientConfig) -> can.BusABC:
-    """python-can's bus for the configured interface (slcan: the chunked reader)."""
+    """python-can's bus for the configured interface (slcan: the chunked reader).
+
+    A TCP bridge (socketcand, slcan over ``socket://``) whose far end leaves Nagle's
+    algorithm on is not a rate trap here, so the socket python-can owns is left as it
+    is: the joint states are the turret's own periodic broadcasts, which the receive
+    thread takes as they come (a bridge that bunches them behind a delayed ACK delivers
+    every one, later), and the poll waits for no batch of replies. At worst a
+    multi-frame node-service answer arrives up to a delayed-ACK time later, inside its
+    service timeout."""
     kwargs = dict(config.bus_options)
     if config.bitrate:
         kwargs["bitrate"] = config.bitrate

@@ -129,6 +129,9 @@ class KosClient(KosCommands, Protocol):
             self._stream_factory = stream_factory or (lambda _h, _p: HidStream(
                 usb, usb_keepalive_period, usb_report_size, usb_device_factory))
         else:
+            # A kOS device that leaves Nagle's algorithm on would hold a reply behind the
+            # delayed ACK of its previous one; TcpStream acknowledges every read at once
+            # (TCP_QUICKACK), so polls and notifications are not held for 40 ms.
             self._stream_factory = stream_factory or (
                 lambda h, p: TcpStream(h, p, connect_timeout))
         self._stream: ByteStream | None = None
