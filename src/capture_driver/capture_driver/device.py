@@ -559,12 +559,12 @@ class CaptureDevice(Device):
     def _axis_refusal(joint: str, registers: dict[str, int]) -> str | None:
         """Why one axis cannot move, from its registers (a fault, the drive off), or None."""
         active = axis_flags(registers)
-        names = {a.flag.name for a in active}
         faults = sorted({a.key for a in active if a.flag.level >= Level.ERROR})
-        if 'fault' in names or faults:
-            return f'{joint} is faulted ({", ".join(faults) or "fault"})'
-        if 'axis_off' in names:
-            return f'{joint} drive is off (SRL axis_off); switch it on with ~/enable'
+        if faults:
+            return f'{joint} is faulted ({", ".join(faults)})'
+        off = sorted({a.key for a in active if a.flag.name == 'axis_off'})
+        if off:  # named after the registers that said so (SRL, CMER): only those answered
+            return f'{joint} drive is off ({", ".join(off)}); switch it on with ~/enable'
         return None
 
     def program_running(self) -> str | None:

@@ -307,3 +307,24 @@ def test_known_sets_name_table_commands():
     for names in KNOWN_SETS.values():
         assert all(name in COMMANDS for name in names)
     assert 'MOT_SetTum' not in KNOWN_SETS['partial']
+
+
+@pytest.mark.parametrize(('model', 'named', 'absent'), [
+    ({'unknown_commands': ['MOT_SrlRegister']}, ['CMER.axis_off'], 'SRL'),
+    (None, ['CMER.axis_off', 'SRL.axis_off'], None),
+], ids=['without-srl', 'full'])
+def test_a_drive_off_is_named_after_the_registers_that_said_so(drive, model, named, absent):
+    """"drive is off" names the register each flag came from, and never a register the
+    device did not answer (a controller without SRL reports the drive off in CMER)."""
+    _, device, controller = drive(model)
+    controller.call(lambda: device.set_power(False))
+    wait_for(lambda: 'pan drive is off' in (device.refusal(['pan']) or ''), 10.0, 'drive off')
+    refusal = device.refusal(['pan'])
+    assert f'({", ".join(named)})' in refusal, refusal
+    parts = {p.part: p for p in device.capabilities.status.parts()}
+    keys = {key for key, _ in parts['pan'].values}
+    assert set(named) <= keys, sorted(keys)
+    if absent is not None:
+        assert absent not in refusal
+        assert not any(key.startswith(f'{absent}.') for key in keys), sorted(keys)
+        assert absent not in parts['pan'].message
