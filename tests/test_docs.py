@@ -206,3 +206,27 @@ def test_readme_ros2_lines_name_real_interfaces() -> None:
                 check_fields(msg_type, rest[1])
         checked += 1
     assert checked >= 4
+
+
+_VERSION_HEADING = re.compile(r'^(Forthcoming|\d+\.\d+\.\d+ \(\d{4}-\d{2}-\d{2}\))$')
+
+
+@pytest.mark.parametrize('package', sorted(p.parent.name for p in (ROOT / 'src').glob(
+    '*/package.xml')))
+def test_every_package_has_a_ros_changelog(package: str) -> None:
+    """CHANGELOG.rst as catkin_generate_changelog and bloom read it: the title between two
+    rows of ``^`` as long as it, then version sections (``Forthcoming`` or ``X.Y.Z
+    (YYYY-MM-DD)``) underlined with ``-``, each a bullet list; no issue numbers or hashes."""
+    lines = (ROOT / 'src' / package / 'CHANGELOG.rst').read_text().splitlines()
+    title = f'Changelog for package {package}'
+    assert lines[:3] == ['^' * len(title), title, '^' * len(title)], lines[:3]
+    sections = [i for i, line in enumerate(lines) if _VERSION_HEADING.match(line)]
+    assert sections, f'{package}: no version section'
+    for start in sections:
+        assert lines[start + 1] == '-' * len(lines[start]), lines[start:start + 2]
+        assert lines[start + 2].startswith('* '), f'{package}: {lines[start]} has no bullets'
+    versions = [lines[i] for i in sections if lines[i] != 'Forthcoming']
+    assert versions == sorted(versions, reverse=True), 'newest version first'
+    text = '\n'.join(lines)
+    assert not re.search(r'\b[Ii]ssues? \d+|#\d+|\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*\d)'
+                         r'[0-9a-f]{7,40}\b', text), f'{package}: issue numbers or hashes'
