@@ -242,3 +242,34 @@ def test_the_probe_section_links_its_manual_once_it_exists() -> None:
     assert 'docs/probe.md' in body
     if (ROOT / 'docs' / 'probe.md').is_file():
         assert '](docs/probe.md' in body, 'link docs/probe.md in the Probe first section'
+
+
+@pytest.mark.ros
+def test_readme_workspace_commands_exist_and_take_their_options() -> None:
+    """The README's commands for this workspace: the scripts it sources exist, and each
+    installed executable it runs exists and takes the options (simulator) or parameters
+    (node, ``-p name:=value``) the line gives it."""
+    if not (ROOT / 'install' / 'setup.bash').exists():
+        pytest.skip('the workspace is not built (make build)')
+    checked = 0
+    for command in readme_commands():
+        if command[0] == 'source' and not command[1].startswith('/'):  # not /opt/ros
+            assert (ROOT / command[1]).is_file(), command
+            continue
+        if not command[0].startswith('install/'):
+            continue
+        executable = ROOT / command[0]
+        assert executable.is_file(), command[0]
+        package = executable.parent.name
+        if '--ros-args' in command:
+            given = [command[i + 1].split(':=')[0] for i, word in enumerate(command)
+                     if word == '-p']
+            listed = {name for kind, name in interface(package) if kind == 'parameter'}
+            assert set(given) <= listed, set(given) - listed
+        else:
+            options = [word for word in command[1:] if word.startswith('--')]
+            usage = subprocess.run([str(executable), '--help'], capture_output=True,
+                                   text=True, timeout=60).stdout
+            assert all(option in usage for option in options), (options, usage)
+        checked += 1
+    assert checked >= 2
