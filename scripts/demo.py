@@ -11,6 +11,7 @@ Run it with ``make demo`` (which sets up the environment first).
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import re
@@ -45,6 +46,7 @@ from gimbal_msgs.srv import GotoPreset, SetPreset, StartScan
 
 ROOT = Path(__file__).resolve().parent.parent
 BAG_NAME = 'demo_bag'  # the rosbag2 bag directory in --output
+COMMANDS_FILE = 'demo_commands.json'  # what each step commanded (the plot's dashed line)
 
 
 @dataclass
@@ -69,6 +71,15 @@ class DemoTarget:
     tracebacks: list[str] = field(default_factory=list)
     workdir: Path = Path()
     stop: threading.Event = field(default_factory=threading.Event)
+    #: what each step commanded, for the plot (``plot_bag.py``): wall-clock times, as the
+    #: recorder stamps the bag
+    commands: list[dict[str, Any]] = field(default_factory=list)
+
+    def commanded(self, kind: str, **data: Any) -> None:
+        """Note what a step commanded: ``target`` (joint -> position), ``jog`` (joint,
+        velocity, t0, t1), ``scan`` (joint -> [low, high], t0, t1), ``home`` or ``keyframes``
+        (joint_names, points [(s from t, positions)]). ``t`` defaults to now."""
+        self.commands.append({'ns': self.namespace, 'kind': kind, 't': time.time(), **data})
 
     @property
     def node_name(self) -> str:
@@ -150,12 +161,15 @@ def available_targets() -> list[DemoTarget]:
 
 def run_step(target: DemoTarget, name: str, action: Callable[[], str]) -> None:
     target.step = name
+    started = time.time()
     try:
         detail = action()
         target.done.append(f'{name}: {detail}')
     except Exception as exc:  # noqa: BLE001 - the demo reports and goes on
         target.failed.append(f'{name}: {exc}')
         target.tracebacks.append(f'{target.node_name} {name}:\n{traceback.format_exc()}')
+    finally:
+        target.commanded('step', name=name, t0=started, t1=time.time())
 
 
 def joint_position(target: DemoTarget, joint: str) -> float:
@@ -190,6 +204,7 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
 
     def move() -> str:
         goal = MoveTo.Goal(joint_names=goal_joints, positions=list(target.spec.move_goal))
+        target.commanded('target', positions=dict(zip(goal_joints, goal.positions, strict=True)))
         result, _, feedback = ros.run_action(MoveTo, target.ns('move_to'), goal, timeout=60)
         if not result.success:
             raise RuntimeError(result.message)
@@ -199,12 +214,13 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
     def jog() -> str:
         joint, velocity, seconds = target.jog_joint, target.spec.demo.jog_velocity, 1.5
         before = joint_position(target, joint)
-        end = time.monotonic() + seconds
+        end, first = time.monotonic() + seconds, time.time()
         while time.monotonic() < end and not stop.is_set():
             ros.publish(target.topic('joint_command'),
                         JointState(name=[joint], velocity=[velocity]))
             target.note = f'jog {joint} {joint_position(target, joint) - before:+.3f}'
             stop.wait(0.1)
+        target.commanded('jog', joint=joint, velocity=velocity, t0=first, t1=time.time())
         # No more joint_command: the dead-man (command_timeout) must stop the axis.
         try:
             stopped_at = settled(target, joint, stop)
@@ -223,6 +239,8 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
             index=1, name='demo', joint_names=goal_joints, positions=list(target.spec.move_goal)))
         if not stored.success:
             raise RuntimeError(stored.message)
+        target.commanded('target', positions=dict(zip(goal_joints, target.spec.move_goal,
+                                                      strict=True)))
         went = ros.call(GotoPreset, target.ns('goto_preset'), GotoPreset.Request(index=1))
         if not went.success:
             raise RuntimeError(went.message)
@@ -238,6 +256,7 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
         if target.scan is None:
             return 'no scan for this device'
         joint = target.spec.joints[0]
+        scan_start = time.time()
         started = ros.call(StartScan, target.ns('start_scan'), target.scan)
         if not started.success:
             raise RuntimeError(started.message)
@@ -249,6 +268,11 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
             target.note = f'scan {joint} {low:+.2f}..{high:+.2f}'
             stop.wait(0.05)
         stopped = ros.call(Trigger, target.ns('stop_scan'), Trigger.Request())
+        corners = {joint: [target.scan.pan_min, target.scan.pan_max]}
+        if len(target.spec.joints) > 1 and target.scan.tilt_max > target.scan.tilt_min:
+            corners[target.spec.joints[1]] = [target.scan.tilt_min, target.scan.tilt_max]
+        target.commanded('scan', corners=corners, pattern=target.scan.pattern,
+                         t0=scan_start, t1=time.time())
         target.note = ''
         if not stopped.success:
             raise RuntimeError(f'stop_scan: {stopped.message}')
@@ -395,7 +419,7 @@ def main() -> int:
     targets = available_targets()
     # Only the files an earlier demo wrote are replaced: --output may name any directory.
     # (demo.mcap: the single-file recording of earlier versions.)
-    previous = {'demo.mcap', 'positions.png', 'demo_failures.log', 'record_bag.log',
+    previous = {'demo.mcap', 'positions.png', COMMANDS_FILE, 'demo_failures.log', 'record_bag.log',
                 *(f'{t.node_name}.log' for t in targets),
                 *(f'{t.spec.sim_executable}.log' for t in targets)}
     output.mkdir(parents=True, exist_ok=True)
@@ -479,8 +503,10 @@ def main() -> int:
     if bag is not None:
         from plot_bag import plot as plot_bag
 
+        commands = output / COMMANDS_FILE
+        commands.write_text(json.dumps([c for t in targets for c in t.commands], indent=1))
         try:
-            plot = plot_bag(bag, output / 'positions.png')
+            plot = plot_bag(bag, output / 'positions.png', commands)
         except (SystemExit, Exception) as exc:  # noqa: BLE001 - e.g. a bag cut short
             print(f'demo: no plot from {bag}: {exc}')
     print(summary(targets, output, bag, plot, time.monotonic() - started))

@@ -36,6 +36,7 @@ def simulator_ready(target: DemoTarget) -> bool:
 
 def run_home(target: DemoTarget, ros: RosTestClient) -> str:
     """The common ``~/home`` action, for drivers whose spec lists a ``home`` step."""
+    target.commanded('home')
     result, _, feedback = ros.run_action(Home, target.ns('home'), Home.Goal(), timeout=60)
     if not result.success:
         raise RuntimeError(result.message)

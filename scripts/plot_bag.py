@@ -3,20 +3,29 @@
 Reads any rosbag2 bag (the demo's, ``scripts/record_bag.py``'s or one from
 ``ros2 bag record``, MCAP or SQLite storage) with the ``rosbags`` reader, which
 decodes every message by the definitions stored in the bag. Actual positions
-come from each ``<ns>/joint_states`` (sensor_msgs/msg/JointState); commanded
-ones from the ``target_position`` of each axis in ``<ns>/<node>/status``
-(gimbal_msgs/msg/GimbalStatus: the last move target the driver sent). One PNG
-with a row of axes per driver.
+come from each ``<ns>/joint_states`` (sensor_msgs/msg/JointState). One PNG with a
+row of axes per driver.
 
-    python scripts/plot_bag.py demo_output/demo_bag demo_output/positions.png
+What was commanded comes from the demo's ``demo_commands.json`` when it is given
+(``scripts/demo.py`` writes it: each step's name and span, move and preset targets,
+jog velocities, scan corners, homing, playback key frames). Without it, the dashed
+line is each axis' ``target_position`` in ``<ns>/<node>/status``
+(gimbal_msgs/msg/GimbalStatus): the last target the driver sent, which motions the
+device runs by itself (its scans, homing, playback) do not change.
+
+    python scripts/plot_bag.py BAG OUT.png [COMMANDS.json]
+    python scripts/plot_bag.py demo_output/demo_bag /tmp/plot.png demo_output/demo_commands.json
 """
 
 from __future__ import annotations
 
+import json
 import math
 import sys
+import textwrap
 from collections import defaultdict
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -52,30 +61,127 @@ def read_series(bag: Path) -> tuple[dict[str, Series], dict[str, Series]]:
     return actual, commanded
 
 
-def plot(bag: Path, out: Path) -> Path:
-    actual, commanded = read_series(bag)
+CAPTION = ('Solid: the position each joint reported (joint_states). Dashed: what the demo '
+           'commanded, held until the next command: move and preset targets, scan corners '
+           '(two dashed limits), playback key frames (dots, joined as the device plays them); '
+           'a shaded span in a joint\'s colour is a jog at the velocity written in it, a '
+           'triangle is a homing command. Grey bands are the demo steps, named at the top.')
+
+
+def load_commands(path: Path | None) -> dict[str, list[dict[str, Any]]]:
+    """namespace -> the demo's command records (``DemoTarget.commanded``), in time order."""
+    if path is None or not path.is_file():
+        return {}
+    by_ns: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for record in sorted(json.loads(path.read_text()), key=lambda r: r.get('t0', r['t'])):
+        by_ns[record['ns']].append(record)
+    return by_ns
+
+
+def commanded_lines(records: list[dict[str, Any]], joint: str,
+                    t0: float) -> tuple[list[float], list[float], list[tuple[float, float]]]:
+    """One joint's held targets as a step line (x, y; NaN where a jog, scan, homing or
+    playback took over) and its key frames as (x, y) dots."""
+    xs: list[float] = []
+    ys: list[float] = []
+    dots: list[tuple[float, float]] = []
+
+    def point(at: float, value: float) -> None:
+        xs.append(at - t0)
+        ys.append(value)
+
+    for record in records:
+        kind = record['kind']
+        if kind == 'target' and joint in record['positions']:
+            point(record['t'], record['positions'][joint])
+        elif (kind == 'jog' and record['joint'] == joint) or (
+                kind == 'scan' and joint in record['corners']):
+            point(record['t0'], math.nan)
+        elif kind == 'home':
+            point(record['t'], math.nan)
+        elif kind == 'keyframes' and joint in record['joint_names']:
+            index = record['joint_names'].index(joint)
+            point(record['t'], math.nan)
+            frames = [(record['t'] + seconds - t0, values[index])
+                      for seconds, values in record['points']]
+            dots.extend(frames)
+            point(frames[-1][0] + t0, frames[-1][1])  # where the playback ends
+    return xs, ys, dots
+
+
+def draw_commands(ax: Any, records: list[dict[str, Any]], joints: list[str], t0: float,
+                  t_end: float) -> None:
+    steps = [r for r in records if r['kind'] == 'step']
+    for index, step in enumerate(steps):
+        ax.axvspan(step['t0'] - t0, step['t1'] - t0, color='0.5',
+                   alpha=0.10 if index % 2 == 0 else 0.18, lw=0)
+        ax.text((step['t0'] + step['t1']) / 2 - t0, 1.01, step['name'], ha='center',
+                va='bottom', fontsize='x-small', transform=ax.get_xaxis_transform())
+    for index, joint in enumerate(joints):
+        color = f'C{index}'
+        xs, ys, dots = commanded_lines(records, joint, t0)
+        if xs:
+            xs.append(t_end - t0), ys.append(ys[-1])
+            ax.step(xs, ys, where='post', color=color, linestyle='--',
+                    label=f'{joint} commanded')
+        if dots:
+            ax.plot([d[0] for d in dots], [d[1] for d in dots], 'o', color=color,
+                    markersize=4)
+            # the device plays the key frames as a smooth curve: join them
+            ax.plot([d[0] for d in dots], [d[1] for d in dots], ':', color=color)
+        for record in records:
+            if record['kind'] == 'jog' and record['joint'] == joint:
+                ax.axvspan(record['t0'] - t0, record['t1'] - t0, color=color, alpha=0.25,
+                           lw=0)
+                ax.text((record['t0'] + record['t1']) / 2 - t0, 0.04,
+                        f'{joint} jog {record["velocity"]:+g} rad/s', ha='center',
+                        fontsize='x-small', color=color, transform=ax.get_xaxis_transform())
+            elif record['kind'] == 'scan' and joint in record['corners']:
+                for limit in record['corners'][joint]:
+                    ax.hlines(limit, record['t0'] - t0, record['t1'] - t0, colors=color,
+                              linestyles='--')
+            elif record['kind'] == 'home' and index == 0:
+                ax.plot([record['t'] - t0], [0.96], 'v', color='k',
+                        transform=ax.get_xaxis_transform())
+
+
+def plot(bag: Path, out: Path, commands: Path | None = None) -> Path:
+    actual, status_targets = read_series(bag)
+    by_ns = load_commands(commands)
     namespaces = sorted(actual)
     if not namespaces:
         raise SystemExit(f'{bag}: no joint_states recorded')
     t0 = min(points[0][0] for ns in namespaces for points in actual[ns].values() if points)
-    fig, axes = plt.subplots(len(namespaces), 1, figsize=(10, 3.2 * len(namespaces)),
+    t_end = max(points[-1][0] for ns in namespaces for points in actual[ns].values() if points)
+    fig, axes = plt.subplots(len(namespaces), 1, figsize=(13, 3.4 * len(namespaces) + 0.8),
                              squeeze=False)
     for row, ns in enumerate(namespaces):
         ax = axes[row][0]
-        for index, (joint, points) in enumerate(sorted(actual[ns].items())):
-            color = f'C{index}'
-            ax.plot([p[0] - t0 for p in points], [p[1] for p in points], color=color,
+        joints = sorted(actual[ns])
+        for index, joint in enumerate(joints):
+            points = actual[ns][joint]
+            ax.plot([p[0] - t0 for p in points], [p[1] for p in points], color=f'C{index}',
                     label=f'{joint} actual')
-            targets = commanded[ns].get(joint, [])
-            if targets:
-                ax.step([p[0] - t0 for p in targets], [p[1] for p in targets], where='post',
-                        color=color, linestyle='--', label=f'{joint} commanded')
-        ax.set_title(f'{ns}: commanded vs. actual joint positions')
+        if by_ns:
+            draw_commands(ax, by_ns.get(ns, []), joints, t0, t_end)
+        else:
+            for index, joint in enumerate(joints):
+                targets = status_targets[ns].get(joint, [])
+                if targets:
+                    ax.step([p[0] - t0 for p in targets], [p[1] for p in targets],
+                            where='post', color=f'C{index}', linestyle='--',
+                            label=f'{joint} last target sent (~/status)')
+        ax.set_title(f'{ns}: commanded vs. actual joint positions', pad=14)
         ax.set_xlabel('time [s]')
         ax.set_ylabel('position [rad or m]')
         ax.grid(True, alpha=0.3)
-        ax.legend(loc='upper right', fontsize='small', ncol=2)
-    fig.tight_layout()
+        ax.legend(loc='upper left', bbox_to_anchor=(1.005, 1.0), fontsize='small')
+    caption = CAPTION if by_ns else (
+        'Solid: the position each joint reported (joint_states). Dashed: the last target '
+        'the driver sent (~/status target_position); motions the device runs by itself '
+        '(its scans, homing, playback) do not change it.')
+    fig.text(0.01, 0.005, textwrap.fill(caption, 150), fontsize='small', va='bottom')
+    fig.tight_layout(rect=(0, 0.7 / fig.get_figheight(), 1, 1))
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=90)
     plt.close(fig)
@@ -83,10 +189,11 @@ def plot(bag: Path, out: Path) -> Path:
 
 
 def main() -> int:
-    if len(sys.argv) != 3:
+    if len(sys.argv) not in (3, 4):
         print(__doc__, file=sys.stderr)
         return 2
-    print(f'plot_bag: wrote {plot(Path(sys.argv[1]), Path(sys.argv[2]))}')
+    commands = Path(sys.argv[3]) if len(sys.argv) == 4 else None
+    print(f'plot_bag: wrote {plot(Path(sys.argv[1]), Path(sys.argv[2]), commands)}')
     return 0
 
 

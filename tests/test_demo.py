@@ -10,6 +10,7 @@ outlived it.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -100,5 +101,20 @@ def test_demo_drives_every_driver_and_records_a_bag(tmp_path, check_rosbag2):
 
     plot = output / 'positions.png'
     assert plot.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    # what the plot's dashed line is drawn from: each step of each driver, named and timed,
+    # with what it commanded
+    commands = json.loads((output / 'demo_commands.json').read_text())
+    for spec in specs:
+        mine = [c for c in commands if c['ns'] == spec.namespace]
+        steps = [c['name'] for c in mine if c['kind'] == 'step']
+        assert steps[:3] == ['move', 'jog', 'preset'], (spec.namespace, steps)
+        assert all(started / 1e9 <= c['t'] <= ended / 1e9 for c in mine)
+        kinds = {c['kind'] for c in mine}
+        assert {'target', 'jog'} <= kinds, (spec.namespace, kinds)
+        if spec.demo.scan is not None:
+            assert 'scan' in kinds, spec.namespace
+        if any(label == 'home' for label, _ in spec.demo.extra_steps):
+            assert 'home' in kinds, spec.namespace
+    assert any(c['kind'] == 'keyframes' for c in commands), 'no playback key frames'
     for node, _ in expected.values():
         assert (output / f'{node}.log').is_file()

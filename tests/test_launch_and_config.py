@@ -22,6 +22,8 @@ import launch_standin
 import pytest
 import yaml
 from ament_index_python.packages import get_package_share_directory
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import GetState
 from rcl_interfaces.srv import ListParameters
 from sensor_msgs.msg import JointState
 
@@ -47,9 +49,9 @@ SRC = Path(__file__).resolve().parent.parent / 'src'
 #: package -> registry spec of every registered driver (the reference virtual gimbal too)
 SPECS: dict[str, DriverSpec] = {spec.package: spec for spec in drivers()}
 DRIVERS = {package: spec.node_executable for package, spec in SPECS.items()}
-#: interfaces.md: every driver's launch file takes these arguments (defaults; the URDF's
-#: default is the package's installed one)
-CONTRACT_ARGUMENTS = {'params_file': '', 'autostart': 'false', 'namespace': '',
+#: docs/interface.md: every driver's launch file takes these arguments (defaults; the URDF's
+#: default is the package's installed one). A bare launch ends with an active node.
+CONTRACT_ARGUMENTS = {'params_file': '', 'autostart': 'true', 'namespace': '',
                       'use_description': 'false', 'description_file': None, 'sim': 'false'}
 
 
@@ -124,7 +126,7 @@ def test_launch_file_runs_and_starts_the_driver(launch, pkg: str) -> None:
     assert node.cmd[0] == find_executable(pkg, spec.node_executable)
     params_file, given = node.parameters
     assert params_file == share(pkg, 'config', f'{pkg}.yaml')
-    assert given == {'autostart': False,
+    assert given == {'autostart': True,
                      'description_file': str(share(pkg, 'urdf', f'{pkg}.urdf'))}
     unknown = set(given) - declared_parameters(pkg)
     assert not unknown, f'the launch file sets undeclared parameters {unknown}'
@@ -183,24 +185,29 @@ def test_use_description_starts_robot_state_publisher_with_the_urdf(launch, pkg:
     assert Path(source).read_text() == xml
 
 
+@pytest.mark.parametrize('autostart', [None, 'false'], ids=['bare', 'autostart_false'])
 @pytest.mark.parametrize('pkg', list(DRIVERS))
 def test_sim_true_starts_the_simulator_and_the_node_connects_to_it(
-        launch, pkg: str, tmp_path: Path) -> None:
-    """``sim:=true autostart:=true``: the simulator (not a ROS node: no --ros-args) and the
-    node with the simulator YAML, whose link address is the one the simulator serves. Both
-    are then started from the command lines the launch produced; only the fixed address
-    (TCP port or pty path) is swapped for a private one, in both, so runs side by side do
-    not meet."""
+        launch, pkg: str, autostart: str | None, tmp_path: Path) -> None:
+    """``sim:=true``: the simulator (not a ROS node: no --ros-args) and the node with the
+    simulator YAML, whose link address is the one the simulator serves. Both are then
+    started from the command lines the launch produced; only the fixed address (TCP port or
+    pty path) is swapped for a private one, in both, so runs side by side do not meet.
+
+    A bare launch (no ``autostart`` argument) ends with an active node publishing
+    joint_states; ``autostart:=false`` leaves it unconfigured, and a lifecycle manager's
+    configure and activate then bring it up."""
     spec = SPECS[pkg]
-    context = launch.run(launch.load_description(launch_file(pkg)),
-                         {'sim': 'true', 'autostart': 'true'})
+    arguments = {'sim': 'true'} if autostart is None else {'sim': 'true',
+                                                           'autostart': autostart}
+    context = launch.run(launch.load_description(launch_file(pkg)), arguments)
     simulator, node = context.launched
     assert simulator.kind == 'process' and '--ros-args' not in simulator.cmd
     assert simulator.cmd == [find_executable(pkg, spec.sim_executable),
                              *spec.launch_sim_arguments]
     sim_yaml = share(pkg, 'config', f'{pkg}_sim.yaml')
     assert node.parameters[0] == sim_yaml
-    assert node.parameters[1]['autostart'] is True
+    assert node.parameters[1]['autostart'] is (autostart is None)
     option = next(o for o in ('--port', '--link') if o in simulator.cmd)
     address = simulator.cmd[simulator.cmd.index(option) + 1]
     parameters = yaml.safe_load(sim_yaml.read_text())[spec.node_name]['ros__parameters']
@@ -220,7 +227,19 @@ def test_sim_true_starts_the_simulator_and_the_node_connects_to_it(
                         *parameter_arguments(overrides)]
             started = ManagedProcess(node_cmd, ros_env(domain), name=spec.node_executable)
             with RosTestClient(domain, 'launch_sim_check') as ros:
+                if autostart is None:
+                    ros.wait_for_lifecycle_state(spec.node_name, 'active', timeout=60)
+                else:
+                    # once it answers, it is unconfigured, and stays so until told
+                    state = ros.call(GetState, f'/{spec.node_name}/get_state',
+                                     GetState.Request(), timeout=60, idempotent=True)
+                    assert state.current_state.label == 'unconfigured'
+                    assert ros.lifecycle_transition(
+                        spec.node_name, Transition.TRANSITION_CONFIGURE, timeout=30)
+                    assert ros.lifecycle_transition(
+                        spec.node_name, Transition.TRANSITION_ACTIVATE, timeout=30)
                 msg = ros.wait_for_message('joint_states', JointState, timeout=60)
+                assert ros.lifecycle_state(spec.node_name) == 'active'
             assert list(msg.name) == list(parameters.get('joint_names', spec.joints))
             assert all(math.isfinite(p) for p in msg.position)
         finally:

@@ -5,7 +5,7 @@ declares, so an import without a declaration works here (the venv has everything
 fails on a robot. The imports are read from the code (ast): package code and launch files
 need ``exec_depend``/``depend``, test code (``test/``, and the ``testing/``
 helper module trees packages ship for tests) at least ``test_depend``. Third-party modules map
-to the keys of rosdistro's rosdep/python.yaml (the README lists them); a module this table
+to the keys of rosdistro's rosdep/python.yaml (docs/development.md lists them); a module this table
 does not know fails the test, so a new dependency gets its key chosen on purpose.
 """
 
@@ -23,7 +23,7 @@ SRC = Path(__file__).resolve().parent.parent / 'src'
 PACKAGES = sorted(p.parent for p in SRC.glob('*/package.xml'))
 
 # Python module -> rosdep key (rosdistro rosdep/python.yaml; checked against its
-# Debian/Ubuntu package names, see the README's rosdep table).
+# Debian/Ubuntu package names, see the rosdep table in docs/development.md).
 THIRD_PARTY = {
     'can': 'python3-can',          # python-can
     'serial': 'python3-serial',    # pyserial
@@ -74,7 +74,7 @@ def rosdep_key(module: str, workspace: set[str]) -> str | None:
     if module in workspace or _is_ros_package(module):
         return module
     raise AssertionError(f'import {module}: no rosdep key known; add it to THIRD_PARTY '
-                         '(and the README table) after looking it up in rosdistro')
+                         '(and the table in docs/development.md) after looking it up in rosdistro')
 
 
 def _is_ros_package(module: str) -> bool:

@@ -265,3 +265,41 @@ def test_subscription_adapts_to_the_offers():
     stored = recorder.offered_qos(reliable_latched)
     assert (stored.reliability.name, stored.durability.name, stored.depth) == (
         'RELIABLE', 'TRANSIENT_LOCAL', 1)
+
+
+def test_the_commanded_line_shows_what_each_step_commanded() -> None:
+    """The demo plot's dashed line: a move target is held until the next command; a jog, a
+    scan, a homing or a playback takes over (a gap: the old target is no longer what was
+    commanded), a playback's key frames are dots at their times, and the line resumes
+    where the playback ends."""
+    plot_bag = load_script('plot_bag.py')
+    records = [
+        {'ns': '/g', 'kind': 'target', 't': 100.0, 'positions': {'pan': 0.4, 'tilt': -0.2}},
+        {'ns': '/g', 'kind': 'jog', 't': 102.0, 'joint': 'pan', 'velocity': 0.3,
+         't0': 102.0, 't1': 103.5},
+        {'ns': '/g', 'kind': 'target', 't': 105.0, 'positions': {'pan': 0.4, 'tilt': -0.2}},
+        {'ns': '/g', 'kind': 'scan', 't': 107.0, 't0': 107.0, 't1': 111.0,
+         'corners': {'pan': [-0.2, 0.2]}},
+        {'ns': '/g', 'kind': 'home', 't': 112.0},
+        {'ns': '/g', 'kind': 'keyframes', 't': 120.0, 'joint_names': ['pan', 'tilt'],
+         'points': [[0.0, [-0.5, -0.2]], [3.0, [1.2, 0.4]]]},
+    ]
+    xs, ys, dots = plot_bag.commanded_lines(records, 'pan', 100.0)
+    assert xs == [0.0, 2.0, 5.0, 7.0, 12.0, 20.0, 23.0]
+    assert ys[:3] == [0.4, pytest.approx(float('nan'), nan_ok=True), 0.4]
+    assert [y != y for y in ys] == [False, True, False, True, True, True, False]
+    assert ys[-1] == 1.2 and dots == [(20.0, -0.5), (23.0, 1.2)]
+    # tilt was not jogged or scanned: its target holds through them, until the homing
+    xs, ys, _ = plot_bag.commanded_lines(records, 'tilt', 100.0)
+    assert xs[:3] == [0.0, 5.0, 12.0] and ys[:2] == [-0.2, -0.2] and ys[2] != ys[2]
+
+
+def test_the_plot_names_the_steps_and_says_what_the_line_means(tmp_path: Path) -> None:
+    """With the demo's command file the figure's caption explains the dashed line."""
+    plot_bag = load_script('plot_bag.py')
+    assert 'Dashed: what the demo commanded' in plot_bag.CAPTION
+    commands = tmp_path / 'demo_commands.json'
+    commands.write_text(json.dumps([
+        {'ns': '/g', 'kind': 'step', 't': 101.0, 'name': 'move', 't0': 100.0, 't1': 101.0}]))
+    assert plot_bag.load_commands(commands)['/g'][0]['name'] == 'move'
+    assert plot_bag.load_commands(tmp_path / 'missing.json') == {}

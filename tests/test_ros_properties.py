@@ -166,7 +166,7 @@ def invalid_joint_command(draw, space: JointSpace) -> JointState:
                           max_size=len(space.joints), unique=True))
     positions = [draw(space.inside(n)) for n in names]
     velocities: list[float] = []
-    # (NaN alone is no defect: it means "no command for this joint", interfaces.md)
+    # (NaN alone is no defect: it means "no command for this joint", docs/interface.md)
     defect = draw(st.sampled_from(('unknown', 'repeated', 'non_finite_position',
                                    'out_of_limit', 'position_length', 'velocity_length',
                                    'jog_too_fast', 'empty')))

@@ -23,7 +23,7 @@ class Logger(Protocol):
 
 @dataclass
 class ControllerConfig:
-    """The common parameters of interfaces.md, as the controller uses them (all runtime)."""
+    """The common parameters of docs/interface.md, as the controller uses them (all runtime)."""
 
     joint_names: list[str]
     limits: dict[str, JointLimits]

@@ -6,7 +6,7 @@ with positions and/or velocities. This module turns them into a
 with a :class:`CommandError` naming the joint, the value and the limit, so a
 bad command never reaches the device half-applied.
 
-NaN means "no command for this joint" in a ``joint_command`` (interfaces.md):
+NaN means "no command for this joint" in a ``joint_command`` (docs/interface.md):
 ros2_control's topic hardware interface sends NaN for the joints whose controller
 has not written a command yet, so those joints are left out of the plan and the
 others are carried out; a message with nothing but NaN is an empty plan, not an
@@ -70,7 +70,7 @@ def limits_from_parameters(
     position_max: Sequence[float],
     velocity_max: Sequence[float],
 ) -> dict[str, JointLimits]:
-    """Build per-joint limits from the parallel-array parameters of interfaces.md."""
+    """Build per-joint limits from the parallel-array parameters of docs/interface.md."""
     for label, values in (
         ('position_min', position_min),
         ('position_max', position_max),
@@ -140,7 +140,7 @@ def validate_joint_command(
 ) -> CommandPlan:
     """Check a JointState-style command and return the plan, or raise CommandError.
 
-    Rules (interfaces.md): a position is an absolute move (a velocity alongside is its
+    Rules (docs/interface.md): a position is an absolute move (a velocity alongside is its
     maximum speed; 0 or NaN: the default speed); a velocity without a position (none, or
     NaN) is a jog. ``positions`` and ``velocities`` are either empty or as long as
     ``names``. A joint whose position and velocity are both NaN (or not given) has no

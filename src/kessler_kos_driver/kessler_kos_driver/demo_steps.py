@@ -35,9 +35,13 @@ def playback(target: Any, ros: Any) -> str:
     if not loaded.success:
         raise RuntimeError(f'load_trajectory: {loaded.message}')
     start = len(statuses)
+    # for the demo's plot: setup returns to the first key frame, the playback follows them
+    target.commanded('target', positions=dict(zip(PLAYBACK_JOINTS, KEYFRAMES[0][1], strict=True)))
     setup = ros.call(Trigger, target.ns('setup_playback'), Trigger.Request(), timeout=60)
     if not setup.success:
         raise RuntimeError(f'setup_playback: {setup.message}')
+    target.commanded('keyframes', joint_names=list(PLAYBACK_JOINTS),
+                     points=[[seconds, list(values)] for seconds, values in KEYFRAMES])
     played = ros.call(Trigger, target.ns('start_playback'), Trigger.Request())
     if not played.success:
         raise RuntimeError(f'start_playback: {played.message}')

@@ -4,7 +4,7 @@ The kOS device counts **motor rotations** (document "Units": positions, begin an
 in rotations, speeds in rotations/s) and says nothing of the gears, belts or lead screws
 between a motor and its joint; its MaxMax speeds (165 rotations/s, 9,900 rpm) are those of a
 motor shaft. So the SI value of a joint comes from what the user measured on the rig
-(issue 22, interfaces.md "Kessler parameters"):
+(docs/interface.md and the Kessler manual, "Units and joints"):
 
 * a calibrated axis with a span: ``offset + rotations * span / end_position``. ``span``
   (``calibrated_spans``) is how far the joint moves from the begin mark to the end mark,

@@ -65,7 +65,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
     DEFAULT_POSITION_MIN: Sequence[float] = (-math.pi, -math.pi / 2)
     DEFAULT_POSITION_MAX: Sequence[float] = (math.pi, math.pi / 2)
     DEFAULT_VELOCITY_MAX: Sequence[float] = (1.0, 1.0)
-    #: default ``publish_rate`` (interfaces.md says 50 Hz)
+    #: default ``publish_rate`` (docs/interface.md says 50 Hz)
     DEFAULT_PUBLISH_RATE = 50.0
     #: the (pan, tilt) joints a scan sweeps; None: `pan`/`tilt` if named so, else the first two
     SCAN_JOINTS: tuple[str, str] | None = None
@@ -279,7 +279,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         self._joint_pub = self.create_publisher(JointState, 'joint_states', state_qos)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._status_pub = self.create_publisher(GimbalStatus, '~/status', 10)
-        # keep-last 1 (interfaces.md): newest wins; the callback never waits on the device,
+        # keep-last 1 (docs/interface.md): newest wins; the callback never waits on the device,
         # so run_driver's executor runs it inline (ros/run.py InlineGroupExecutor)
         command_group = MutuallyExclusiveCallbackGroup()
         command_group.inline = True

@@ -1,4 +1,4 @@
-"""The common parameters of interfaces.md, declared once for every driver node."""
+"""The common parameters of docs/interface.md, declared once for every driver node."""
 
 from __future__ import annotations
 

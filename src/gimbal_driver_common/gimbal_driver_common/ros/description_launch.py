@@ -2,7 +2,7 @@
 
 Each driver's ``launch/<package>.launch.py`` is one line,
 ``driver_launch_description('<package>')``, so every driver takes the same launch arguments
-(interfaces.md):
+(docs/interface.md, "Launch arguments"):
 
 =================== ============================ ==============================================
 argument            default                      meaning
@@ -10,8 +10,9 @@ argument            default                      meaning
 ``params_file``     ``''``                       parameter YAML; ``''``: the package's
                                                  ``config/<package>.yaml``, or with ``sim:=true``
                                                  ``config/<package>_sim.yaml``
-``autostart``       ``false``                    ``true``: the node configures and activates
-                                                 itself; ``false``: a lifecycle manager (or
+``autostart``       ``true``                     ``true``: the node configures and activates
+                                                 itself (a bare launch ends active);
+                                                 ``false``: a lifecycle manager (or
                                                  ``ros2 lifecycle set``) does
 ``namespace``       ``''``                       namespace of the node (and of
                                                  robot_state_publisher)
@@ -64,12 +65,12 @@ def default_params_file(package: str, sim: bool) -> str:
 
 
 def driver_launch_description(package: str) -> LaunchDescription:
-    """The launch arguments of interfaces.md, then the actions they ask for."""
+    """The launch arguments of docs/interface.md, then the actions they ask for."""
     arguments = [
         ('params_file', '', f"parameter YAML ('' = config/{package}.yaml, or "
                             f"config/{package}_sim.yaml with sim:=true)"),
-        ('autostart', 'false', 'true: the node configures and activates itself; false: a '
-                               'lifecycle manager (or ros2 lifecycle set) does'),
+        ('autostart', 'true', 'true: the node configures and activates itself; false: a '
+                              'lifecycle manager (or ros2 lifecycle set) does'),
         ('namespace', '', 'namespace of the driver node (and of robot_state_publisher)'),
         ('use_description', 'false', 'true: also start robot_state_publisher with the URDF '
                                      '(TF for RViz)'),
