@@ -45,11 +45,6 @@ pytestmark = pytest.mark.ros
 ROOT = Path(__file__).resolve().parent.parent
 COMMON_REFERENCE = ROOT / 'docs' / 'interface.md'
 
-#: Parameters the reference lists before the node declares them. ``motion_start_timeout``
-#: (the motion-start watch) is being added on another branch; remove it from this set when
-#: that branch is merged, and the test then requires every node to declare it.
-PENDING_PARAMETERS = {'motion_start_timeout'}
-
 #: What every rclpy lifecycle node offers by itself (ROS infrastructure, not the driver's
 #: interface): the parameter and lifecycle services, /rosout, /parameter_events and the
 #: lifecycle transition events. The reference names them once in prose.
@@ -197,8 +192,7 @@ def running_node(spec: DriverSpec, workdir: Path) -> Iterator[RosTestClient]:
 def drift(spec: DriverSpec, ros: RosTestClient) -> tuple[dict, dict, dict]:
     """(undocumented, missing, wrong type) between the node and the reference."""
     listed = documented(spec)
-    comparable = {key for key in listed if key[1] not in PENDING_PARAMETERS
-                  or key[0] != 'parameter'}
+    comparable = set(listed)
 
     def compare() -> dict[tuple[str, str], str]:
         if (spec.node_name, '/') not in ros.node.get_node_names_and_namespaces():
