@@ -235,10 +235,10 @@ def line_verdict(watched: Iterable[WatchedStream], protocol: str, error: BaseExc
     received = b''.join(bytes(s.received) for s in streams)
     total = sum(s.received_total for s in streams)
     if not received:
+        if streams and link_failed(error):  # opened, then lost: not "cannot connect"
+            return f'the link failed before any answer: {error}'
         if not written:
             return f'{error}'
-        if link_failed(error):
-            return f'the link failed before any answer: {error}'
         return f'silent: no byte came back ({error})'
     if written and (received.startswith(written[:len(received)])
                     or written.startswith(received)):
@@ -250,11 +250,15 @@ def line_verdict(watched: Iterable[WatchedStream], protocol: str, error: BaseExc
 
 
 def link_failed(error: BaseException) -> bool:
-    """The error (or one it was raised from) is the link closing, not a missing answer."""
+    """The error (or one it was raised from) is the link closing, not a missing answer.
+
+    By kind where the kind says it (a transport failure, the OS's connection errors), else
+    by the words: the clients raise their own LinkError for a missing answer too."""
     seen: BaseException | None = error
     while seen is not None:
-        if isinstance(seen, TransportError) or 'link lost' in str(seen) \
-                or 'closed' in str(seen):
+        text = str(seen)
+        if isinstance(seen, TransportError | ConnectionError) or 'closed' in text \
+                or ' lost' in text:
             return True
         seen = seen.__cause__ or seen.__context__
     return False
