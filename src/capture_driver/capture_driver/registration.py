@@ -21,7 +21,7 @@ SPEC = DriverSpec(
     node_parameters={'transport': 'tcp', 'host': '127.0.0.1', 'port': '{port}',
                      'status_period': 0.2, 'default_speed': 1.0, 'acceleration': 6.0},
     launch_sim_arguments=('--port', '4949'),
-    sim_handle='capture_driver.sim_handle:CaptureSimHandle',
+    sim_handle='capture_driver.testing.sim_handle:CaptureSimHandle',
     demo=DemoSettings(
         jog_velocity=0.3,
         scan={'pattern': 'snake', 'pan_min': -0.2, 'pan_max': 0.2, 'tilt_min': 0.0,

@@ -20,11 +20,11 @@ SPEC = DriverSpec(
     sim_arguments=('--link', '{link}'),
     node_parameters={'serial_port': '{link}', 'telemetry_rate': 50, 'gps_feed': 'external'},
     launch_sim_arguments=('--link', '/tmp/ucamera_sim_tty'),
-    sim_handle='ucamera_driver.sim_handle:UCameraSimHandle',
+    sim_handle='ucamera_driver.testing.sim_handle:UCameraSimHandle',
     demo=DemoSettings(
         jog_velocity=0.3,
         scan={'pattern': 'sector', 'pan_min': -0.3, 'pan_max': 0.3, 'speed': 0.5},
-        extra_steps=(('zoom', 'ucamera_driver.demo_steps:zoom'), ('home', ''))),
+        extra_steps=(('zoom', 'ucamera_driver.testing.demo_steps:zoom'), ('home', ''))),
     soak=SoakSettings(extra_services={'set_mode': 'gimbal_msgs/srv/SetMode',
                                       'save_configuration': 'std_srvs/srv/Trigger',
                                       'save_ffc': 'std_srvs/srv/Trigger'}),
