@@ -244,7 +244,7 @@ class TurretClient:
         self._opened_before = True
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, args=(self._bus,),
-                                        name="canaero-client-rx", daemon=True)
+                                        name="canaero-reader", daemon=True)
         self._thread.start()
 
     def close(self) -> None:

@@ -218,7 +218,7 @@ class UCameraClient:
         self.last_error = ""
         LOG.info("opened %s", stream.description)
         self._stop.clear()
-        self._thread = threading.Thread(target=self._io_loop, name="ucamera-io", daemon=True)
+        self._thread = threading.Thread(target=self._io_loop, name="ucamera-reader", daemon=True)
         self._thread.start()
         deadline = time.monotonic() + timeout
         last_failure = "no answer"

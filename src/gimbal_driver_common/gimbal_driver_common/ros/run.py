@@ -68,7 +68,7 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
                                daemon=True)
     spinner.start()
     if node.autostart:
-        threading.Thread(target=_autostart, args=(node,), daemon=True).start()
+        threading.Thread(target=_autostart, args=(node,), name='autostart', daemon=True).start()
     while not stop.wait(1.0):
         pass
     node.on_shutdown(None)
