@@ -24,6 +24,7 @@ SPEC = DriverSpec(
                      'actuator_mode': 'auto_brake'},
     launch_sim_arguments=('--link', '/tmp/canaero_turret'),
     sim_handle='canaero_turret_driver.testing.sim_handle:CanaeroSimHandle',
+    refused_requests='canaero_turret_driver.testing.refused_requests:refused_requests',
     demo=DemoSettings(
         jog_velocity=0.3,
         scan={'pattern': 'zigzag', 'pan_min': -0.3, 'pan_max': 0.3, 'tilt_min': 0.0,

@@ -22,6 +22,7 @@ SPEC = DriverSpec(
                      'status_period': 0.2, 'default_speed': 1.0, 'acceleration': 6.0},
     launch_sim_arguments=('--port', '4949'),
     sim_handle='capture_driver.testing.sim_handle:CaptureSimHandle',
+    refused_requests='capture_driver.testing.refused_requests:refused_requests',
     demo=DemoSettings(
         jog_velocity=0.3,
         scan={'pattern': 'snake', 'pan_min': -0.2, 'pan_max': 0.2, 'tilt_min': 0.0,

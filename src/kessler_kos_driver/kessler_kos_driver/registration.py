@@ -72,6 +72,7 @@ SPEC = DriverSpec(
     password='kos-sim-secret',
     launch_sim_arguments=('--port', '5520', '--precalibrated'),
     sim_handle='kessler_kos_driver.testing.sim_handle:KesslerSimHandle',
+    refused_requests='kessler_kos_driver.testing.refused_requests:refused_requests',
     demo=DemoSettings(
         jog_joint='pan', jog_velocity=0.5,
         scan={'pattern': 'sector', 'pan_min': -1.0, 'pan_max': 1.0, 'speed': 1.0},

@@ -21,6 +21,7 @@ SPEC = DriverSpec(
     node_parameters={'serial_port': '{link}', 'telemetry_rate': 50, 'gps_feed': 'external'},
     launch_sim_arguments=('--link', '/tmp/ucamera_sim_tty'),
     sim_handle='ucamera_driver.testing.sim_handle:UCameraSimHandle',
+    refused_requests='ucamera_driver.testing.refused_requests:refused_requests',
     demo=DemoSettings(
         jog_velocity=0.3,
         scan={'pattern': 'sector', 'pan_min': -0.3, 'pan_max': 0.3, 'speed': 0.5},
