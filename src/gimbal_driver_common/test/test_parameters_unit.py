@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import pytest
 import rclpy
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -16,6 +17,7 @@ from gimbal_driver_common.ros.parameters import (
     ParameterError,
     ParameterRegistry,
     declare,
+    take_secret,
 )
 from gimbal_driver_common.testing import DomainLease
 
@@ -217,3 +219,28 @@ def test_start_up_runs_the_same_checks(node) -> None:
     registry.add_check(['low', 'high'], ordered)
     with pytest.raises(ParameterError, match='parameter high/low: bad'):
         registry.check_all()
+
+
+def test_a_secret_is_taken_from_the_overrides_without_being_declared() -> None:
+    with DomainLease() as domain:
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain)
+        node = Node('secret_test', context=context,
+                    parameter_overrides=[Parameter('password', value='s3cret'),
+                                         Parameter('pin', value=1234)])
+        events: list[object] = []
+        node.add_on_set_parameters_callback(
+            lambda parameters: events.extend(parameters) or SetParametersResult(successful=True))
+        try:
+            taken = take_secret(node, 'password')
+            assert taken is not None and taken.value == 's3cret'
+            assert not node.has_parameter('password')
+            assert take_secret(node, 'pin').value == 1234  # the caller checks the type
+            assert take_secret(node, 'absent') is None
+            assert events == []  # the capture refused first: no other callback saw a value
+            value = declare(node, 'password', '********', 'password', read_only=True,
+                            ignore_override=True)
+            assert value == '********'
+        finally:
+            node.destroy_node()
+            rclpy.shutdown(context=context)

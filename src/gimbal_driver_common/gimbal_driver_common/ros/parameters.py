@@ -296,11 +296,14 @@ def declare(
     read_only: bool = False,
     choices: Sequence[str] | None = None,
     registry: ParameterRegistry | None = None,
+    ignore_override: bool = False,
 ) -> Any:
     """Declare ``name`` with a descriptor and return its (checked) value.
 
     ``value_range`` applies to numbers and to every element of numeric arrays;
     ``choices`` restricts strings. Violations raise :class:`ParameterError`.
+    ``ignore_override``: declare ``default`` whatever the command line gave (a secret
+    taken with :func:`take_secret` is declared redacted this way).
     The parameter is registered in ``registry`` (default: the node's
     ``parameter_registry``, if it has one) as read-only, or as needing a
     reconfigure until the driver marks it runtime.
@@ -324,7 +327,8 @@ def declare(
         if is_array and not default:
             value = _declare_empty_array(node, name, descriptor)
         else:
-            value = node.declare_parameter(name, default, descriptor).value
+            value = node.declare_parameter(name, default, descriptor,
+                                           ignore_override=ignore_override).value
     except Exception as exc:  # rclpy raises several types for bad overrides
         raise ParameterError(f'parameter {name!r}: {exc}') from exc
     if is_array and value is None:
@@ -337,3 +341,31 @@ def declare(
     if registry is not None:
         registry.add(spec)
     return value
+
+
+def take_secret(node: Node, name: str) -> Parameter | None:
+    """The value the command line or a parameters file gave ``name``, without declaring it
+    (a declared value goes out on /parameter_events); None when none was given.
+
+    Public rclpy only: ``name`` is declared once under an on-set callback that records the
+    value and refuses it, so nothing is set and nothing is published. The refusal's
+    exception carries the value: it is dropped here, never logged.
+    """
+    taken: list[Parameter] = []
+
+    def capture(parameters: list[Parameter]) -> SetParametersResult:
+        taken.extend(p for p in parameters if p.name == name)
+        return SetParametersResult(successful=not taken, reason='taken, not set')
+
+    node.add_on_set_parameters_callback(capture)
+    try:
+        node.declare_parameter(name, None, ParameterDescriptor(dynamic_typing=True))
+    except Exception:  # noqa: BLE001 - the refusal above; its text holds the secret
+        pass
+    finally:
+        node.remove_on_set_parameters_callback(capture)
+    if node.has_parameter(name):
+        node.undeclare_parameter(name)
+    if not taken or taken[0].type_ == Parameter.Type.NOT_SET:
+        return None
+    return taken[0]
