@@ -9,8 +9,8 @@ parameters, topics, services and actions onto them and builds the messages.
 Threading (ARCHITECTURE.md, "Threads"): ``joint_command`` validates and queues, and the
 controller's command thread sends (newest wins), so the subscription callback never
 waits for a device reply; only a device whose sends wait for no reply is written to
-from the callback itself. Services and actions share a reentrant group on a
-MultiThreadedExecutor, so ``~/stop`` answers while a ``move_to`` waits. Periodic jobs run
+from the callback itself. Services and actions share a reentrant group run by the
+executor's pool (``ros/run.py``), so ``~/stop`` answers while a ``move_to`` waits. Periodic jobs run
 on two plain threads: ``periodic`` (jog watchdog, diagnostics, ~/status) and
 ``sensor_jobs`` (a driver's extra topics that read the device).
 """
