@@ -93,7 +93,7 @@ def loopback_rtt_us(samples: int = 200) -> float:
             while data := conn.recv(64):
                 conn.sendall(data)
 
-    thread = threading.Thread(target=echo, daemon=True)
+    thread = threading.Thread(target=echo, daemon=True, name='loopback-echo')
     thread.start()
     client = socket.create_connection(('127.0.0.1', port))
     client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)

@@ -60,7 +60,7 @@ def main() -> int:
     node = rclpy.create_node('bench_trajectory_publisher')
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    threading.Thread(target=executor.spin, daemon=True).start()
+    threading.Thread(target=executor.spin, daemon=True, name='trajectory-spin').start()
     stand_in = TopicSystemStandIn(node, config)
     states: list[tuple[float, float]] = []
 

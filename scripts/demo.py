@@ -383,7 +383,7 @@ def stop_processes(targets: list[DemoTarget], recorder: ManagedProcess | None,
     Every process gets SIGINT, then SIGTERM, then SIGKILL (ManagedProcess.stop)."""
 
     def stop_all(processes: list[ManagedProcess]) -> None:
-        threads = [threading.Thread(target=p.stop) for p in processes]
+        threads = [threading.Thread(target=p.stop, name=f'stop-{p.name}') for p in processes]
         for thread in threads:
             thread.start()
         for thread in threads:
@@ -479,7 +479,8 @@ def main() -> int:
                     target.failed.append(f'start: no {target.topic("joint_states")} in 60 s')
                     waiting.remove(target)
             stop.wait(0.2)
-        workers = [threading.Thread(target=drive, args=(t, ros, stop), daemon=True)
+        workers = [threading.Thread(target=drive, args=(t, ros, stop), daemon=True,
+                                    name=f'drive-{t.spec.name}')
                    for t in targets if not t.failed]
         for worker in workers:
             worker.start()

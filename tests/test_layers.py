@@ -1,10 +1,9 @@
 """The layers of ARCHITECTURE.md, read from the imports of the code (ast).
 
 - the core's top-level modules are ROS-free (the package docstring says so);
-- runtime code never imports the test scaffolding (``gimbal_driver_common.testing``): only
-  tests, the tools (``scripts/``, ``bench/``) and the tool code a driver registers for them
-  (``<driver>/sim_handle.py`` for the soak, bench and tests; ``<driver>/demo_steps.py`` for
-  the demo) do;
+- runtime code never imports the test scaffolding (``gimbal_driver_common.testing``, or a
+  driver's own ``<pkg>.testing`` that holds its simulator handle and demo steps): every
+  module outside a ``testing`` package is runtime, with no exemption;
 - ARCHITECTURE.md names only what exists: every file it names (``<pkg>`` and the like
   stand for each driver) and every ``module.name`` it cites.
 """
@@ -22,8 +21,6 @@ SRC = ROOT / 'src'
 CORE = SRC / 'gimbal_driver_common' / 'gimbal_driver_common'
 #: top-level modules of ROS client libraries and message packages
 ROS_MODULES = ('rclpy', 'launch', 'launch_ros', 'ament_index_python')
-#: driver modules that only the tools load (through the registry's module:attribute names)
-TOOL_MODULES = ('sim_handle.py', 'demo_steps.py')
 
 
 def imports(path: Path) -> set[str]:
@@ -34,23 +31,36 @@ def imports(path: Path) -> set[str]:
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             found.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            found.add(node.module)
-            found.update(f'{node.module}.{alias.name}' for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and (node.module or node.level):
+            module = node.module or ''
+            if node.level:  # relative: resolved against the file's package under src/<pkg>/
+                package = path.relative_to(SRC).parts[1:-1]
+                base = '.'.join(package[:len(package) - node.level + 1])
+                module = f'{base}.{module}' if module else base
+            found.add(module)
+            found.update(f'{module}.{alias.name}' for alias in node.names)
     return found
 
 
+def packages() -> list[str]:
+    """The Python package of every ament_python package in ``src/``."""
+    return sorted(p.parent.name for p in SRC.glob('*/setup.py'))
+
+
 def runtime_modules() -> list[Path]:
-    """Every installed Python module of every package, except test helpers and the tool
-    code the registry names (simulator handles, demo steps)."""
+    """Every installed Python module of every package outside its ``testing`` subpackage."""
     modules = []
-    for package in sorted(p.parent for p in SRC.glob('*/setup.py')):
-        for path in sorted((package / package.name).rglob('*.py')):
-            relative = path.relative_to(package / package.name)
-            if 'testing' in relative.parts or path.name in TOOL_MODULES:
-                continue
-            modules.append(path)
+    for package in packages():
+        root = SRC / package / package
+        modules.extend(path for path in sorted(root.rglob('*.py'))
+                       if path.relative_to(root).parts[0] != 'testing')
     return modules
+
+
+def is_scaffolding(name: str) -> bool:
+    """Whether a dotted import names a ``testing`` package of ours (or something in one)."""
+    return any(name == f'{package}.testing' or name.startswith(f'{package}.testing.')
+               for package in packages())
 
 
 def test_the_core_top_level_is_ros_free() -> None:
@@ -65,10 +75,22 @@ def test_the_core_top_level_is_ros_free() -> None:
 
 @pytest.mark.parametrize('path', runtime_modules(), ids=lambda p: str(p.relative_to(SRC)))
 def test_runtime_code_never_imports_the_test_scaffolding(path: Path) -> None:
-    scaffolding = sorted(name for name in imports(path)
-                         if name == 'gimbal_driver_common.testing'
-                         or name.startswith('gimbal_driver_common.testing.'))
+    scaffolding = sorted(name for name in imports(path) if is_scaffolding(name))
     assert scaffolding == [], f'{path.relative_to(SRC)} imports {scaffolding}'
+
+
+def test_the_runtime_check_sees_the_drivers_and_their_tool_code() -> None:
+    """The rule above is not vacuous: it covers every driver's package, and the tool code
+    the registry names sits in the ``testing`` packages it leaves out."""
+    covered = {path.relative_to(SRC).parts[0] for path in runtime_modules()}
+    assert covered == set(packages())
+    assert is_scaffolding('capture_driver.testing.sim_handle')
+    assert not is_scaffolding('capture_driver.client')
+    tool_code = [path for package in packages()
+                 for path in (SRC / package / package).rglob('*.py')
+                 if path.name in ('sim_handle.py', 'demo_steps.py')]
+    assert tool_code
+    assert all(path.parent.name == 'testing' for path in tool_code)
 
 
 #: what ARCHITECTURE.md cites from other projects (python-can's test suite)

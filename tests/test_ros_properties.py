@@ -3,12 +3,15 @@
 Hypothesis generates invalid service requests, MoveTo goals and joint_command JointStates
 (each built with at least one defect: unknown or repeated joint, NaN/inf, out-of-limit value,
 mismatched array lengths, empty, unknown scan pattern, unstored preset, ...). They go to one
-running node per driver (the virtual gimbal, Capture, the CANaerospace turret, Kessler kOS and
-U-Camera; one node process per driver for the module, reused across examples), built from
+running node per registered driver (``registry.drivers()``; one node process per driver for
+the module, reused across examples), built from
 that node's own joint names and limits (read back from its parameters). Every service/goal
 must answer success=false with a reason, and the simulator's receive side (the registry's
 in-process ``SimHandle``: the requests its device model handled) must show no command that
 moves, stops or changes the device.
+
+A driver's own services get the requests its ``DriverSpec.refused_requests`` strategy
+draws (in its ``<pkg>/testing/refused_requests.py``).
 
 A joint_command has no answer; the node counts it in its ``joint_command`` diagnostics part
 (``rejected``, by reason; the log says each reason at most once every few seconds), so the
@@ -26,15 +29,14 @@ from hypothesis import strategies as st
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
 from sensor_msgs.msg import JointState
-from std_srvs.srv import Trigger
 
-from gimbal_driver_common.registry import DriverSpec, drivers
+from gimbal_driver_common.registry import DriverSpec, drivers, resolve
 from gimbal_driver_common.testing import DomainLease, ManagedProcess
 from gimbal_driver_common.testing import wait_for as wait_until
 from gimbal_driver_common.testing.ros import RosTestClient
 from gimbal_driver_common.testing.sim_handle import SimHandle, make_handle
 from gimbal_msgs.action import MoveTo
-from gimbal_msgs.srv import ClearPreset, DeviceCommand, GotoPreset, SetMode, SetPreset, StartScan
+from gimbal_msgs.srv import ClearPreset, GotoPreset, SetPreset, StartScan
 
 pytestmark = pytest.mark.ros
 
@@ -268,75 +270,6 @@ def invalid_preset_request(draw, space: JointSpace):
         joint_names=names, positions=positions)
 
 
-# ------------------------------------------------- the drivers' own services: refused requests
-#: names of out-of-scope (weapon) functions: never encoded, so unknown to every command table
-OUT_OF_SCOPE_NAMES = ('WCU_Fire', 'WCU_Trigger', 'WCU_SetSafety', 'WCU_GetShotCounter',
-                      'CapSnap', 'fire', 'arm')
-IDENTIFIER_TEXT = st.text(alphabet='abcdefghijklmnopqrstuvwxyz_0123456789', max_size=14)
-
-
-def device_command(service: str, names: st.SearchStrategy[str]) -> st.SearchStrategy:
-    """DeviceCommand requests with any axis and any argument texts."""
-    return st.builds(lambda name, axis, arguments: (DeviceCommand, service, DeviceCommand.Request(
-        command=name, axis=axis, arguments=arguments)),
-        names, st.integers(0, 255), st.lists(st.text(max_size=12), max_size=3))
-
-
-def unknown(known: set[str]) -> st.SearchStrategy[str]:
-    return st.one_of(st.sampled_from(OUT_OF_SCOPE_NAMES), st.text(max_size=16)).filter(
-        lambda name: name.strip() not in known)
-
-
-def capture_refused() -> st.SearchStrategy:
-    """~/command: unknown names, and every table command gated behind an opt-in parameter
-    (non-volatile writes, reboots, network settings) or one that starts motion without the
-    driver's limit checks."""
-    from capture_driver.device import ALLOWED_MOTION
-    from capture_driver.protocol import COMMANDS, Safety
-
-    gated = sorted(name for name, command in COMMANDS.items()
-                   if command.safety in (Safety.NV_WRITE, Safety.REBOOT, Safety.NETWORK)
-                   or (command.safety is Safety.MOTION and name not in ALLOWED_MOTION))
-    return device_command('command', st.one_of(st.sampled_from(gated), unknown(set(COMMANDS))))
-
-
-def turret_refused() -> st.SearchStrategy:
-    """~/device_command: unknown names, and the node-id change, flash programming and data
-    download (each behind its opt-in); ~/set_actuator_mode with an unknown mode."""
-    from canaero_turret_driver.node import MODE_NAMES
-
-    known = {'identify', 'set_interval', 'upload', 'download', 'set_node_id',
-             'store_configuration'}
-    gated = st.sampled_from(('set_node_id', 'store_configuration', 'download'))
-    mode = IDENTIFIER_TEXT.filter(lambda m: m not in MODE_NAMES)
-    return st.one_of(device_command('device_command', st.one_of(gated, unknown(known))),
-                     mode.map(lambda m: (SetMode, 'set_actuator_mode', SetMode.Request(mode=m))))
-
-
-def kessler_refused() -> st.SearchStrategy:
-    """~/command: unknown names, and SetSoftwareID (behind allow_software_id_write)."""
-    known = {'GetLEDStatus', 'SetLEDStatus', 'GetSoftwareID', 'SetSoftwareID'}
-    return device_command('command', st.one_of(st.just('SetSoftwareID'), unknown(known)))
-
-
-def ucamera_refused() -> st.SearchStrategy:
-    """~/save_configuration and ~/save_ffc (non-volatile writes, behind allow_nv_write);
-    ~/set_mode with an unknown mode."""
-    from ucamera_driver.protocol.packets import MODE_NAMES
-
-    saves = st.sampled_from(('save_configuration', 'save_ffc')).map(
-        lambda name: (Trigger, name, Trigger.Request()))
-    mode = st.text(max_size=16).filter(lambda m: m.strip().lower() not in MODE_NAMES)
-    return st.one_of(saves, mode.map(lambda m: (SetMode, 'set_mode', SetMode.Request(mode=m))))
-
-
-#: driver -> its own services' requests that must be refused (the virtual gimbal has none)
-REFUSED_DRIVER_REQUESTS = {'capture_driver': capture_refused,
-                           'canaero_turret_driver': turret_refused,
-                           'kessler_kos_driver': kessler_refused,
-                           'ucamera_driver': ucamera_refused}
-
-
 # ------------------------------------------------------------------------- properties
 @PROPERTY_SETTINGS
 @given(data=st.data())
@@ -415,9 +348,9 @@ def test_impossible_lifecycle_transitions_are_refused_and_the_node_lives_on(
 def test_refused_driver_requests_answer_with_a_reason_and_send_nothing(rig, data) -> None:
     """Each driver's own services: unknown commands and modes, out-of-scope (weapon) names,
     and commands that can cut off or brick the device without their opt-in parameter."""
-    refused = REFUSED_DRIVER_REQUESTS.get(rig.driver.node_name)
-    if refused is None:
-        pytest.skip(f'{rig.driver.node_name} has no services of its own')
+    if not rig.driver.refused_requests:
+        pytest.skip(f'{rig.driver.name} has no services of its own')
+    refused = resolve(rig.driver.refused_requests)
     srv_type, name, request = data.draw(refused(), label='call')
     mark = rig.device.mark()
     reply = rig.ros.call(srv_type, rig.service(name), request, timeout=20)

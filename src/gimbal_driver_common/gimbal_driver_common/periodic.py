@@ -1,6 +1,6 @@
 """Periodic jobs on one plain thread instead of executor timers.
 
-Every wake-up of rclpy's MultiThreadedExecutor rebuilds its wait set in Python
+Every wake-up of an rclpy executor rebuilds its wait set in Python
 and competes for the GIL with the device thread; measured as CPU and
 joint_states latency. So the jog watchdog, diagnostics and ~/status run here.
 """

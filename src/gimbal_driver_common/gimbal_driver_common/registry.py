@@ -113,6 +113,9 @@ class DriverSpec:
     launch_sim_arguments: tuple[str, ...] = ()
     password: str = ''           # the simulator's device password (never logged)
     sim_handle: str = ''         # 'module:Class' of the in-process simulator handle
+    #: 'module:function' of a hypothesis strategy of (service type, service, request) the
+    #: driver's own services must refuse (the property tests); '' when it has none
+    refused_requests: str = ''
     #: 'module:function' of the driver's read-only probe (gimbal_probe,
     #: gimbal_driver_common.probe): link -> the attempts it makes there; '' = none
     probe: str = ''

@@ -248,6 +248,8 @@ class ControlServer:
 
         class Handler(socketserver.StreamRequestHandler):
             def handle(self) -> None:
+                # socketserver starts one unnamed thread per connection: name it here
+                threading.current_thread().name = f'{outer.name}-control-session'
                 for raw in self.rfile:
                     line = raw.decode('utf-8', 'replace').strip()
                     if line:

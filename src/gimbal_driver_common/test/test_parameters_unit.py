@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import pytest
 import rclpy
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -16,6 +17,7 @@ from gimbal_driver_common.ros.parameters import (
     ParameterError,
     ParameterRegistry,
     declare,
+    take_secret,
 )
 from gimbal_driver_common.testing import DomainLease
 
@@ -101,6 +103,69 @@ def test_a_device_refusal_refuses_the_set_and_nothing_is_applied(rig) -> None:
     assert 'rate' not in applied and node.get_parameter('rate').value == 10.0
 
 
+class HeldValues:
+    """Two device-held values (like a rate and an interval list): logs sends, can refuse."""
+
+    def __init__(self) -> None:
+        self.held = {'interval': 1.0, 'limit': 5}
+        self.log: list[tuple[str, object]] = []
+        self.refused: set[tuple[str, object]] = set()
+
+    def sender(self, name: str):
+        def send(value: object) -> None:
+            self.log.append((name, value))
+            if (name, value) in self.refused:
+                raise RuntimeError(f'NACK {name}')
+            self.held[name] = value
+        return send
+
+
+@pytest.fixture
+def two_held(node):
+    registry = ParameterRegistry(node)
+    device = HeldValues()
+    applied: dict[str, object] = {}
+    for name, value in device.held.items():
+        declare(node, name, value, name, registry=registry)
+        registry.make_runtime(name, lambda v, n=name: applied.__setitem__(n, v),
+                              send=device.sender(name))
+    declare(node, 'mode', 'a', 'mode', choices=('a', 'b'), registry=registry)
+    registry.make_runtime('mode', lambda v: applied.__setitem__('mode', v))
+    registry.attach()
+    return node, device, applied
+
+
+def test_a_refused_second_value_puts_the_first_back_on_the_device(two_held) -> None:
+    node, device, applied = two_held
+    device.refused.add(('limit', 9))
+    result = node.set_parameters_atomically([Parameter('interval', value=2.0),
+                                             Parameter('limit', value=9)])
+    assert not result.successful
+    assert "'limit'" in result.reason and 'NACK limit' in result.reason
+    assert device.log == [('interval', 2.0), ('limit', 9), ('interval', 1.0)]
+    assert device.held == {'interval': 1.0, 'limit': 5}
+    assert applied == {}
+    assert node.get_parameter('interval').value == 1.0 and node.get_parameter('limit').value == 5
+
+
+def test_a_set_is_checked_whole_before_any_value_is_sent(two_held) -> None:
+    node, device, applied = two_held
+    result = node.set_parameters_atomically([Parameter('interval', value=2.0),
+                                             Parameter('limit', value=9),
+                                             Parameter('mode', value='c')])
+    assert not result.successful and "is not one of ['a', 'b']" in result.reason
+    assert device.log == [] and applied == {}
+
+
+def test_a_set_the_device_takes_whole_is_sent_and_applied(two_held) -> None:
+    node, device, applied = two_held
+    result = node.set_parameters_atomically([Parameter('interval', value=2.0),
+                                             Parameter('limit', value=9)])
+    assert result.successful, result.reason
+    assert device.log == [('interval', 2.0), ('limit', 9)]
+    assert applied == {'interval': 2.0, 'limit': 9}
+
+
 def test_busy_refuses_before_anything_is_sent(rig) -> None:
     node, _, applied, device, busy = rig
     busy.append('pan is moving')
@@ -154,3 +219,28 @@ def test_start_up_runs_the_same_checks(node) -> None:
     registry.add_check(['low', 'high'], ordered)
     with pytest.raises(ParameterError, match='parameter high/low: bad'):
         registry.check_all()
+
+
+def test_a_secret_is_taken_from_the_overrides_without_being_declared() -> None:
+    with DomainLease() as domain:
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain)
+        node = Node('secret_test', context=context,
+                    parameter_overrides=[Parameter('password', value='s3cret'),
+                                         Parameter('pin', value=1234)])
+        events: list[object] = []
+        node.add_on_set_parameters_callback(
+            lambda parameters: events.extend(parameters) or SetParametersResult(successful=True))
+        try:
+            taken = take_secret(node, 'password')
+            assert taken is not None and taken.value == 's3cret'
+            assert not node.has_parameter('password')
+            assert take_secret(node, 'pin').value == 1234  # the caller checks the type
+            assert take_secret(node, 'absent') is None
+            assert events == []  # the capture refused first: no other callback saw a value
+            value = declare(node, 'password', '********', 'password', read_only=True,
+                            ignore_override=True)
+            assert value == '********'
+        finally:
+            node.destroy_node()
+            rclpy.shutdown(context=context)

@@ -33,7 +33,7 @@ from std_srvs.srv import Trigger
 
 from gimbal_driver_common.joint_command import CommandError
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
-from gimbal_driver_common.ros.parameters import ParameterError
+from gimbal_driver_common.ros.parameters import ParameterError, take_secret
 from gimbal_driver_common.ros.run import run_driver
 from gimbal_msgs.msg import PlaybackStatus as PlaybackStatusMsg
 from gimbal_msgs.srv import Calibrate, DeviceCommand, LoadTrajectory
@@ -223,8 +223,7 @@ class KosDriverNode(GimbalDriverNode):
 
     def _declare_password(self) -> str:
         """Take the password without ever letting its value into a parameter event."""
-        overrides = getattr(self, '_parameter_overrides', {})
-        given = overrides.pop('password', None)
+        given = take_secret(self, 'password')
         password = ''
         if given is not None:
             if given.type_ != Parameter.Type.STRING:
@@ -241,7 +240,7 @@ class KosDriverNode(GimbalDriverNode):
                                      f'{password_file!r} ({type(exc).__name__})') from None
         self.declare_param('password', REDACTED if password else '',
                            'device password (write-only: always shown redacted)',
-                           read_only=True)
+                           read_only=True, ignore_override=True)
         return password
 
     # ------------------------------------------------- run-time parameters

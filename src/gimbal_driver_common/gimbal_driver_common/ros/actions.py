@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 from lifecycle_msgs.srv import ChangeState
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode
 
 from gimbal_driver_common.errors import DeviceRefused, GimbalError
@@ -87,24 +87,28 @@ class MotionActions:
         return result
 
 
-def guard_change_state_service(node: LifecycleNode) -> None:
+def guard_change_state_service(node: LifecycleNode, state: Callable[[], str]) -> None:
     """Answer an impossible lifecycle transition with success=false instead of dying.
 
-    rclpy's ``~/change_state`` lets the RCLError of a transition the current state
-    lacks escape into the executor, which ends the spin (found by `make soak`).
+    rclpy's ``~/change_state`` lets the error of a transition the current state lacks
+    escape into the executor, which ends the spin (found by `make soak`). The service is
+    found among the node's public ``services`` (the one of type ChangeState); ``state()``
+    names the current state for the warning.
     """
-    service = getattr(node, '_service_change_state', None)
-    if service is None:
+    for service in node.services:
+        if service.srv_type is ChangeState:
+            break
+    else:
         return
     handler = service.callback
 
     def guarded(request: ChangeState.Request, response: ChangeState.Response):
         try:
             return handler(request, response)
-        except _rclpy.RCLError as exc:
+        except Exception as exc:  # noqa: BLE001 - rclpy's RCLError is not public; any refusal
             node.get_logger().warning(
                 f'lifecycle transition {request.transition.label or request.transition.id!r}'
-                f' refused in state {node._state_machine.current_state[1]!r}: {exc}')
+                f' refused in state {state()!r}: {exc}')
             response.success = False
             return response
 

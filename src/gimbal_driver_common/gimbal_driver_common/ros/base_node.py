@@ -9,8 +9,8 @@ parameters, topics, services and actions onto them and builds the messages.
 Threading (ARCHITECTURE.md, "Threads"): ``joint_command`` validates and queues, and the
 controller's command thread sends (newest wins), so the subscription callback never
 waits for a device reply; only a device whose sends wait for no reply is written to
-from the callback itself. Services and actions share a reentrant group on a
-MultiThreadedExecutor, so ``~/stop`` answers while a ``move_to`` waits. Periodic jobs run
+from the callback itself. Services and actions share a reentrant group run by the
+executor's pool (``ros/run.py``), so ``~/stop`` answers while a ``move_to`` waits. Periodic jobs run
 on two plain threads: ``periodic`` (jog watchdog, diagnostics, ~/status) and
 ``sensor_jobs`` (a driver's extra topics that read the device).
 """
@@ -86,6 +86,9 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         #: across configure/cleanup
         self.rejections = CommandRejections(self.get_logger())
         self._active = False
+        #: the lifecycle state this node's transitions left it in (rclpy keeps its own
+        #: state machine private): unconfigured, inactive, active or finalized
+        self.lifecycle_state = 'unconfigured'
         self._joint_rate = FrequencyMonitor(self.publish_rate)
         self.service_group = ReentrantCallbackGroup()
         self._create_ros_interfaces()
@@ -273,7 +276,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         return super().create_publisher(*args, event_callbacks=event_callbacks, **kwargs)
 
     def _create_ros_interfaces(self) -> None:
-        guard_change_state_service(self)
+        guard_change_state_service(self, lambda: self.lifecycle_state)
         state_qos = QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
         self._joint_pub = self.create_publisher(JointState, 'joint_states', state_qos)
@@ -327,6 +330,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
             if self.controller is not None:
                 self.controller.close()
             return TransitionCallbackReturn.FAILURE
+        self.lifecycle_state = 'inactive'
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -334,27 +338,33 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         if self.controller:
             self.controller.activate()
         self.get_logger().info('active: publishing joint_states and accepting commands')
+        self.lifecycle_state = 'active'
         return super().on_activate(state)
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._active = False
         if self.controller:
             self.controller.deactivate()
+        self.lifecycle_state = 'inactive'
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
         if self.controller:
             self.controller.close()
+        self.lifecycle_state = 'unconfigured'
         return TransitionCallbackReturn.SUCCESS
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._active = False
         if self.controller:
             self.controller.shutdown()
+        self.lifecycle_state = 'finalized'
         return TransitionCallbackReturn.SUCCESS
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
-        return self.on_shutdown(state)
+        result = self.on_shutdown(state)
+        self.lifecycle_state = 'unconfigured'  # a handled error leads back to unconfigured
+        return result
 
     # ---------------------------------------------------------- topics
     def _publish_joint_state(self, sample: JointSample) -> None:

@@ -13,6 +13,10 @@ One validation path: :func:`check_value` (element ranges, choices) and the
 registered cross-parameter checks run both at start-up and for every
 ``ros2 param set``; rclpy's descriptor checks (type, scalar range, read-only)
 apply to both as well.
+
+A set is all or nothing: every check runs before any value is sent to the device, and
+when the device refuses one value of a set, the values of the same set it had already
+taken are sent back to their old values (:func:`send_all_or_nothing`).
 """
 
 from __future__ import annotations
@@ -77,7 +81,8 @@ class ParameterSpec:
     change: Change = Change.RECONFIGURE
     #: stores the new value in the node (runs after rclpy accepted it; must not fail)
     apply: Callable[[Any], None] | None = None
-    #: sends the new value to the device; runs last in validation, an exception refuses
+    #: sends a value to the device; runs after every check, an exception refuses the set
+    #: (and the set's values the device already took are sent again with their old values)
     send: Callable[[Any], None] | None = None
     #: why the value cannot change right now (e.g. an axis is moving), or None
     busy: Callable[[], str | None] | None = None
@@ -106,6 +111,45 @@ def check_value(spec: ParameterSpec, value: Any) -> Any:
             f'parameter {spec.name!r}: {value!r} is not one of {list(spec.choices)}'
         )
     return value
+
+
+@dataclass(frozen=True)
+class DeviceChange:
+    """One device-held value of a parameter set: how to send it, the new and the old value."""
+
+    name: str
+    send: Callable[[Any], None]
+    value: Any
+    previous: Any
+
+
+def send_all_or_nothing(changes: Sequence[DeviceChange]) -> str | None:
+    """Send each change in turn; None when the device took them all.
+
+    When the device refuses one, the changes it had already taken get their previous
+    values back, in reverse order, and the reason for the refusal is returned (naming any
+    value that could not be put back, so the operator knows what the device now holds).
+    """
+    taken: list[DeviceChange] = []
+    for change in changes:
+        try:
+            change.send(change.value)
+        except Exception as exc:  # noqa: BLE001 - the device's refusal becomes the reason
+            reason = f'parameter {change.name!r}: the device refused {change.value!r}: {exc}'
+            break
+        taken.append(change)
+    else:
+        return None
+    not_restored = []
+    for change in reversed(taken):
+        try:
+            change.send(change.previous)
+        except Exception as exc:  # noqa: BLE001 - reported with the refusal
+            not_restored.append(f'{change.name!r} may still hold {change.value!r} '
+                                f'(putting back {change.previous!r} failed: {exc})')
+    if not_restored:
+        reason += '; ' + '; '.join(not_restored)
+    return reason
 
 
 @dataclass
@@ -175,7 +219,10 @@ class ParameterRegistry:
             raise ParameterError(f'parameter {"/".join(sorted(group.names))}: {exc}') from exc
 
     def refusal(self, parameters: Sequence[Parameter]) -> str | None:
-        """Why this set must be refused, or None; sends device-held values when it is not."""
+        """Why this set must be refused, or None; sends device-held values when it is not.
+
+        Every check runs first; only then are the device-held values sent, all or nothing.
+        """
         proposed = {p.name: plain_value(p.value) for p in parameters}
         touched = [self.specs[p.name] for p in parameters if p.name in self.specs]
         for spec in touched:
@@ -197,14 +244,9 @@ class ParameterRegistry:
             reason = spec.busy() if spec.busy else None
             if reason:
                 return f'parameter {spec.name!r} cannot change now: {reason}'
-        for spec in touched:
-            if spec.send is None:
-                continue
-            try:
-                spec.send(proposed[spec.name])
-            except Exception as exc:  # noqa: BLE001 - the device's refusal becomes the reason
-                return f'parameter {spec.name!r}: the device refused {proposed[spec.name]!r}: {exc}'
-        return None
+        return send_all_or_nothing([
+            DeviceChange(spec.name, spec.send, proposed[spec.name], self.current(spec.name))
+            for spec in touched if spec.send is not None])
 
     def _on_set(self, parameters: list[Parameter]) -> SetParametersResult:
         reason = self.refusal(parameters)
@@ -254,11 +296,14 @@ def declare(
     read_only: bool = False,
     choices: Sequence[str] | None = None,
     registry: ParameterRegistry | None = None,
+    ignore_override: bool = False,
 ) -> Any:
     """Declare ``name`` with a descriptor and return its (checked) value.
 
     ``value_range`` applies to numbers and to every element of numeric arrays;
     ``choices`` restricts strings. Violations raise :class:`ParameterError`.
+    ``ignore_override``: declare ``default`` whatever the command line gave (a secret
+    taken with :func:`take_secret` is declared redacted this way).
     The parameter is registered in ``registry`` (default: the node's
     ``parameter_registry``, if it has one) as read-only, or as needing a
     reconfigure until the driver marks it runtime.
@@ -282,7 +327,8 @@ def declare(
         if is_array and not default:
             value = _declare_empty_array(node, name, descriptor)
         else:
-            value = node.declare_parameter(name, default, descriptor).value
+            value = node.declare_parameter(name, default, descriptor,
+                                           ignore_override=ignore_override).value
     except Exception as exc:  # rclpy raises several types for bad overrides
         raise ParameterError(f'parameter {name!r}: {exc}') from exc
     if is_array and value is None:
@@ -295,3 +341,31 @@ def declare(
     if registry is not None:
         registry.add(spec)
     return value
+
+
+def take_secret(node: Node, name: str) -> Parameter | None:
+    """The value the command line or a parameters file gave ``name``, without declaring it
+    (a declared value goes out on /parameter_events); None when none was given.
+
+    Public rclpy only: ``name`` is declared once under an on-set callback that records the
+    value and refuses it, so nothing is set and nothing is published. The refusal's
+    exception carries the value: it is dropped here, never logged.
+    """
+    taken: list[Parameter] = []
+
+    def capture(parameters: list[Parameter]) -> SetParametersResult:
+        taken.extend(p for p in parameters if p.name == name)
+        return SetParametersResult(successful=not taken, reason='taken, not set')
+
+    node.add_on_set_parameters_callback(capture)
+    try:
+        node.declare_parameter(name, None, ParameterDescriptor(dynamic_typing=True))
+    except Exception:  # noqa: BLE001 - the refusal above; its text holds the secret
+        pass
+    finally:
+        node.remove_on_set_parameters_callback(capture)
+    if node.has_parameter(name):
+        node.undeclare_parameter(name)
+    if not taken or taken[0].type_ == Parameter.Type.NOT_SET:
+        return None
+    return taken[0]

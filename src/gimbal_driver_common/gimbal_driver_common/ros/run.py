@@ -6,12 +6,15 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import TYPE_CHECKING
 
 import rclpy
+from rclpy.context import Context
 from rclpy.executors import (
     ConditionReachedException,
+    Executor,
     ExternalShutdownException,
     MultiThreadedExecutor,
     ShutdownException,
@@ -19,6 +22,7 @@ from rclpy.executors import (
 )
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future, Task
 
 from gimbal_driver_common.ros.parameters import ParameterError
 
@@ -27,6 +31,8 @@ if TYPE_CHECKING:
 
 #: Python thread switch interval in driver processes (default 5 ms)
 GIL_SWITCH_INTERVAL_S = 0.001
+#: names of the executor's pool threads (``executor-pool_0`` ...; ARCHITECTURE.md)
+POOL_THREAD_PREFIX = 'executor-pool'
 
 
 def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = None) -> int:
@@ -62,7 +68,7 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
                                daemon=True)
     spinner.start()
     if node.autostart:
-        threading.Thread(target=_autostart, args=(node,), daemon=True).start()
+        threading.Thread(target=_autostart, args=(node,), name='autostart', daemon=True).start()
     while not stop.wait(1.0):
         pass
     node.on_shutdown(None)
@@ -76,7 +82,7 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
     return 0
 
 
-def _spin(executor: MultiThreadedExecutor, stop: threading.Event) -> None:
+def _spin(executor: Executor, stop: threading.Event) -> None:
     try:
         executor.spin()
     except (ExternalShutdownException, KeyboardInterrupt):
@@ -89,7 +95,7 @@ def _autostart(node: GimbalDriverNode) -> None:
     """Configure (retrying while the device is absent) and activate."""
     logger = node.get_logger()
     while rclpy.ok():
-        state = node._state_machine.current_state[1]
+        state = node.lifecycle_state
         if state == 'unconfigured':
             if node.trigger_configure() == TransitionCallbackReturn.SUCCESS:
                 continue
@@ -102,19 +108,35 @@ def _autostart(node: GimbalDriverNode) -> None:
             return
 
 
-class InlineGroupExecutor(MultiThreadedExecutor):
-    """A MultiThreadedExecutor that runs the callbacks of an *inline* callback group in its
-    own thread instead of handing them to the pool.
+class InlineGroupExecutor(Executor):
+    """An executor that runs the callbacks of an *inline* callback group in its spinning
+    thread and every other callback in a pool, like ``MultiThreadedExecutor``.
 
-    Measured (bench, node trace): the hand-off to the pool thread is the whole of the
-    command path's excess over a bare rclpy subscriber (publish -> callback p50 1.7 ms
-    against 0.65 ms single-threaded). ``joint_command``'s callback never waits for a device reply
-    (it validates and queues for the controller's command thread; only a device whose
-    sends wait for no reply is written to from here), so it runs inline; services and
-    actions still run in the pool, so ``~/stop`` answers while a ``move_to`` waits.
+    Written on rclpy's public extension point (``spin_once`` over
+    ``wait_for_ready_callbacks``, as :class:`rclpy.executors.Executor` asks of a custom
+    executor) with a pool of its own. Measured (bench, node trace): the hand-off to a
+    pool thread is the whole of the command path's excess over a bare rclpy subscriber
+    (publish -> callback p50 1.7 ms against 0.65 ms single-threaded). ``joint_command``'s
+    callback never waits for a device reply, so it runs inline; services and actions run
+    in the pool, so ``~/stop`` answers while a ``move_to`` waits.
     """
 
-    def _spin_once_impl(self, timeout_sec=None, wait_condition=lambda: False) -> None:
+    def __init__(self, num_threads: int = 4, *, context: Context | None = None) -> None:
+        super().__init__(context=context)
+        self.pool = ThreadPoolExecutor(num_threads, thread_name_prefix=POOL_THREAD_PREFIX)
+        self.running: list[Task] = []
+
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        self.run_one(timeout_sec)
+
+    def spin_once_until_future_complete(self, future: Future,
+                                        timeout_sec: float | None = None) -> None:
+        future.add_done_callback(lambda _: self.wake())
+        self.run_one(timeout_sec, future.done)
+
+    def run_one(self, timeout_sec: float | None = None,
+                wait_condition: Callable[[], bool] = lambda: False) -> None:
+        """Wait for one ready callback and run it inline or hand it to the pool."""
         try:
             handler, entity, _ = self.wait_for_ready_callbacks(timeout_sec, None, wait_condition)
         except (ExternalShutdownException, ShutdownException, TimeoutException,
@@ -124,9 +146,13 @@ class InlineGroupExecutor(MultiThreadedExecutor):
             handler()
             handler.result()  # raise what the callback raised, as the pool path does
             return
-        self._executor.submit(handler)
-        self._futures.append(handler)
-        for future in self._futures[:]:
-            if future.done():
-                self._futures.remove(future)
-                future.result()
+        self.pool.submit(handler)
+        self.running.append(handler)
+        for task in [task for task in self.running if task.done()]:
+            self.running.remove(task)
+            task.result()
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        done = super().shutdown(timeout_sec)
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        return done

@@ -82,7 +82,7 @@ class RosTestClient:
         # the GIL while a worker has not yet taken a ready message, delaying messages.
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread = threading.Thread(target=self._spin, daemon=True, name=f'{name}-spin')
         self._thread.start()
         self._messages: dict[str, list[Any]] = {}
         self._subscriptions: dict[str, Any] = {}

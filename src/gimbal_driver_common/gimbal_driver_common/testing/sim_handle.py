@@ -6,7 +6,7 @@ simulator in their own process so they reach its device model and fault API dire
 node runs as a separate process connected by :meth:`SimHandle.node_parameters`. Each driver
 package subclasses :class:`SimHandle` and names the subclass in its registry spec
 (``DriverSpec.sim_handle``); the reference virtual gimbal's is
-``virtual_gimbal_driver.sim_handle.VirtualGimbalSim``.
+``virtual_gimbal_driver.testing.sim_handle.VirtualGimbalSim``.
 :func:`make_handle` builds the one a spec names.
 
 The receive side is a log of every request the device model handled (:meth:`SimHandle.requests`),

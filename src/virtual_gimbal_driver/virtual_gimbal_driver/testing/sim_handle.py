@@ -10,8 +10,8 @@ from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.testing.sim_handle import SimHandle
 
-from .protocol import MOTION, READS, verb
-from .sim import make_control, make_server
+from ..protocol import MOTION, READS, verb
+from ..sim import make_control, make_server
 
 
 class VirtualGimbalSim(SimHandle):

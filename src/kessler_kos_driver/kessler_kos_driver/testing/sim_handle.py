@@ -11,7 +11,7 @@ from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.testing.sim_handle import SimHandle
 
-from .registration import SIM_RIG
+from ..registration import SIM_RIG
 
 
 class KesslerSimHandle(SimHandle):
