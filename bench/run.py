@@ -143,6 +143,12 @@ def markdown(results: dict) -> str:
                         f'{data.get("publish_rate")} Hz | {data["joint_states_hz"]} Hz | rclpy '
                         f'{ref["achieved_hz"]} Hz at {ref["rate_hz"]:g} Hz | '
                         f'{data.get("rate_target", "")} |')
+        nagle = data.get('nagle')
+        if nagle and 'joint_states_hz' in nagle:
+            rows.append(f'| {name} | joint_states rate against a controller with Nagle on '
+                        f'(each reply its own segment) at publish_rate {nagle["publish_rate"]:g}'
+                        f' Hz | {nagle["joint_states_hz"]} Hz '
+                        f'({nagle["fraction_of_publish_rate"]:.0%}) | | {nagle["target"]} |')
         if 'cpu_percent' in data:
             rows.append(cpu_row(name, data))
         if 'tracking' in data:
