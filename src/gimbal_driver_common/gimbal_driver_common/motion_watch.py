@@ -64,6 +64,10 @@ class MotionWatch:
         self._log = log
         self._lock = threading.Lock()
         self._episodes: dict[str, Episode] = {}
+        #: joints whose jog has shown motion, with its direction: the same jog sent again
+        #: (a controller streams it to feed the dead-man watchdog) is not a new episode, so
+        #: an axis that jogged into its limit and rests there is not reported
+        self._running_jogs: dict[str, float] = {}
         self._latest: JointSample | None = None
 
     # ------------------------------------------------------------ commands
@@ -72,15 +76,19 @@ class MotionWatch:
         unmet command (a command stream to an axis that ignores it is still reported)."""
         with self._lock:
             for joint, target in targets.items():
+                self._running_jogs.pop(joint, None)
                 self._start(joint, target, 0.0)
 
     def jogged(self, velocities: dict[str, float]) -> None:
         """Jog velocities were sent; a zero velocity is a stop (withdraws the joint)."""
         with self._lock:
             for joint, velocity in velocities.items():
+                direction = math.copysign(1.0, velocity)
                 if velocity == 0.0:
                     self._episodes.pop(joint, None)
-                else:
+                    self._running_jogs.pop(joint, None)
+                elif self._running_jogs.get(joint) != direction:
+                    self._running_jogs.pop(joint, None)
                     self._start(joint, None, velocity)
 
     def withdraw(self, joints: Iterable[str] | None = None) -> None:
@@ -88,8 +96,10 @@ class MotionWatch:
         with self._lock:
             if joints is None:
                 self._episodes.clear()
+                self._running_jogs.clear()
             for joint in joints or ():
                 self._episodes.pop(joint, None)
+                self._running_jogs.pop(joint, None)
 
     def _start(self, joint: str, target: float | None, velocity: float) -> None:
         position = self._position(joint)
@@ -133,6 +143,8 @@ class MotionWatch:
                 moved = abs(position - episode.start) > MOTION_EPSILON
                 if reached or moved:
                     del self._episodes[joint]
+                    if moved and episode.target is None:
+                        self._running_jogs[joint] = math.copysign(1.0, episode.velocity)
                 elif timeout > 0 and now - episode.since >= timeout and not episode.stalled:
                     episode.stalled = True
                     newly.append(episode.describe(joint, timeout))

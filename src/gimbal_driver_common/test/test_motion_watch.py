@@ -160,6 +160,27 @@ def test_an_ignored_jog_is_reported_and_a_stop_clears_it(rig) -> None:
     wait_for(lambda: not ctl.motion_watch.stalled(), 5.0, 'the zero jog to clear it')
 
 
+def test_a_jog_streamed_into_its_limit_is_not_reported(rig) -> None:
+    """A controller feeds the dead-man watchdog with the same jog; the axis runs into its
+    limit and rests there: that is the jog carried out, not a stall."""
+    ctl, device, lines = rig
+    device.axes['pan'].max_position = 0.05   # the device's own end stop, near by
+    deadline = time.monotonic() + 0.2
+    while time.monotonic() < deadline:  # until it has moved
+        ctl.command(['pan'], [], [0.5])
+        time.sleep(0.01)
+    wait_for(lambda: device.axes['pan'].position >= 0.05, 5.0, 'pan at its end stop')
+    end = time.monotonic() + 6 * TIMEOUT
+    while time.monotonic() < end:   # the jog goes on at the limit for several timeouts
+        ctl.command(['pan'], [], [0.5])
+        time.sleep(0.01)
+    assert ctl.motion_watch.stalled() == {}
+    assert lines.stalls() == []
+    ctl.command(['pan'], [], [-0.5])   # the other way is a new jog, watched again
+    wait_for(lambda: device.axes['pan'].position < 0.04, 5.0, 'pan back off the stop')
+    assert ctl.motion_watch.stalled() == {}
+
+
 def test_moves_and_jogs_that_move_are_never_reported(lines) -> None:
     log, handler = lines
     # slow: 0.05 rad/s at 0.1 rad/s^2 moves far less than the goal tolerance per timeout
