@@ -149,7 +149,7 @@ class Motion:
         self.preempt()
         ctl.watchdog.cancel(list(targets))
         message = ctl.call(lambda: pointing.point_at(target))
-        ctl.commanded_targets.update(targets)
+        ctl.record_targets(targets)
         return message
 
     def _scan_stop_current(self) -> None:
@@ -160,7 +160,7 @@ class Motion:
         (which then ends "stopped"), so waiting goals never pile up; a device scan ends
         with the device's new move."""
         self._scan_stop.set()
-        self.controller.motion_generation += 1
+        self.controller.bump_motion_generation()
 
     # ---------------------------------------------------------------- homing
     def home(
@@ -301,7 +301,7 @@ class Motion:
             ctl.require(ctl.config.joint_names)
             self.preempt()
             message = ctl.call(lambda: device.goto(index, speed))
-            ctl.commanded_targets.update(device.target(index) or {})
+            ctl.record_targets(device.target(index) or {})
             return message
         preset = self.store.get(index)
         names = [n for n in preset.positions if n in ctl.config.limits]
