@@ -30,6 +30,7 @@ from gimbal_driver_common.device import (
     Geolocation,
     JointSample,
     Moves,
+    PostedWrite,
 )
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
 from gimbal_driver_common.geodesy import (
@@ -225,8 +226,11 @@ class TurretDevice(Device):
 
     #: positions arrive as NOD broadcasts: joint_states follow each broadcast cycle
     streamed = True
-    #: set-points are single CAN frames; the turret answers none of them
-    sends_without_reply = True
+
+    def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite:
+        """Set-points are single CAN frames; the turret answers none of them.
+        Written from the caller's thread, with no answer to settle."""
+        return self.write_now(moves, jogs)
 
     def __init__(
         self, client: TurretClient, settings: TurretSettings,

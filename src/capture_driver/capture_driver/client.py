@@ -843,15 +843,17 @@ class CaptureClient:
         finally:
             self._lock.release()
 
-    def finish_posted(self) -> None:
+    def finish_posted(self) -> bool:
         """Read the ACKs of the last :meth:`post_moves` (if nobody has yet) and arm the next
-        TUM; raises the device's refusal. A post that lost an ACK is sent again with
-        :meth:`move_absolute`, unless another setter (a stop, a newer move) went out since:
-        a stale target is never sent after it."""
+        TUM; raises the device's refusal. False: an ACK was lost (or a NACK says the packet
+        was not executed) and no other setter (a stop, a newer move) went out since, so the
+        caller sends the moves again with :meth:`move_absolute` (the axes' set-up is
+        forgotten: the whole 7.1 sequence goes out); a stale target is never sent after a
+        newer setter. True: nothing to send again."""
         with self._lock:
             posted = self._posted
             if posted is None:
-                return
+                return True
             try:
                 if not posted.settled:  # a link that closed settled it (_close_locked)
                     self._settle_posted(self._stream)
@@ -863,14 +865,16 @@ class CaptureClient:
                     self._setups.pop(axis, None)
                 raise posted.error
             if superseded:
-                return
-            for axis, (position, speed, acceleration) in posted.moves.items():
-                if posted.resend:
+                return True
+            if posted.resend:
+                for axis in posted.moves:
                     self._setups.pop(axis, None)
-                    self.move_absolute(axis, position, speed, acceleration)
-                elif self._setups.get(axis) == ('absolute', acceleration, abs(speed), False):
+                return False
+            for axis, (_, speed, acceleration) in posted.moves.items():
+                if self._setups.get(axis) == ('absolute', acceleration, abs(speed), False):
                     self._setups[axis] = ('absolute', acceleration, abs(speed),
                                           self._arm_tum(axis))
+            return True
 
     def _settle_posted(self, stream: ByteStream | None) -> None:
         """Read the ACK of each posted frame, in order (under the lock); the stream is

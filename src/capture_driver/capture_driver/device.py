@@ -35,6 +35,7 @@ from gimbal_driver_common.device import (
     Homing,
     JointSample,
     Moves,
+    PostedWrite,
     StatusReport,
     TargetPointing,
 )
@@ -280,10 +281,6 @@ class CaptureDevice(Device):
             settings.open_stream, group=settings.group_id, timeout=settings.request_timeout,
             expect_greeting=settings.transport == 'tcp',
             keepalive_period=settings.keepalive_period, batch_reads=settings.batch_reads)
-        #: called with the joint targets of motions the device runs to a known pose
-        #: (device presets, go-to-target, levelling): the node points it at
-        #: ``controller.commanded_targets.update`` (AxisState.target_position)
-        self.on_targets: Callable[[dict[str, float]], None] = lambda targets: None
         self._status: dict[str, Any] = {}
         self._status_lock = threading.Lock()
         self._next_status = 0.0
@@ -481,17 +478,22 @@ class CaptureDevice(Device):
                                    acceleration)
                 for joint, (target, speed) in moves.items()}
 
-    def post_move(self, moves: Moves) -> bool:
+    def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite | None:
         """A stream move written at once when the axes are already set up for it (the
-        client's ``post_moves``: SendPosition + MOT_Update, ACKs read later), so the
-        joint_command callback writes it without waiting; not while a device program runs
-        (a move ends it first, with requests that wait)."""
-        if self.device_scanning or self.preset_looping or self.target_looping:
-            return False
-        return self.client.post_moves(self._axis_moves(moves))
+        client's ``post_moves``: SendPosition + MOT_Update per axis, two ACKs each, read
+        by :meth:`settle`), so the joint_command callback writes it without waiting; not
+        a jog, nor while a device program runs (a move ends it first, with requests that
+        wait)."""
+        if jogs or not moves or self.device_scanning or self.preset_looping \
+                or self.target_looping:
+            return None
+        axis_moves = self._axis_moves(moves)
+        if not self.client.post_moves(axis_moves):
+            return None
+        return PostedWrite(dict(moves), {}, replies=2 * len(axis_moves))
 
-    def finish_move(self) -> None:
-        self.client.finish_posted()
+    def settle(self, posted: PostedWrite) -> bool:
+        return self.client.finish_posted()
 
     def jog(self, velocities: dict[str, float]) -> None:
         with self.client.exclusive():
@@ -761,7 +763,7 @@ class CaptureDevice(Device):
         self.check_pose(pose, f'the pose for lat {latitude:.6f} lon {longitude:.6f}')
         self.leave_device_programs()
         self.client.goto_lla(self.settings.gps_target_slot, target)
-        self.on_targets(pose)
+        self.report_targets(pose)
         return pose
 
     def start_target_loop(self) -> str:
@@ -821,7 +823,7 @@ class CaptureDevice(Device):
         self.leave_device_programs()
         for joint in joints:
             self.client.run('IMU_Leveling', self.axis(joint))
-        self.on_targets(targets)
+        self.report_targets(targets)
 
     def start_gyro_drift(self) -> None:
         """IMU_GyroDriftCompensation on ``gyro_drift_sensor``."""
@@ -985,7 +987,7 @@ class CapturePresets(DevicePresets):
                 client.run('CFG_SetGeneralSpd', device.axis(joint), math.degrees(speed))
         device.leave_device_programs()
         client.run('PRST_GoToPreset', index)
-        device.on_targets(self.positions(record))
+        device.report_targets(self.positions(record))
         return f'moving to device preset {index} ({record.name or "unnamed"})'
 
     def list(self) -> list[tuple[int, str, dict[str, float]]]:

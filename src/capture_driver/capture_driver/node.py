@@ -239,8 +239,8 @@ class CaptureDriverNode(GimbalDriverNode):
         return CaptureDevice(self.settings)  # the controller attaches config and logger
 
     def device_ready(self, device: Device) -> None:
-        """Device-run motions report their targets to ~/status; the sensor topics start."""
-        device.on_targets = self.controller.commanded_targets.update
+        """The sensor topics start (device-run motions report their targets through the
+        device contract, ``Device.report_targets``)."""
         for job, rate_name in self._sensor_jobs():
             self.sensor_jobs.remove(job)  # a reconfigure adds them again
             self.sensor_jobs.add(self._job_period(rate_name), job)

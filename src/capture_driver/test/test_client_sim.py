@@ -781,7 +781,7 @@ def test_a_stream_move_goes_out_in_one_write_once_the_axis_is_set_up(sim, link, 
     assert client.post_moves({1: (9.0, SPEED, ACCELERATION)})
     assert writes.writes == before + 1
     assert not client.post_moves({1: (10.0, SPEED, ACCELERATION)})  # one at a time
-    client.finish_posted()  # reads both ACKs, arms the next session's TUM
+    assert client.finish_posted()  # reads both ACKs, arms the next session's TUM
     assert requests_since(sim, start) == [('MOT_SendPosition', 1), ('MOT_Update', 1),
                                           ('MOT_SetTum', 1)]
     settle(client, 1, 9.0)
@@ -831,7 +831,9 @@ def test_a_stream_move_with_a_lost_ack_is_sent_again_one_request_at_a_time(sim, 
     sim.model.lose_replies(1)
     assert client.post_moves({1: (7.0, SPEED, ACCELERATION)})
     start = len(sim.model.requests)
-    client.finish_posted()  # one ACK of two: which one is lost, the byte does not say
+    # one ACK of two: which one is lost, the byte does not say; the caller sends it again
+    assert not client.finish_posted()
+    client.move_absolute(1, 7.0, SPEED, ACCELERATION)
     assert ('MOT_SetPositionMode', 1) in requests_since(sim, start)  # the whole 7.1 set-up
     assert client.stats['incomplete_batches'] == 1 and client.connected
     settle(client, 1, 7.0)
@@ -845,7 +847,7 @@ def test_a_stream_move_is_never_sent_again_after_a_stop(sim, link):
     assert client.post_moves({1: (40.0, SPEED, ACCELERATION)})
     client.stop_axis(1)  # reads what came of the post first, then stops
     start = len(sim.model.requests)
-    client.finish_posted()  # the lost ACK would resend the move: not after a stop
+    assert client.finish_posted()  # the lost ACK would resend the move: not after a stop
     assert ('MOT_SendPosition', 1) not in requests_since(sim, start)
     wait_for(lambda: client.read_axis(1)[1] == 0.0, 5.0, 'axis 1 stopped')
 
@@ -859,7 +861,8 @@ def test_a_controller_that_drops_queued_requests_gets_moves_one_at_a_time(sim, l
     for _ in range(3):  # each post loses its MOT_Update: sent again, and counted
         target += 1.0
         assert client.post_moves({1: (target, SPEED, ACCELERATION)})
-        client.finish_posted()
+        assert not client.finish_posted()
+        client.move_absolute(1, target, SPEED, ACCELERATION)
         settle(client, 1, target)
     assert not client.batching
     assert not client.post_moves({1: (target + 1.0, SPEED, ACCELERATION)})

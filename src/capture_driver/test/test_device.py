@@ -63,7 +63,6 @@ class Rig:
         self.config = make_config(command_timeout)
         self.device = CaptureDevice(make_settings(sim, transport))
         self.controller = GimbalController(self.device, self.config, LOG)
-        self.device.on_targets = self.controller.commanded_targets.update
         self.motion = Motion(self.controller, scan_patterns=self.device.capabilities.scans
                              .patterns)
         self.controller.open()

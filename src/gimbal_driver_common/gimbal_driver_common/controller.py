@@ -7,10 +7,9 @@ the one connection supervisor (open, identity, reconnect every
 watchdog, ``stop`` and the refusal rules.
 
 The thread rule: :meth:`GimbalController.command` (the joint_command callback) never
-waits for a device reply. It validates and queues; the command thread sends. Only a
-device whose sends wait for no reply (``Device.sends_without_reply``) is sent to from
-the caller's thread, when the link is free; a device that ACKs may write a stream move
-there without waiting and leave its replies to the command thread (``post_move``).
+waits for a device reply. It validates and hands the command to the one command path
+(:mod:`gimbal_driver_common.command_path`), which posts what the device can write at
+once and leaves answers, resends and everything else to the command thread.
 Periodic work runs on two plain threads: ``periodic`` (housekeeping: the jog
 watchdog, diagnostics, ~/status, all quick) and ``sensors`` (the driver's extra topics
 that read the device), so a slow or silent sensor read never delays a dead-man stop.
@@ -26,12 +25,12 @@ from __future__ import annotations
 
 import enum
 import math
-import os
 import threading
 import time
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
+from gimbal_driver_common.command_path import CommandPath
 from gimbal_driver_common.config import ControllerConfig, Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, LinkError, device_boundary
@@ -59,22 +58,6 @@ class LinkState(enum.Enum):
     RECONNECTING = 'reconnecting'       # a reconnect attempt failed; trying again
 
 
-def yield_core() -> None:
-    """Give this thread's core away once, right after the joint_command callback wrote a
-    command.
-
-    What happens next in the callback's thread is rclpy's executor bookkeeping (finishing
-    the task, rebuilding its wait set in Python: about 0.3 ms), none of it urgent. The
-    process at the other end of the bytes (a simulator on this machine, a serial or TCP
-    bridge) was just woken and needs a core to act on them; on 2 cores it waited for that
-    bookkeeping. Measured (``make bench``, Capture alone, 2 runs each, 2-core machine): p50
-    publish -> command bytes at the simulator, 50 / 100 Hz, 1.12-1.21 / 0.79-1.00 ms
-    without, 0.84-0.95 / 0.67-0.69 ms with (ratio to the bare rclpy reference 1.31-1.57
-    -> 1.08-1.28). One system call; it returns at once when nothing else waits for a core.
-    """
-    os.sched_yield()
-
-
 def is_moving(sample: JointSample | None, joint: str) -> bool:
     """The one "moving" rule: the device's own bit where it has one, else the speed."""
     if sample is None:
@@ -97,7 +80,7 @@ class GimbalController:
         self.device = device
         self.config = config
         self.log = log
-        device.attach(config, log)
+        device.attach(config, log, self._show_targets)
         self.on_sample = on_sample or (lambda sample: None)
         self.on_link_change = on_link_change or (lambda: None)
         self.device_info = DeviceInfo()
@@ -107,13 +90,17 @@ class GimbalController:
         self.link_error = 'not configured'
         self.reconnects = 0
         self.latest: JointSample | None = None
-        #: last position target sent per joint (AxisState.target_position)
+        #: last position target sent per joint (AxisState.target_position); changed only
+        #: through :meth:`record_targets`
         self.commanded_targets: dict[str, float] = {}
         #: accepted commands that show no motion (motion_start_timeout): diagnostics, goals
         self.motion_watch = MotionWatch(lambda: self.config.motion_start_timeout,
                                         lambda: self.config.goal_tolerance, log)
-        #: bumped by every stop and halt: a running move or scan sees it and ends
+        self._targets_lock = threading.Lock()
+        #: bumped by every stop and halt (:meth:`bump_motion_generation`): a running move
+        #: or scan sees it and ends
         self.motion_generation = 0
+        self._generation_lock = threading.Lock()
         self.watchdog = JogWatchdog(config.command_timeout, self._on_jog_expired)
         self.periodic = periodic or Periodic(on_error=log.error)
         #: jobs that do device I/O (sensor topics): never on the watchdog's thread
@@ -124,13 +111,10 @@ class GimbalController:
         self.periodic.add(self._watchdog_period(), self.watchdog.check)
         self.halt_hooks: list[Callable[[], None]] = []  # stop and halt call these (policies)
         self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
-        self._send_lock = threading.Lock()  # one motion set-up at a time; stop goes last
-        self._pending: dict[str, tuple[str, float, float | None]] = {}  # joint -> kind, value, v
-        # moves written by device.post_move whose replies the command thread has not read
-        # (None: none); a joint leaves it when a newer send for it (stop, move_to) goes first
-        self._posted: Moves | None = None
-        self._pending_lock = threading.Lock()
-        self._command_ready = threading.Event()
+        self.commands = CommandPath(device, self.rejections, self.record_targets,
+                                    self._send_refusal, self.motion_watch.jogged)
+        #: one send on the link at a time (the command path's); stop goes last
+        self._send_lock = self.commands.lock
         self._stopping = threading.Event()
         self._wake = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -145,9 +129,10 @@ class GimbalController:
         """Open the link and start the device and command threads (lifecycle configure)."""
         self._connect()
         self._stopping.clear()
+        self.commands.reopen()
         self._threads = [
             threading.Thread(target=self._device_loop, name='device', daemon=True),
-            threading.Thread(target=self._command_loop, name='commands', daemon=True),
+            threading.Thread(target=self.commands.run, name='commands', daemon=True),
         ]
         for thread in self._threads:
             thread.start()
@@ -163,7 +148,7 @@ class GimbalController:
         """Stop the threads and close the link (cleanup, shutdown)."""
         self._stopping.set()
         self._wake.set()
-        self._command_ready.set()
+        self.commands.close()
         for thread in self._threads:
             if thread is not threading.current_thread():
                 thread.join(timeout=5.0)
@@ -270,84 +255,41 @@ class GimbalController:
         self.require(movers or None)  # active and connected; and the movers can move
         for hook in self.preempt_hooks:
             hook()
-        with self._pending_lock:
-            for joint, (target, speed) in plan.moves.items():
-                self._pending[joint] = ('move', target, speed)
-            for joint, velocity in plan.jogs.items():
-                self._pending[joint] = ('jog', velocity, None)
         self.watchdog.cancel(list(plan.moves) + [j for j, v in plan.jogs.items() if v == 0.0])
         self.watchdog.feed([j for j, v in plan.jogs.items() if v != 0.0])
-        # Fast paths, when the link is free: a write-only device gets the command from the
-        # caller's thread (no thread hand-off); a device that ACKs may write a stream move
-        # at once and leave the replies to the command thread (post_move). Otherwise the
-        # command thread sends it as soon as the current send is done.
-        if self._send_lock.acquire(blocking=False):
-            try:
-                if self.device.sends_without_reply:
-                    self._flush_pending()
-                    sent = True
-                else:
-                    sent = self._post_pending()
-            finally:
-                self._send_lock.release()
-            if sent:
-                if not self.device.sends_without_reply:
-                    self._command_ready.set()  # the command thread reads the replies
-                yield_core()
-                return
-        self._command_ready.set()
-        # Let the command thread take the GIL now. Otherwise it waits until this
-        # (executor) thread blocks again, after rclpy's wait-set rebuild: measured in
-        # a loop with 300 us of Python after the set(), hand-off p50 330 -> 50 us.
-        time.sleep(0)
+        self.commands.submit(plan.moves, plan.jogs)
 
-    def _post_pending(self) -> bool:
-        """Write the queued moves with ``device.post_move`` (caller holds the send lock);
-        True when written. Jogs, and moves the device cannot post, stay queued."""
-        with self._pending_lock:
-            if not self._pending or any(kind != 'move' for kind, _, _ in
-                                        self._pending.values()):
-                return False
-            moves = {j: (v, s) for j, (_, v, s) in self._pending.items()}
-            try:
-                with device_boundary():
-                    posted = self.device.post_move(moves)
-            except GimbalError as exc:
-                self._pending.clear()
-                self.rejections.record(exc, sent=True)
-                return False
-            if posted:
-                self._pending.clear()
-                self._posted = moves
-            return posted
+    def _send_refusal(self) -> str | None:
+        """Why the command path cannot send now (the link dropped), or None."""
+        return None if self.connected else f'device not connected ({self.link_error})'
 
-    def _finish_posted(self) -> None:
-        """The replies of a posted move (caller holds the send lock)."""
-        moves, self._posted = self._posted, None
-        if moves is None:
-            return
-        try:
-            with device_boundary():
-                self.device.finish_move()
-        except GimbalError as exc:
-            self.rejections.record(exc, sent=True)
-            return
-        self.targets_sent({joint: move[0] for joint, move in moves.items()})
+    def record_targets(self, targets: dict[str, float]) -> None:
+        """Position targets sent (by the command path, or by a policy through a device
+        capability): ~/status shows them and the motion watch waits for motion."""
+        self._show_targets(targets)
+        self.motion_watch.commanded(targets)
+
+    def _show_targets(self, targets: dict[str, float]) -> None:
+        """Targets for ~/status only: also what the device reports it took by itself
+        (``Device.report_targets``: levelling, new units), which the watch leaves alone."""
+        with self._targets_lock:
+            self.commanded_targets.update(targets)
+
+    def bump_motion_generation(self) -> None:
+        """End a running move or scan (they compare :attr:`motion_generation`)."""
+        with self._generation_lock:
+            self.motion_generation += 1
 
     def send_moves(self, moves: Moves, offsets: dict[str, float] | None = None) -> None:
         """Send absolute moves now (move_to, presets, scans), after the queued commands."""
         self.watchdog.cancel(list(moves))
-        with self._send_lock, device_boundary():
-            self._drop_pending(moves)
+
+        def send() -> None:
             if not (offsets and self.device.move_relative(offsets, moves)):
                 self.device.move(moves)
-        self.targets_sent({joint: move[0] for joint, move in moves.items()})
 
-    def targets_sent(self, targets: dict[str, float]) -> None:
-        """Position targets went to the device (by the controller, or by a policy through a
-        device capability): ~/status shows them and the motion watch waits for motion."""
-        self.commanded_targets.update(targets)
-        self.motion_watch.commanded(targets)
+        self.commands.send(list(moves), send)
+        self.record_targets({joint: move[0] for joint, move in moves.items()})
 
     def stop(self) -> str:
         """~/stop: cancel jogs, moves, scans and queued commands, then stop every axis."""
@@ -373,32 +315,20 @@ class GimbalController:
     def _cancel_motion(self) -> None:
         self.watchdog.cancel()
         self.motion_watch.withdraw()
-        self.motion_generation += 1
-        with self._pending_lock:
-            self._pending.clear()
+        self.bump_motion_generation()
+        self.commands.drop(None)
         for hook in self.halt_hooks:
             hook()
 
     def _stop_device(self, joints: Sequence[str] | None) -> None:
-        with self._send_lock, device_boundary():
-            self._drop_pending(joints)
+        def send() -> None:
             scans = self.device.capabilities.scans
             if scans is not None and joints is None:
                 scans.stop()
             self.device.stop(None if joints is None else list(joints))
-        self.motion_watch.withdraw(joints)
 
-    def _drop_pending(self, joints: Sequence[str] | None) -> None:
-        """Forget queued commands (and the targets of posted ones) for a newer send."""
-        with self._pending_lock:
-            if joints is None:
-                self._pending.clear()
-                if self._posted is not None:
-                    self._posted.clear()
-            for joint in joints or ():
-                self._pending.pop(joint, None)
-                if self._posted is not None:
-                    self._posted.pop(joint, None)
+        self.commands.send(joints, send)
+        self.motion_watch.withdraw(joints)
 
     def _on_jog_expired(self, joints: list[str]) -> None:
         self.log.warning(
@@ -406,39 +336,6 @@ class GimbalController:
             f'{self.config.command_timeout:g} s): stopping')
         if self.connected:
             self.stop_joints(joints)
-
-    def _command_loop(self) -> None:
-        """Send what :meth:`command` queued while another send held the link."""
-        while not self._stopping.is_set():
-            self._command_ready.wait()
-            self._command_ready.clear()
-            with self._send_lock:
-                self._finish_posted()
-                self._flush_pending()
-
-    def _flush_pending(self) -> None:
-        """Send the queued commands, moves first (caller holds the send lock)."""
-        with self._pending_lock:
-            pending, self._pending = self._pending, {}
-        if not pending:
-            return
-        if not self.connected:  # the link dropped after the command was accepted
-            self.rejections.record(DeviceRefused(
-                f'device not connected ({self.link_error})', reason='device not connected'))
-            return
-        moves = {j: (v, s) for j, (kind, v, s) in pending.items() if kind == 'move'}
-        jogs = {j: v for j, (kind, v, _) in pending.items() if kind == 'jog'}
-        try:
-            with device_boundary():
-                if moves:
-                    self.device.move(moves)
-                if jogs:
-                    self.device.jog(jogs)
-        except GimbalError as exc:
-            self.rejections.record(exc, sent=True)
-            return
-        self.motion_watch.jogged(jogs)
-        self.targets_sent({joint: move[0] for joint, move in moves.items()})
 
     # ------------------------------------------------------ device thread
     def _device_loop(self) -> None:

@@ -191,6 +191,16 @@ class TargetPointing(abc.ABC):
 
 
 @dataclass
+class PostedWrite:
+    """A joint_command a device wrote without waiting (:meth:`Device.post`)."""
+
+    moves: Moves = field(default_factory=dict)
+    jogs: dict[str, float] = field(default_factory=dict)
+    #: answers the command path settles later (:meth:`Device.settle`); 0: write-only
+    replies: int = 0
+
+
+@dataclass
 class Capabilities:
     """What the device offers beyond the contract; None means "not on this device"."""
 
@@ -210,13 +220,6 @@ class Device(abc.ABC):
     #: True when :meth:`read` returns data a receive thread streams in: the controller
     #: then publishes on :meth:`wait_for_data` instead of on a fixed polling tick.
     streamed: bool = False
-    #: True when :meth:`move` and :meth:`jog` only write (a CAN frame, a serial packet, a
-    #: TCP message) and wait for no reply: the controller may then send a joint_command
-    #: from the subscription callback's own thread. Otherwise (a device that ACKs each
-    #: set-up request) the command thread sends, so the callback never waits on the device;
-    #: such a device may still write a stream move at once and leave its replies to the
-    #: command thread (:meth:`post_move`).
-    sends_without_reply: bool = False
 
     def __init__(self) -> None:
         self.capabilities = Capabilities()
@@ -225,10 +228,21 @@ class Device(abc.ABC):
         #: the node's logger once attached (a module logger until then)
         self.log: Logger = logging.getLogger(type(self).__module__)
         self._data_arrived = threading.Event()
+        self._on_targets: Callable[[dict[str, float]], None] = lambda targets: None
 
-    def attach(self, config: ControllerConfig, log: Logger) -> None:
-        """Called by the controller that runs this device, before :meth:`open`."""
+    def attach(self, config: ControllerConfig, log: Logger,
+               on_targets: Callable[[dict[str, float]], None] | None = None) -> None:
+        """Called by the controller that runs this device, before :meth:`open`;
+        ``on_targets`` receives what :meth:`report_targets` reports."""
         self.config, self.log = config, log
+        if on_targets is not None:
+            self._on_targets = on_targets
+
+    def report_targets(self, targets: dict[str, float]) -> None:
+        """Targets the device took on its own (a device preset, a geo-pointing, levelling,
+        new units): the controller records them (AxisState.target_position). The one way
+        a device reports targets; it never writes controller state."""
+        self._on_targets(dict(targets))
 
     @abc.abstractmethod
     def open(self) -> DeviceInfo:
@@ -249,19 +263,32 @@ class Device(abc.ABC):
     def move(self, moves: Moves) -> None:
         """Absolute position moves (targets already checked against the limits)."""
 
-    def post_move(self, moves: Moves) -> bool:
-        """Write these moves at once without waiting for any reply, when that is all they
-        need (the link is free, the device already set up for them): True when written;
-        the command thread then calls :meth:`finish_move`. False: nothing was written, and
-        the command thread sends them with :meth:`move`. Must never wait: the
-        joint_command callback calls it. A device whose every send waits for no reply
-        (``sends_without_reply``) has no use for it."""
-        return False
+    def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite | None:
+        """Write a joint_command now, from the callback's thread, without waiting for any
+        answer: what was written and how many answers to settle later, or None (nothing
+        written: the command thread sends it with :meth:`move` and :meth:`jog`).
 
-    def finish_move(self) -> None:
-        """Read the replies to the last :meth:`post_move` (command thread); raise the
-        device's refusal of it. Only called after :meth:`post_move` returned True."""
-        raise NotImplementedError(f'{type(self).__name__} posts moves but cannot finish them')
+        Must never wait for the device (the callback calls it while holding the command
+        path's send lock, so no other send is on the link). A device whose moves and jogs
+        only write (a CAN frame, a serial packet) returns :meth:`write_now`; a device that
+        ACKs posts what needs no set-up and counts the answers in
+        :attr:`PostedWrite.replies`."""
+        return None
+
+    def write_now(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite:
+        """:meth:`post` for a device whose :meth:`move` and :meth:`jog` wait for no answer."""
+        if moves:
+            self.move(moves)
+        if jogs:
+            self.jog(jogs)
+        return PostedWrite(dict(moves), dict(jogs), replies=0)
+
+    def settle(self, posted: PostedWrite) -> bool:
+        """Read the answers of a :meth:`post` (command thread, or the next send first):
+        True when every answer came; False when some were lost (the command path sends
+        the moves again unless a stop or a newer move went out). Raises the device's
+        refusal. Only called for a post with ``replies`` > 0."""
+        raise NotImplementedError(f'{type(self).__name__} posts writes but cannot settle them')
 
     def move_relative(self, offsets: dict[str, float], moves: Moves) -> bool:
         """Send a relative move as the device's own relative set-points; False: use move()."""

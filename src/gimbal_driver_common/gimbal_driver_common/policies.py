@@ -153,7 +153,7 @@ class Motion:
         self.preempt()
         ctl.watchdog.cancel(list(targets))
         message = ctl.call(lambda: pointing.point_at(target))
-        ctl.targets_sent(targets)
+        ctl.record_targets(targets)
         return message
 
     def _scan_stop_current(self) -> None:
@@ -165,7 +165,7 @@ class Motion:
         with the device's new move."""
         self._scan_stop.set()
         self.controller.motion_watch.withdraw()
-        self.controller.motion_generation += 1
+        self.controller.bump_motion_generation()
 
     # ---------------------------------------------------------------- homing
     def home(
@@ -306,7 +306,7 @@ class Motion:
             ctl.require(ctl.config.joint_names)
             self.preempt()
             message = ctl.call(lambda: device.goto(index, speed))
-            ctl.targets_sent(device.target(index) or {})
+            ctl.record_targets(device.target(index) or {})
             return message
         preset = self.store.get(index)
         names = [n for n in preset.positions if n in ctl.config.limits]

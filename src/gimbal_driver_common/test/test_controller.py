@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
@@ -18,6 +19,7 @@ from gimbal_driver_common.device import (
     Homing,
     JointSample,
     Moves,
+    PostedWrite,
 )
 from gimbal_driver_common.errors import (
     DeviceRefused,
@@ -361,36 +363,89 @@ def test_a_joint_command_never_waits_for_the_device_reply(controller, device) ->
     wait_for(lambda: controller.commanded_targets.get('pan') == 0.2, 2.0, 'the move sent')
 
 
-def test_a_write_only_device_is_sent_to_from_the_callers_thread(controller, device) -> None:
-    device.sends_without_reply = True
+class WriteOnlyDevice(FakeDevice):
+    """Moves and jogs that wait for no answer (the turret, Kessler, U-Camera)."""
+
+    def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite:
+        return self.write_now(moves, jogs)
+
+
+@pytest.fixture
+def write_only():
+    device = WriteOnlyDevice()
+    ctl = GimbalController(device, config(), logging.getLogger('test'))
+    ctl.open()
+    ctl.activate()
+    yield ctl, device
+    ctl.shutdown()
+    ctl.periodic.stop()
+    ctl.sensors.stop()
+
+
+def test_a_write_only_device_is_sent_to_from_the_callers_thread(write_only) -> None:
+    controller, device = write_only
     controller.command(['pan'], [0.2], [])
     assert device.move_threads == [threading.current_thread().name]
+    assert controller.commanded_targets == {'pan': 0.2}  # no answer to wait for
+    controller.command(['tilt'], [], [0.3])
+    assert device.sent[-1] == ('jog', {'tilt': 0.3})  # a jog too, at once
+
+
+def test_a_write_only_device_behind_a_busy_link_gets_the_newest_from_the_command_thread(
+        write_only) -> None:
+    controller, device = write_only
+    with controller.commands.lock:  # another send holds the link
+        controller.command(['pan'], [0.1], [])
+        controller.command(['pan'], [0.2], [])
+        assert device.sent == []
+    wait_for(lambda: device.sent == [('move', {'pan': (0.2, None)})], 2.0, 'the newest')
+    assert device.move_threads == ['commands']
 
 
 class PostingDevice(FakeDevice):
-    """Writes a stream move at once and reads its replies later (Capture's post_moves)."""
+    """Writes a stream move at once and settles its answers later (Capture, the virtual
+    gimbal)."""
 
     def __init__(self) -> None:
         super().__init__()
         self.can_post = True
-        self.finish_error: Exception | None = None
+        self.settle_error: Exception | None = None
+        self.lose_answers = 0  # settles that report a lost answer
         self.post_threads: list[str] = []
-        self.finish_threads: list[str] = []
+        self.finish_threads: list[str] = []  # the thread each settle ran in
+        self.settled: list[PostedWrite] = []
 
-    def post_move(self, moves: Moves) -> bool:
-        if not self.can_post:
-            return False
+    def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite | None:
+        if not self.can_post or jogs:
+            return None
         self.post_threads.append(threading.current_thread().name)
         with self.lock:
             self.sent.append(('post', dict(moves)))
             self.targets.update({joint: target for joint, (target, _) in moves.items()})
-        return True
+        return PostedWrite(dict(moves), {}, replies=2 * len(moves))
 
-    def finish_move(self) -> None:
+    def settle(self, posted: PostedWrite) -> bool:
         self.finish_threads.append(threading.current_thread().name)
-        error, self.finish_error = self.finish_error, None
+        self.settled.append(posted)
+        error, self.settle_error = self.settle_error, None
         if error is not None:
             raise error
+        if self.lose_answers:
+            self.lose_answers -= 1
+            return False
+        return True
+
+
+@contextlib.contextmanager
+def command_thread_asleep(controller: GimbalController):
+    """The command thread does not wake (to settle or send) until the block ends."""
+    ready = controller.commands.ready
+    controller.commands.ready = threading.Event()
+    try:
+        yield
+    finally:
+        controller.commands.ready = ready
+        ready.set()
 
 
 @pytest.fixture
@@ -413,15 +468,17 @@ def test_a_posted_move_is_written_by_the_caller_and_finished_by_the_command_thre
     wait_for(lambda: device.finish_threads == ['commands'], 2.0, 'the replies read')
     wait_for(lambda: controller.commanded_targets.get('pan') == 0.2, 2.0, 'the target')
     assert device.move_threads == []
+    assert device.settled[0].replies == 2
 
 
 def test_a_refusal_in_a_posted_moves_replies_is_counted_and_sets_no_target(posting) -> None:
     controller, device = posting
-    device.finish_error = DeviceRefused('device NACK: axis disabled')
+    device.settle_error = DeviceRefused('device NACK: axis disabled')
     controller.command(['pan'], [0.2], [])
     wait_for(lambda: controller.rejections.counts()['refused'].get(
         'failed on the device: refused by the device'), 2.0, 'the refusal counted')
     assert 'pan' not in controller.commanded_targets
+    assert device.move_threads == []  # a refusal is not sent again
 
 
 def test_a_move_the_device_cannot_post_goes_to_the_command_thread(posting) -> None:
@@ -434,19 +491,49 @@ def test_a_move_the_device_cannot_post_goes_to_the_command_thread(posting) -> No
     assert device.post_threads == device.finish_threads == []
 
 
+def test_a_posted_move_whose_answer_was_lost_is_sent_again(posting) -> None:
+    controller, device = posting
+    device.lose_answers = 1
+    controller.command(['pan'], [0.2], [])
+    wait_for(lambda: ('move', {'pan': (0.2, None)}) in device.sent, 2.0, 'the resend')
+    assert device.move_threads == ['commands']
+    assert controller.commanded_targets['pan'] == 0.2
+    assert controller.rejections.counts()['refused'] == {}
+
+
+def test_a_stop_supersedes_a_posted_move_whose_answer_was_lost(posting) -> None:
+    """The stop settles the post first (it goes after the send in flight) and nothing
+    stale follows it: the lost answer is not sent again."""
+    controller, device = posting
+    device.lose_answers = 1
+    with command_thread_asleep(controller):
+        controller.command(['pan'], [0.2], [])
+        assert device.sent == [('post', {'pan': (0.2, None)})]
+        controller.stop()
+        assert device.finish_threads == [threading.current_thread().name]
+    assert device.kinds() == ['post', 'stop']
+    assert device.move_threads == []
+    assert 'pan' not in controller.commanded_targets
+
+
+def test_a_newer_queued_move_is_sent_instead_of_a_lost_posted_one(posting) -> None:
+    controller, device = posting
+    device.lose_answers = 1
+    with command_thread_asleep(controller):  # the second comes before the first settles
+        controller.command(['pan'], [0.2], [])
+        controller.command(['pan'], [0.4], [])
+    wait_for(lambda: controller.commanded_targets.get('pan') == 0.4, 2.0, 'the newest')
+    assert device.sent == [('post', {'pan': (0.2, None)}), ('move', {'pan': (0.4, None)})]
+
+
 def test_a_newer_move_keeps_its_target_over_an_unfinished_posted_one(posting) -> None:
     """move_to goes out between the post and the reading of its replies: the posted target
     must not overwrite the newer one when the replies come in."""
     controller, device = posting
-    ready = controller._command_ready
-    controller._command_ready = threading.Event()  # the command thread does not wake yet
-    try:
+    with command_thread_asleep(controller):
         controller.command(['pan'], [0.2], [])
-        controller.send_moves({'pan': (0.5, None)})
-    finally:
-        controller._command_ready = ready
-    ready.set()
-    wait_for(lambda: device.finish_threads == ['commands'], 2.0, 'the replies read')
+        controller.send_moves({'pan': (0.5, None)})  # settles the post first
+    wait_for(lambda: device.finish_threads, 2.0, 'the replies read')
     assert controller.commanded_targets['pan'] == 0.5
 
 
@@ -717,3 +804,13 @@ def test_joint_command_ends_a_driver_side_scan(motion, controller) -> None:
     motion.start_scan(ScanRequest('sector', -0.2, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0))
     controller.command(['pan'], [0.0], [])
     wait_for(lambda: not motion.scanning, 2.0, 'the scan thread to end')
+
+
+def test_a_device_reports_its_own_targets_through_the_contract(controller, device) -> None:
+    """A device-run motion (a device preset, a geo-pointing) reports its targets with
+    ``Device.report_targets``; the controller records them (AxisState.target_position)."""
+    reported = {'pan': 0.4}
+    device.report_targets(reported)
+    reported['pan'] = 9.0  # the controller keeps its own copy
+    assert controller.commanded_targets == {'pan': 0.4}
+

@@ -34,6 +34,7 @@ from gimbal_driver_common.device import (
     Homing,
     JointSample,
     Moves,
+    PostedWrite,
     StatusReport,
 )
 from gimbal_driver_common.diagnostics import Level, StatusPart
@@ -120,8 +121,11 @@ class KosDevice(Device):
 
     #: positions come from MotorInfo polls (every ``poll_period``) and notifications
     streamed = True
-    #: a move is one kOS message written to the link; no reply is awaited
-    sends_without_reply = True
+
+    def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite:
+        """A move is one kOS message written to the link; no reply is awaited.
+        Written from the caller's thread, with no answer to settle."""
+        return self.write_now(moves, jogs)
 
     def __init__(
         self, client: KosClient, joints: Sequence[JointMapping], config: MotionConfig,
@@ -165,13 +169,14 @@ class KosDevice(Device):
 
     def set_units(self, units: Sequence[JointUnits], targets: dict[str, float]) -> None:
         """New unit parameters per joint (order of the joints); ``targets`` (SI, by joint,
-        e.g. the controller's commanded targets) keep their motor positions."""
+        e.g. the controller's commanded targets) keep their motor positions: reported in
+        the new units (:meth:`report_targets`)."""
         before = {name: self.conversion(name) for name in self.joints}
         for (name, mapping), joint_units in zip(list(self.joints.items()), units, strict=True):
             self.joints[name] = JointMapping(name, mapping.address, joint_units)
-        for name, target in list(targets.items()):
-            if name in before:
-                targets[name] = self.conversion(name).to_si(before[name].to_rotations(target))
+        self.report_targets({
+            name: self.conversion(name).to_si(before[name].to_rotations(target))
+            for name, target in targets.items() if name in before})
 
     def units_report(self) -> dict[str, str]:
         """Joint -> what its joint_states mean now (the diagnostics ``units`` value)."""

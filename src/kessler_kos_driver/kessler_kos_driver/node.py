@@ -272,7 +272,8 @@ class KosDriverNode(GimbalDriverNode):
                 self.joint_units = joint_units(
                     len(self.joint_names), *(getattr(self, n) for n in UNIT_PARAMETERS))
                 if self.device is not None:
-                    self.device.set_units(self.joint_units, self.controller.commanded_targets)
+                    self.device.set_units(self.joint_units,
+                                          dict(self.controller.commanded_targets))
             return apply
 
         for name in UNIT_PARAMETERS:

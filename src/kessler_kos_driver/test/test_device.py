@@ -362,11 +362,12 @@ def test_a_recalibration_changes_the_conversion(rig, caplog):
 def test_new_units_keep_the_motor_positions_of_the_commanded_targets(rig):
     outcome = rig.motion.wait_move(rig.motion.start_move(['pan', 'slider'], [0.0, 3.0]))
     assert outcome.success, outcome.message
-    targets = rig.controller.commanded_targets
+    targets = dict(rig.controller.commanded_targets)
     # pan: a quarter turn offset; slider: a 0.01 m per rotation belt instead of motor radians
     rig.device.set_units([JointUnits(scale=0.01), JointUnits(span=TWO_PI, offset=-math.pi / 2),
-                          UNITS[2]], targets)
-    assert targets == pytest.approx({'pan': math.pi / 2, 'slider': 0.03 / TWO_PI})
+                          UNITS[2]], targets)  # reported to the controller, not written
+    assert rig.controller.commanded_targets == pytest.approx(
+        {'pan': math.pi / 2, 'slider': 0.03 / TWO_PI})
     wait_for(lambda: rig.position_reads('pan', math.pi / 2)
              and rig.position_reads('slider', 0.03 / TWO_PI, 1e-6), TIMEOUT, 'the new units')
     assert rig.device.units_report()['slider'] == 'SI (joint_scales)'

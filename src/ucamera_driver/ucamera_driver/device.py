@@ -52,6 +52,7 @@ from gimbal_driver_common.device import (
     Homing,
     JointSample,
     Moves,
+    PostedWrite,
     StatusReport,
 )
 from gimbal_driver_common.diagnostics import Level, StatusPart
@@ -119,8 +120,11 @@ class UCameraDevice(Device):
     """One U-Camera in joint space (REP-103); thread-safe."""
 
     streamed = True  # angles arrive as periodic reports: publish each as it comes
-    #: UCSP has no ACK: a set-point is one packet written to the serial line
-    sends_without_reply = True
+
+    def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite:
+        """UCSP has no ACK: a set-point is one packet written to the serial line.
+        Written from the caller's thread, with no answer to settle."""
+        return self.write_now(moves, jogs)
 
     def __init__(
         self, settings: UCameraSettings, *, tolerance: Callable[[], float] = lambda: 0.01,

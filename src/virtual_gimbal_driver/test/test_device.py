@@ -135,7 +135,7 @@ def test_posted_requests_are_answered_in_order_around_a_request():
 
 
 def test_a_command_stream_is_written_from_the_callback(rig):
-    """With the link free, a move goes out from the caller's thread (post_move) and the
+    """With the link free, a move goes out from the caller's thread (Device.post) and the
     command thread reads its OK; a refused posted move is counted like any refusal."""
     post, nack = rig.device.client.post, False
     posted: list[tuple[list[str], int]] = []  # lines, refusals counted when they went out

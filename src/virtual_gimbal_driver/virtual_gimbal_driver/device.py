@@ -16,6 +16,7 @@ from gimbal_driver_common.device import (
     Homing,
     JointSample,
     Moves,
+    PostedWrite,
     StatusReport,
 )
 from gimbal_driver_common.diagnostics import Level, RegisterFlag, StatusPart, decode_register
@@ -70,14 +71,22 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
         for joint, (position, speed) in moves.items():
             self.client.request(move_request(joint, position, speed))
 
-    def post_move(self, moves: Moves) -> bool:
-        """A stream move's MOVE lines written at once, their OKs read by the command thread
-        (:meth:`finish_move`): the joint_command callback never waits for a reply."""
-        return self.client.post([move_request(joint, position, speed)
-                                 for joint, (position, speed) in moves.items()])
+    def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite | None:
+        """A stream move's MOVE lines written at once, one OK each settled by the command
+        thread (:meth:`settle`): the joint_command callback never waits for a reply."""
+        lines = [move_request(joint, position, speed)
+                 for joint, (position, speed) in moves.items()]
+        if jogs or not lines or not self.client.post(lines):
+            return None
+        return PostedWrite(dict(moves), {}, replies=len(lines))
 
-    def finish_move(self) -> None:
-        self.client.finish_posted()
+    def settle(self, posted: PostedWrite) -> bool:
+        """False when an OK never came (the command path sends the moves again)."""
+        try:
+            self.client.finish_posted()
+        except DeviceTimeout:
+            return False
+        return True
 
     def jog(self, velocities: dict[str, float]) -> None:
         for joint, velocity in velocities.items():
