@@ -10,7 +10,8 @@ lost unless a stop or a newer move for the joint went out since, and sends the q
 with ``Device.move`` and ``Device.jog``. Any other send (move_to, a stop) settles a
 posted write first, so a stop goes after the send in flight and nothing stale follows
 it. The caller never waits for a device answer nor behind another send: the one
-non-blocking try is here, on :attr:`CommandPath.lock`, and nowhere in the adapters.
+non-blocking try is here, on :attr:`CommandPath.lock` (the Capture and virtual-gimbal
+clients still also try their own link lock, which their poll shares: open work).
 """
 
 from __future__ import annotations
