@@ -370,9 +370,8 @@ class WriteOnlyDevice(FakeDevice):
         return self.write_now(moves, jogs)
 
 
-@pytest.fixture
-def write_only():
-    device = WriteOnlyDevice()
+def running(device: Device):
+    """A controller running ``device`` (a fixture body: yields (controller, device))."""
     ctl = GimbalController(device, config(), logging.getLogger('test'))
     ctl.open()
     ctl.activate()
@@ -380,6 +379,11 @@ def write_only():
     ctl.shutdown()
     ctl.periodic.stop()
     ctl.sensors.stop()
+
+
+@pytest.fixture
+def write_only():
+    yield from running(WriteOnlyDevice())
 
 
 def test_a_write_only_device_is_sent_to_from_the_callers_thread(write_only) -> None:
@@ -450,14 +454,7 @@ def command_thread_asleep(controller: GimbalController):
 
 @pytest.fixture
 def posting():
-    device = PostingDevice()
-    ctl = GimbalController(device, config(), logging.getLogger('test'))
-    ctl.open()
-    ctl.activate()
-    yield ctl, device
-    ctl.shutdown()
-    ctl.periodic.stop()
-    ctl.sensors.stop()
+    yield from running(PostingDevice())
 
 
 def test_a_posted_move_is_written_by_the_caller_and_finished_by_the_command_thread(
