@@ -41,7 +41,9 @@ from gimbal_driver_common.ros.run import run_driver
 from gimbal_msgs.action import Home
 from gimbal_msgs.srv import DeviceCommand, SetMode
 
-from .device import DIGITAL_IO_COUNT, CaptureDevice, CaptureScans, CaptureSettings
+from .capabilities import CaptureScans
+from .device import CaptureDevice, CaptureSettings
+from .functions import DIGITAL_IO_COUNT
 
 T = TypeVar('T')
 

@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from gimbal_driver_common.testing.refused_requests import device_command, unknown
 
-from ..device import ALLOWED_MOTION
+from ..command_text import ALLOWED_MOTION
 from ..protocol import COMMANDS, Safety
 
 
