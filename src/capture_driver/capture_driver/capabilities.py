@@ -24,13 +24,8 @@ from gimbal_driver_common.device import (
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
 from gimbal_driver_common.scan import ScanError, ScanRequest, check_scan
 
-from .client import (
-    REQUEST_ERRORS,
-    SCAN_COMMANDS,
-    DeviceNack,
-    NotConnected,
-    WrongReply,
-)
+from .device_requests import SCAN_COMMANDS
+from .errors import REQUEST_ERRORS, DeviceNack, NotConnected, WrongReply
 from .protocol import GeoPoint, PresetRecord
 
 if TYPE_CHECKING:

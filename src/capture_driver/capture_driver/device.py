@@ -41,13 +41,9 @@ from .capabilities import (
     CaptureScans,
     CaptureTargetPointing,
 )
-from .client import (
-    IDENTITY_GETTERS,
-    REQUEST_ERRORS,
-    CaptureClient,
-    Identity,
-    NotSupported,
-)
+from .client import CaptureClient
+from .device_requests import IDENTITY_GETTERS, Identity
+from .errors import REQUEST_ERRORS, NotSupported
 from .functions import CaptureFunctions
 from .status import CaptureStatus, axis_flags
 

@@ -16,12 +16,7 @@ from gimbal_driver_common.config import scan_joints
 from gimbal_driver_common.device import AxisStateCode
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest
 
-from .client import (
-    REQUEST_ERRORS,
-    CaptureClient,
-    NotSupported,
-    TrackingState,
-)
+from .client import CaptureClient
 from .command_text import (
     ALLOWED_MOTION,
     DEDICATED,
@@ -30,6 +25,8 @@ from .command_text import (
     format_result,
     parse_arguments,
 )
+from .device_requests import TrackingState
+from .errors import REQUEST_ERRORS, NotSupported
 from .protocol import COMMANDS, GeoPoint, ProtocolError, Safety
 from .protocol import command as lookup_command
 from .protocol.geometry import aim_at

@@ -19,7 +19,9 @@ from gimbal_driver_common.probe import (
 )
 from gimbal_driver_common.transport import SerialStream, TcpStream
 
-from .client import IDENTITY_GETTERS, CaptureClient, CaptureError
+from .client import CaptureClient
+from .device_requests import IDENTITY_GETTERS
+from .errors import CaptureError
 
 #: spec 6.1, Table 4: the controller's TCP port
 TCP_PORT = 4949

@@ -10,7 +10,8 @@ import threading
 
 import pytest
 
-from capture_driver.client import CaptureClient, DeviceNack, DeviceTimeout, NotConnected
+from capture_driver.client import CaptureClient
+from capture_driver.errors import DeviceNack, DeviceTimeout, NotConnected
 from capture_driver.protocol import BY_OPCODE, COMMANDS, GeoPoint, ProtocolError, ReplyCode
 from capture_driver.protocol.geometry import aim_at
 from capture_driver.protocol.registers import CMER, REGISTERS, SRL

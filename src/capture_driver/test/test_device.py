@@ -12,8 +12,8 @@ import threading
 
 import pytest
 
-from capture_driver.client import DeviceNack, NotConnected
 from capture_driver.device import CaptureDevice, CaptureSettings
+from capture_driver.errors import DeviceNack, NotConnected
 from capture_driver.protocol import BY_OPCODE, COMMANDS
 from capture_driver.sim import CaptureSimulator, PedestalModel
 from gimbal_driver_common.controller import ControllerConfig, GimbalController

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import pytest
 
-from capture_driver.client import CaptureClient, DeviceNack
+from capture_driver.client import CaptureClient
+from capture_driver.errors import DeviceNack
 from capture_driver.protocol import COMMANDS, GeoPoint, ProtocolError, ReplyCode
 from capture_driver.sim import GYRO_BIAS, CaptureSimulator, PedestalModel
 from gimbal_driver_common.testing import wait_for

@@ -16,13 +16,9 @@ import math
 
 import pytest
 
-from capture_driver.client import (
-    CaptureClient,
-    DeviceTimeout,
-    NotSupported,
-    WrongReply,
-)
+from capture_driver.client import CaptureClient
 from capture_driver.device import CaptureDevice, CaptureSettings
+from capture_driver.errors import DeviceTimeout, NotSupported, WrongReply
 from capture_driver.protocol import BY_OPCODE, COMMANDS
 from capture_driver.protocol.registers import REGISTERS
 from capture_driver.sim import KNOWN_SETS, CaptureSimulator, PedestalModel

@@ -1,0 +1,315 @@
+"""What the host asks the Capture controller for (no ROS): identity, registers, scans,
+presets, IMU, GPS, tracking, power, digital I/O, and the requests it makes on its own
+(:meth:`DeviceRequests.poll`: not asked again once the device does not know them). A
+mixin of :class:`~.client.CaptureClient`, whose request/reply link it uses.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from dataclasses import dataclass, field
+from typing import Any
+
+from .errors import (
+    REQUEST_ERRORS,
+    CaptureError,
+    DeviceNack,
+    DeviceTimeout,
+    NotSupported,
+    WrongReply,
+)
+from .protocol import (
+    GeoPoint,
+    PresetRecord,
+    ProtocolError,
+    ReplyCode,
+    command,
+    ddmm_to_degrees,
+)
+from .protocol.registers import CSR_ERROR_STRINGS, CSR_PROTOCOL_ERROR, REGISTERS
+
+LOG = logging.getLogger('capture_driver.device_requests')
+
+GPS_FIX_COMMANDS = ('GPS_PositionReady', 'GPS_GetLatitude', 'GPS_GetLongitude')
+
+SCAN_COMMANDS = {
+    'zigzag': 'SCN_StartScanZigZag',
+    'snake': 'SCN_StartScanSnake',
+    'square': 'SCN_StartScanSquare',
+}
+
+
+IDENTITY_GETTERS = (('serial_number', 'COM_GetSn'), ('firmware', 'COM_GetFw'),
+                    ('hardware', 'COM_GetHw'), ('part_number', 'COM_GetPn'))
+
+
+@dataclass
+class Identity:
+    serial_number: str = ''
+    firmware: str = ''
+    hardware: str = ''
+    part_number: str = ''
+    #: getter -> how it failed (the ones that gave no value)
+    problems: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class TrackingState:
+    """One camera's video-tracker state as the device reports it."""
+
+    camera: int
+    active: bool
+    automatic: bool
+    target_detected: bool
+
+    @property
+    def mode(self) -> str:
+        if self.automatic:
+            return 'auto'
+        return 'manual' if self.active else 'off'
+
+
+
+class DeviceRequests:
+    """Device functions of :class:`~.client.CaptureClient` (a mixin)."""
+
+    def explain_nack(self, exc: DeviceNack) -> DeviceNack:
+        """Add the controller's own reason (ERR_GetProtocolErrorString) to an 0xA6 NACK."""
+        if exc.code != ReplyCode.INVALID_COMMAND or exc.detail:
+            return exc
+        try:
+            detail = self.optional('ERR_GetProtocolErrorString')
+        except CaptureError:  # the link went
+            return exc
+        return DeviceNack(exc.request, exc.code, detail) if detail else exc
+
+    def run(self, name: str, axis: int | None = None, value: Any = None) -> Any:
+        """:meth:`request`, with the controller's reason attached to an 0xA6 NACK."""
+        try:
+            return self.request(name, axis, value)
+        except DeviceNack as exc:
+            raise self.explain_nack(exc) from None
+
+    def poll(self, name: str, axis: int | None = None) -> Any:
+        """A getter the host asks on its own (identity, probes, registers, sensor polls).
+
+        Some of these opcodes are reconstructions, and a device may lack the function. When
+        the device answers 0xA6, or answers with the wrong kind of reply (an ACK: a
+        controller that acknowledges what it does not know), the command lands in
+        :attr:`unsupported` with that answer and is never sent again on this connection
+        (:class:`NotSupported`, now and on every later call), so the host does not keep
+        raising the controller's protocol-error flag; the one flag an 0xA6 raised is cleared
+        again when it is the only CSR bit set (ERR_ClearErrors would otherwise also clear
+        real errors). Timeouts and other NACKs raise as :meth:`request` does, for this call
+        only.
+        """
+        answer = self.unsupported.get(name)
+        if answer is not None:
+            raise NotSupported(name, answer)
+        opcode = f'0x{command(name).opcode:04X}'
+        try:
+            return self.request(name, axis)
+        except WrongReply as exc:
+            self._not_supported(name, f'{opcode} answered {exc.answer}, expected {exc.expected}')
+            raise NotSupported(name, self.unsupported[name]) from exc
+        except DeviceNack as exc:
+            if exc.code != ReplyCode.INVALID_COMMAND:
+                raise
+            self._not_supported(name, f'{opcode} answered NACK 0xA6', exc)
+            raise NotSupported(name, self.unsupported[name]) from exc
+
+    def optional(self, name: str, axis: int | None = None) -> Any:
+        """:meth:`poll`, with None for every answer that is not the value."""
+        try:
+            return self.poll(name, axis)
+        except NotSupported:
+            return None
+        except (DeviceNack, DeviceTimeout) as exc:
+            LOG.info('%s', exc)
+            return None
+
+    def _not_supported(self, name: str, answer: str, nack: DeviceNack | None = None) -> None:
+        """Record ``name`` as unknown to the device (said once, here); for an 0xA6, with the
+        device's reason, and the protocol-error flag it raised cleared."""
+        self.unsupported[name] = answer  # first: explaining it asks the device again
+        if nack is not None:
+            detail = self.explain_nack(nack).detail
+            if detail:
+                self.unsupported[name] = f'{answer} "{detail}"'
+        LOG.warning('%s: the device does not support it (%s); not sent again on this '
+                    'connection', name, self.unsupported[name])
+        if nack is not None:
+            self._clear_own_protocol_error()
+
+    def _clear_own_protocol_error(self) -> None:
+        with contextlib.suppress(CaptureError, ProtocolError):
+            if self.optional('ERR_CaptureSystemRegister') == CSR_PROTOCOL_ERROR:
+                self.request('ERR_ClearErrors')
+
+
+    def identity(self) -> Identity:
+        """Serial number, firmware, hardware and part number, best effort: blank where the
+        getter is not answered with data, and how it failed in ``problems``."""
+        ident = Identity()
+        for attr, name in IDENTITY_GETTERS:
+            try:
+                value = self.poll(name)
+            except NotSupported as exc:
+                ident.problems[name] = exc.answer
+                continue
+            except (DeviceNack, DeviceTimeout) as exc:
+                ident.problems[name] = str(exc)
+                continue
+            setattr(ident, attr, f'{value:g}' if isinstance(value, float) else str(value))
+        return ident
+
+    def read_axis(self, axis: int, with_current: bool = False) -> tuple[float, float, float | None]:
+        """Load position (deg), speed (deg/s) and optionally current (mA) of one axis."""
+        position = self.request('MOT_GetLoadPosition', axis)
+        speed = self.request('MOT_GetMotorSpeed', axis)
+        current = self.request('MOT_GetMotorCurrent', axis) if with_current else None
+        return position, speed, current
+
+    def stop_all(self, axes: list[int]) -> list[str]:
+        """Stop scans, loops and every axis; returns the problems (empty when all worked)."""
+        problems = []
+        for name in ('SCN_StopScan', 'PRST_StopPresetLooping', 'GPS_StopTargetLooping'):
+            try:
+                self.request(name)
+            except REQUEST_ERRORS as exc:
+                LOG.debug('stop: %s', exc)
+        for axis in axes:
+            try:
+                self.stop_axis(axis)
+            except REQUEST_ERRORS as exc:
+                problems.append(str(exc))
+        return problems
+
+    def reset_faults(self, axis: int) -> None:
+        """4.10: "send the 'Reset faults' and the 'AxisOn' commands"."""
+        self.run('MOT_ResetFaults', axis)
+        self.run('MOT_AxisOn', axis)
+
+    def registers(self, axis: int | None) -> dict[str, int]:
+        """Raw per-axis registers (``axis``) or system registers (``None``): those the
+        device reports; a register getter it does not answer with data is left out and
+        not asked again (:meth:`poll`)."""
+        wanted = [register for register in REGISTERS.values()
+                  if register.per_axis == (axis is not None)]
+        values = self.read_many([(register.command, axis) for register in wanted],
+                                optional=True)
+        return {register.name: value for register, value in zip(wanted, values, strict=True)
+                if value is not None}
+
+    def error_strings(self, csr: int) -> dict[str, str]:
+        """Detailed device error text for every set CSR bit that has one (and the device
+        answers with data)."""
+        texts = {}
+        for bit, name in CSR_ERROR_STRINGS.items():
+            if csr & (1 << bit):
+                try:
+                    texts[name] = self.poll(name)
+                except NotSupported:
+                    continue
+                except REQUEST_ERRORS as exc:
+                    texts[name] = f'unavailable ({exc})'
+        return texts
+
+    def configure_scan(self, yaw_min: float, yaw_max: float, pitch_min: float, steps: int,
+                       step_height: float, speed: float) -> None:
+        """4.3: every scan parameter is sent before each scan (defaults are 0)."""
+        for name, value in (
+            ('SCN_SetYawMin', yaw_min), ('SCN_SetYawMax', yaw_max),
+            ('SCN_SetPitchMin', pitch_min), ('SCN_SetNumSteps', steps),
+            ('SCN_SetStepHeight', step_height), ('SCN_SetScanSpeed', speed),
+        ):
+            self.run(name, None, value)
+
+    def start_scan(self, pattern: str) -> None:
+        try:
+            name = SCAN_COMMANDS[pattern]
+        except KeyError:
+            raise CaptureError(
+                f'pattern {pattern!r} not available; the device has {sorted(SCAN_COMMANDS)}'
+            ) from None
+        self.run(name)
+
+    def set_preset(self, index: int, name: str, angles: list[float]) -> None:
+        full = [*angles, *([0.0] * (6 - len(angles)))][:6]
+        self.run('PRST_SetPreset', index, PresetRecord(name, tuple(full)))
+
+    def get_preset(self, index: int) -> PresetRecord:
+        return self.run('PRST_GetPreset', index)
+
+    def preset_indices(self) -> list[int]:
+        flags = self.request('PRST_GetPresetFlag')
+        return [bit + 1 for bit in range(15) if flags & (1 << bit)]
+
+    def imu(self) -> dict[str, float]:
+        """Euler angles (deg) and gyro rates (deg/s); :class:`NotSupported` once the device
+        does not answer one of the six with data."""
+        names = ('IMU_GetRoll', 'IMU_GetPitch', 'IMU_GetYaw',
+                 'IMU_GetGyroX', 'IMU_GetGyroY', 'IMU_GetGyroZ')
+        keys = ('roll', 'pitch', 'yaw', 'gyro_x', 'gyro_y', 'gyro_z')
+        return {key: self.poll(name) for key, name in zip(keys, names, strict=True)}
+
+    def gps_fix(self) -> tuple[bool, float, float] | None:
+        """(position valid, latitude deg, longitude deg), converted from DDMM.mmmm (4.4.1);
+        None once the device does not answer one of the three with data (the fix poll then
+        stops); a timeout or another NACK raises, for this read only."""
+        if any(name in self.unsupported for name in GPS_FIX_COMMANDS):
+            return None  # nothing is sent for a fix the device cannot give
+        try:
+            ready, latitude, longitude = (self.poll(name) for name in GPS_FIX_COMMANDS)
+        except NotSupported:
+            return None
+        return bool(ready), ddmm_to_degrees(latitude), ddmm_to_degrees(longitude)
+
+    def goto_lla(self, target: int, point: GeoPoint) -> None:
+        self.run('GPS_SetTargetLLA', target, point)
+        self.run('GPS_GoToTarget', target)
+
+    # ------------------------------------- issue 15: first-class device functions
+    def set_tracking(self, camera: int, mode: int) -> None:
+        """VDT_setTrackingOn: 0 off, 1 manual, 2 automatic (4.11.1) for camera 0..3."""
+        self.run('VDT_setTrackingOn', camera, mode)
+
+    def tracking_state(self, camera: int) -> TrackingState:
+        """Tracking active, automatic mode and target detection of one camera (4.11.2-4)."""
+        return TrackingState(
+            camera=camera,
+            active=bool(self.poll('VDT_isTrackingOn', camera)),
+            automatic=bool(self.poll('VDT_isAutoModeOn', camera)),
+            target_detected=bool(self.poll('VDT_isTargetDetected', camera)),
+        )
+
+    def set_axis_power(self, axis: int, on: bool) -> None:
+        """MOT_AxisOn / MOT_AxisOff (4.2.11-12). Switching on also cancels the motion the
+        drive buffered while off (AxisOn would resume it) by stopping the axis."""
+        if on:
+            self.run('MOT_AxisOn', axis)
+            self.stop_axis(axis)
+        else:
+            self.run('MOT_AxisOff', axis)
+
+    def digital_io(self, numbers: list[int]) -> dict[int, bool]:
+        """State of digital I/O 1..6 (COM_getDigitalIO, the number in the axis byte)."""
+        return {n: bool(self.poll('COM_getDigitalIO', n)) for n in numbers}
+
+    def set_digital_output(self, number: int, on: bool) -> None:
+        self.run('COM_setDigitalIO', number, int(on))
+
+    def gps_heading(self) -> tuple[bool, float]:
+        """(heading valid, system heading in compass degrees clockwise from north)."""
+        ready = bool(self.poll('GPS_HeadingReady'))
+        return ready, self.poll('GPS_GetHeading')
+
+    def stored_targets(self) -> dict[int, GeoPoint]:
+        """Targets 1..15 that hold a position (4.4.12: a cleared target reads all zero)."""
+        targets = {}
+        for number in range(1, 16):
+            point = self.request('GPS_GetTargetLLA', number)
+            if (point.longitude, point.latitude, point.altitude) != (0.0, 0.0, 0.0):
+                targets[number] = point
+        return targets

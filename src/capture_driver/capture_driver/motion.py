@@ -1,0 +1,283 @@
+"""The Capture motion set-ups (no ROS): the 7.1 motion profile, speed mode, stops and the
+stream move written without waiting for its ACKs. A mixin of :class:`~.client.CaptureClient`,
+whose request/reply link (``request``, ``run``, the link lock) it drives.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any
+
+from gimbal_driver_common.transport import ByteStream, TransportError
+
+from .errors import (
+    CaptureError,
+    DeviceNack,
+    NotConnected,
+)
+from .protocol import (
+    Frame,
+    ProtocolError,
+    ReplyByte,
+    ReplyCode,
+    command,
+)
+
+LOG = logging.getLogger('capture_driver.motion')
+
+#: motion set-up steps the protocol calls advisory (4.2.14 "it is advisable to send this
+#: command before each command session", 7.1 "MOT_SetTum (as needed)"): a controller that
+#: does not know one (0xA6 while the rest of the set-up is accepted) is driven without it
+ADVISORY_STEPS = frozenset({'MOT_SetTum'})
+
+
+@dataclass
+class PostedMoves:
+    """A stream move written by :meth:`CaptureClient.post_moves` whose ACKs nobody has read
+    yet: per axis ``(position_deg, speed_deg_s, acceleration)`` and the frames, in order."""
+
+    moves: dict[int, tuple[float, float, float]]
+    frames: list[tuple[str, Frame]]
+    settled: bool = False
+    #: the client's count of setters sent when this was written (see finish_posted)
+    setters_at_post: int = 0
+    #: the device's refusal, or the link lost, found when the ACKs were read
+    error: CaptureError | None = None
+    #: some ACK never came, or a NACK says the packet was not executed (0xF6): the moves
+    #: are sent again, one request at a time (the same target twice is harmless)
+    resend: bool = False
+
+
+class MotionRequests:
+    """Motion set-ups of :class:`~.client.CaptureClient` (a mixin)."""
+
+    def move_absolute(self, axis: int, position_deg: float, speed_deg_s: float,
+                      acceleration: float) -> None:
+        """The 7.1 motion profile, absolute: mode, TUM, absolute, acc, speed, position, update.
+
+        When this client's last set-up of the axis was an absolute move and nothing else was
+        commanded since, the mode commands (SetPositionMode, SetPositionAbsolute) and an
+        unchanged acceleration and speed are left out. 4.2.14: without TUM "the motion
+        profile will use the last parameters", and TUM builds the new profile from the
+        acceleration, speed and position registers, so an unchanged register need not be
+        written again.
+
+        TUM is sent before every session ("advisable before each command session", 4.2.14),
+        but for a stream of moves it is sent for the *next* session right after this one's
+        MOT_Update: the 7.1 sequence already puts register writes between TUM and
+        MOT_Update, and only reads (the poll) come between them here. A stream at one speed
+        then costs SendPosition and MOT_Update before the device acts, and TUM after it:
+        the same 3 transactions, one less round trip on the way to MOT_Update. Anything else
+        commanded on the link forgets the armed TUM, and the next move sends it first again.
+        """
+        speed = abs(speed_deg_s)
+        with self._lock:
+            known = self._setups.pop(axis, None)
+            same_mode = known is not None and known[0] == 'absolute'
+            steps: list[tuple[str, Any]] = []
+            if not same_mode:
+                steps.append(('MOT_SetPositionMode', None))
+            if not (same_mode and known[3]):  # no TUM armed for this session
+                steps.append(('MOT_SetTum', None))
+            if not same_mode:
+                steps.append(('MOT_SetPositionAbsolute', None))
+            if not same_mode or known[1] != acceleration:
+                steps.append(('MOT_SetAcceleration', acceleration))
+            if not same_mode or known[2] != speed:
+                steps.append(('MOT_SetSpeed', speed))
+            steps += [('MOT_SendPosition', position_deg), ('MOT_Update', None)]
+            self._run_setup(axis, steps)
+            self._setups[axis] = ('absolute', acceleration, speed, self._arm_tum(axis))
+
+    def _arm_tum(self, axis: int) -> bool:
+        """MOT_SetTum for the axis' next session (see :meth:`move_absolute`); False when it
+        failed, so that session sends it itself (and judges an 0xA6 with the rest of its
+        set-up), or when the device does not know it. The move already happened: a failure
+        here is not the move's."""
+        if 'MOT_SetTum' in self.unsupported:
+            return False
+        self._in_setup = True
+        try:
+            self.request('MOT_SetTum', axis)
+        except CaptureError as exc:
+            LOG.debug('TUM for the next move of axis %d: %s', axis, exc)
+            return False
+        finally:
+            self._in_setup = False
+        return True
+
+    def post_moves(self, moves: dict[int, tuple[float, float, float]]) -> bool:
+        """Write a stream move at once, without waiting for any reply: True when written.
+
+        ``moves``: axis -> (position_deg, speed_deg_s, acceleration). Only the common case
+        of a command stream is posted: every axis already set up by this client for
+        absolute moves at this speed and acceleration, with a TUM armed (see
+        :meth:`move_absolute`), so the move is MOT_SendPosition + MOT_Update per axis. They
+        go out in one write, as :meth:`read_many` writes its getters (the same reading of
+        the document: the controller answers requests in the order they came; and the
+        same way back: :attr:`batching` off means one request at a time). False, and
+        nothing written, when the link is busy (another thread holds it: never waited
+        for), an earlier post is not finished, or the move needs more than that; the
+        caller then sends it with :meth:`move_absolute`.
+
+        The ACKs are read by whoever takes the link next (:meth:`_send`), and
+        :meth:`finish_posted` reports them and arms the next TUM. A NACK to SendPosition
+        leaves the MOT_Update that follows it to re-run the previous profile: the target
+        the axis already has.
+        """
+        if not self._lock.acquire(blocking=False):
+            return False
+        try:
+            stream = self._stream
+            if self._posted is not None or stream is None or not self.batching:
+                return False
+            if any(self._setups.get(axis) != ('absolute', acceleration, abs(speed), True)
+                   for axis, (_, speed, acceleration) in moves.items()):
+                return False
+            try:
+                frames = [(name, command(name).frame(axis, value, self.group))
+                          for axis, (position, _, _) in moves.items()
+                          for name, value in (('MOT_SendPosition', position),
+                                              ('MOT_Update', None))]
+            except ProtocolError:
+                return False  # move_absolute raises it, with nothing sent
+            for axis, (_, speed, acceleration) in moves.items():
+                self._setups[axis] = ('absolute', acceleration, abs(speed), False)
+            self.stats['requests'] += len(frames)
+            try:
+                self._send(stream, b''.join(frame.encode() for _, frame in frames))
+            except TransportError as exc:
+                self._link_lost(f'stream move: {exc}')
+                raise NotConnected(f'stream move: link lost ({exc})') from exc
+            self._setters_sent += 1
+            self.stats['posted_moves'] += 1
+            self._posted = PostedMoves(dict(moves), frames, setters_at_post=self._setters_sent)
+            return True
+        finally:
+            self._lock.release()
+
+    def finish_posted(self) -> bool:
+        """Read the ACKs of the last :meth:`post_moves` (if nobody has yet) and arm the next
+        TUM; raises the device's refusal. False: an ACK was lost (or a NACK says the packet
+        was not executed) and no other setter (a stop, a newer move) went out since, so the
+        caller sends the moves again with :meth:`move_absolute` (the axes' set-up is
+        forgotten: the whole 7.1 sequence goes out); a stale target is never sent after a
+        newer setter. True: nothing to send again."""
+        with self._lock:
+            posted = self._posted
+            if posted is None:
+                return True
+            try:
+                if not posted.settled:  # a link that closed settled it (_close_locked)
+                    self._settle_posted(self._stream)
+            finally:
+                self._posted = None
+            superseded = self._setters_sent != posted.setters_at_post
+            if posted.error is not None and (superseded or not posted.resend):
+                for axis in posted.moves:
+                    self._setups.pop(axis, None)
+                raise posted.error
+            if superseded:
+                return True
+            if posted.resend:
+                for axis in posted.moves:
+                    self._setups.pop(axis, None)
+                return False
+            for axis, (_, speed, acceleration) in posted.moves.items():
+                if self._setups.get(axis) == ('absolute', acceleration, abs(speed), False):
+                    self._setups[axis] = ('absolute', acceleration, abs(speed),
+                                          self._arm_tum(axis))
+            return True
+
+    def _settle_posted(self, stream: ByteStream | None) -> None:
+        """Read the ACK of each posted frame, in order (under the lock); the stream is
+        there while a post is unsettled (closing the link settles it)."""
+        assert stream is not None
+        posted = self._posted
+        assert posted is not None
+        posted.settled = True
+        answers: list[ReplyByte] = []
+        try:
+            for item in self._input_until(stream, self._last_activity + self.timeout):
+                if not isinstance(item, ReplyByte):
+                    self.stats['stale'] += 1
+                    continue
+                answers.append(item)
+                if len(answers) == len(posted.frames):
+                    break
+        except TransportError as exc:
+            self._link_lost(f'stream move: {exc}')
+            posted.error = NotConnected(f'stream move: link lost ({exc})')
+            return
+        for (name, frame), answer in zip(posted.frames, answers, strict=False):
+            if not answer.is_ack:
+                self.stats['nacks'] += 1
+                if posted.error is None:
+                    posted.error = DeviceNack(self._label(name, frame), answer.code)
+                    posted.resend = answer.code == ReplyCode.WRONG_CHECKSUM
+        self._count_batch(complete=len(answers) == len(posted.frames))
+        if len(answers) == len(posted.frames):
+            return
+        posted.resend = True
+        if not answers:
+            self._count_timeout('stream move')
+
+    def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:
+        """Speed mode (4.2.9): the axis turns at ``velocity_deg_s`` until told otherwise.
+
+        Speed mode and an unchanged acceleration are left out when this client's last
+        set-up of the axis left it in speed mode (a jog or a stop) and nothing else was
+        commanded since: a stream of jog commands costs 2 round trips each, not 4.
+        """
+        with self._lock:
+            known = self._setups.pop(axis, None)
+            same_mode = known is not None and known[0] == 'speed'
+            steps: list[tuple[str, Any]] = []
+            if not same_mode:
+                steps.append(('MOT_SetSpeedMode', None))
+            if not same_mode or known[1] != acceleration:
+                steps.append(('MOT_SetAcceleration', acceleration))
+            steps += [('MOT_SetSpeed', velocity_deg_s), ('MOT_Update', None)]
+            self._run_setup(axis, steps)
+            self._setups[axis] = ('speed', acceleration, velocity_deg_s, False)
+
+    def stop_axis(self, axis: int) -> None:
+        """Decelerate to rest: speed mode with speed 0 (works from position or speed mode).
+        Always the full sequence: a stop never relies on what the client remembers."""
+        with self._lock:
+            known = self._setups.pop(axis, None)
+            self._run_setup(axis, [('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
+                                   ('MOT_Update', None)])
+            self._setups[axis] = ('speed', known[1] if known else None, 0.0, False)
+
+    def _run_setup(self, axis: int, steps: list[tuple[str, Any]]) -> None:
+        """Send one axis' motion set-up under the lock; the setters in it do not count as
+        "something else commanded" (see :attr:`_setups`).
+
+        An advisory step (:data:`ADVISORY_STEPS`: MOT_SetTum) refused with 0xA6 does not
+        end the set-up. When the device accepts the rest, it does not know the step: it is
+        recorded in :attr:`unsupported` (said once) and left out of later set-ups on this
+        connection. When the rest is refused too, the 0xA6 meant the mode (scanning,
+        stabilising, ...), and the set-up fails with the later refusal as before.
+        """
+        refused: tuple[str, DeviceNack] | None = None
+        self._in_setup = True
+        try:
+            for name, value in steps:
+                if name not in ADVISORY_STEPS:
+                    self.run(name, axis, value)
+                elif name not in self.unsupported:
+                    try:
+                        self.run(name, axis, value)
+                    except DeviceNack as exc:
+                        if exc.code != ReplyCode.INVALID_COMMAND:
+                            raise
+                        refused = (name, exc)
+        finally:
+            self._in_setup = False
+        if refused is not None:
+            name, exc = refused
+            answer = f'0x{command(name).opcode:04X} answered NACK 0xA6'
+            self._not_supported(name, f'{answer} "{exc.detail}"' if exc.detail else answer)
+            self._clear_own_protocol_error()
