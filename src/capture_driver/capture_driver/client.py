@@ -1,6 +1,10 @@
 """Capture pedestal session: handshake, request/reply, keep-alive, resync and reconnect.
 
-One request is in flight at a time (a lock serialises callers from any thread). A request
+One request is in flight at a time: every exchange holds the device's link lock
+(:class:`~gimbal_driver_common.link_lock.LinkLock`, which the adapter passes in; a client
+made alone makes its own), and so does the core's command path for its sends. A stream
+move posted without waiting (:meth:`MotionRequests.post_moves`) is settled by that lock
+before the link's next exchange. A request
 writes one packet and reads until its reply: a data packet with the same opcode and axis
 for getters, a single ACK byte for everything else, or a NACK byte, which raises
 :class:`DeviceNack` carrying the spec's meaning and advice. A reply of the other kind (an
@@ -41,7 +45,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-from gimbal_driver_common.fair_lock import FairRLock
+from gimbal_driver_common.link_lock import LinkLock
 from gimbal_driver_common.transport import ByteStream, TransportError
 
 from .device_requests import DeviceRequests
@@ -53,7 +57,7 @@ from .errors import (
     NotSupported,
     WrongReply,
 )
-from .motion import MotionRequests, PostedMoves
+from .motion import MotionRequests
 from .protocol import (
     Frame,
     ProtocolError,
@@ -85,6 +89,7 @@ class CaptureClient(MotionRequests, DeviceRequests):
         resync_gap: float = 0.05,
         max_timeouts: int = 3,
         batch_reads: bool = True,
+        link_lock: LinkLock | None = None,
     ) -> None:
         self._stream_factory = stream_factory
         self.group = group
@@ -95,8 +100,8 @@ class CaptureClient(MotionRequests, DeviceRequests):
         self.keepalive_count = keepalive_count
         self.resync_gap = resync_gap
         self.max_timeouts = max_timeouts
-        # fair: a command stream must not starve the joint poll (gimbal_driver_common.fair_lock)
-        self._lock = FairRLock()
+        # the device's one link lock (fair: a command stream must not starve the joint poll)
+        self._lock = link_lock if link_lock is not None else LinkLock()
         self._stream: ByteStream | None = None
         self._decoder = StreamDecoder()
         self._connected = False
@@ -114,10 +119,6 @@ class CaptureClient(MotionRequests, DeviceRequests):
         self.batch_reads = batch_reads
         self.batching = batch_reads
         self._batch_failures = 0
-        #: a stream move written without waiting for its ACKs (see :meth:`post_moves`)
-        self._posted: PostedMoves | None = None
-        #: setters sent on this client (a posted move is not re-sent after another one)
-        self._setters_sent = 0
         self._worker: threading.Thread | None = None
         self._stop = threading.Event()
         self.last_error = 'not connected'
@@ -223,11 +224,6 @@ class CaptureClient(MotionRequests, DeviceRequests):
     def _close_locked(self) -> None:
         self._connected = False
         self._setups.clear()
-        posted = self._posted
-        if posted is not None and not posted.settled:
-            posted.settled = True
-            posted.error = NotConnected(f'stream move: link closed before its ACKs came '
-                                        f'({self.last_error})')
         stream, self._stream = self._stream, None
         if stream is not None:
             stream.close()
@@ -282,10 +278,8 @@ class CaptureClient(MotionRequests, DeviceRequests):
         frame = cmd.frame(axis, value, self.group if group is None else group)
         if self._stream is None:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
-        if not cmd.replies_with_data:
-            self._setters_sent += 1
-            if not self._in_setup:
-                self._setups.clear()  # anything may have changed an axis' mode or profile
+        if not cmd.replies_with_data and not self._in_setup:
+            self._setups.clear()  # anything may have changed an axis' mode or profile
         for attempt in (1, 2):
             try:
                 reply = self._transact(name, frame, cmd.replies_with_data,
@@ -435,13 +429,7 @@ class CaptureClient(MotionRequests, DeviceRequests):
     def _send(self, stream: ByteStream, data: bytes) -> bool:
         """Write one request (or a batch), after draining stale input if there can be any;
         until its reply is in, input may hold a stale reply again. Returns True when a late
-        reply to an earlier request may still arrive (one was left unanswered).
-
-        A posted stream move's ACKs are read first (:meth:`_settle_posted`): whoever takes
-        the link next, the poll included, finds the link as if that move had been sent by
-        :meth:`request`."""
-        if self._posted is not None and not self._posted.settled:
-            self._settle_posted(stream)
+        reply to an earlier request may still arrive (one was left unanswered)."""
         late_possible = self._stale_possible
         if late_possible:
             self._drain(stream)
@@ -540,7 +528,7 @@ class CaptureClient(MotionRequests, DeviceRequests):
     def _label(name: str, frame: Frame) -> str:
         return f'{name} (axis {frame.axis})' if frame.axis else name
 
-    def exclusive(self) -> FairRLock:
-        """The request lock, for a caller that sends a whole motion set-up (several axes)
+    def exclusive(self) -> LinkLock:
+        """The link lock, for a caller that sends a whole motion set-up (several axes)
         without the poll thread's requests in between: ``with client.exclusive(): ...``."""
         return self._lock

@@ -45,6 +45,7 @@ from .client import CaptureClient
 from .device_requests import IDENTITY_GETTERS, Identity
 from .errors import REQUEST_ERRORS, NotSupported
 from .functions import CaptureFunctions
+from .motion import PostedMoves
 from .status import CaptureStatus, axis_flags
 
 LOG = logging.getLogger('capture_driver.device')
@@ -130,7 +131,8 @@ class CaptureDevice(CaptureFunctions, Device):
         self.client = CaptureClient(
             settings.open_stream, group=settings.group_id, timeout=settings.request_timeout,
             expect_greeting=settings.transport == 'tcp',
-            keepalive_period=settings.keepalive_period, batch_reads=settings.batch_reads)
+            keepalive_period=settings.keepalive_period, batch_reads=settings.batch_reads,
+            link_lock=self.link_lock)
         self._status: dict[str, Any] = {}
         self._status_lock = threading.Lock()
         self._next_status = 0.0
@@ -313,7 +315,7 @@ class CaptureDevice(CaptureFunctions, Device):
             self.target_looping = False
 
     def move(self, moves: Moves) -> None:
-        """Absolute moves; the whole set-up of every axis under one hold of the client's
+        """Absolute moves; the whole set-up of every axis under one hold of the link
         lock, so the poll does not interleave its reads."""
         with self.client.exclusive():
             self.leave_device_programs()
@@ -331,19 +333,20 @@ class CaptureDevice(CaptureFunctions, Device):
     def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite | None:
         """A stream move written at once when the axes are already set up for it (the
         client's ``post_moves``: SendPosition + MOT_Update per axis, two ACKs each, read
-        by :meth:`settle`), so the joint_command callback writes it without waiting; not
-        a jog, nor while a device program runs (a move ends it first, with requests that
-        wait)."""
+        by :meth:`settle` when the link lock is next taken), so the joint_command
+        callback writes it without waiting; not a jog, nor while a device program runs (a
+        move ends it first, with requests that wait)."""
         if jogs or not moves or self.device_scanning or self.preset_looping \
                 or self.target_looping:
             return None
-        axis_moves = self._axis_moves(moves)
-        if not self.client.post_moves(axis_moves):
+        written = self.client.post_moves(self._axis_moves(moves))
+        if written is None:
             return None
-        return PostedWrite(dict(moves), {}, replies=2 * len(axis_moves))
+        return PostedWrite(dict(moves), {}, replies=len(written.frames), expected=written)
 
     def settle(self, posted: PostedWrite) -> bool:
-        return self.client.finish_posted()
+        assert isinstance(posted.expected, PostedMoves)
+        return self.client.settle_posted(posted.expected)
 
     def jog(self, velocities: dict[str, float]) -> None:
         with self.client.exclusive():

@@ -34,19 +34,14 @@ ADVISORY_STEPS = frozenset({'MOT_SetTum'})
 
 @dataclass
 class PostedMoves:
-    """A stream move written by :meth:`CaptureClient.post_moves` whose ACKs nobody has read
-    yet: per axis ``(position_deg, speed_deg_s, acceleration)`` and the frames, in order."""
+    """A stream move written by :meth:`MotionRequests.post_moves`: per axis
+    ``(position_deg, speed_deg_s, acceleration)``, the frames in order (one ACK each) and
+    the stream they went out on. The core carries it (``PostedWrite.expected``) until
+    :meth:`MotionRequests.settle_posted` reads the ACKs."""
 
     moves: dict[int, tuple[float, float, float]]
     frames: list[tuple[str, Frame]]
-    settled: bool = False
-    #: the client's count of setters sent when this was written (see finish_posted)
-    setters_at_post: int = 0
-    #: the device's refusal, or the link lost, found when the ACKs were read
-    error: CaptureError | None = None
-    #: some ACK never came, or a NACK says the packet was not executed (0xF6): the moves
-    #: are sent again, one request at a time (the same target twice is harmless)
-    resend: bool = False
+    stream: ByteStream
 
 
 class MotionRequests:
@@ -107,8 +102,9 @@ class MotionRequests:
             self._in_setup = False
         return True
 
-    def post_moves(self, moves: dict[int, tuple[float, float, float]]) -> bool:
-        """Write a stream move at once, without waiting for any reply: True when written.
+    def post_moves(self, moves: dict[int, tuple[float, float, float]]) -> PostedMoves | None:
+        """Write a stream move at once, without waiting for any reply: what was written, or
+        None with nothing written.
 
         ``moves``: axis -> (position_deg, speed_deg_s, acceleration). Only the common case
         of a command stream is posted: every axis already set up by this client for
@@ -116,32 +112,30 @@ class MotionRequests:
         :meth:`move_absolute`), so the move is MOT_SendPosition + MOT_Update per axis. They
         go out in one write, as :meth:`read_many` writes its getters (the same reading of
         the document: the controller answers requests in the order they came; and the
-        same way back: :attr:`batching` off means one request at a time). False, and
-        nothing written, when the link is busy (another thread holds it: never waited
-        for), an earlier post is not finished, or the move needs more than that; the
-        caller then sends it with :meth:`move_absolute`.
+        same way back: :attr:`batching` off means one request at a time). None when the
+        link is down or the move needs more than that; the caller then sends it with
+        :meth:`move_absolute`.
 
-        The ACKs are read by whoever takes the link next (:meth:`_send`), and
-        :meth:`finish_posted` reports them and arms the next TUM. A NACK to SendPosition
-        leaves the MOT_Update that follows it to re-run the previous profile: the target
-        the axis already has.
+        The caller holds the link lock (the command path's one try, from the
+        joint_command callback). The lock settles the post before the link's next
+        exchange (``gimbal_driver_common.link_lock``): :meth:`settle_posted` reads the ACKs
+        and arms the next TUM. A NACK to SendPosition leaves the MOT_Update that follows it
+        to re-run the previous profile: the target the axis already has.
         """
-        if not self._lock.acquire(blocking=False):
-            return False
-        try:
+        with self._lock:  # reentrant: the caller's hold
             stream = self._stream
-            if self._posted is not None or stream is None or not self.batching:
-                return False
+            if stream is None or not self.batching:
+                return None
             if any(self._setups.get(axis) != ('absolute', acceleration, abs(speed), True)
                    for axis, (_, speed, acceleration) in moves.items()):
-                return False
+                return None
             try:
                 frames = [(name, command(name).frame(axis, value, self.group))
                           for axis, (position, _, _) in moves.items()
                           for name, value in (('MOT_SendPosition', position),
                                               ('MOT_Update', None))]
             except ProtocolError:
-                return False  # move_absolute raises it, with nothing sent
+                return None  # move_absolute raises it, with nothing sent
             for axis, (_, speed, acceleration) in moves.items():
                 self._setups[axis] = ('absolute', acceleration, abs(speed), False)
             self.stats['requests'] += len(frames)
@@ -150,39 +144,29 @@ class MotionRequests:
             except TransportError as exc:
                 self._link_lost(f'stream move: {exc}')
                 raise NotConnected(f'stream move: link lost ({exc})') from exc
-            self._setters_sent += 1
             self.stats['posted_moves'] += 1
-            self._posted = PostedMoves(dict(moves), frames, setters_at_post=self._setters_sent)
-            return True
-        finally:
-            self._lock.release()
+            return PostedMoves(dict(moves), frames, stream)
 
-    def finish_posted(self) -> bool:
-        """Read the ACKs of the last :meth:`post_moves` (if nobody has yet) and arm the next
-        TUM; raises the device's refusal. False: an ACK was lost (or a NACK says the packet
-        was not executed) and no other setter (a stop, a newer move) went out since, so the
+    def settle_posted(self, posted: PostedMoves) -> bool:
+        """Read the ACKs of a :meth:`post_moves`, in order, and arm the next TUM; raises the
+        device's refusal, or :class:`NotConnected` when the link closed before they came.
+        False: an ACK was lost (or a NACK says the packet was not executed, 0xF6), so the
         caller sends the moves again with :meth:`move_absolute` (the axes' set-up is
-        forgotten: the whole 7.1 sequence goes out); a stale target is never sent after a
-        newer setter. True: nothing to send again."""
+        forgotten: the whole 7.1 sequence goes out). Run under the link lock before its
+        next exchange, so no other setter went out since the post."""
         with self._lock:
-            posted = self._posted
-            if posted is None:
-                return True
-            try:
-                if not posted.settled:  # a link that closed settled it (_close_locked)
-                    self._settle_posted(self._stream)
-            finally:
-                self._posted = None
-            superseded = self._setters_sent != posted.setters_at_post
-            if posted.error is not None and (superseded or not posted.resend):
+            if self._stream is not posted.stream:
                 for axis in posted.moves:
                     self._setups.pop(axis, None)
-                raise posted.error
-            if superseded:
-                return True
-            if posted.resend:
+                raise NotConnected(f'stream move: link closed before its ACKs came '
+                                   f'({self.last_error})')
+            error, resend = self._read_posted_answers(posted)
+            if error is not None or resend:
                 for axis in posted.moves:
                     self._setups.pop(axis, None)
+            if error is not None and not resend:
+                raise error
+            if resend:
                 return False
             for axis, (_, speed, acceleration) in posted.moves.items():
                 if self._setups.get(axis) == ('absolute', acceleration, abs(speed), False):
@@ -190,16 +174,12 @@ class MotionRequests:
                                           self._arm_tum(axis))
             return True
 
-    def _settle_posted(self, stream: ByteStream | None) -> None:
-        """Read the ACK of each posted frame, in order (under the lock); the stream is
-        there while a post is unsettled (closing the link settles it)."""
-        assert stream is not None
-        posted = self._posted
-        assert posted is not None
-        posted.settled = True
+    def _read_posted_answers(self, posted: PostedMoves) -> tuple[CaptureError | None, bool]:
+        """The ACK of each posted frame, in order (under the lock): the first refusal (or
+        the link lost) and whether to send the moves again (an ACK missing, or 0xF6)."""
         answers: list[ReplyByte] = []
         try:
-            for item in self._input_until(stream, self._last_activity + self.timeout):
+            for item in self._input_until(posted.stream, self._last_activity + self.timeout):
                 if not isinstance(item, ReplyByte):
                     self.stats['stale'] += 1
                     continue
@@ -208,20 +188,21 @@ class MotionRequests:
                     break
         except TransportError as exc:
             self._link_lost(f'stream move: {exc}')
-            posted.error = NotConnected(f'stream move: link lost ({exc})')
-            return
+            return NotConnected(f'stream move: link lost ({exc})'), False
+        error: CaptureError | None = None
+        resend = False
         for (name, frame), answer in zip(posted.frames, answers, strict=False):
             if not answer.is_ack:
                 self.stats['nacks'] += 1
-                if posted.error is None:
-                    posted.error = DeviceNack(self._label(name, frame), answer.code)
-                    posted.resend = answer.code == ReplyCode.WRONG_CHECKSUM
+                if error is None:
+                    error = DeviceNack(self._label(name, frame), answer.code)
+                    resend = answer.code == ReplyCode.WRONG_CHECKSUM
         self._count_batch(complete=len(answers) == len(posted.frames))
         if len(answers) == len(posted.frames):
-            return
-        posted.resend = True
+            return error, resend
         if not answers:
             self._count_timeout('stream move')
+        return error, True
 
     def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:
         """Speed mode (4.2.9): the axis turns at ``velocity_deg_s`` until told otherwise.

@@ -16,6 +16,7 @@ from capture_driver.protocol import BY_OPCODE, COMMANDS, GeoPoint, ProtocolError
 from capture_driver.protocol.geometry import aim_at
 from capture_driver.protocol.registers import CMER, REGISTERS, SRL
 from capture_driver.sim import CaptureSimulator, PedestalModel
+from gimbal_driver_common.link_lock import LinkLock
 from gimbal_driver_common.sim_control import read_ready_line
 from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import SerialStream, TcpStream
@@ -774,52 +775,67 @@ def requests_since(sim, start: int) -> list[tuple[str, int]]:
 def test_a_stream_move_goes_out_in_one_write_once_the_axis_is_set_up(sim, link, transport):
     client, writes = link(transport)
     before = writes.writes
-    assert not client.post_moves({1: (5.0, SPEED, ACCELERATION)})  # not set up yet
+    assert client.post_moves({1: (5.0, SPEED, ACCELERATION)}) is None  # not set up yet
     assert writes.writes == before
     client.move_absolute(1, 5.0, SPEED, ACCELERATION)  # the set-up, and a TUM armed
     settle(client, 1, 5.0)
     start, before = len(sim.model.requests), writes.writes
-    assert client.post_moves({1: (9.0, SPEED, ACCELERATION)})
-    assert writes.writes == before + 1
-    assert not client.post_moves({1: (10.0, SPEED, ACCELERATION)})  # one at a time
-    assert client.finish_posted()  # reads both ACKs, arms the next session's TUM
+    posted = client.post_moves({1: (9.0, SPEED, ACCELERATION)})
+    assert posted is not None and writes.writes == before + 1
+    assert [name for name, _ in posted.frames] == ['MOT_SendPosition', 'MOT_Update']
+    assert client.settle_posted(posted)  # reads both ACKs, arms the next session's TUM
     assert requests_since(sim, start) == [('MOT_SendPosition', 1), ('MOT_Update', 1),
                                           ('MOT_SetTum', 1)]
     settle(client, 1, 9.0)
     # another speed needs MOT_SetSpeed: not a stream move, sent by move_absolute
-    assert not client.post_moves({1: (3.0, SPEED / 2, ACCELERATION)})
-    assert client.post_moves({1: (3.0, SPEED, ACCELERATION)})
-    client.finish_posted()
+    assert client.post_moves({1: (3.0, SPEED / 2, ACCELERATION)}) is None
+    assert client.settle_posted(client.post_moves({1: (3.0, SPEED, ACCELERATION)}))
     settle(client, 1, 3.0)
     assert client.stats['nacks'] == client.stats['timeouts'] == client.stats['stale'] == 0
 
 
-def test_two_axes_in_one_post_and_the_poll_reads_the_acks_first(sim, link):
-    client, writes = link()
-    client.move_absolute(1, 1.0, SPEED, ACCELERATION)
-    client.move_absolute(2, -1.0, SPEED, ACCELERATION)
-    before = writes.writes
-    assert client.post_moves({1: (4.0, SPEED, ACCELERATION), 2: (-4.0, SPEED, ACCELERATION)})
-    assert writes.writes == before + 1
-    client.read_many(POLL)  # the poll takes the link first: it reads the two ACKs
-    assert client.stats['stale'] == 0
-    client.finish_posted()
-    settle(client, 1, 4.0)
-    settle(client, 2, -4.0)
-    assert client.post_moves({1: (5.0, SPEED, ACCELERATION)})  # both TUMs armed again
-    client.finish_posted()
-    settle(client, 1, 5.0)
+def test_the_link_lock_settles_a_post_before_the_poll_reads(sim):
+    """Every exchange of the client holds the link lock it was given; the lock's
+    ``before_use`` (the core's command path in a node) reads a posted move's ACKs before
+    the poll writes, so the poll gets its own answers."""
+    lock, posts, settled = LinkLock(), [], []
+    client = CaptureClient(lambda: TcpStream('127.0.0.1', sim.tcp.port), timeout=0.3,
+                           link_lock=lock)
+
+    def settle_posted() -> None:  # what the command path's settle does, in short
+        while posts:
+            settled.append(client.settle_posted(posts.pop()))
+
+    lock.before_use = settle_posted
+    client.connect()
+    try:
+        client.move_absolute(1, 1.0, SPEED, ACCELERATION)
+        client.move_absolute(2, -1.0, SPEED, ACCELERATION)
+        assert lock.try_hold()  # as the joint_command callback does: no settle
+        try:
+            posts.append(client.post_moves({1: (4.0, SPEED, ACCELERATION),
+                                            2: (-4.0, SPEED, ACCELERATION)}))
+        finally:
+            lock.release()
+        assert posts[0] is not None and settled == []
+        assert len(client.read_many(POLL)) == 4  # the lock settles the post first
+        assert settled == [True] and client.stats['stale'] == 0
+        settle(client, 1, 4.0)
+        settle(client, 2, -4.0)
+        assert client.post_moves({1: (5.0, SPEED, ACCELERATION)}) is not None  # TUMs armed
+    finally:
+        client.stop()
 
 
 def test_a_refused_stream_move_is_reported_and_the_next_move_sets_up_again(sim, link):
     client, _ = link()
     client.move_absolute(1, 2.0, SPEED, ACCELERATION)
     sim.model.nack_next(0x16, COMMANDS['MOT_SendPosition'].opcode)
-    assert client.post_moves({1: (6.0, SPEED, ACCELERATION)})
+    posted = client.post_moves({1: (6.0, SPEED, ACCELERATION)})
     with pytest.raises(DeviceNack, match=r'MOT_SendPosition \(axis 1\).*0x16'):
-        client.finish_posted()
+        client.settle_posted(posted)
     settle(client, 1, 2.0)  # the MOT_Update after it re-ran the previous profile
-    assert not client.post_moves({1: (6.0, SPEED, ACCELERATION)})  # set-up forgotten
+    assert client.post_moves({1: (6.0, SPEED, ACCELERATION)}) is None  # set-up forgotten
     start = len(sim.model.requests)
     client.move_absolute(1, 6.0, SPEED, ACCELERATION)
     assert ('MOT_SetPositionMode', 1) in requests_since(sim, start)
@@ -830,27 +846,14 @@ def test_a_stream_move_with_a_lost_ack_is_sent_again_one_request_at_a_time(sim, 
     client, _ = link()
     client.move_absolute(1, 2.0, SPEED, ACCELERATION)
     sim.model.lose_replies(1)
-    assert client.post_moves({1: (7.0, SPEED, ACCELERATION)})
+    posted = client.post_moves({1: (7.0, SPEED, ACCELERATION)})
     start = len(sim.model.requests)
     # one ACK of two: which one is lost, the byte does not say; the caller sends it again
-    assert not client.finish_posted()
+    assert not client.settle_posted(posted)
     client.move_absolute(1, 7.0, SPEED, ACCELERATION)
     assert ('MOT_SetPositionMode', 1) in requests_since(sim, start)  # the whole 7.1 set-up
     assert client.stats['incomplete_batches'] == 1 and client.connected
     settle(client, 1, 7.0)
-
-
-def test_a_stream_move_is_never_sent_again_after_a_stop(sim, link):
-    client, _ = link()
-    client.move_absolute(1, 0.5, SPEED, ACCELERATION)
-    settle(client, 1, 0.5)
-    sim.model.lose_replies(1)
-    assert client.post_moves({1: (40.0, SPEED, ACCELERATION)})
-    client.stop_axis(1)  # reads what came of the post first, then stops
-    start = len(sim.model.requests)
-    assert client.finish_posted()  # the lost ACK would resend the move: not after a stop
-    assert ('MOT_SendPosition', 1) not in requests_since(sim, start)
-    wait_for(lambda: client.read_axis(1)[1] == 0.0, 5.0, 'axis 1 stopped')
 
 
 @pytest.mark.parametrize('transport', ['tcp', 'pty'])
@@ -861,20 +864,21 @@ def test_a_controller_that_drops_queued_requests_gets_moves_one_at_a_time(sim, l
     client.move_absolute(1, target, SPEED, ACCELERATION)
     for _ in range(3):  # each post loses its MOT_Update: sent again, and counted
         target += 1.0
-        assert client.post_moves({1: (target, SPEED, ACCELERATION)})
-        assert not client.finish_posted()
+        assert not client.settle_posted(client.post_moves({1: (target, SPEED, ACCELERATION)}))
         client.move_absolute(1, target, SPEED, ACCELERATION)
         settle(client, 1, target)
     assert not client.batching
-    assert not client.post_moves({1: (target + 1.0, SPEED, ACCELERATION)})
+    assert client.post_moves({1: (target + 1.0, SPEED, ACCELERATION)}) is None
 
 
 def test_a_link_lost_before_the_acks_is_reported_as_not_connected(sim, link):
     client, _ = link()
     client.move_absolute(1, 1.0, SPEED, ACCELERATION)
-    assert client.post_moves({1: (3.0, SPEED, ACCELERATION)})
+    posted = client.post_moves({1: (3.0, SPEED, ACCELERATION)})
     client.close()
     with pytest.raises(NotConnected, match='stream move'):
-        client.finish_posted()
+        client.settle_posted(posted)
     client.connect()
-    assert not client.post_moves({1: (3.0, SPEED, ACCELERATION)})  # a new connection
+    with pytest.raises(NotConnected, match='stream move'):  # not the new connection's
+        client.settle_posted(posted)
+    assert client.post_moves({1: (3.0, SPEED, ACCELERATION)}) is None  # a new connection

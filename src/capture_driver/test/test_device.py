@@ -330,3 +330,27 @@ def test_levelling_targets_and_reaches_the_leveling_value(tcp_rig):
     assert tcp_rig.sim_axis(2).position == pytest.approx(-3.0, abs=0.1)
     with pytest.raises(InvalidRequest, match='unknown joint'):
         ctl.call(lambda: device.start_leveling(['elbow']))
+
+
+def test_a_posted_stream_move_is_settled_through_the_link_lock_and_a_stop_wins(tcp_rig):
+    """A stream move goes out from the caller's thread (posted, one write) once the axis
+    is set up; the device's one link lock settles its ACKs before the next exchange. With
+    an ACK lost and a stop sent before it settles, the stale move is not sent again."""
+    ctl, sim = tcp_rig.controller, tcp_rig.sim
+    ctl.command(['pan'], [0.05], [])  # the first move sets the axis up (command thread)
+    tcp_rig.wait_positions({'pan': 0.05})
+    posted = tcp_rig.device.client.stats['posted_moves']
+    with tcp_rig.device.link_lock:  # the poll and the command thread wait: nothing settles
+        ctl.command(['pan'], [0.1], [])
+        assert tcp_rig.device.client.stats['posted_moves'] == posted + 1  # written at once
+    tcp_rig.wait_positions({'pan': 0.1})
+    assert ctl.rejections.counts()['refused'] == {}
+    with tcp_rig.device.link_lock:
+        sim.model.lose_replies(1)
+        ctl.command(['pan'], [1.5], [])
+        assert tcp_rig.device.client.stats['posted_moves'] == posted + 2
+        sends = tcp_rig.sent('MOT_SendPosition')
+        ctl.stop()  # settles the post first (an ACK lost), then stops: no resend
+    wait_for(lambda: sim.model.axes[1].velocity == 0.0, 10.0, 'pan stopped')
+    assert tcp_rig.sent('MOT_SendPosition') == sends  # the lost move was not sent again
+    assert 'pan' not in ctl.commanded_targets or ctl.commanded_targets['pan'] != 1.5

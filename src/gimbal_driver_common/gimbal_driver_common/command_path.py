@@ -10,8 +10,12 @@ lost unless a stop or a newer move for the joint went out since, and sends the q
 with ``Device.move`` and ``Device.jog``. Any other send (move_to, a stop) settles a
 posted write first, so a stop goes after the send in flight and nothing stale follows
 it. The caller never waits for a device answer nor behind another send: the one
-non-blocking try is here, on :attr:`CommandPath.lock` (the Capture and virtual-gimbal
-clients still also try their own link lock, which their poll shares: open work).
+non-blocking try is here, on the device's link lock (:attr:`CommandPath.lock`, the
+:class:`~gimbal_driver_common.link_lock.LinkLock` the ``Device`` base owns). A
+request/reply client takes that same lock around each exchange (its poll, sensors and
+services too), and the lock settles a posted write before anyone else uses the link
+(``before_use``): the adapter says what it wrote and how many answers to expect
+(:class:`~gimbal_driver_common.device.PostedWrite`), and holds no lock of its own.
 """
 
 from __future__ import annotations
@@ -65,8 +69,10 @@ class CommandPath:
         self._record_targets = record_targets
         self._record_jogs = record_jogs
         self._refusal = refusal
-        #: one send on the link at a time; stop takes it last, after the send in flight
-        self.lock = threading.Lock()
+        #: the device's link lock: one exchange on the link at a time, shared with the
+        #: device's own requests; its first hold settles what the caller posted
+        self.lock = device.link_lock
+        self.lock.before_use = self._settle_posted
         self._queue_lock = threading.Lock()
         self._pending: Pending = {}
         #: a write whose answers nobody has read yet (None: none); a joint leaves its
@@ -84,7 +90,7 @@ class CommandPath:
                 self._pending[joint] = ('move', target, speed)
             for joint, velocity in jogs.items():
                 self._pending[joint] = ('jog', velocity, None)
-        if self.lock.acquire(blocking=False):
+        if self.lock.try_hold():
             try:
                 posted = self._post_pending()
             finally:
@@ -133,9 +139,9 @@ class CommandPath:
         """Run another send (move_to, a stop) now: the queued commands of ``joints``
         (None: all) are dropped, a posted write is settled first and not sent again for
         them. The caller's own refusals raise (device_boundary)."""
+        self.drop(joints)  # before the lock's settle, which would send them again
         with self.lock:
-            self.drop(joints)
-            self._settle_posted()
+            self.drop(joints)  # and what the caller queued meanwhile
             with device_boundary():
                 request()
 
@@ -158,8 +164,7 @@ class CommandPath:
         while not self._stopping.is_set():
             self.ready.wait()
             self.ready.clear()
-            with self.lock:
-                self._settle_posted()
+            with self.lock:  # settles a posted write first (before_use)
                 self._flush_pending()
 
     def close(self) -> None:
@@ -171,8 +176,9 @@ class CommandPath:
         self._stopping.clear()
 
     def _settle_posted(self) -> None:
-        """Read a posted write's answers (caller holds :attr:`lock`); send its moves again
-        when answers were lost, unless superseded (a stop, a newer move or a queued one)."""
+        """Read a posted write's answers (the lock's ``before_use``: every holder, from any
+        thread, runs it before its own exchange); send its moves again when answers
+        were lost, unless superseded (a stop, a newer move or a queued one)."""
         posted, self._posted = self._posted, None
         if posted is None:
             return

@@ -113,8 +113,6 @@ class GimbalController:
         self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
         self.commands = CommandPath(device, self.rejections, self.record_targets,
                                     self._send_refusal, self.motion_watch.jogged)
-        #: one send on the link at a time (the command path's); stop goes last
-        self._send_lock = self.commands.lock
         self._stopping = threading.Event()
         self._wake = threading.Event()
         self._threads: list[threading.Thread] = []

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING
 from gimbal_driver_common.config import ControllerConfig, Logger
 from gimbal_driver_common.diagnostics import StatusPart
 from gimbal_driver_common.errors import Unsupported
+from gimbal_driver_common.link_lock import LinkLock
 from gimbal_driver_common.scan import ScanRequest
 
 if TYPE_CHECKING:  # the geodesy (pymap3d) is loaded only by the adapters that report a pose
@@ -198,6 +199,9 @@ class PostedWrite:
     jogs: dict[str, float] = field(default_factory=dict)
     #: answers the command path settles later (:meth:`Device.settle`); 0: write-only
     replies: int = 0
+    #: the adapter's own record of what it wrote and which answers to expect, for its
+    #: :meth:`Device.settle` (the core only carries it)
+    expected: object = None
 
 
 @dataclass
@@ -227,6 +231,9 @@ class Device(abc.ABC):
         self.config: ControllerConfig | None = None
         #: the node's logger once attached (a module logger until then)
         self.log: Logger = logging.getLogger(type(self).__module__)
+        #: the one lock of a request/reply link (:mod:`gimbal_driver_common.link_lock`):
+        #: the adapter hands it to its client, the command path sends under it
+        self.link_lock = LinkLock()
         self._data_arrived = threading.Event()
         self._on_targets: Callable[[dict[str, float]], None] = lambda targets: None
 
@@ -268,11 +275,13 @@ class Device(abc.ABC):
         answer: what was written and how many answers to settle later, or None (nothing
         written: the command thread sends it with :meth:`move` and :meth:`jog`).
 
-        Must never wait for the device (the callback calls it while holding the command
-        path's send lock, so no other send is on the link). A device whose moves and jogs
-        only write (a CAN frame, a serial packet) returns :meth:`write_now`; a device that
-        ACKs posts what needs no set-up and counts the answers in
-        :attr:`PostedWrite.replies`."""
+        Must never wait for the device (the callback calls it while holding
+        :attr:`link_lock`, so no other exchange is on the link). A device whose moves and
+        jogs only write (a CAN frame, a serial packet) returns :meth:`write_now`; a device
+        that answers posts what needs no set-up, counts the answers in
+        :attr:`PostedWrite.replies` and says which in :attr:`PostedWrite.expected`; its
+        client must take :attr:`link_lock` around every exchange, so that the lock
+        settles the post before anyone else writes."""
         return None
 
     def write_now(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite:
@@ -284,7 +293,8 @@ class Device(abc.ABC):
         return PostedWrite(dict(moves), dict(jogs), replies=0)
 
     def settle(self, posted: PostedWrite) -> bool:
-        """Read the answers of a :meth:`post` (command thread, or the next send first):
+        """Read the answers of a :meth:`post` (the next holder of :attr:`link_lock`, before
+        its own exchange; :mod:`gimbal_driver_common.link_lock`):
         True when every answer came; False when some were lost (the command path sends
         the moves again unless a stop or a newer move went out). Raises the device's
         refusal. Only called for a post with ``replies`` > 0."""

@@ -333,8 +333,29 @@ def test_device_refusal_sends_nothing(controller, device) -> None:
     wait_for(lambda: device.kinds() == ['jog'], 2.0, 'the zero jog')
 
 
+@contextlib.contextmanager
+def link_held(controller: GimbalController):
+    """Another thread holds the device's link lock (a send or an exchange in flight) until
+    the block ends."""
+    taken, done = threading.Event(), threading.Event()
+
+    def hold() -> None:
+        with controller.commands.lock:
+            taken.set()
+            done.wait(10.0)
+
+    holder = threading.Thread(target=hold, name='link-holder', daemon=True)
+    holder.start()
+    assert taken.wait(5.0), 'the link lock was not taken'
+    try:
+        yield
+    finally:
+        done.set()
+        holder.join(5.0)
+
+
 def test_newest_command_per_joint_wins(controller, device) -> None:
-    with controller._send_lock:  # hold the command thread while three commands queue
+    with link_held(controller):  # hold the command thread while three commands queue
         controller.command(['pan'], [0.1], [])
         controller.command(['pan'], [0.2], [])
         controller.command(['tilt'], [-0.3], [])
@@ -398,7 +419,7 @@ def test_a_write_only_device_is_sent_to_from_the_callers_thread(write_only) -> N
 def test_a_write_only_device_behind_a_busy_link_gets_the_newest_from_the_command_thread(
         write_only) -> None:
     controller, device = write_only
-    with controller.commands.lock:  # another send holds the link
+    with link_held(controller):  # another send holds the link
         controller.command(['pan'], [0.1], [])
         controller.command(['pan'], [0.2], [])
         assert device.sent == []
@@ -466,6 +487,25 @@ def test_a_posted_move_is_written_by_the_caller_and_finished_by_the_command_thre
     wait_for(lambda: controller.commanded_targets.get('pan') == 0.2, 2.0, 'the target')
     assert device.move_threads == []
     assert device.settled[0].replies == 2
+
+
+def test_the_devices_own_exchange_settles_a_posted_move_first(posting) -> None:
+    """The poll (or any request of the device's client) takes the device's link lock,
+    which reads the posted write's answers before the poll's own exchange."""
+    controller, device = posting
+    with command_thread_asleep(controller):
+        controller.command(['pan'], [0.2], [])
+        assert device.finish_threads == []
+
+        def poll() -> None:
+            with device.link_lock:
+                pass
+
+        thread = threading.Thread(target=poll, name='poll')
+        thread.start()
+        thread.join(5.0)
+        assert device.finish_threads == ['poll']
+        assert controller.commanded_targets.get('pan') == 0.2
 
 
 def test_a_refusal_in_a_posted_moves_replies_is_counted_and_sets_no_target(posting) -> None:
@@ -555,7 +595,7 @@ def test_a_blocked_sensor_read_does_not_delay_the_dead_man_stop(controller, devi
 
 
 def test_stop_drops_queued_commands_and_stops_everything(controller, device) -> None:
-    with controller._send_lock:
+    with link_held(controller):
         controller.command(['pan'], [0.9], [])
         controller._cancel_motion()  # what stop() does first
     assert controller.stop().startswith('all axes stopped')

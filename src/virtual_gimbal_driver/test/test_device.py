@@ -14,6 +14,7 @@ import pytest
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
 from gimbal_driver_common.errors import DeviceRefused
 from gimbal_driver_common.joint_command import JointLimits
+from gimbal_driver_common.link_lock import LinkLock
 from gimbal_driver_common.testing import wait_for
 from virtual_gimbal_driver.client import VirtualGimbalClient
 from virtual_gimbal_driver.device import VirtualGimbalDevice
@@ -112,22 +113,39 @@ def test_a_dropped_link_is_reported_and_reopened(rig):
              'a command after the reconnect')
 
 
-def test_posted_requests_are_answered_in_order_around_a_request():
-    """post() writes and returns; the next request reads the posted replies before its own,
-    and finish_posted() raises the device's ERR to one of them."""
+def test_the_link_lock_settles_posted_requests_before_the_next_request():
+    """post() writes and returns; the link lock's ``before_use`` (the core's command path
+    in a node) reads the posted replies before the next request writes, and settle()
+    raises the device's ERR to one of them."""
     server, sim = make_server()
-    client = VirtualGimbalClient('127.0.0.1', server.port)
+    lock = LinkLock()
+    client = VirtualGimbalClient('127.0.0.1', server.port, link_lock=lock)
+    posts: list = []
+    outcomes: list[str] = []
+
+    def settle_posted() -> None:  # what the command path's settle does, in short
+        while posts:
+            try:
+                client.settle(posts.pop())
+                outcomes.append('ok')
+            except DeviceRefused as exc:
+                outcomes.append(str(exc))
+
+    lock.before_use = settle_posted
     try:
         client.open()
-        assert client.post([move_request('pan', 0.2, 0.5), 'BOGUS'])
-        assert not client.post([move_request('pan', 0.3, 0.5)]), 'the first post is unread'
-        assert parse_position(client.request('GET')).positions['pan'] < 0.2
-        with pytest.raises(DeviceRefused, match='unknown command BOGUS'):
-            client.finish_posted()
-        client.finish_posted()  # read and reported once
+        assert lock.try_hold()  # as the joint_command callback does: no settle
+        try:
+            posts.append(client.post([move_request('pan', 0.2, 0.5), 'BOGUS']))
+        finally:
+            lock.release()
+        assert outcomes == []
+        assert parse_position(client.request('GET')).positions['pan'] < 0.2  # its own reply
+        assert len(outcomes) == 1 and 'unknown command BOGUS' in outcomes[0]
         assert sim.state()['axes']['pan']['target'] == pytest.approx(0.2)
-        assert client.post([move_request('tilt', -0.1, 0.5)])
-        client.finish_posted()
+        posts.append(client.post([move_request('tilt', -0.1, 0.5)]))
+        client.request('GET')
+        assert outcomes[1:] == ['ok']
         assert sim.state()['axes']['tilt']['target'] == pytest.approx(-0.1)
     finally:
         client.close()

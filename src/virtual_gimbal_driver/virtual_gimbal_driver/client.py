@@ -6,35 +6,33 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
-from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, GimbalError, LinkError
-from gimbal_driver_common.fair_lock import FairRLock
+from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, LinkError
+from gimbal_driver_common.link_lock import LinkLock
 from gimbal_driver_common.transport import TcpStream
 
 from .protocol import Refused, check_reply, verb
 
 
 class VirtualGimbalClient:
-    """Request/reply client (thread-safe). A request waits for its reply; :meth:`post`
-    writes requests whose replies are read later, by :meth:`finish_posted` or by the next
-    request (replies come in the order of the requests)."""
+    """Request/reply client (thread-safe). Every exchange holds the device's link lock
+    (``link_lock``: the adapter passes ``Device.link_lock``; alone, the client makes its
+    own). :meth:`post` writes requests whose replies :meth:`settle` reads later; the
+    core's link lock runs that before the link's next exchange (replies come in the
+    order of the requests)."""
 
-    def __init__(self, host: str, port: int, timeout: float = 1.0) -> None:
+    def __init__(self, host: str, port: int, timeout: float = 1.0,
+                 link_lock: LinkLock | None = None) -> None:
         self.stream = TcpStream(host, port)
         self.timeout = timeout
-        # fair: a command stream must not starve the joint poll (gimbal_driver_common.fair_lock)
-        self._lock = FairRLock()
+        self._lock = link_lock if link_lock is not None else LinkLock()
         self._buffer = b''
-        self._posted: list[str] = []  # written by post(), replies not read yet
-        self._posted_error: GimbalError | None = None
+        self._opened = 0  # connections made: a post outlives none
 
     def open(self) -> None:
         with self._lock:
             self.stream.open()
             self._buffer = b''
-            if self._posted:  # the link closed before their replies came
-                self._posted_error = LinkError(
-                    f'link lost before the reply to {verb(self._posted[0])}')
-                self._posted = []
+            self._opened += 1
 
     def close(self) -> None:
         self.stream.close()
@@ -42,7 +40,6 @@ class VirtualGimbalClient:
     def request(self, line: str) -> str:
         """Send ``line``; the reply line, DeviceRefused for ERR, DeviceTimeout for none."""
         with self._lock:
-            self._settle_posted()
             self.stream.write(line.encode() + b'\n')
             reply = self._reply_to(line)
         try:
@@ -50,42 +47,28 @@ class VirtualGimbalClient:
         except Refused as exc:
             raise DeviceRefused(str(exc)) from None
 
-    def post(self, lines: Sequence[str]) -> bool:
-        """Write ``lines`` in one write without waiting for their replies: True when
-        written. False, with nothing written, when another thread holds the link (never
-        waited for: the joint_command callback calls this) or an earlier post is unread."""
-        if not self._lock.acquire(blocking=False):
-            return False
-        try:
-            if self._posted:
-                return False
+    def post(self, lines: Sequence[str]) -> tuple[int, list[str]]:
+        """Write ``lines`` in one write without waiting for their replies (the caller, the
+        core's command path, holds the link lock); returns what :meth:`settle` takes."""
+        with self._lock:  # reentrant: the caller's hold
             self.stream.write(b''.join(line.encode() + b'\n' for line in lines))
-            self._posted = list(lines)
-            return True
-        finally:
-            self._lock.release()
+            return self._opened, list(lines)
 
-    def finish_posted(self) -> None:
-        """Read the replies of the last :meth:`post` if no request has yet; raise the first
-        ERR among them (DeviceRefused), or the timeout or lost link that cut them off."""
+    def settle(self, posted: tuple[int, list[str]]) -> None:
+        """Read the replies of a :meth:`post`, in order; raise the first ERR among them
+        (DeviceRefused), or the timeout or lost link that cut them off."""
+        opened, lines = posted
         with self._lock:
-            self._settle_posted()
-            error, self._posted_error = self._posted_error, None
-        if error is not None:
-            raise error
-
-    def _settle_posted(self) -> None:
-        """Read the posted requests' replies (caller holds the lock); keep their first
-        error for finish_posted. A timeout also fails the request that found them."""
-        posted, self._posted = self._posted, []
-        for line in posted:
-            try:
-                check_reply(line, self._reply_to(line))
-            except Refused as exc:
-                self._posted_error = self._posted_error or DeviceRefused(str(exc))
-            except DeviceTimeout as exc:
-                self._posted_error = self._posted_error or exc
-                raise
+            if opened != self._opened:
+                raise LinkError(f'link lost before the reply to {verb(lines[0])}')
+            refused: DeviceRefused | None = None
+            for line in lines:
+                try:
+                    check_reply(line, self._reply_to(line))
+                except Refused as exc:
+                    refused = refused or DeviceRefused(str(exc))
+        if refused is not None:
+            raise refused
 
     def _reply_to(self, line: str) -> str:
         """The next reply line (caller holds the lock); DeviceTimeout when none comes."""

@@ -42,7 +42,7 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
 
     def __init__(self, host: str, port: int, home_timeout: float = 60.0) -> None:
         super().__init__()
-        self.client = VirtualGimbalClient(host, port)
+        self.client = VirtualGimbalClient(host, port, link_lock=self.link_lock)
         self.home_timeout = home_timeout
         self._faults = 0
         self._latest: JointSample | None = None
@@ -72,18 +72,20 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
             self.client.request(move_request(joint, position, speed))
 
     def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite | None:
-        """A stream move's MOVE lines written at once, one OK each settled by the command
-        thread (:meth:`settle`): the joint_command callback never waits for a reply."""
+        """A stream move's MOVE lines written at once, one OK each, read by :meth:`settle`
+        before the link's next exchange: the joint_command callback never waits for a
+        reply."""
         lines = [move_request(joint, position, speed)
                  for joint, (position, speed) in moves.items()]
-        if jogs or not lines or not self.client.post(lines):
+        if jogs or not lines:
             return None
-        return PostedWrite(dict(moves), {}, replies=len(lines))
+        posted = self.client.post(lines)
+        return PostedWrite(dict(moves), {}, replies=len(lines), expected=posted)
 
     def settle(self, posted: PostedWrite) -> bool:
         """False when an OK never came (the command path sends the moves again)."""
         try:
-            self.client.finish_posted()
+            self.client.settle(posted.expected)
         except DeviceTimeout:
             return False
         return True

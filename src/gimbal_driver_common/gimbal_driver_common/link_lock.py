@@ -1,0 +1,60 @@
+"""The one lock of a request/reply device link, owned by the core (no ROS).
+
+A device whose link answers every request in turn (Capture's ACK bytes, the virtual
+gimbal's reply lines) has one exchange on the link at a time: whoever writes a request
+reads its answer before anyone else writes. Its users are several threads: the joint
+poll, the sensor and service calls, the command path. They all hold this lock for a whole
+exchange. The :class:`~gimbal_driver_common.device.Device` base makes one per device
+(``Device.link_lock``); the adapter hands it to its client, which takes it around every
+exchange, and the command path (:mod:`gimbal_driver_common.command_path`) uses the same
+lock for its sends.
+
+One write goes out without its exchange: a joint_command posted from the callback, whose
+answers nobody waits for then (the callback never waits for a device reply). Before any
+other user writes, those answers must be read, or they would answer the next request.
+So the lock settles the posted write itself: every hold runs ``before_use`` (the command
+path's settle: nothing to do unless a write is posted) before the holder's own exchange.
+The callback's one non-blocking try (:meth:`LinkLock.try_hold`) does not settle: it posts
+only when nothing is posted.
+
+Fair (:class:`~gimbal_driver_common.fair_lock.FairRLock`): a command stream sent back to
+back does not starve the joint poll.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from gimbal_driver_common.fair_lock import FairRLock
+
+
+class LinkLock:
+    """Reentrant and fair; every blocking hold settles a posted write first."""
+
+    def __init__(self) -> None:
+        self._lock = FairRLock()
+        #: run by every blocking hold, before the holder's exchange; the command path sets
+        #: it to settle a posted write (it must take the write off before reading its
+        #: answers: the reading holds this lock again)
+        self.before_use: Callable[[], None] = lambda: None
+
+    def __enter__(self) -> LinkLock:
+        self._lock.acquire()
+        try:
+            self.before_use()
+        except BaseException:
+            self._lock.release()
+            raise
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self._lock.release()
+
+    def try_hold(self) -> bool:
+        """Take the lock if nobody holds or waits for it, without settling anything (the
+        joint_command callback's one try); give it back with :meth:`release`."""
+        return self._lock.acquire(blocking=False)
+
+    def release(self) -> None:
+        """Give back a hold taken with :meth:`try_hold`."""
+        self._lock.release()
