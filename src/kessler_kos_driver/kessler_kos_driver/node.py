@@ -38,17 +38,16 @@ from gimbal_driver_common.ros.run import run_driver
 from gimbal_msgs.msg import PlaybackStatus as PlaybackStatusMsg
 from gimbal_msgs.srv import Calibrate, DeviceCommand, LoadTrajectory
 
+from . import load_request
 from .client import KosClient
 from .device import (
-    AUX_INPUT_BUTTONS,
-    AUX_SLAVE_PRESENT_BIT,
     LED_NAMES,
     KosDevice,
     KosSettings,
     PlaybackReport,
     joint_mappings,
 )
-from .moves import Keyframe, PlaybackSettings
+from .moves import PlaybackSettings
 from .protocol import (
     DEFAULT_TCP_PORT,
     MOTOR_ADDRESS_MAX,
@@ -57,6 +56,7 @@ from .protocol import (
     USB_KEEPALIVE_PERIOD_S,
     PlaybackMode,
 )
+from .status import AUX_INPUT_BUTTONS, AUX_SLAVE_PRESENT_BIT
 from .units import MOTOR_RADIANS, MOTOR_RADIANS_PER_ROTATION, JointUnits, joint_units
 from .usb_link import USB_BACKENDS, UsbTarget
 
@@ -417,7 +417,7 @@ class KosDriverNode(GimbalDriverNode):
 
     def _on_load_trajectory(self, request, response):
         def action(device: KosDevice) -> str:
-            start_time = self._start_time(request.start_time)
+            start_time = load_request.start_time(request.start_time)
             settings = PlaybackSettings(
                 mode=request.playback_mode, duration=request.duration,
                 loop_count=request.loop_count, rapid_reverse=request.rapid_reverse,
@@ -433,9 +433,11 @@ class KosDriverNode(GimbalDriverNode):
                 raise CommandError('give either keyframes (trajectory_msgs/JointTrajectory) or '
                                    'explicit Bezier axes, not both and not neither')
             if has_keyframes:
-                trajectory = device.load_keyframes(self._keyframes(keyframes), settings)
+                trajectory = device.load_keyframes(
+                    load_request.keyframes(keyframes, self.limits), settings)
             else:
-                trajectory = device.load_segments(self._segments(request.axes), settings)
+                trajectory = device.load_segments(
+                    load_request.segments(request.axes, self.limits), settings)
             self._delay_return = bool(request.delay_return)
             axes = ', '.join(f'{device.joint_of(a) or a}: {len(s)} segment(s)'
                              for a, s in trajectory.axes.items())
@@ -453,62 +455,6 @@ class KosDriverNode(GimbalDriverNode):
 
         joints = list(request.keyframes.joint_names) or [a.joint_name for a in request.axes]
         return self._serve_device(response, action, joints)
-
-    def _start_time(self, stamp) -> int:
-        """LoadTrajectory.start_time as UnixTime (0 = not used); a past date is refused."""
-        if stamp.sec == 0 and stamp.nanosec == 0:
-            return 0
-        value = math.ceil(stamp.sec + stamp.nanosec * 1e-9)   # UnixTime is whole seconds
-        now = time.time()
-        if value <= now:
-            raise CommandError(f'start_time {value} (UnixTime s) is {now - value:.0f} s in the '
-                               'past; give a future date or use start_delay')
-        if value > 0xFFFFFFFF:
-            raise CommandError(f'start_time {value} is beyond UnixTime (UInt32) 4294967295')
-        return value
-
-    def _keyframes(self, trajectory) -> list[Keyframe]:
-        names = list(trajectory.joint_names)
-        if not names or len(set(names)) != len(names):
-            raise CommandError(f'keyframes.joint_names must be unique and non-empty: {names}')
-        unknown = [n for n in names if n not in self.limits]
-        if unknown:
-            raise CommandError(f'unknown joint(s) {unknown}; this device has '
-                               f'{list(self.joint_names)}')
-        frames = []
-        for index, point in enumerate(trajectory.points):
-            if len(point.positions) != len(names):
-                raise CommandError(f'keyframe {index}: {len(point.positions)} positions for '
-                                   f'{len(names)} joints')
-            if point.velocities and len(point.velocities) != len(names):
-                raise CommandError(f'keyframe {index}: velocities must be empty or one per '
-                                   'joint')
-            positions = dict(zip(names, point.positions, strict=True))
-            for name, value in positions.items():
-                limits = self.limits[name]
-                if not math.isfinite(value) or not (
-                        limits.position_min <= value <= limits.position_max):
-                    raise CommandError(f'keyframe {index}: joint {name!r} position {value} is '
-                                       f'outside [{limits.position_min}, '
-                                       f'{limits.position_max}]')
-            velocities = (dict(zip(names, point.velocities, strict=True))
-                          if point.velocities else None)
-            t = point.time_from_start.sec + point.time_from_start.nanosec * 1e-9
-            frames.append(Keyframe(t, positions, velocities))
-        return frames
-
-    def _segments(self, axes) -> dict[str, list[tuple[float, ...]]]:
-        segments: dict[str, list[tuple[float, ...]]] = {}
-        for axis in axes:
-            if axis.joint_name not in self.limits:
-                raise CommandError(f'unknown joint {axis.joint_name!r}; this device has '
-                                   f'{list(self.joint_names)}')
-            if axis.joint_name in segments:
-                raise CommandError(f'joint {axis.joint_name!r} is given twice')
-            segments[axis.joint_name] = [
-                (s.p0_time, s.p0_position, s.p1_time, s.p1_position, s.p2_time,
-                 s.p2_position, s.p3_time, s.p3_position) for s in axis.segments]
-        return segments
 
     def _on_setup_playback(self, request, response):
         def action(device: KosDevice) -> str:
