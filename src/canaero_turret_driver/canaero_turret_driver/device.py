@@ -5,12 +5,13 @@ reconnect every `reconnect_period`, link state); this adapter maps the turret's 
 the configured joints, applies each axis' installation direction (`yaw_direction`,
 `pitch_direction`: +1 or -1 between the device's count and REP-103), reads joint samples
 from the client's broadcast cache and offers the turret's extras (actuator modes,
-periphery switches, node services, GNSS/heading/inclination/zoom readings) as plain
-methods the node calls through `controller.call`.
+periphery switches, node services (node_services.py), GNSS/heading/inclination/zoom
+readings (readings.py)) as methods the node calls through `controller.call`.
 
-Capabilities: preset slot 0 is the turret's own remember/restore position
-(`TurretPresets.handles(0)`; the core's Motion keeps every other slot in the YAML store)
-and `TurretStatus` (status.py) decodes the status identifiers for /diagnostics and
+Capabilities (capabilities.py): preset slot 0 is the turret's own remember/restore
+position (`TurretPresets.handles(0)`; the core's Motion keeps every other slot in the YAML
+store), the base's pose from its GNSS nodes (`TurretGeolocation`), and `TurretStatus`
+(status.py) decodes the status identifiers for /diagnostics and
 ~/status. The turret has no homing routine and no scans of its own.
 """
 
@@ -23,26 +24,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from gimbal_driver_common.config import Logger
-from gimbal_driver_common.device import (
-    Device,
-    DeviceInfo,
-    DevicePresets,
-    Geolocation,
-    JointSample,
-    Moves,
-    PostedWrite,
-)
-from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
-from gimbal_driver_common.geodesy import (
-    Attitude,
-    DevicePose,
-    GeoPoint,
-    OrientationFix,
-    PositionFix,
-)
+from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves, PostedWrite
+from gimbal_driver_common.errors import InvalidRequest, LinkError
 
+from .capabilities import TurretGeolocation, TurretPresets
 from .client import AXES, CommandError, Sample, TurretClient
+from .node_services import TurretNodeServices
 from .protocol.identifiers import ActuatorMode, AxisStatus, TargetState
+from .readings import TurretReadings
 from .status import TurretStatus
 
 MODE_NAMES = {mode.name.lower(): mode for mode in ActuatorMode}
@@ -52,15 +41,9 @@ ICD_POSITION_LIMIT_DEG = 180.0  # set-point range "-180 ÷ 180" (6.1.2, 6.1.1 pi
 MODE_REPORT_WAIT_S = 1.0
 POSITION_KEYS = frozenset(f"{axis}_position" for axis in AXES)
 MIN_TIS_INTERVAL_MS = 1  # TIS counts whole milliseconds
-PRESET_DEVICE_INDEX = 0  # the turret's own remember/restore position
 #: the on/off services of the node -> the client method that sends them
 SWITCHES = {"set_cover": "set_cover", "set_fan": "set_fan", "set_oes_heater": "set_oes_heater",
             "set_drives_heater": "set_drives_heater", "set_charging": "set_charging"}
-#: node-id parameter name -> the ClientConfig field it sets
-NODE_ID_FIELDS = ("turret_node_id", "cover_node_id", "rover_gnss_node_id",
-                  "base_gnss_node_id", "zoom_node_id")
-DEVICE_COMMANDS = ("identify", "set_interval", "upload", "download", "set_node_id",
-                   "store_configuration")
 
 
 @dataclass
@@ -88,140 +71,7 @@ class TurretSettings:
     geoid_height: float | None = None
 
 
-@dataclass(frozen=True)
-class GnssFix:
-    """One base-GNSS position (7.2): degrees, metres; `fresh` False once it went stale."""
-
-    stamp: float
-    latitude: float
-    longitude: float
-    altitude: float
-    accuracy: float | None  # m (1 sigma), None when the node sent none
-    fresh: bool
-
-
-@dataclass(frozen=True)
-class Heading:
-    """A compass heading (rad, clockwise from north) and its accuracy (rad) if known."""
-
-    stamp: float
-    heading: float
-    accuracy: float | None
-
-
-@dataclass(frozen=True)
-class Inclination:
-    """The turret base's roll and pitch (rad)."""
-
-    stamp: float
-    roll: float
-    pitch: float
-
-
-class TurretPresets(DevicePresets):
-    """Slot 0 is the turret's remember/restore position; the driver remembers where it was."""
-
-    def __init__(self, device: TurretDevice) -> None:
-        self.device = device
-        self.remembered: dict[str, float] | None = None
-
-    def handles(self, index: int) -> bool:
-        return index == PRESET_DEVICE_INDEX
-
-    def set(self, index: int, name: str, positions: dict[str, float] | None) -> str:
-        if positions is not None:
-            raise InvalidRequest("preset 0 is the turret's remembered position: it can only "
-                                 "store the current position (use_current_position=true)")
-        self.device.client.remember_position()
-        self.remembered = self.device.positions()
-        return "preset 0: the turret remembered its current position"
-
-    def goto(self, index: int, speed: float) -> str:
-        if speed > 0:
-            raise InvalidRequest("preset 0 (turret set-to-saved-position) has no speed; "
-                                 "use speed 0")
-        self.device.client.restore_position()
-        return "moving to preset 0 (the turret's saved position)"
-
-    def target(self, index: int) -> dict[str, float] | None:
-        return dict(self.remembered) if self.remembered else None
-
-    def list(self) -> list[tuple[int, str, dict[str, float]]]:
-        if self.remembered is None:
-            return []
-        return [(PRESET_DEVICE_INDEX, "turret saved position", dict(self.remembered))]
-
-    def clear(self, index: int | None) -> str:
-        self.remembered = None
-        if index is None:
-            return "all driver-side presets cleared (the turret keeps its saved position)"
-        return ("preset 0 lives in the turret and cannot be erased; the driver forgot its "
-                "record of it")
-
-
-class TurretGeolocation(Geolocation):
-    """Where the turret stands and faces: the base GNSS position (7.4: latitude, longitude,
-    altitude above mean sea level plus ``geoid_height``, accuracy estimate), the rover
-    GNSS heading (7.3.1, accuracy 7.3.2) and the base's inclinometer (7.1.31-32).
-
-    The ICD gives the inclinometer no sign convention; it is read as the aerospace one
-    (pitch nose-up positive, roll right side down positive), i.e. REP-103 roll = global
-    roll, REP-103 pitch = -global pitch (README, decision 21).
-    """
-
-    POSITION_KEYS = ("latitude", "longitude", "altitude_msl")
-    ORIENTATION_KEYS = ("rover_heading", "global_roll", "global_pitch")
-
-    def __init__(self, device: TurretDevice) -> None:
-        self.device = device
-
-    def _readings(self, keys: Sequence[str], what: str) -> tuple[list[Sample], str | None]:
-        """The samples of ``keys``, or why they cannot be used (never received, stale)."""
-        client = self.device.client
-        samples = [client.latest(key) for key in keys]
-        absent = [k for k, s in zip(keys, samples, strict=True) if s is None or s.si is None]
-        if absent:
-            return [], f"no {what} received ({', '.join(absent)})"
-        stale = [k for k in keys if client.is_stale(k)]
-        if stale:
-            age = max(client.age(k) or 0.0 for k in stale)
-            return [], (f"{what} stale: no {', '.join(stale)} for {age:.1f} s "
-                        f"(stale after {client.stale_timeout_for(stale[0]):g} s)")
-        return samples, None
-
-    def pose(self) -> DevicePose:
-        missing: dict[str, str] = {}
-        position = orientation = None
-        samples, why = self._readings(self.POSITION_KEYS, "base GNSS position")
-        geoid_height = self.device.settings.geoid_height
-        if why is None and geoid_height is None:
-            why = ("the base GNSS gives the altitude above mean sea level (ICD 7.4.3): set "
-                   "geoid_height (the geoid height N at the site, m) to make it a height above "
-                   "the WGS84 ellipsoid")
-        if why is not None:
-            missing["position"] = why
-        else:
-            latitude, longitude, altitude = samples
-            accuracy = self.device._fresh("position_accuracy")
-            position = PositionFix(
-                GeoPoint(latitude.si, longitude.si, altitude.si + geoid_height), "base GNSS",
-                stamp=min(s.stamp for s in samples),
-                error=abs(accuracy.si) if accuracy is not None else None)
-        samples, why = self._readings(self.ORIENTATION_KEYS,
-                                      "rover GNSS heading and inclinometer")
-        if why is not None:
-            missing["orientation"] = why
-        else:
-            heading, roll, pitch = samples
-            accuracy = self.device._fresh("rover_heading_accuracy")
-            orientation = OrientationFix(
-                Attitude.from_heading(heading.si, roll.si, -pitch.si),
-                "rover GNSS heading + inclinometer", stamp=min(s.stamp for s in samples),
-                heading_error=abs(accuracy.si) if accuracy is not None else None)
-        return DevicePose(position, orientation, missing)
-
-
-class TurretDevice(Device):
+class TurretDevice(TurretReadings, TurretNodeServices, Device):
     """One turret (and its cover, GNSS and zoom nodes) on one CAN interface."""
 
     #: positions arrive as NOD broadcasts: joint_states follow each broadcast cycle
@@ -567,134 +417,3 @@ class TurretDevice(Device):
         if name == "set_cover":
             return "cover " + ("opening" if on else "closing")
         return name.removeprefix("set_").replace("_", " ") + (" on" if on else " off")
-
-    def node_ids(self) -> dict[str, int]:
-        """The node-ids in use (NIS through device_command changes them)."""
-        return {name: getattr(self.client.config, name) for name in NODE_ID_FIELDS}
-
-    def device_command(self, command: str, args: Sequence[str]) -> tuple[str, list[str]]:
-        """`~/device_command`: the node services by name; returns (message, results).
-
-        identify [node-id] | set_interval <key> <ms> | upload <memid> <length> |
-        download <memid> <hex> | set_node_id <new> [node-id] |
-        store_configuration <security code> [node-id]. NIS and FPS need their opt-in in
-        the client config, DDS (download) `allow_data_download`.
-        """
-        client = self.client
-        args = list(args)
-        command = command.strip()
-
-        def number(text: str) -> int:
-            try:
-                return int(text, 0)
-            except ValueError as exc:
-                raise CommandError(f"{text!r} is not an integer") from exc
-
-        if command == "identify":
-            info = client.identify(number(args[0]) if args else None)
-            return "IDS answered", [
-                f"hardware_revision={info.hardware_revision}",
-                f"software_revision={info.software_revision}",
-                f"identifier_distribution={info.identifier_distribution}",
-                f"header_type={info.header_type}"]
-        if command == "set_interval":
-            if len(args) != 2:
-                raise CommandError("set_interval needs <data key> <ms>")
-            client.set_transmission_interval(args[0], number(args[1]))
-            return f"{args[0]} every {number(args[1])} ms", []
-        if command == "set_node_id":
-            if not args:
-                raise CommandError("set_node_id needs <new node-id> [node-id]")
-            node = number(args[1]) if len(args) > 1 else client.config.turret_node_id
-            new_id = number(args[0])
-            client.set_node_id(new_id, node)
-            self.log.warning(
-                f"node {node} now has node-id {new_id}; put it in the parameter file, and "
-                "store it with store_configuration (FPS) to keep it after a power cycle")
-            return f"node-id {node} changed to {new_id}", []
-        if command == "upload":
-            if len(args) != 2:
-                raise CommandError("upload needs <memory id> <length in bytes>")
-            data = client.upload(number(args[0]), number(args[1]))
-            return f"{len(data)} bytes read from memory {number(args[0])} (DUS)", [data.hex()]
-        if command == "download":
-            if not self.settings.allow_data_download:
-                raise DeviceRefused("data download (DDS) writes device memory and is "
-                                    "disabled; set allow_data_download to use it")
-            if len(args) != 2:
-                raise CommandError("download needs <memory id> <hex bytes>")
-            try:
-                data = bytes.fromhex(args[1])
-            except ValueError as exc:
-                raise CommandError(f"{args[1]!r} is not hex bytes") from exc
-            checksum = client.download(number(args[0]), data)
-            return (f"{len(data)} bytes written to memory {number(args[0])} (DDS)",
-                    [f"checksum={checksum}"])
-        if command == "store_configuration":
-            if not args:
-                raise CommandError("store_configuration needs <security code>")
-            client.store_configuration(number(args[0]), number(args[1]) if len(args) > 1
-                                       else None)
-            return "configuration stored in flash", []
-        raise CommandError(f"unknown command {command!r}; commands: "
-                           + ", ".join(DEVICE_COMMANDS))
-
-    # ------------------------------------------------------------------ readings
-    def _fresh(self, key: str) -> Sample | None:
-        """The latest `key` sample if it is numeric and not stale, else None."""
-        sample = self.client.latest(key)
-        if sample is None or sample.si is None or self.client.is_stale(key):
-            return None
-        return sample
-
-    def _unseen(self, name: str, sample: Sample) -> bool:
-        """True once per arrival of `sample` under `name` (each reading is handed out once)."""
-        if self._published.get(name) == sample.received:
-            return False
-        self._published[name] = sample.received
-        return True
-
-    def new_fix(self) -> GnssFix | None:
-        """The base GNSS position if a new one arrived since the last call (stale: fresh
-        False, so a consumer sees the fix go away)."""
-        client = self.client
-        latitude, longitude = client.latest("latitude"), client.latest("longitude")
-        if latitude is None or longitude is None or latitude.si is None \
-                or longitude.si is None or not self._unseen("fix", latitude):
-            return None
-        altitude = client.latest("altitude_msl")
-        accuracy = client.latest("position_accuracy")
-        return GnssFix(
-            stamp=latitude.stamp, latitude=latitude.si, longitude=longitude.si,
-            altitude=altitude.si if altitude is not None and altitude.si is not None
-            else math.nan,
-            accuracy=accuracy.si if accuracy is not None else None,
-            fresh=not (client.is_stale("latitude") or client.is_stale("longitude")))
-
-    def new_heading(self, key: str) -> Heading | None:
-        """A fresh `rover_heading` or `global_yaw` not handed out before; the accuracy is
-        the rover GNSS's (7.3.2) while that is fresh."""
-        sample = self._fresh(key)
-        if sample is None or not self._unseen(key, sample):
-            return None
-        accuracy = self._fresh("rover_heading_accuracy")
-        return Heading(sample.stamp, sample.si, abs(accuracy.si) if accuracy else None)
-
-    def new_utc(self) -> tuple[float, float] | None:
-        """(arrival, UTC seconds) of a fresh base-GNSS time not handed out before."""
-        sample = self.client.latest("utc_time")
-        if sample is None or self.client.is_stale("utc_time") \
-                or not self._unseen("utc_time", sample):
-            return None
-        return sample.stamp, float(sample.value)
-
-    def inclination(self) -> Inclination | None:
-        pitch, roll = self.client.latest("global_pitch"), self.client.latest("global_roll")
-        if pitch is None or roll is None or self.client.is_stale("global_pitch"):
-            return None
-        return Inclination(pitch.stamp, roll.si, pitch.si)
-
-    def zoom(self) -> float | None:
-        """Camera0 zoom position (counts) while fresh."""
-        sample = self._fresh("zoom_position")
-        return None if sample is None else sample.si

@@ -35,8 +35,9 @@ from gimbal_driver_common.ros.run import run_driver
 from gimbal_msgs.srv import DeviceCommand, SetMode
 
 from .client import ClientConfig, TurretClient
-from .device import MODE_NAMES, SWITCHES, Heading, TurretDevice, TurretSettings
+from .device import MODE_NAMES, SWITCHES, TurretDevice, TurretSettings
 from .protocol.identifiers import DATA_IDENTIFIERS, DEFAULT_ZOOM_POSITION_ID
+from .readings import Heading
 from .status import NODE_GROUPS
 
 NODE_NAME = "canaero_turret_driver"

@@ -1,0 +1,108 @@
+"""The turret's sensor readings (no ROS): base GNSS fix, headings, inclination, UTC and
+zoom from the client's broadcast cache, each handed out once per arrival. A mixin of
+:class:`~.device.TurretDevice`, apart so the adapter's core reads in one sitting.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .client import Sample, TurretClient
+
+
+@dataclass(frozen=True)
+class GnssFix:
+    """One base-GNSS position (7.2): degrees, metres; `fresh` False once it went stale."""
+
+    stamp: float
+    latitude: float
+    longitude: float
+    altitude: float
+    accuracy: float | None  # m (1 sigma), None when the node sent none
+    fresh: bool
+
+
+@dataclass(frozen=True)
+class Heading:
+    """A compass heading (rad, clockwise from north) and its accuracy (rad) if known."""
+
+    stamp: float
+    heading: float
+    accuracy: float | None
+
+
+@dataclass(frozen=True)
+class Inclination:
+    """The turret base's roll and pitch (rad)."""
+
+    stamp: float
+    roll: float
+    pitch: float
+
+
+class TurretReadings:
+    """The sensor readings of :class:`~.device.TurretDevice` (a mixin: it provides
+    ``client`` and ``_published``)."""
+
+    client: TurretClient
+    _published: dict[str, float]
+
+    def _fresh(self, key: str) -> Sample | None:
+        """The latest `key` sample if it is numeric and not stale, else None."""
+        sample = self.client.latest(key)
+        if sample is None or sample.si is None or self.client.is_stale(key):
+            return None
+        return sample
+
+    def _unseen(self, name: str, sample: Sample) -> bool:
+        """True once per arrival of `sample` under `name` (each reading is handed out once)."""
+        if self._published.get(name) == sample.received:
+            return False
+        self._published[name] = sample.received
+        return True
+
+    def new_fix(self) -> GnssFix | None:
+        """The base GNSS position if a new one arrived since the last call (stale: fresh
+        False, so a consumer sees the fix go away)."""
+        client = self.client
+        latitude, longitude = client.latest("latitude"), client.latest("longitude")
+        if latitude is None or longitude is None or latitude.si is None \
+                or longitude.si is None or not self._unseen("fix", latitude):
+            return None
+        altitude = client.latest("altitude_msl")
+        accuracy = client.latest("position_accuracy")
+        return GnssFix(
+            stamp=latitude.stamp, latitude=latitude.si, longitude=longitude.si,
+            altitude=altitude.si if altitude is not None and altitude.si is not None
+            else math.nan,
+            accuracy=accuracy.si if accuracy is not None else None,
+            fresh=not (client.is_stale("latitude") or client.is_stale("longitude")))
+
+    def new_heading(self, key: str) -> Heading | None:
+        """A fresh `rover_heading` or `global_yaw` not handed out before; the accuracy is
+        the rover GNSS's (7.3.2) while that is fresh."""
+        sample = self._fresh(key)
+        if sample is None or not self._unseen(key, sample):
+            return None
+        accuracy = self._fresh("rover_heading_accuracy")
+        return Heading(sample.stamp, sample.si, abs(accuracy.si) if accuracy else None)
+
+    def new_utc(self) -> tuple[float, float] | None:
+        """(arrival, UTC seconds) of a fresh base-GNSS time not handed out before."""
+        sample = self.client.latest("utc_time")
+        if sample is None or self.client.is_stale("utc_time") \
+                or not self._unseen("utc_time", sample):
+            return None
+        return sample.stamp, float(sample.value)
+
+    def inclination(self) -> Inclination | None:
+        pitch, roll = self.client.latest("global_pitch"), self.client.latest("global_roll")
+        if pitch is None or roll is None or self.client.is_stale("global_pitch"):
+            return None
+        return Inclination(pitch.stamp, roll.si, pitch.si)
+
+    def zoom(self) -> float | None:
+        """Camera0 zoom position (counts) while fresh."""
+        sample = self._fresh("zoom_position")
+        return None if sample is None else sample.si
