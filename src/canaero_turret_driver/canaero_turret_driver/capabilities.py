@@ -13,6 +13,7 @@ from gimbal_driver_common.errors import InvalidRequest
 from gimbal_driver_common.geodesy import Attitude, DevicePose, GeoPoint, OrientationFix, PositionFix
 
 from .client import Sample
+from .readings import si
 
 if TYPE_CHECKING:
     from .device import TurretDevice
@@ -81,7 +82,7 @@ class TurretGeolocation(Geolocation):
         """The samples of ``keys``, or why they cannot be used (never received, stale)."""
         client = self.device.client
         samples = [client.latest(key) for key in keys]
-        absent = [k for k, s in zip(keys, samples, strict=True) if s is None or s.si is None]
+        absent = [k for k, s in zip(keys, samples, strict=True) if si(s) is None]
         if absent:
             return [], f"no {what} received ({', '.join(absent)})"
         stale = [k for k in keys if client.is_stale(k)]
@@ -106,9 +107,9 @@ class TurretGeolocation(Geolocation):
             latitude, longitude, altitude = samples
             accuracy = self.device._fresh("position_accuracy")
             position = PositionFix(
-                GeoPoint(latitude.si, longitude.si, altitude.si + geoid_height), "base GNSS",
+                GeoPoint(si(latitude), si(longitude), si(altitude) + geoid_height), "base GNSS",
                 stamp=min(s.stamp for s in samples),
-                error=abs(accuracy.si) if accuracy is not None else None)
+                error=abs(si(accuracy)) if si(accuracy) is not None else None)
         samples, why = self._readings(self.ORIENTATION_KEYS,
                                       "rover GNSS heading and inclinometer")
         if why is not None:
@@ -117,7 +118,7 @@ class TurretGeolocation(Geolocation):
             heading, roll, pitch = samples
             accuracy = self.device._fresh("rover_heading_accuracy")
             orientation = OrientationFix(
-                Attitude.from_heading(heading.si, roll.si, -pitch.si),
+                Attitude.from_heading(si(heading), si(roll), -si(pitch)),
                 "rover GNSS heading + inclinometer", stamp=min(s.stamp for s in samples),
-                heading_error=abs(accuracy.si) if accuracy is not None else None)
+                heading_error=abs(si(accuracy)) if si(accuracy) is not None else None)
         return DevicePose(position, orientation, missing)

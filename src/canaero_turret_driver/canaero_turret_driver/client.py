@@ -10,9 +10,10 @@ adapter, a failing send) end the session; `connected` turns False and whoever su
 the link (the controller of gimbal_driver_common, through `TurretDevice`) closes and
 reopens it.
 
-Units: received values carry their SI equivalent from the identifier table (the device's
-own direction). Commands take the ICD's own units (degrees, degrees/s): `TurretDevice`
-converts SI and REP-103 directions, and checks the set-point range, before calling them.
+Units: the client speaks the ICD's own units both ways: a sample carries the value as the
+bus carried it (degrees, degrees/s, ...), and commands take degrees. The adapter alone
+converts (`readings.si` for what arrives; `TurretDevice` SI and REP-103 directions, and
+the set-point range, for commands).
 Errors are the core's hierarchy (`gimbal_driver_common.errors`).
 
 Frames with an id not in the identifier table (including the out-of-scope functions)
@@ -288,8 +289,8 @@ class TurretClient(NodeServices, Protocol):
         if not event.accepted:
             return  # an old or duplicate value must not replace the newer one
         value = message.value
-        sample = Sample(ident.key, value, self._to_si(ident, value), time.time(), now,
-                        message.message_code, message.node_id)
+        sample = Sample(ident.key, value, time.time(), now, message.message_code,
+                        message.node_id)
         with self._cache_lock:
             previous = self._cache.get(ident.key)
             self._cache[ident.key] = sample
@@ -297,11 +298,6 @@ class TurretClient(NodeServices, Protocol):
             self._learn_interval(ident.key, now - previous.received)
         if self.on_sample is not None:
             self.on_sample(sample)
-
-    def _to_si(self, ident: Identifier, value: object) -> float | None:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            return None
-        return ident.to_si(value)
 
     @contextlib.contextmanager
     def _expect(self, request: CanAerospaceMessage) -> Iterator[Pending]:

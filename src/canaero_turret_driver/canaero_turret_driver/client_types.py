@@ -81,8 +81,7 @@ class Sample:
     """The latest value of one data identifier."""
 
     key: str
-    value: object  # as decoded (device units)
-    si: float | None  # SI value (the device's own direction) for numeric values
+    value: object  # as decoded: the ICD's units (the adapter converts, readings.si)
     stamp: float  # wall-clock time of arrival (for ROS headers)
     received: float  # monotonic time of arrival (for staleness)
     message_code: int

@@ -31,7 +31,7 @@ from .capabilities import TurretGeolocation, TurretPresets
 from .client import AXES, CommandError, Sample, TurretClient
 from .node_services import TurretNodeServices
 from .protocol.identifiers import ActuatorMode, AxisStatus, TargetState
-from .readings import TurretReadings
+from .readings import TurretReadings, si
 from .status import TurretStatus
 
 MODE_NAMES = {mode.name.lower(): mode for mode in ActuatorMode}
@@ -129,9 +129,10 @@ class TurretDevice(TurretReadings, TurretNodeServices, Device):
     def _joint_value(self, axis: str, key: str) -> float | None:
         """The SI value of `<axis>_<key>` in REP-103 direction (None: not received)."""
         sample = self.client.latest(f"{axis}_{key}")
-        if sample is None or sample.si is None:
+        value = si(sample)
+        if value is None:
             return None
-        return sample.si * self._direction(axis)
+        return value * self._direction(axis)
 
     # ------------------------------------------------------------------ link
     def open(self) -> DeviceInfo:
@@ -223,8 +224,8 @@ class TurretDevice(TurretReadings, TurretNodeServices, Device):
             velocity = self._joint_value(axis, "velocity")
             velocities[joint] = math.nan if velocity is None else velocity
             current = client.latest(f"{axis}_current")
-            if current is not None and current.si is not None:
-                efforts[joint] = current.si
+            if si(current) is not None:
+                efforts[joint] = si(current)
             status = client.latest(f"{axis}_status")
             if status is not None:
                 moving[joint] = AxisStatus.decode(status.value).target != TargetState.REACHED

@@ -9,6 +9,19 @@ import math
 from dataclasses import dataclass
 
 from .client import Sample, TurretClient
+from .protocol.identifiers import BY_KEY
+
+
+def si(sample: Sample | None) -> float | None:
+    """The one conversion of an incoming value to SI (the device's own direction): the
+    ICD unit of its identifier (deg -> rad, deg/s -> rad/s, ...); None for no sample or a
+    value that is not a number (a status byte, a flag)."""
+    if sample is None:
+        return None
+    value = sample.value
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return BY_KEY[sample.key].to_si(value)
 
 
 @dataclass(frozen=True)
@@ -51,7 +64,7 @@ class TurretReadings:
     def _fresh(self, key: str) -> Sample | None:
         """The latest `key` sample if it is numeric and not stale, else None."""
         sample = self.client.latest(key)
-        if sample is None or sample.si is None or self.client.is_stale(key):
+        if si(sample) is None or self.client.is_stale(key):
             return None
         return sample
 
@@ -67,16 +80,15 @@ class TurretReadings:
         False, so a consumer sees the fix go away)."""
         client = self.client
         latitude, longitude = client.latest("latitude"), client.latest("longitude")
-        if latitude is None or longitude is None or latitude.si is None \
-                or longitude.si is None or not self._unseen("fix", latitude):
+        if latitude is None or longitude is None or si(latitude) is None \
+                or si(longitude) is None or not self._unseen("fix", latitude):
             return None
         altitude = client.latest("altitude_msl")
         accuracy = client.latest("position_accuracy")
         return GnssFix(
-            stamp=latitude.stamp, latitude=latitude.si, longitude=longitude.si,
-            altitude=altitude.si if altitude is not None and altitude.si is not None
-            else math.nan,
-            accuracy=accuracy.si if accuracy is not None else None,
+            stamp=latitude.stamp, latitude=si(latitude), longitude=si(longitude),
+            altitude=si(altitude) if si(altitude) is not None else math.nan,
+            accuracy=si(accuracy),
             fresh=not (client.is_stale("latitude") or client.is_stale("longitude")))
 
     def new_heading(self, key: str) -> Heading | None:
@@ -86,7 +98,9 @@ class TurretReadings:
         if sample is None or not self._unseen(key, sample):
             return None
         accuracy = self._fresh("rover_heading_accuracy")
-        return Heading(sample.stamp, sample.si, abs(accuracy.si) if accuracy else None)
+        accuracy_rad = si(accuracy)
+        return Heading(sample.stamp, si(sample),
+                       abs(accuracy_rad) if accuracy_rad is not None else None)
 
     def new_utc(self) -> tuple[float, float] | None:
         """(arrival, UTC seconds) of a fresh base-GNSS time not handed out before."""
@@ -100,9 +114,9 @@ class TurretReadings:
         pitch, roll = self.client.latest("global_pitch"), self.client.latest("global_roll")
         if pitch is None or roll is None or self.client.is_stale("global_pitch"):
             return None
-        return Inclination(pitch.stamp, roll.si, pitch.si)
+        return Inclination(pitch.stamp, si(roll), si(pitch))
 
     def zoom(self) -> float | None:
         """Camera0 zoom position (counts) while fresh."""
         sample = self._fresh("zoom_position")
-        return None if sample is None else sample.si
+        return si(sample)

@@ -18,6 +18,7 @@ from gimbal_driver_common.diagnostics import Level, StatusPart
 from .client import AXES, TurretClient
 from .protocol.datatypes import DataType
 from .protocol.identifiers import ActuatorMode, AxisStatus, CoverState, decode_periphery
+from .readings import si
 
 if TYPE_CHECKING:
     from .device import TurretDevice
@@ -135,15 +136,16 @@ class TurretStatus(StatusReport):
             elif key == "humidity":
                 values.append(("humidity_percent", f"{sample.value:.1f}"))
             else:
-                text = f"{sample.si:.2f}" if isinstance(sample.si, float) else str(sample.value)
+                reading = si(sample)
+                text = f"{reading:.2f}" if reading is not None else str(sample.value)
                 values.append((key, text))
-                if key.endswith("temperature") and isinstance(sample.si, float):
-                    if sample.si > settings.temperature_error:
+                if key.endswith("temperature") and reading is not None:
+                    if reading > settings.temperature_error:
                         level = max(level, Level.ERROR)
-                        problems.append(f"{key} {sample.si:.1f} degC")
-                    elif sample.si > settings.temperature_warn:
+                        problems.append(f"{key} {reading:.1f} degC")
+                    elif reading > settings.temperature_warn:
                         level = max(level, Level.WARN)
-                        problems.append(f"{key} {sample.si:.1f} degC")
+                        problems.append(f"{key} {reading:.1f} degC")
         message = "; ".join(problems) if problems else "OK"
         return StatusPart(self.device.joint_of[axis], Level(level), message, values)
 
@@ -168,12 +170,12 @@ class TurretStatus(StatusReport):
                     "oes_heater_state"):
             value = client.latest(key)
             if value is not None:
-                values.append((key, f"{value.si:.2f}" if client.data_type_of(key)
+                values.append((key, f"{si(value):.2f}" if client.data_type_of(key)
                                == DataType.FLOAT else str(value.value)))
-        case = client.latest("case_temperature")
-        if case is not None and case.si > self.device.settings.temperature_warn:
+        case = si(client.latest("case_temperature"))
+        if case is not None and case > self.device.settings.temperature_warn:
             level = Level.WARN
-            problems.append(f"case temperature {case.si:.1f} degC")
+            problems.append(f"case temperature {case:.1f} degC")
         return StatusPart("periphery", level, "; ".join(problems) or "OK", values)
 
     def _sequence_part(self, client: TurretClient) -> StatusPart:

@@ -17,6 +17,7 @@ from canaero_turret_driver.client import (
 )
 from canaero_turret_driver.protocol import ActuatorMode, AxisStatus, CanAerospaceMessage
 from canaero_turret_driver.protocol.identifiers import DEFAULT_ZOOM_POSITION_ID
+from canaero_turret_driver.readings import si
 from canaero_turret_driver.sim import BusSimRunner, EedCode, SimConfig, TurretSimulator
 from gimbal_driver_common.testing import wait_for
 
@@ -28,7 +29,7 @@ def _latest(client, key, field):
 
 
 def _si(client, key):
-    return _latest(client, key, lambda sample: sample.si)
+    return _latest(client, key, si)
 
 
 def _enabled(client, key):
@@ -51,8 +52,8 @@ def test_identify_and_data_arrive(client):
                 "zoom_position", "periphery_status"):
         assert wait_for(lambda k=key: client.latest(k) is not None), key
     assert not client.node_silent()
-    assert client.latest("latitude").si == pytest.approx(48.1372)
-    assert client.latest("altitude_msl").si == pytest.approx(519.0)
+    assert si(client.latest("latitude")) == pytest.approx(48.1372)
+    assert si(client.latest("altitude_msl")) == pytest.approx(519.0)
     assert client.identify(node_id=6).hardware_revision == 2  # base GNSS node answers too
 
 

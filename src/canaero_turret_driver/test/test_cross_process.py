@@ -19,6 +19,7 @@ import pytest
 import canaero_turret_driver
 import gimbal_driver_common
 from canaero_turret_driver.client import ClientConfig, ServiceError, TurretClient
+from canaero_turret_driver.readings import si
 from canaero_turret_driver.sim import ControlClient
 from gimbal_driver_common.sim_control import parse_ready_line
 from gimbal_driver_common.testing import ManagedProcess, wait_for
@@ -74,7 +75,7 @@ def test_identify_move_and_data_across_processes(sim_process, remote_client):
     assert remote_client.identify().software_revision == 7
     assert wait_for(lambda: remote_client.latest("yaw_position") is not None)
     remote_client.move_to("yaw", math.degrees(0.35))
-    assert wait_for(lambda: abs(remote_client.latest("yaw_position").si - 0.35) < 1e-3)
+    assert wait_for(lambda: abs(si(remote_client.latest("yaw_position")) - 0.35) < 1e-3)
     assert abs(control.state()["axes"]["yaw"]["position"] - 20.0535) < 0.01
 
 
@@ -174,7 +175,7 @@ def test_socketcand_bridge_is_a_shared_bus(socketcand_sim, supervised):
             assert first.identify().software_revision == 7
             first.move_to("pitch", math.degrees(0.3))
             assert wait_for(lambda: second.latest("pitch_position") is not None
-                            and abs(second.latest("pitch_position").si - 0.3) < 1e-3)
+                            and abs(si(second.latest("pitch_position")) - 0.3) < 1e-3)
             assert control.command("node_silence turret") == "ok"
             assert wait_for(lambda: second.node_silent())
             assert control.command("node_silence all off") == "ok"

@@ -107,6 +107,19 @@ def test_move_converges_in_si_units(rig):
     assert rig.controller.commanded_targets == {"yaw": 0.4, "pitch": 0.2}
 
 
+def test_units_convert_once_in_the_adapter(rig):
+    """The client hands on what the bus carried, in the ICD's units (degrees); the adapter
+    alone converts it to SI (radians) and REP-103, for the controller and the readings."""
+    outcome = rig.move({"yaw": 0.4, "pitch": 0.2})
+    assert outcome.success, outcome.message
+    wait_for(lambda: abs(rig.controller.positions()["yaw"] - 0.4) < 0.011, 10, "yaw there")
+    raw = rig.device.client.latest("yaw_position")
+    assert raw.value == pytest.approx(math.degrees(0.4), abs=0.6)  # degrees on the wire
+    assert not hasattr(raw, "si")
+    assert rig.device.read().positions["yaw"] == pytest.approx(math.radians(raw.value),
+                                                               abs=0.011)
+
+
 def test_a_setpoint_outside_the_icd_range_is_refused_by_the_adapter(rig):
     """-180..180 degrees (6.1.2): checked in the adapter, in SI, before any frame."""
     before = rig.commands_received()
