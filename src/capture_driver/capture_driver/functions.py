@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, TypeVar
 
 from gimbal_driver_common.config import scan_joints
-from gimbal_driver_common.device import AxisStateCode
+from gimbal_driver_common.device import AxisStateCode, DeviceProcedure, ProcedureProgress
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest
 
 from .client import CaptureClient
@@ -76,6 +76,72 @@ class LevelErrors:
     def summary(self) -> str:
         return ', '.join(f'{j} ({abs(e):.3f} deg)' for j, e in self.degrees.items())
 
+
+class CaptureProcedure(DeviceProcedure):
+    """Levelling and the drift measurement share the IMU and run one at a time; a device
+    program (scan, loop) keeps them from starting."""
+
+    group = 'a levelling or drift compensation'
+
+    def __init__(self, device: CaptureFunctions) -> None:
+        self.device = device
+
+    def busy(self) -> str | None:
+        return self.device.program_running()
+
+
+class Levelling(CaptureProcedure):
+    """IMU_Leveling (4.5.11): the controller turns the joints until the IMU reads its
+    levelling values; done once every angle is within ``goal_tolerance`` and the axes
+    rest, failed after ``move_timeout``."""
+
+    name = 'levelling'
+    cancelled = 'levelling cancelled; axes stopped'
+
+    def __init__(self, device: CaptureFunctions, joints: Sequence[str]) -> None:
+        super().__init__(device)
+        self.joints = list(joints) or list(device.joint_names)
+        self.timeout = device.config.move_timeout
+        self.timed_out = f'not level within move_timeout {self.timeout:g} s'
+
+    def start(self) -> None:
+        self.device.start_leveling(self.joints)
+
+    def poll(self, elapsed: float) -> ProcedureProgress:
+        errors = self.device.level_errors(self.joints)
+        done = errors.within(self.device.config.goal_tolerance)
+        return ProcedureProgress(errors.progress(), 'levelled ' + errors.summary() if done
+                                 else None)
+
+
+class GyroDriftMeasurement(CaptureProcedure):
+    """IMU_GyroDriftCompensation (4.5.28): the pedestal holds still for ``duration`` s
+    while the controller measures the drift (the spec gives no duration), then the
+    result is read; any motion meanwhile makes it untrusted."""
+
+    name = 'the drift measurement'
+    cancelled = ('drift measurement cancelled (the controller may still finish it; '
+                 '~/reset_gyro_drift clears it)')
+    hold_still = True
+    period = 0.2
+
+    def __init__(self, device: CaptureFunctions, joints: Sequence[str],
+                 duration: float) -> None:
+        super().__init__(device)
+        self.requested_joints, self.duration = list(joints), duration
+
+    def start(self) -> None:
+        if self.requested_joints:
+            raise InvalidRequest('the drift compensation takes no joint names (it measures '
+                                 f'IMU sensor {self.device.settings.gyro_drift_sensor}, '
+                                 'gyro_drift_sensor)')
+        self.device.start_gyro_drift()
+
+    def poll(self, elapsed: float) -> ProcedureProgress:
+        if elapsed >= self.duration:
+            return ProcedureProgress(result=self.device.gyro_drift_result())
+        return ProcedureProgress(f'holding still while measuring the gyro drift: '
+                                 f'{elapsed:.1f} of {self.duration:g} s')
 
 
 class CaptureFunctions:
@@ -292,6 +358,16 @@ class CaptureFunctions:
         sensor = self.settings.gyro_drift_sensor
         self.client.run('IMU_ResetGyroDriftCompensation', sensor)
         return f'gyro drift compensation of IMU sensor {sensor} reset to 0'
+
+    def levelling(self, joints: Sequence[str]) -> Levelling:
+        """The ~/level procedure for ``joints`` (none: every joint), for the core's
+        guarded policy (``guarded.GuardedProcedures``)."""
+        return Levelling(self, joints)
+
+    def gyro_drift_measurement(self, joints: Sequence[str], duration: float
+                               ) -> GyroDriftMeasurement:
+        """The drift measurement procedure; ``joints`` must be empty (it names none)."""
+        return GyroDriftMeasurement(self, joints, duration)
 
     def level_errors(self, joints: Sequence[str]) -> LevelErrors:
         """Per joint: the angle between the IMU and its levelling value."""

@@ -13,8 +13,6 @@ runs any in-scope table entry by name.
 from __future__ import annotations
 
 import math
-import threading
-import time
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
@@ -29,8 +27,6 @@ from gimbal_driver_common.device import Device
 from gimbal_driver_common.errors import (
     DeviceRefused,
     GimbalError,
-    InvalidRequest,
-    LinkError,
     Unsupported,
 )
 from gimbal_driver_common.orientation import quaternion_from_euler
@@ -38,7 +34,6 @@ from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.heading import heading_imu
 from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_driver_common.ros.run import run_driver
-from gimbal_msgs.action import Home
 from gimbal_msgs.srv import DeviceCommand, SetMode
 
 from .capabilities import CaptureScans
@@ -62,7 +57,6 @@ class CaptureDriverNode(GimbalDriverNode):
     SCAN_PATTERNS = CaptureScans.patterns
 
     def __init__(self, **kwargs: object) -> None:
-        self._guarded = threading.Lock()  # one levelling/drift run at a time
         super().__init__('capture_driver', **kwargs)
         self._imu_pub = self.create_publisher(Imu, '~/imu', 10)
         self._fix_pub = self.create_publisher(NavSatFix, '~/fix', 10)
@@ -88,9 +82,11 @@ class CaptureDriverNode(GimbalDriverNode):
         ])
         self.create_subscription(NavSatFix, '~/goto_lla', self._on_goto_lla, 1,
                                  callback_group=self.service_group)
-        self.create_accepting_action_server(Home, '~/level', self._execute_level)
-        self.create_accepting_action_server(Home, '~/compensate_gyro_drift',
-                                            self._execute_gyro_drift)
+        # guarded device procedures: the core's policy runs them (gimbal_driver_common.guarded)
+        self.create_procedure_action('~/level', lambda device, joints: device.levelling(joints))
+        self.create_procedure_action(
+            '~/compensate_gyro_drift',
+            lambda device, joints: device.gyro_drift_measurement(joints, self.gyro_drift_time))
 
     # ------------------------------------------------------------ parameters
     def declare_device_parameters(self) -> None:
@@ -486,110 +482,6 @@ class CaptureDriverNode(GimbalDriverNode):
         self.get_logger().info(
             f'aiming at lat {msg.latitude:.6f} lon {msg.longitude:.6f}: '
             + ', '.join(f'{j} {p:+.4f} rad' for j, p in pose.items()))
-
-    # ----------------------------------------------------------- actions
-    def _busy_reason(self) -> str | None:
-        """Why the pedestal is not at rest for a guarded operation, or None."""
-        program = self._device_call(lambda device: device.program_running())
-        if program:
-            return program
-        if self.motion is not None and self.motion.scanning:
-            return 'a scan is running; stop it with ~/stop_scan first'
-        moving = [j for j in self.joint_names if self.controller and self.controller.moving(j)]
-        if moving:
-            return f'{", ".join(moving)} moving; wait for the move to end or call ~/stop'
-        return None
-
-    def _run_guarded(self, goal_handle, work: Callable[[Callable[[str], None]], str]):
-        """Run a levelling/drift goal: refused while the pedestal is busy or another runs;
-        feedback through ``report``; cancel, ~/stop and link loss end it."""
-        result = Home.Result()
-        feedback = Home.Feedback()
-
-        def report(state: str) -> None:
-            feedback.state = state
-            goal_handle.publish_feedback(feedback)
-
-        if not self._guarded.acquire(blocking=False):
-            goal_handle.abort()
-            result.message = 'refused: a levelling or drift compensation is already running'
-            return result
-        try:
-            refusal = self.command_refusal() or self._busy_reason()
-            if refusal:
-                raise DeviceRefused(refusal)
-            result.message = work(report)
-            result.success = True
-        except GimbalError as exc:
-            result.success, result.message = False, str(exc)
-        finally:
-            self._guarded.release()
-        if goal_handle.is_cancel_requested:
-            goal_handle.canceled()
-            result.success = False
-        elif result.success:
-            goal_handle.succeed()
-        else:
-            goal_handle.abort()
-        return result
-
-    def _execute_level(self, goal_handle):
-        joints = list(goal_handle.request.joint_names) or list(self.joint_names)
-
-        def work(report: Callable[[str], None]) -> str:
-            self._device_call(lambda device: device.start_leveling(joints))
-            return self._wait_level(joints, report, goal_handle)
-
-        return self._run_guarded(goal_handle, work)
-
-    def _wait_level(self, joints: Sequence[str], report: Callable[[str], None],
-                    goal_handle) -> str:
-        """Feedback until every IMU angle is at its levelling value and the axes rest."""
-        ctl = self.controller
-        generation = ctl.motion_generation
-        deadline = time.monotonic() + self.move_timeout
-        while True:
-            errors = self._device_call(lambda device: device.level_errors(joints))
-            moving = ctl.latest is None or any(ctl.moving(j) for j in joints)
-            report(errors.progress() + (' (moving)' if moving else ''))
-            if errors.within(self.goal_tolerance) and not moving:
-                return 'levelled ' + errors.summary()
-            if goal_handle.is_cancel_requested or generation != ctl.motion_generation:
-                ctl.stop_joints(joints)
-                raise DeviceRefused('levelling cancelled; axes stopped')
-            if not ctl.connected:
-                raise LinkError('device link lost during levelling')
-            if time.monotonic() > deadline:
-                ctl.stop_joints(joints)
-                raise DeviceRefused(f'not level within move_timeout {self.move_timeout:g} s')
-            time.sleep(0.1)
-
-    def _execute_gyro_drift(self, goal_handle):
-        def work(report: Callable[[str], None]) -> str:
-            if goal_handle.request.joint_names:
-                raise InvalidRequest('the drift compensation takes no joint names (it '
-                                     f'measures IMU sensor {self.gyro_drift_sensor}, '
-                                     'gyro_drift_sensor)')
-            ctl = self.controller  # _run_guarded checked it is configured
-            self._device_call(lambda device: device.start_gyro_drift())
-            generation = ctl.motion_generation
-            start = time.monotonic()
-            while (elapsed := time.monotonic() - start) < self.gyro_drift_time:
-                if goal_handle.is_cancel_requested or generation != ctl.motion_generation:
-                    raise DeviceRefused('drift measurement cancelled (the controller may '
-                                        'still finish it; ~/reset_gyro_drift clears it)')
-                if not ctl.connected:
-                    raise LinkError('device link lost during the drift measurement')
-                reason = self._busy_reason()
-                if reason:
-                    raise DeviceRefused(f'the pedestal moved during the drift measurement '
-                                        f'({reason}); the result is not trusted')
-                report(f'holding still while measuring the gyro drift: {elapsed:.1f} of '
-                       f'{self.gyro_drift_time:g} s')
-                time.sleep(0.2)
-            return self._device_call(lambda device: device.gyro_drift_result())
-
-        return self._run_guarded(goal_handle, work)
 
 
 def main(args: Sequence[str] | None = None) -> int:

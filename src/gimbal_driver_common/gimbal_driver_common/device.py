@@ -192,6 +192,54 @@ class TargetPointing(abc.ABC):
 
 
 @dataclass
+class ProcedureProgress:
+    """One look at a running :class:`DeviceProcedure`: feedback for people, and the
+    result message once the device is done (None: not yet)."""
+
+    feedback: str = ''
+    result: str | None = None
+
+
+class DeviceProcedure(abc.ABC):
+    """A procedure the device runs by itself and that needs the pedestal to itself
+    (Capture's IMU levelling, its gyro drift measurement). The adapter knows how to start
+    it and how far along it is; the core's guarded policy (``guarded.GuardedProcedures``)
+    refuses it while anything else moves the axes, polls it and ends it on a cancel, a
+    newer motion command, link loss or its timeout. An adapter builds one per request."""
+
+    #: how messages name it ("device link lost during {name}")
+    name: str = 'the device procedure'
+    #: how the refusal names the procedures that run one at a time ("refused: {group} is
+    #: already running")
+    group: str = 'a device procedure'
+    #: the message when a cancel or a newer motion command ends it
+    cancelled: str = 'cancelled'
+    #: the joints the device moves: it is done once they also rest; a cancel or a timeout
+    #: stops them. Empty: it moves none
+    joints: Sequence[str] = ()
+    #: a measurement: nothing may move while it runs, any motion ends it untrusted
+    hold_still: bool = False
+    #: s it may take (None: :meth:`poll` ends it), and the message when it did not finish
+    timeout: float | None = None
+    timed_out: str = 'not finished in time'
+    #: s between two polls
+    period: float = 0.1
+
+    def busy(self) -> str | None:
+        """Why the device is busy with a motion program of its own (a scan, a loop), or
+        None: the policy refuses to start then."""
+        return None
+
+    @abc.abstractmethod
+    def start(self) -> None:
+        """Check and start it on the device; raise GimbalError (nothing started) if not."""
+
+    @abc.abstractmethod
+    def poll(self, elapsed: float) -> ProcedureProgress:
+        """How far along it is, ``elapsed`` s after :meth:`start` returned."""
+
+
+@dataclass
 class PostedWrite:
     """A joint_command a device wrote without waiting (:meth:`Device.post`)."""
 

@@ -1,20 +1,38 @@
-"""The MoveTo and Home actions on the policies, and a lifecycle guard; mixed into the node."""
+"""The MoveTo and Home actions on the policies, the guarded device procedures as Home
+actions, and a lifecycle guard; mixed into the node."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 from lifecycle_msgs.srv import ChangeState
+from rclpy.action import ActionServer
 from rclpy.lifecycle import LifecycleNode
 
+from gimbal_driver_common.device import Device, DeviceProcedure
 from gimbal_driver_common.errors import DeviceRefused, GimbalError
 from gimbal_driver_common.policies import HomingSuperseded
 from gimbal_msgs.action import Home, MoveTo
 
+#: builds a device procedure from the adapter and the goal's joint names
+ProcedureFactory = Callable[[Device, Sequence[str]], DeviceProcedure]
+
+
+def state_reporter(goal_handle) -> Callable[[str], None]:
+    """Publish a text as the Home feedback ``state`` of ``goal_handle``."""
+    feedback = Home.Feedback()
+
+    def report(state: str) -> None:
+        feedback.state = state
+        goal_handle.publish_feedback(feedback)
+
+    return report
+
 
 class MotionActions:
-    """``~/move_to`` and ``~/home`` execute callbacks (the node provides controller/motion)."""
+    """``~/move_to``, ``~/home`` and the guarded procedures' execute callbacks (the node
+    provides controller, motion and procedures)."""
 
     def _execute_move(self, goal_handle):
         goal = goal_handle.request
@@ -58,12 +76,7 @@ class MotionActions:
     def _execute_home(self, goal_handle):
         joints = list(goal_handle.request.joint_names) or list(self.joint_names)
         result = Home.Result()
-        feedback = Home.Feedback()
-
-        def report(state: str) -> None:
-            feedback.state = state
-            goal_handle.publish_feedback(feedback)
-
+        report = state_reporter(goal_handle)
         superseded = False
         try:
             if self.motion is None:
@@ -80,6 +93,38 @@ class MotionActions:
             self.controller.stop_joints(joints)
             goal_handle.canceled()
             result.success, result.message = False, 'homing cancelled'
+        elif result.success:
+            goal_handle.succeed()
+        else:
+            goal_handle.abort()
+        return result
+
+    def create_procedure_action(self, name: str, make: ProcedureFactory) -> ActionServer:
+        """A Home action that runs ``make(device, goal joint names)`` through the guarded
+        procedure policy (``guarded.GuardedProcedures``); a cancel request wakes its wait."""
+        def wake() -> None:
+            if self.procedures is not None:
+                self.procedures.wake()
+
+        return self.create_accepting_action_server(
+            Home, name, lambda goal_handle: self._execute_procedure(goal_handle, make),
+            on_cancel=wake)
+
+    def _execute_procedure(self, goal_handle, make: ProcedureFactory) -> Home.Result:
+        result = Home.Result()
+        joints = list(goal_handle.request.joint_names)
+        try:
+            if self.procedures is None:
+                raise DeviceRefused(self.command_refusal())
+            result.message = self.procedures.run(
+                lambda: make(self.controller.device, joints), state_reporter(goal_handle),
+                lambda: goal_handle.is_cancel_requested)
+            result.success = True
+        except GimbalError as exc:
+            result.success, result.message = False, str(exc)
+        if goal_handle.is_cancel_requested:
+            result.success = False
+            goal_handle.canceled()
         elif result.success:
             goal_handle.succeed()
         else:

@@ -36,6 +36,7 @@ from gimbal_driver_common.controller import GimbalController
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample
 from gimbal_driver_common.diagnostics import FrequencyMonitor
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest
+from gimbal_driver_common.guarded import GuardedProcedures
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.periodic import Periodic
 from gimbal_driver_common.policies import DRIVER_SCAN_PATTERNS, Motion
@@ -79,6 +80,8 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         self.declare_device_parameters()
         self.controller: GimbalController | None = None
         self.motion: Motion | None = None
+        #: the guarded device procedures (levelling, drift measurement): one at a time
+        self.procedures: GuardedProcedures | None = None
         self.periodic = Periodic(on_error=self.get_logger().error)
         #: a driver's jobs that do device I/O (sensor topics): off the watchdog's thread
         self.sensor_jobs = Periodic(on_error=self.get_logger().error, name='sensors')
@@ -119,13 +122,19 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
             self.create_service(srv_type, name, callback, callback_group=self.service_group)
 
     def create_accepting_action_server(self, action_type: type, name: str,
-                                       execute: Callable[..., Any]) -> ActionServer:
+                                       execute: Callable[..., Any],
+                                       on_cancel: Callable[[], None] = lambda: None,
+                                       ) -> ActionServer:
         """An action server in the service group that accepts every goal and every cancel
-        request; ``execute`` refuses a goal by aborting it with a message saying why."""
+        request (calling ``on_cancel``, so a waiting goal can look at once); ``execute``
+        refuses a goal by aborting it with a message saying why."""
+        def accept_cancel(_goal: object) -> CancelResponse:
+            on_cancel()
+            return CancelResponse.ACCEPT
+
         return ActionServer(self, action_type, name, execute_callback=execute,
                             goal_callback=lambda _goal: GoalResponse.ACCEPT,
-                            cancel_callback=lambda _goal: CancelResponse.ACCEPT,
-                            callback_group=self.service_group)
+                            cancel_callback=accept_cancel, callback_group=self.service_group)
 
     def declare_param(self, name: str, default: object, description: str, **kwargs):
         """Declare a parameter with a descriptor; see :func:`ros.parameters.declare`."""
@@ -323,6 +332,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
                 sensors=self.sensor_jobs, rejections=self.rejections)
             self.controller = controller
             self.motion = Motion(controller, store, self.SCAN_PATTERNS)
+            self.procedures = GuardedProcedures(self.motion)
             controller.open()
             self.device_ready(device)
         except Exception as exc:  # noqa: BLE001 - any failure means "device not there"
