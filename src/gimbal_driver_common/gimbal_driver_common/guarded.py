@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 
 from gimbal_driver_common.device import DeviceProcedure
-from gimbal_driver_common.errors import DeviceRefused, LinkError
+from gimbal_driver_common.errors import DeviceRefused, GimbalError, LinkError
 from gimbal_driver_common.policies import Motion
 
 
@@ -94,13 +94,18 @@ class GuardedProcedures:
                     raise DeviceRefused(f'the pedestal moved during {procedure.name} '
                                         f'({reason}); the result is not trusted')
             elapsed = time.monotonic() - start
-            progress = ctl.call(functools.partial(procedure.poll, elapsed))
+            try:
+                progress = ctl.call(functools.partial(procedure.poll, elapsed))
+            except GimbalError as exc:  # the link dropped after the check above
+                if not ctl.connected:
+                    raise LinkError(f'device link lost during {procedure.name}') from exc
+                raise
             moving = bool(joints) and (ctl.latest is None or any(ctl.moving(j) for j in joints))
             if progress.feedback:
                 report(progress.feedback + (' (moving)' if moving else ''))
             if progress.result is not None and not moving:
                 return progress.result
-            if procedure.timeout is not None and elapsed > procedure.timeout:
+            if procedure.timeout is not None and elapsed >= procedure.timeout:
                 if joints:
                     ctl.stop_joints(joints)
                 raise DeviceRefused(procedure.timed_out)
