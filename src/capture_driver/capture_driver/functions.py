@@ -97,6 +97,7 @@ class Levelling(CaptureProcedure):
 
     name = 'levelling'
     cancelled = 'levelling cancelled; axes stopped'
+    superseded = 'levelling ended by a newer motion command, which now moves the axes'
 
     def __init__(self, device: CaptureFunctions, joints: Sequence[str]) -> None:
         super().__init__(device)

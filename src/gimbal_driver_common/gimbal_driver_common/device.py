@@ -214,6 +214,9 @@ class DeviceProcedure(abc.ABC):
     group: str = 'a device procedure'
     #: the message when a cancel or a newer motion command ends it
     cancelled: str = 'cancelled'
+    #: the message when a newer motion command ends it (its joints are not stopped: the
+    #: newer command owns them); None: :attr:`cancelled`
+    superseded: str | None = None
     #: the joints the device moves: it is done once they also rest; a cancel or a timeout
     #: stops them. Empty: it moves none
     joints: Sequence[str] = ()

@@ -85,7 +85,7 @@ class GuardedProcedures:
                     ctl.stop_joints(joints)
                 raise DeviceRefused(procedure.cancelled)
             if generation != ctl.motion_generation:
-                raise DeviceRefused(procedure.cancelled)
+                raise DeviceRefused(procedure.superseded or procedure.cancelled)
             if not ctl.connected:
                 raise LinkError(f'device link lost during {procedure.name}')
             if procedure.hold_still:

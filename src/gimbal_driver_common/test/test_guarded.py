@@ -69,6 +69,7 @@ class Scripted(DeviceProcedure):
     name = 'the scripted procedure'
     group = 'a scripted procedure'
     cancelled = 'scripted procedure cancelled'
+    superseded = 'scripted procedure superseded'
     timed_out = 'scripted procedure not done in time'
 
     def __init__(self, done_at: int | None = 1, joints: Sequence[str] = (),
@@ -195,7 +196,7 @@ def test_a_newer_move_ends_it_without_stopping_the_move(procedures, motion, devi
                                                         pool) -> None:
     future = start_run(pool, procedures, Scripted(done_at=None, joints=['tilt']))
     motion.start_move(['tilt'], [0.2])
-    with pytest.raises(DeviceRefused, match='scripted procedure cancelled'):
+    with pytest.raises(DeviceRefused, match='scripted procedure superseded'):
         future.result(ENDS_WITHIN)
     assert device.sent == [('move', ['tilt'])]  # the newer move owns the axis now
 
