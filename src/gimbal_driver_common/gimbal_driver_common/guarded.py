@@ -29,8 +29,14 @@ class GuardedProcedures:
         self._running = threading.Lock()
         #: set to end a poll wait early: a cancel request, ~/stop, a joint_command
         self._wake = threading.Event()
-        self.controller.halt_hooks.append(self.wake)
+        #: ~/stop (a halt) came during the run: it ends as cancelled, not superseded
+        self._halted = threading.Event()
+        self.controller.halt_hooks.append(self._halt)
         self.controller.preempt_hooks.append(self.wake)
+
+    def _halt(self) -> None:
+        self._halted.set()
+        self.wake()
 
     def wake(self) -> None:
         """Look at the running procedure now (a cancel request came, or a command)."""
@@ -64,6 +70,7 @@ class GuardedProcedures:
             if refusal:
                 raise DeviceRefused(refusal)
             self._wake.clear()
+            self._halted.clear()
             generation = ctl.motion_generation
             ctl.call(procedure.start)
             return self._watch(procedure, generation, report, cancelled)
@@ -85,7 +92,9 @@ class GuardedProcedures:
                     ctl.stop_joints(joints)
                 raise DeviceRefused(procedure.cancelled)
             if generation != ctl.motion_generation:
-                raise DeviceRefused(procedure.superseded or procedure.cancelled)
+                halted = self._halted.is_set()
+                raise DeviceRefused(procedure.cancelled if halted
+                                    else procedure.superseded or procedure.cancelled)
             if not ctl.connected:
                 raise LinkError(f'device link lost during {procedure.name}')
             if procedure.hold_still:
