@@ -16,7 +16,9 @@ marks) and :class:`~.status.KosStatus` (ErrorStatus latch, lock state, per-motor
 diagnostics). kOS has no device
 presets and no device scans, so the controller's YAML presets and driver-side scans serve it.
 The playback, calibration, picture, LED and SoftwareID requests the node exposes as its own
-services are plain methods of :class:`KosDevice`, called through ``controller.call``.
+services are plain methods of :class:`KosDevice`, called through ``controller.call``: the
+playback ones from the :class:`~.playback.KosPlayback` mixin, the others from the
+:class:`~.device_functions.KosFunctions` mixin.
 """
 
 from __future__ import annotations
@@ -25,40 +27,24 @@ import logging
 import math
 import threading
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Protocol
 
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves, PostedWrite
-from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, GimbalError, InvalidRequest
+from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest
 from gimbal_driver_common.joint_command import JointLimits
 
-from .client import KosClient, KosError, MotorState, NotConnected
+from .client import KosClient, MotorState, NotConnected
+from .device_functions import KosFunctions
 from .homing import KosHoming
-from .moves import (
-    AxisRange,
-    JointMapping,
-    Keyframe,
-    PlaybackSettings,
-    from_keyframes,
-    from_segments,
-)
-from .protocol import (
-    DeviceType,
-    LedState,
-    PlaybackState,
-    PlaybackStatus,
-    ProtocolError,
-    Trajectory,
-    playback_state_name,
-)
+from .moves import JointMapping
+from .playback import KosPlayback, PlaybackReport
+from .protocol import DeviceType, playback_state_name
 from .status import KosStatus
 from .units import Conversion, JointUnits
 
 LOG = logging.getLogger('kessler_kos_driver.device')
 
-# AuxInputStatus bits (document "AuxInputStatus"): buttons in this order; bit 4 = a slave
-# controller is present.
-LED_NAMES = {int(state): state.name.lower() for state in LedState}
 DEVICE_MODELS = {
     DeviceType.CINESHOOTER: 'Kessler CineShooter',
     DeviceType.SECOND_SHOOTER_PRO: 'Kessler Second Shooter Pro',
@@ -82,22 +68,7 @@ class KosSettings:
     playback_timeout: float = 60.0     # s to wait for SetupCompleted / MotorsHome
 
 
-@dataclass
-class PlaybackReport:
-    """One PlaybackStatus notification with the motor positions in SI, by joint."""
-
-    status: int
-    status_name: str
-    elapsed: float
-    photo_count: int
-    positions: dict[str, float] = field(default_factory=dict)
-
-
-def _finite_or(value: float, default: float) -> float:
-    return value if math.isfinite(value) else default
-
-
-class KosDevice(Device):
+class KosDevice(KosPlayback, KosFunctions, Device):
     """One kOS device (TCP or USB HID) in SI units; callbacks run on the client's reader."""
 
     #: positions come from MotorInfo polls (every ``poll_period``) and notifications
@@ -367,107 +338,7 @@ class KosDevice(Device):
                 if uncalibrated else '')
         return f'cleared {count} latched device error(s){note}'
 
-    # ------------------------------------------------------------- playback
-    def _ranges(self) -> dict[int, AxisRange]:
-        return {a: AxisRange(m.begin_position, m.end_position)
-                for a, m in self.client.motors.items() if m.online}
-
-    def load_keyframes(self, frames: list[Keyframe], settings: PlaybackSettings) -> Trajectory:
-        """Fit SI key frames to the calibrated ranges, load and confirm the move."""
-        self.require_idle()
-        self.client.refresh_motors()
-        return self._load(lambda: from_keyframes(frames, self.joints, self._ranges(), settings))
-
-    def load_segments(
-        self, segments: dict[str, list[tuple[float, ...]]], settings: PlaybackSettings
-    ) -> Trajectory:
-        """Load explicit normalised Bezier segments per joint."""
-        self.require_idle()
-        self.client.refresh_motors()
-        return self._load(lambda: from_segments(segments, self.joints, settings))
-
-    def _load(self, build: Callable[[], Trajectory]) -> Trajectory:
-        """Build and load; a refusal names the joints behind the device's motor numbers."""
-        try:
-            trajectory = build()
-            self.client.load_trajectory(trajectory)
-        except (ProtocolError, KosError) as exc:
-            raise DeviceRefused(f'trajectory not loaded: {exc}; {self._rotations_legend()}'
-                                ) from exc
-        return trajectory
-
-    def _rotations_legend(self) -> str:
-        """What a device figure in rotations means for each joint (refusals quote them)."""
-        parts = []
-        for name, mapping in self.joints.items():
-            units = self.conversion(name)
-            parts.append(f'motor {mapping.address} is joint {name!r}, 1 rotation = '
-                         f'{abs(units.per_rotation):.6g} ({units.describe()})')
-        return '; '.join(parts)
-
-    def setup_playback(self, delay_return: bool) -> None:
-        """SetupPlayback, answered once SetupCompleted arrives."""
-        self.require_idle()
-        client = self.client
-        marker = len(client.playback.history)
-        client.setup_playback(delay_return=delay_return)
-        timeout = self.settings.playback_timeout
-        if not client.wait_for(
-                lambda: PlaybackState.SETUP_COMPLETED in client.playback.history[marker:],
-                timeout):
-            raise DeviceTimeout(f'no SetupCompleted notification within {timeout:g} s')
-
-    def start_playback(self) -> None:
-        self.require_idle()
-        self.client.start_playback()
-
-    def stop_playback(self) -> None:
-        self.client.stop_playback()
-
-    def _playback_notified(self, note: PlaybackStatus) -> None:
-        photos = note.photo_count
-        report = PlaybackReport(
-            status=int(note.status), status_name=playback_state_name(note.status),
-            elapsed=float(_finite_or(note.elapsed_time, 0.0)),
-            photo_count=(min(round(photos), 2**32 - 1)
-                         if math.isfinite(photos) and photos >= 0 else 0))
-        for address, position in sorted(note.positions.items()):
-            name = self.joint_of(address)
-            if name is not None:
-                report.positions[name] = self.to_si(name, float(position))
-        self.on_playback(report)
-
-    # ---------------------------------------------------- calibration, camera
-    def mark_begin(self, joint: str) -> None:
-        self.require_idle()
-        self.client.mark_begin(self._mapping(joint).address)
-
-    def mark_end(self, joint: str) -> tuple[float, float]:
-        """MarkEndPosition, then MotorInfo read again: the new end mark sets the joint's
-        conversion (its span over the end); the calibrated (begin, end) in SI."""
-        self.require_idle()
-        client = self.client
-        address = self._mapping(joint).address
-        client.mark_end(address)
-        client.refresh_motors()
-        self._note_calibration()
-        motor = client.motor(address)
-        return self.to_si(joint, motor.begin_position), self.to_si(joint, motor.end_position)
-
-    def reset_axis(self, joint: str) -> None:
-        self.require_idle()
-        self.client.reset_axis(self._mapping(joint).address)
-
-    def _mapping(self, joint: str) -> JointMapping:
-        mapping = self.joints.get(joint)
-        if mapping is None:
-            raise InvalidRequest(f'unknown joint {joint!r}; this device has {list(self.joints)}')
-        return mapping
-
-    def take_picture(self, exposure: float) -> None:
-        self.client.take_picture(exposure)
-
-    # --------------------------------------------------------- LEDs, SoftwareID
+    # ------------------------------------------------------------- settings
     def _read_device_settings(self) -> None:
         """LEDStatus and SoftwareID once per connection, for diagnostics."""
         self.device_settings = {}
@@ -476,32 +347,6 @@ class KosDevice(Device):
             self.software_id()
         except GimbalError as exc:
             LOG.warning('cannot read LEDStatus/SoftwareID: %s', exc)
-
-    def _remember_leds(self, master: int, slave: int) -> tuple[str, str]:
-        names = LED_NAMES.get(master, str(master)), LED_NAMES.get(slave, str(slave))
-        self.device_settings['led_master'], self.device_settings['led_slave'] = names
-        return names
-
-    def led_status(self) -> tuple[str, str]:
-        """(master, slave) LED states by name."""
-        return self._remember_leds(*self.client.led_status())
-
-    def set_led_status(self, master: int, slave: int) -> tuple[str, str]:
-        return self._remember_leds(*self.client.set_led_status(master, slave))
-
-    def software_id(self) -> int:
-        value = self.client.software_id()
-        self.device_settings['last_client_software_id'] = str(value)
-        return value
-
-    def set_software_id(self, platform: int) -> int:
-        value = self.client.set_software_id(platform)
-        self.device_settings['last_client_software_id'] = str(value)
-        return value
-
-    @property
-    def aux_inputs(self) -> int:
-        return self.client.aux_inputs
 
 
 def joint_mappings(

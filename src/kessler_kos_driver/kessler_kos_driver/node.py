@@ -40,14 +40,10 @@ from gimbal_msgs.srv import Calibrate, DeviceCommand, LoadTrajectory
 
 from . import load_request
 from .client import KosClient
-from .device import (
-    LED_NAMES,
-    KosDevice,
-    KosSettings,
-    PlaybackReport,
-    joint_mappings,
-)
+from .device import KosDevice, KosSettings, joint_mappings
+from .device_functions import LED_NAMES
 from .moves import PlaybackSettings
+from .playback import PlaybackReport
 from .protocol import (
     DEFAULT_TCP_PORT,
     MOTOR_ADDRESS_MAX,

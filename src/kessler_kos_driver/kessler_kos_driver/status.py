@@ -21,6 +21,8 @@ if TYPE_CHECKING:
 
 LOG = logging.getLogger('kessler_kos_driver.status')
 
+# AuxInputStatus bits (document "AuxInputStatus"): buttons in this order; bit 4 = a slave
+# controller is present.
 AUX_INPUT_BUTTONS = ('master_tip', 'master_ring', 'slave_tip', 'slave_ring')
 AUX_SLAVE_PRESENT_BIT = 4
 #: ErrorStatus notifications kept for diagnostics until ~/reset_faults
