@@ -9,7 +9,8 @@ adapter :class:`~kessler_kos_driver.device.KosDevice` (built by
 :meth:`KosDriverNode.make_device`); this node sees SI only. It adds the kOS services
 (playback, ~/calibrate, ~/take_picture, ~/command for LEDStatus and SoftwareID) and topics
 (~/playback_status, ~/aux_inputs, ~/slave_controller_present); each service is one call of
-adapter methods through the controller's ``call()`` boundary, never the client.
+adapter methods through the controller's ``call()`` boundary, never the client. The service
+handlers are the :class:`~.ros_services.KosServices` mixin.
 
 The `password` parameter is redacted: rclpy publishes declared parameter values on
 /parameter_events and serves them on ~/get_parameters, so the real value is taken from the
@@ -21,7 +22,6 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -31,18 +31,14 @@ from sensor_msgs.msg import Joy
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.joint_command import CommandError
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.parameters import ParameterError, take_secret
 from gimbal_driver_common.ros.run import run_driver
 from gimbal_msgs.msg import PlaybackStatus as PlaybackStatusMsg
 from gimbal_msgs.srv import Calibrate, DeviceCommand, LoadTrajectory
 
-from . import load_request
 from .client import KosClient
 from .device import KosDevice, KosSettings, joint_mappings
-from .device_functions import LED_NAMES
-from .moves import PlaybackSettings
 from .playback import PlaybackReport
 from .protocol import (
     DEFAULT_TCP_PORT,
@@ -50,8 +46,8 @@ from .protocol import (
     MOTOR_ADDRESS_MIN,
     REPORT_SIZE,
     USB_KEEPALIVE_PERIOD_S,
-    PlaybackMode,
 )
+from .ros_services import KosServices
 from .status import AUX_INPUT_BUTTONS, AUX_SLAVE_PRESENT_BIT
 from .units import MOTOR_RADIANS, MOTOR_RADIANS_PER_ROTATION, JointUnits, joint_units
 from .usb_link import USB_BACKENDS, UsbTarget
@@ -81,7 +77,7 @@ class _RosLogHandler(logging.Handler):
             self._logger.debug(text)
 
 
-class KosDriverNode(GimbalDriverNode):
+class KosDriverNode(KosServices, GimbalDriverNode):
     DEFAULT_JOINT_NAMES = ('slider', 'pan', 'tilt')
     # One example rig in SI, the same in urdf/kessler_kos_driver.urdf (tests/
     # test_descriptions.py checks they agree): a slider of 1.5 m from its begin mark at up
@@ -332,14 +328,6 @@ class KosDriverNode(GimbalDriverNode):
                 'rotation; set calibrated_spans (the distance between the begin and end '
                 'marks, measured on the rig) or joint_scales (SI per motor rotation)')
 
-    def _serve_device(self, response: object, request: Callable[[KosDevice], str],
-                      joints: Sequence[str] | None = None) -> object:
-        """A kOS extra through the controller's ``call()`` boundary: refused while inactive,
-        disconnected or (with ``joints``) while those joints cannot move; errors become
-        success=false."""
-        return self.serve_request(
-            response, lambda: self.controller.call(lambda: request(self.device), joints))
-
     # ---------------------------------------------------------- notifications
     def _publish_playback(self, report: PlaybackReport) -> None:
         msg = PlaybackStatusMsg()
@@ -357,153 +345,6 @@ class KosDriverNode(GimbalDriverNode):
         msg.buttons = [status >> bit & 1 for bit in range(len(AUX_INPUT_BUTTONS))]
         self._aux_pub.publish(msg)
         self._slave_pub.publish(Bool(data=bool(status >> AUX_SLAVE_PRESENT_BIT & 1)))
-
-    # -------------------------------------------------------------- services
-    def _on_command(self, request, response):
-        """~/command: the kOS Get/Set messages without a dedicated interface."""
-        def action(device: KosDevice) -> str:
-            name = request.command.strip()
-            args = [a.strip() for a in request.arguments]
-            handler = {'GetLEDStatus': (0, self._get_leds), 'SetLEDStatus': (2, self._set_leds),
-                       'GetSoftwareID': (0, self._get_software_id),
-                       'SetSoftwareID': (1, self._set_software_id)}.get(name)
-            if handler is None:
-                raise CommandError(f'unknown command {name!r}; this driver has GetLEDStatus, '
-                                   'SetLEDStatus MASTER SLAVE, GetSoftwareID, SetSoftwareID ID')
-            count, run = handler
-            if len(args) != count:
-                raise CommandError(f'{name} takes {count} argument(s), got {len(args)}: {args}')
-            if request.axis:
-                raise CommandError(f'{name} is device-wide: axis must be 0, got {request.axis}')
-            response.results = run(device, args)
-            return f'{name}: ' + ', '.join(response.results)
-
-        return self._serve_device(response, action)
-
-    @staticmethod
-    def _led_results(master: str, slave: str) -> list[str]:
-        return [f'master={master}', f'slave={slave}']
-
-    def _get_leds(self, device: KosDevice, _args: list[str]) -> list[str]:
-        return self._led_results(*device.led_status())
-
-    def _set_leds(self, device: KosDevice, args: list[str]) -> list[str]:
-        states = []
-        by_name = {v: k for k, v in LED_NAMES.items()}
-        for which, text in zip(('master', 'slave'), args, strict=True):
-            value = by_name.get(text.lower(), int(text) if text.isdigit() else None)
-            if value not in LED_NAMES:
-                raise CommandError(f'{which} LED status {text!r} is not one of '
-                                   f'{", ".join(f"{k} ({v})" for k, v in LED_NAMES.items())}')
-            states.append(value)
-        return self._led_results(*device.set_led_status(*states))
-
-    def _get_software_id(self, device: KosDevice, _args: list[str]) -> list[str]:
-        return [f'software_id={device.software_id()}']
-
-    def _set_software_id(self, device: KosDevice, args: list[str]) -> list[str]:
-        if not self.allow_software_id_write:
-            raise CommandError('SetSoftwareID changes what the device tells every other client '
-                               'about its last user; set the parameter '
-                               'allow_software_id_write:=true to allow it')
-        text = args[0]
-        if not text.isdigit() or int(text) > 0xFF:
-            raise CommandError(f'SoftwareID must be an integer 0..255, got {text!r}')
-        return [f'software_id={device.set_software_id(int(text))}']
-
-    def _on_load_trajectory(self, request, response):
-        def action(device: KosDevice) -> str:
-            start_time = load_request.start_time(request.start_time)
-            settings = PlaybackSettings(
-                mode=request.playback_mode, duration=request.duration,
-                loop_count=request.loop_count, rapid_reverse=request.rapid_reverse,
-                start_delay=request.start_delay, start_time=start_time,
-                interval=request.interval,
-                exposure=request.exposure, move_photos=request.move_photos,
-                pre_move_photos=request.pre_move_photos,
-                post_move_photos=request.post_move_photos,
-                return_to_home_percent=self.return_to_home_percent)
-            keyframes = request.keyframes
-            has_keyframes = bool(keyframes.points)
-            if has_keyframes == bool(request.axes):
-                raise CommandError('give either keyframes (trajectory_msgs/JointTrajectory) or '
-                                   'explicit Bezier axes, not both and not neither')
-            if has_keyframes:
-                trajectory = device.load_keyframes(
-                    load_request.keyframes(keyframes, self.limits), settings)
-            else:
-                trajectory = device.load_segments(
-                    load_request.segments(request.axes, self.limits), settings)
-            self._delay_return = bool(request.delay_return)
-            axes = ', '.join(f'{device.joint_of(a) or a}: {len(s)} segment(s)'
-                             for a, s in trajectory.axes.items())
-            mode = PlaybackMode(request.playback_mode).name.lower()
-            when = ''
-            if start_time:
-                when = time.strftime('; starts at %Y-%m-%dT%H:%M:%SZ', time.gmtime(start_time))
-            elif request.start_delay > 0:
-                when = f'; starts {request.start_delay:g} s after ~/start_playback'
-            if self._delay_return:
-                when += '; delay_return: ~/setup_playback does not move the axes'
-            return (f'{mode} move loaded ({axes}), duration '
-                    f'{trajectory.effective_duration():.3f} s{when}; now ~/setup_playback '
-                    'and ~/start_playback')
-
-        joints = list(request.keyframes.joint_names) or [a.joint_name for a in request.axes]
-        return self._serve_device(response, action, joints)
-
-    def _on_setup_playback(self, request, response):
-        def action(device: KosDevice) -> str:
-            device.setup_playback(self._delay_return)
-            if self._delay_return:
-                return ('move set up without moving (delay_return); ~/start_playback returns '
-                        'to the first key frame, then plays')
-            return 'motors at the first key frame, move set up; call ~/start_playback'
-
-        return self._serve_device(response, action)
-
-    def _on_start_playback(self, request, response):
-        def action(device: KosDevice) -> str:
-            device.start_playback()
-            return 'playback started; follow ~/playback_status (FullStop ends the move)'
-
-        return self._serve_device(response, action)
-
-    def _on_stop_playback(self, request, response):
-        def action(device: KosDevice) -> str:
-            device.stop_playback()
-            return 'StopPlayback sent: motors stop, the device reports FullStop'
-
-        return self._serve_device(response, action)
-
-    def _on_calibrate(self, request, response):
-        def action(device: KosDevice) -> str:
-            joint = request.joint_name
-            if joint not in self.limits:
-                raise CommandError(f'unknown joint {joint!r}; this device has '
-                                   f'{list(self.joint_names)}')
-            if request.action == Calibrate.Request.MARK_BEGIN:
-                device.mark_begin(joint)
-                return (f'{joint}: begin marked here; move to the end of the travel and mark '
-                        'the end')
-            if request.action == Calibrate.Request.MARK_END:
-                begin, end = device.mark_end(joint)
-                return (f'{joint}: calibrated, range {begin:.4f} .. {end:.4f} (position is '
-                        'now relative to the begin mark)')
-            if request.action == Calibrate.Request.RESET:
-                device.reset_axis(joint)
-                return f'{joint}: calibration cleared, position reset to 0'
-            raise CommandError(f'action {request.action} is not MARK_BEGIN (0), MARK_END (1) '
-                               'or RESET (2)')
-
-        return self._serve_device(response, action, [request.joint_name])
-
-    def _on_take_picture(self, request, response):
-        def action(device: KosDevice) -> str:
-            device.take_picture(self.picture_exposure)
-            return f'picture taken (exposure {self.picture_exposure:g} s)'
-
-        return self._serve_device(response, action)
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -21,7 +21,7 @@ from gimbal_driver_common.orientation import quaternion_from_euler
 from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.testing.conformance_rig import ConformanceRig
 from gimbal_driver_common.testing.look_at_geo import LookAtGeoSuite, TestPose
-from ucamera_driver.device import enu_flu_to_ned_frd
+from ucamera_driver.device_functions import enu_flu_to_ned_frd
 
 
 class TestUCameraLookAtGeo(LookAtGeoSuite):

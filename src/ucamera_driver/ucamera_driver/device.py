@@ -4,15 +4,18 @@ Wraps one :class:`UCameraClient` and speaks the device contract: SI units,
 REP-103 signs and joint names. Everything that converts between the gimbal and
 ROS conventions lives here: axis signs (``invert_pan``/``invert_tilt``), the
 set-point ramp that gives angle moves a speed (the gimbal has no speed input),
-the "moving" bits, and the external-feed frames (ENU/FLU in, NED/FRD out).
+the "moving" bits, and (in its mixin, ``device_functions.py``) the external-feed
+frames (ENU/FLU in, NED/FRD out).
 
 What lives where:
 
 * ``protocol/``: the codec (packets, scaling, range checks);
 * ``client.py``: the serial session (reader thread, requests, refresh at >= 10 Hz,
   link loss detection; no reconnect loop);
-* this module: the adapter and the device extras the node exposes (modes, zoom,
-  IR palette, external feed, non-volatile saves behind ``allow_nv_write``);
+* this module: the adapter;
+* ``device_functions.py``: the device extras the node exposes (modes, zoom, IR
+  palette, external feed, non-volatile saves behind ``allow_nv_write``), the
+  :class:`~.device_functions.UCameraFunctions` mixin of the adapter;
 * ``capabilities.py``: its capability objects (:class:`~.capabilities.PilotHoming`,
   :class:`~.capabilities.UCameraStatus`, :class:`~.capabilities.UCameraGeolocation`);
 * ``node.py``: parameters, ``make_device()`` and the ROS topics and services of
@@ -47,28 +50,15 @@ from dataclasses import dataclass, field
 
 from gimbal_driver_common.config import Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves, PostedWrite
-from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, InvalidRequest, Unsupported
+from gimbal_driver_common.errors import DeviceTimeout, Unsupported
 from gimbal_driver_common.geodesy import Attitude
-from gimbal_driver_common.orientation import euler_from_quaternion, wrap_angle
 
 from .capabilities import PilotHoming, UCameraGeolocation, UCameraStatus
 from .client import NotConnectedError, UCameraClient
-from .protocol import MODE_NAMES, AnglesReport, GimbalMode, GimbalType, GpsFeed, Packet, mode_name
+from .device_functions import UCameraFunctions
+from .protocol import AnglesReport, GimbalMode, GimbalType, GpsFeed, Packet
 
 LOG = logging.getLogger(__name__)
-
-#: modes the gimbal leaves by itself (set_mode says so)
-SELF_ENDING_MODES = (GimbalMode.GYRO_AUTOALIGN, GimbalMode.FULL_AUTOALIGN,
-                     GimbalMode.FFC_CALIBRATION, GimbalMode.INIT)
-
-
-def enu_flu_to_ned_frd(roll: float, pitch: float, yaw: float) -> tuple[float, float, float]:
-    """REP-103 attitude (ENU world, FLU body) -> aerospace yaw, pitch, roll (NED/FRD).
-
-    Roll keeps its sign, pitch flips (FLU nose-down positive, FRD nose-up
-    positive) and yaw turns from "east, counter-clockwise" to "north, clockwise".
-    """
-    return wrap_angle(math.pi / 2 - yaw), -pitch, roll
 
 
 @dataclass
@@ -94,7 +84,7 @@ class UCameraSettings:
     allow_nv_write: bool = False
 
 
-class UCameraDevice(Device):
+class UCameraDevice(UCameraFunctions, Device):
     """One U-Camera in joint space (REP-103); thread-safe."""
 
     streamed = True  # angles arrive as periodic reports: publish each as it comes
@@ -340,104 +330,3 @@ class UCameraDevice(Device):
             self.notify_data()  # publish joint_states now
         if self._listener is not None:
             self._listener(packet, stamp)
-
-    # ------------------------------------------------------------------ extras
-    def mode(self) -> str:
-        mode = self.client.state().mode
-        return mode_name(mode) if mode is not None else ""
-
-    def set_mode(self, name: str) -> str:
-        """Select a mode by name; answer once the gimbal reports it (``mode_timeout``)."""
-        key = name.strip().lower()
-        if key not in MODE_NAMES:
-            raise InvalidRequest(
-                f"unknown mode {name!r}; the U-Camera modes are " + ", ".join(MODE_NAMES))
-        mode = MODE_NAMES[key]
-        client = self.client
-        if mode == GimbalMode.FFC_CALIBRATION and client.state().gimbal_type == GimbalType.DAYLIGHT:
-            raise DeviceRefused("ffc_calibration needs an IR gimbal; this one is daylight")
-        self.command_mode(mode)
-        deadline = time.monotonic() + self.settings.mode_timeout
-        while time.monotonic() < deadline:
-            if client.state().mode == mode:
-                suffix = (" (returns to angles by itself when done)"
-                          if mode in SELF_ENDING_MODES else "")
-                return f"mode {key} active{suffix}"
-            time.sleep(0.02)
-        reported = client.state().mode
-        raise DeviceTimeout(
-            f"device did not report mode {key} within {self.settings.mode_timeout:g} s "
-            f"(reports {mode_name(reported) if reported is not None else 'nothing'})")
-
-    def command_mode(self, mode: GimbalMode) -> None:
-        """Hand the axes to a device mode: the driver's set-point, ramp and jog end here.
-
-        ``angles`` holds the current position and ``rates`` starts with zero rates.
-        """
-        with self._lock:
-            self._forget_motion()
-            if mode == GimbalMode.ANGLES:
-                self.client.hold_angles()
-            elif mode == GimbalMode.RATES:
-                self.client.set_rates(0.0, 0.0)
-            else:
-                self.client.set_mode(mode)
-
-    def set_telemetry_rate(self, rate: int) -> None:
-        """Send a new report rate now (volatile); refused when the gimbal reports another."""
-        if not self.client.connected or rate == 0:
-            return  # applied when the link opens
-        achieved = self.client.set_telemetry_rate(rate)
-        if achieved != rate:
-            raise DeviceRefused(f"the gimbal reports {achieved} Hz")
-
-    def set_refresh_rate(self, rate: float) -> None:
-        self.client.refresh_period = 1.0 / rate
-
-    def set_zoom(self, level: float) -> None:
-        """Zoom 0 (wide) .. 1 (tele)."""
-        self.client.set_zoom(level)
-
-    def set_ir_palette(self, palette: int) -> None:
-        self.client.set_ir_palette(palette)
-
-    def send_external_velocity(self, east: float, north: float, up: float) -> None:
-        """ENU ground velocity (m/s) -> the gimbal's NED GPS velocities."""
-        self.client.send_gps_velocity(north, east, -up)
-
-    def send_external_fix(self, latitude: float, longitude: float, altitude: float,
-                          east: float, north: float, up: float) -> None:
-        """A fix (degrees, m) with its ENU velocity -> Send GPS Position and Velocities."""
-        self.client.send_gps(latitude, longitude, altitude, north, east, -up)
-
-    def send_external_attitude(self, x: float, y: float, z: float, w: float) -> None:
-        """Vehicle orientation quaternion (ENU world, FLU body) -> Send Vehicle Angles."""
-        norm = math.sqrt(x * x + y * y + z * z + w * w)
-        if not 0.9 < norm < 1.1:
-            raise InvalidRequest(f"quaternion norm {norm:.3f} is not 1")
-        rep103 = euler_from_quaternion(x / norm, y / norm, z / norm, w / norm)
-        yaw, pitch, roll = enu_flu_to_ned_frd(*rep103)
-        self.client.send_vehicle_angles(yaw, pitch, roll)
-        self.vehicle_attitude = (Attitude(*rep103), time.time())
-
-    def send_external_body_rates(self, x: float, y: float, z: float) -> None:
-        """FLU body rates (rad/s) -> FRD p, q, r -> Send Vehicle Angular Velocities."""
-        self.client.send_vehicle_rates(-z, -y, x)
-
-    def save_configuration(self) -> str:
-        self._check_nv_allowed("save_configuration")
-        self.client.save_configuration()
-        return "configuration saved to non-volatile memory (the gimbal is silent for about 1 s)"
-
-    def save_ffc(self) -> str:
-        self._check_nv_allowed("save_ffc")
-        if self.client.state().gimbal_type != GimbalType.IR:
-            raise DeviceRefused("save_ffc needs an IR gimbal")
-        self.client.save_ffc()
-        return "FFC calibration saved to the IR module (may take up to 10 s)"
-
-    def _check_nv_allowed(self, what: str) -> None:
-        if not self.settings.allow_nv_write:
-            raise DeviceRefused(
-                f"{what} refused: non-volatile writes need the parameter allow_nv_write:=true "
-                "(never during flight; keep the power stable while saving)")
