@@ -13,6 +13,9 @@ which the client reports through `connected` and `last_error_text`. Over USB
 4 s USB keep-alive) and no password message is sent: the document's USB notes say
 UserPassword and DevicePassword are "not required or supported".
 
+The notification handling is the :class:`~.client_notifications.KosNotifications` mixin,
+the commands the :class:`~.client_commands.KosCommands` mixin.
+
 Design notes:
 - Set messages and actions have no reply. Where the caller needs to know the outcome the client
   follows them with a Get as a *barrier*: the device handles messages in order, so any
@@ -27,7 +30,6 @@ Design notes:
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from collections import deque
@@ -38,6 +40,7 @@ from gimbal_driver_common.session import Protocol, Session, StreamLink
 from gimbal_driver_common.transport import ByteStream, TcpStream, TransportError
 
 from .client_commands import KosCommands
+from .client_notifications import KosNotifications
 from .client_types import (
     CommandRejected,
     DeviceTimeout,
@@ -67,19 +70,16 @@ from .protocol import (
     GetMotorInfo,
     GetNetworkInfo,
     Message,
-    MessageId,
     MotorCalibrated,
     MotorInfo,
     MotorPosition,
     MotorStatus,
-    PlaybackState,
     PlaybackStatus,
     ProtocolError,
     UnknownMessage,
     UnsupportedMessage,
     UserPassword,
     decode,
-    describe_error,
     unpack_header,
 )
 from .usb_link import HidDevice, HidStream, UsbTarget
@@ -92,7 +92,7 @@ NOTIFICATIONS = (PlaybackStatus, MotorPosition, MotorCalibrated, MotorStatus, Er
                  AuxInputStatus, UnsupportedMessage, UnknownMessage)
 
 
-class KosClient(KosCommands, Protocol):
+class KosClient(KosNotifications, KosCommands, Protocol):
     """A session with one kOS device. Thread-safe; callbacks run on the reader thread."""
 
     def __init__(
@@ -362,119 +362,6 @@ class KosClient(KosCommands, Protocol):
         elif self.keepalive_period > 0 and now - self._last_tx >= self.keepalive_period:
             self.send(GetNetworkInfo(False))
         return self._next_poll if self.poll_period > 0 else None
-
-    # --------------------------------------------------------------- notifications
-    def _completed(self, key: int) -> None:
-        self._seq[key] = self._seq.get(key, 0) + 1
-        self._cond.notify_all()
-
-    def _dispatch(self, message: Message) -> None:
-        now = time.time()
-        callback = None
-        with self._cond:
-            if isinstance(message, MotorInfo):
-                self._apply_motor_info(message.motors, now)
-                self._cond.notify_all()
-                callback = self.on_motor_update
-            elif isinstance(message, PlaybackStatus):
-                self._apply_playback(message, now)
-                self._completed(-MessageId.NOTIFICATION)
-                callback = self.on_playback and (lambda: self.on_playback(message))
-            elif isinstance(message, MotorPosition):
-                motor = self.motors.get(message.motor_address)
-                if motor is not None and math.isfinite(message.position):
-                    motor.position, motor.velocity, motor.stamp = message.position, 0.0, now
-                self._completed(-1000 - message.motor_address)
-                callback = self.on_motor_update
-            elif isinstance(message, MotorCalibrated):
-                motor = self.motors.get(message.motor_address)
-                if motor is not None:
-                    motor.begin_position = message.begin_position
-                    motor.end_position = message.end_position
-                    if message.end_position == 0.0:
-                        motor.position = 0.0
-                    else:
-                        motor.position = message.end_position
-                self._completed(-2000 - message.motor_address)
-            elif isinstance(message, MotorStatus):
-                for entry in message.motors:
-                    motor = self.motors.setdefault(entry.address, MotorState(entry.address))
-                    motor.online = entry.online
-                    motor.is_fiz = entry.motor_type == 1
-                    motor.max_setup_speed = entry.max_setup_speed
-                    motor.max_move_speed = entry.max_move_speed
-                    motor.max_acceleration = entry.max_acceleration
-                    LOG.warning('motor %d is now %s', entry.address,
-                                'online' if entry.online else 'OFFLINE')
-                callback = self.on_motor_update
-            elif isinstance(message, ErrorStatus):
-                event = ErrorEvent(message.error_code, message.motor_address,
-                                   describe_error(message.error_code), now)
-                self.errors.append(event)
-                self.error_total += 1
-                motor = self.motors.get(message.motor_address)
-                if motor is not None:
-                    motor.last_error = message.error_code
-                self._completed(-MessageId.NOTIFICATION - 3)
-                LOG.warning('device error %d (%s), motor %d', event.code, event.description,
-                            event.motor_address)
-                callback = self.on_error and (lambda: self.on_error(event))
-            elif isinstance(message, AuxInputStatus):
-                self.aux_inputs = message.status
-                status = message.status
-                callback = self.on_aux_inputs and (lambda: self.on_aux_inputs(status))
-            elif isinstance(message, UnsupportedMessage):
-                self.unsupported_replies += 1
-                LOG.warning('device did not support a message: %s', message.offending.hex())
-            elif isinstance(message, UnknownMessage):
-                LOG.debug('ignoring unknown message id %#x', message.message_id)
-            else:   # responses (DeviceInfo, DeviceGuid, ...): the session answers requests
-                self._cond.notify_all()
-        if callback:
-            callback()
-
-    def _apply_motor_info(self, entries: list, now: float) -> None:
-        seen = set()
-        for entry in entries:
-            seen.add(entry.address)
-            values = (entry.position, entry.begin_position, entry.end_position,
-                      entry.max_setup_speed, entry.max_move_speed, entry.max_acceleration)
-            if not all(math.isfinite(v) for v in values):
-                LOG.warning('ignoring MotorInfo for motor %d with non-finite values',
-                            entry.address)
-                continue
-            motor = self.motors.setdefault(entry.address, MotorState(entry.address))
-            if motor.stamp and now > motor.stamp:
-                motor.velocity = (entry.position - motor.position) / (now - motor.stamp)
-            motor.position = entry.position
-            motor.begin_position = entry.begin_position
-            motor.end_position = entry.end_position
-            motor.max_setup_speed = entry.max_setup_speed
-            motor.max_move_speed = entry.max_move_speed
-            motor.max_acceleration = entry.max_acceleration
-            motor.is_fiz = entry.is_fiz
-            motor.online = True
-            motor.stamp = now
-        for address, motor in self.motors.items():
-            if address not in seen:
-                motor.online = False   # MotorInfo lists the connected motors only
-
-    def _apply_playback(self, note: PlaybackStatus, now: float) -> None:
-        pb = self.playback
-        pb.status = note.status
-        pb.elapsed = note.elapsed_time
-        photos = note.photo_count
-        pb.photo_count = round(photos) if math.isfinite(photos) and photos >= 0 else 0
-        pb.positions = dict(note.positions)
-        pb.history.append(note.status)
-        if note.status == PlaybackState.SETUP_COMPLETED:
-            pb.set_up = True
-        if note.status == PlaybackState.FULL_STOP:
-            pb.loaded = pb.set_up = False    # the move must be sent again
-        for address, position in note.positions.items():
-            motor = self.motors.get(address)
-            if motor is not None and math.isfinite(position):
-                motor.position, motor.stamp = position, now
 
     # ------------------------------------------------------------------- queries
     def refresh_motors(self) -> dict[int, MotorState]:
