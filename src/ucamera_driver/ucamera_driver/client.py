@@ -34,6 +34,7 @@ from gimbal_driver_common.errors import DeviceTimeout, LinkError
 from gimbal_driver_common.session import Protocol, Session, StreamLink
 from gimbal_driver_common.transport import ByteStream, SerialStream, TransportError
 
+from .client_commands import UCameraCommands
 from .client_types import (
     ONE_SHOT_MODES,
     PERSISTENT_MODES,
@@ -47,34 +48,22 @@ from .protocol import (
     AnglesReport,
     AntennaPositionReport,
     AntennaPositionRequest,
-    ConfigureGpsFeed,
     FrameParser,
     GimbalMode,
     GimbalTypeReport,
-    GpsFeed,
-    GpsPositionVelocities,
-    GpsVelocities,
     IrPaletteReport,
     ModeReport,
     Packet,
     PayloadError,
     ProtocolError,
     RatesReport,
-    SaveConfiguration,
-    SaveFfc,
     SetAngles,
-    SetAntennaPosition,
-    SetIrPalette,
     SetMode,
     SetRates,
-    SetTelemetryRate,
-    SetZoom,
     SystemPositionReport,
     TelemetryRateReport,
     TelemetryRateRequest,
     UnknownPacketError,
-    VehicleAngles,
-    VehicleAngularVelocities,
     VersionReport,
     VersionRequest,
     ZoomReport,
@@ -85,7 +74,7 @@ from .protocol import (
 
 LOG = logging.getLogger(__name__)
 
-class UCameraClient(Protocol):
+class UCameraClient(UCameraCommands, Protocol):
     """Session with one U-Camera; thread-safe. The client is its session's protocol."""
 
     _reading: Session  # the session whose reader runs the protocol methods
@@ -345,44 +334,6 @@ class UCameraClient(Protocol):
         if state.pan is None or state.tilt is None:
             raise NotConnectedError("no angles reported yet: cannot hold position")
         self.set_angles(state.pan, state.tilt)
-
-    def set_zoom(self, level: float) -> None:
-        self.send(SetZoom(level))
-
-    def set_telemetry_rate(self, rate_hz: int, verify: bool = True) -> int:
-        """Set the periodic report rate; with ``verify`` read it back and return it."""
-        self.send(SetTelemetryRate(rate_hz))
-        return self.request_telemetry_rate() if verify else int(rate_hz)
-
-    def set_ir_palette(self, palette: int) -> None:
-        self.send(SetIrPalette(palette))
-
-    def configure_gps_feed(self, source: GpsFeed) -> None:
-        self.send(ConfigureGpsFeed(source))
-
-    def send_gps(self, latitude: float, longitude: float, altitude: float,
-                 north: float, east: float, down: float) -> None:
-        self.send(GpsPositionVelocities(latitude, longitude, altitude, north, east, down))
-
-    def send_gps_velocity(self, north: float, east: float, down: float) -> None:
-        self.send(GpsVelocities(north, east, down))
-
-    def send_vehicle_angles(self, yaw: float, pitch: float, roll: float) -> None:
-        self.send(VehicleAngles(yaw, pitch, roll))
-
-    def send_vehicle_rates(self, yaw_rate: float, pitch_rate: float, roll_rate: float) -> None:
-        self.send(VehicleAngularVelocities(yaw_rate, pitch_rate, roll_rate))
-
-    def set_antenna_position(self, x: float, y: float, z: float) -> None:
-        self.send(SetAntennaPosition(x, y, z))
-
-    def save_configuration(self) -> None:
-        """NV write: the gimbal goes quiet ~1 s, which is not treated as silence."""
-        self._quiet_until = time.monotonic() + self.save_pause_grace
-        self.send(SaveConfiguration())
-
-    def save_ffc(self) -> None:
-        self.send(SaveFfc())
 
     # --- session protocol (on the reader thread) ---------------------------------
     def connection_made(self, session: Session) -> None:
