@@ -1,0 +1,128 @@
+"""Batched reads of the Capture client (no ROS): several getters in one write, their
+replies matched by opcode and axis, and the way back to one request at a time when a
+controller drops what it queues. A mixin of :class:`~.client.CaptureClient`, whose link,
+lock and counters it uses.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Sequence
+from typing import Any
+
+from gimbal_driver_common.transport import TransportError
+
+from .errors import NotConnected, NotSupported, WrongReply
+from .protocol import Frame, ProtocolError, ReplyByte, command
+
+LOG = logging.getLogger('capture_driver.batch')
+
+#: batched reads in a row that came back incomplete before :meth:`CaptureClient.read_many`
+#: falls back to one request at a time for the connection
+BATCH_FAILURES = 3
+
+
+class BatchedReads:
+    """:meth:`read_many` of :class:`~.client.CaptureClient` (a mixin)."""
+
+    def read_many(self, reads: Sequence[tuple[str, int | None]],
+                  optional: bool = False) -> list[Any]:
+        """Several getters (``(name, axis)``) written at once, their replies matched by
+        opcode and axis; returns the decoded values in order.
+
+        ``optional``: reads the host makes on its own (the status registers), each as
+        :meth:`poll`: None for a getter the device does not answer with data (it is not
+        sent again), so the rest are read from what the device does report.
+
+        A data reply names the opcode and axis it answers (section 3), so getters need not
+        wait for each other: the joint poll (position and speed of each axis) costs one
+        round trip instead of four, and holds the link for that long only. The protocol
+        document shows one request at a time and says nothing of queuing, so this is our
+        reading of it, with a way back: a batch that gets a NACK or misses a reply has
+        the missing reads sent again one at a time (with :meth:`request`'s retry rules),
+        and after ``BATCH_FAILURES`` such batches in a row the client reads one at a
+        time for the rest of the connection (:attr:`batching` says which, in diagnostics).
+        An ACK byte names neither opcode nor axis: in a batch it only says that one of the
+        reads got no data, and that read is then named by asking it alone.
+        """
+        frames = []
+        for name, axis in reads:
+            cmd = command(name)
+            if not cmd.replies_with_data:
+                raise ProtocolError(f'{name} is not a getter: only getters are batched')
+            frames.append((cmd, axis, cmd.frame(axis, None, self.group)))
+        with self._lock:
+            values: list[Any] = [None] * len(frames)
+            asked = [i for i, (cmd, _, _) in enumerate(frames)
+                     if not (optional and cmd.name in self.unsupported)]
+            replies: list[Frame | None] = [None] * len(asked)
+            if self.batching and len(asked) >= 2:
+                replies = self._transact_batch([frames[i][2] for i in asked])
+            for i, reply in zip(asked, replies, strict=True):
+                cmd, axis, frame = frames[i]
+                if reply is not None:
+                    with contextlib.suppress(WrongReply):  # undecodable: asked alone below
+                        values[i] = self._decode(cmd.name, frame, reply)
+                        continue
+                # NACKed, answered without data or unanswered: once more, on its own
+                if not optional:
+                    values[i] = self._request_locked(cmd.name, axis, None)
+                    continue
+                with contextlib.suppress(NotSupported):  # None: not asked again
+                    values[i] = self.poll(cmd.name, axis)
+            return values
+
+    def _transact_batch(self, frames: list[Frame]) -> list[Frame | None]:
+        """Write ``frames`` in one go; the reply to each, or None for those that got no
+        data reply within :attr:`timeout` (a NACK or an ACK ends the wait for one of them:
+        which one, the reply byte does not say)."""
+        stream = self._stream
+        if stream is None:
+            raise NotConnected(f'batched read: not connected ({self.last_error})')
+        self.stats['requests'] += len(frames)
+        replies: list[Frame | None] = [None] * len(frames)
+        waiting = len(frames)
+        try:
+            self._send(stream, b''.join(frame.encode() for frame in frames))
+            for item in self._input_until(stream, self._last_activity + self.timeout):
+                if isinstance(item, ReplyByte):
+                    if not item.is_ack:
+                        self.stats['nacks'] += 1
+                    waiting -= 1  # one of the reads answered without data
+                elif isinstance(item, Frame):
+                    slot = next((i for i, frame in enumerate(frames) if replies[i] is None
+                                 and (frame.opcode, frame.axis) == (item.opcode, item.axis)),
+                                None)
+                    if slot is None:
+                        self.stats['stale'] += 1
+                    else:
+                        replies[slot] = item
+                        waiting -= 1
+                if not waiting:
+                    break
+        except TransportError as exc:
+            self._link_lost(f'batched read: {exc}')
+            raise NotConnected(f'batched read: link lost ({exc})') from exc
+        if waiting == len(frames):  # not one answer: a timeout, as for a single request
+            self._count_timeout('batched read')
+        # each read answered (a NACK or ACK too): nothing late can come, and the controller
+        # handles queued requests (those reads are named alone)
+        self._count_batch(complete=not waiting)
+        return replies
+
+    def _count_batch(self, complete: bool) -> None:
+        """One batch (the poll's getters, or a posted stream move) came back whole or not.
+        A whole one leaves nothing late to come; ``BATCH_FAILURES`` incomplete ones in a
+        row end batching for the connection (one request at a time)."""
+        if complete:
+            self._stale_possible = False
+            self._consecutive_timeouts = 0
+            self._batch_failures = 0
+            return
+        self.stats['incomplete_batches'] += 1
+        self._batch_failures += 1
+        if self._batch_failures >= BATCH_FAILURES:
+            self.batching = False
+            LOG.info('%d batches in a row came back incomplete: one request at a time on '
+                     'this connection', self._batch_failures)
