@@ -13,7 +13,7 @@ from gimbal_driver_common.errors import InvalidRequest
 from gimbal_driver_common.geodesy import Attitude, DevicePose, GeoPoint, OrientationFix, PositionFix
 
 from .client import Sample
-from .readings import si
+from .readings import si, si_magnitude
 
 if TYPE_CHECKING:
     from .device import TurretDevice
@@ -109,7 +109,7 @@ class TurretGeolocation(Geolocation):
             position = PositionFix(
                 GeoPoint(si(latitude), si(longitude), si(altitude) + geoid_height), "base GNSS",
                 stamp=min(s.stamp for s in samples),
-                error=abs(si(accuracy)) if si(accuracy) is not None else None)
+                error=si_magnitude(accuracy))
         samples, why = self._readings(self.ORIENTATION_KEYS,
                                       "rover GNSS heading and inclinometer")
         if why is not None:
@@ -120,5 +120,5 @@ class TurretGeolocation(Geolocation):
             orientation = OrientationFix(
                 Attitude.from_heading(si(heading), si(roll), -si(pitch)),
                 "rover GNSS heading + inclinometer", stamp=min(s.stamp for s in samples),
-                heading_error=abs(si(accuracy)) if si(accuracy) is not None else None)
+                heading_error=si_magnitude(accuracy))
         return DevicePose(position, orientation, missing)

@@ -24,6 +24,12 @@ def si(sample: Sample | None) -> float | None:
     return BY_KEY[sample.key].to_si(value)
 
 
+def si_magnitude(sample: Sample | None) -> float | None:
+    """:func:`si` without its sign (an accuracy sent signed), None as :func:`si`."""
+    value = si(sample)
+    return None if value is None else abs(value)
+
+
 @dataclass(frozen=True)
 class GnssFix:
     """One base-GNSS position (7.2): degrees, metres; `fresh` False once it went stale."""
@@ -98,9 +104,7 @@ class TurretReadings:
         if sample is None or not self._unseen(key, sample):
             return None
         accuracy = self._fresh("rover_heading_accuracy")
-        accuracy_rad = si(accuracy)
-        return Heading(sample.stamp, si(sample),
-                       abs(accuracy_rad) if accuracy_rad is not None else None)
+        return Heading(sample.stamp, si(sample), si_magnitude(accuracy))
 
     def new_utc(self) -> tuple[float, float] | None:
         """(arrival, UTC seconds) of a fresh base-GNSS time not handed out before."""

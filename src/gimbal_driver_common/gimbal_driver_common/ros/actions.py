@@ -19,6 +19,19 @@ from gimbal_msgs.action import Home, MoveTo
 ProcedureFactory = Callable[[Device, Sequence[str]], DeviceProcedure]
 
 
+def end_goal(goal_handle, result, cancelled: bool):
+    """End an action goal by its result: canceled (never a success), succeeded or
+    aborted; returns ``result``."""
+    if cancelled:
+        result.success = False
+        goal_handle.canceled()
+    elif result.success:
+        goal_handle.succeed()
+    else:
+        goal_handle.abort()
+    return result
+
+
 def state_reporter(goal_handle) -> Callable[[str], None]:
     """Publish a text as the Home feedback ``state`` of ``goal_handle``."""
     feedback = Home.Feedback()
@@ -65,13 +78,7 @@ class MotionActions:
             targets, tolerance, lambda: goal_handle.is_cancel_requested, publish)
         result.positions, result.success, result.message = (
             outcome.positions, outcome.success, outcome.message)
-        if outcome.state == 'cancelled':
-            goal_handle.canceled()
-        elif outcome.success:
-            goal_handle.succeed()
-        else:
-            goal_handle.abort()
-        return result
+        return end_goal(goal_handle, result, cancelled=outcome.state == 'cancelled')
 
     def _execute_home(self, goal_handle):
         joints = list(goal_handle.request.joint_names) or list(self.joint_names)
@@ -89,15 +96,11 @@ class MotionActions:
             superseded, result.success, result.message = True, False, str(exc)
         except GimbalError as exc:
             result.success, result.message = False, str(exc)
-        if goal_handle.is_cancel_requested and not superseded:
+        cancelled = goal_handle.is_cancel_requested and not superseded
+        if cancelled:
             self.controller.stop_joints(joints)
-            goal_handle.canceled()
-            result.success, result.message = False, 'homing cancelled'
-        elif result.success:
-            goal_handle.succeed()
-        else:
-            goal_handle.abort()
-        return result
+            result.message = 'homing cancelled'
+        return end_goal(goal_handle, result, cancelled)
 
     def create_procedure_action(self, name: str, make: ProcedureFactory) -> ActionServer:
         """A Home action that runs ``make(device, goal joint names)`` through the guarded
@@ -122,14 +125,7 @@ class MotionActions:
             result.success = True
         except GimbalError as exc:
             result.success, result.message = False, str(exc)
-        if goal_handle.is_cancel_requested:
-            result.success = False
-            goal_handle.canceled()
-        elif result.success:
-            goal_handle.succeed()
-        else:
-            goal_handle.abort()
-        return result
+        return end_goal(goal_handle, result, goal_handle.is_cancel_requested)
 
 
 def guard_change_state_service(node: LifecycleNode, state: Callable[[], str]) -> None:
