@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 
 from capture_driver.protocol import BY_OPCODE, COMMANDS, Frame, ReplyCode, StreamDecoder
 from capture_driver.sim import CaptureSession, PedestalModel
+from gimbal_driver_common.testing import wait_for
 
 
 def connected_session() -> CaptureSession:
@@ -48,3 +49,18 @@ def test_bad_checksum_gets_f6():
     packet = bytearray(COMMANDS['MOT_GetLoadPosition'].encode(1))
     packet[-1] ^= 0x55
     assert session.on_bytes(bytes(packet)) == bytes([ReplyCode.WRONG_CHECKSUM])
+
+
+def test_a_request_reads_the_axis_as_it_is_now():
+    """The model advances to the wall clock before each request, as a controller's motion
+    runs continuously: no physics thread runs here, and the move still shows in the reads."""
+    session = connected_session()
+    session.model.axes[1].move_to(90.0, speed=20.0)  # degrees, degrees per second
+    getter = COMMANDS['MOT_GetLoadPosition']
+
+    def position() -> float:
+        (reply,) = StreamDecoder().feed(session.on_bytes(getter.encode(1)))
+        return getter.decode_reply(reply)
+
+    first = position()
+    wait_for(lambda: position() > first + 0.05, 5.0, 'the move to show in a position read')

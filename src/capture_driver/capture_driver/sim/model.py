@@ -124,11 +124,14 @@ class PedestalModel(CommandHandlers):
         self.requests: list[Frame] = []  # every request received (tests inspect it)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._last_advance = time.monotonic()
         self.connected_sessions = 0
 
     # -------------------------------------------------------------- physics
     def start(self, rate_hz: float = 100.0) -> None:
         self._stop.clear()
+        with self.lock:
+            self._last_advance = time.monotonic()
         self._thread = threading.Thread(target=self._run, args=(rate_hz,), daemon=True,
                                         name='capture-sim-physics')
         self._thread.start()
@@ -140,11 +143,23 @@ class PedestalModel(CommandHandlers):
 
     def _run(self, rate_hz: float) -> None:
         period = 1.0 / rate_hz
-        last = time.monotonic()
         while not self._stop.wait(period):
+            self.advance()
+
+    def advance(self) -> None:
+        """Bring the model up to the current wall time.
+
+        Called by the physics thread (so time-driven behaviour such as the keep-alive
+        expiry and scans goes on between requests) and before every request: a controller
+        acts on a command when it arrives and reads a position as it is then, not as it was
+        at the last tick of a fixed-rate loop (which made positions up to one tick old and
+        started moves up to one tick late).
+        """
+        with self.lock:
             now = time.monotonic()
-            self.step((now - last) * self.time_scale)
-            last = now
+            elapsed, self._last_advance = now - self._last_advance, now
+            if elapsed > 0.0:
+                self.step(elapsed * self.time_scale)
 
     def step(self, dt: float) -> None:
         with self.lock:
@@ -329,6 +344,7 @@ class PedestalModel(CommandHandlers):
     def handle(self, frame: Frame, session: CaptureSession) -> bytes:
         """Execute one request; return the reply bytes (data packet, ACK or NACK)."""
         with self.lock:
+            self.advance()
             self.last_command = time.monotonic()
             self.requests.append(frame)
             if len(self.requests) > 5000:
