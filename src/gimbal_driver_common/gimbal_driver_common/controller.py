@@ -109,7 +109,7 @@ class GimbalController:
         #: configure/cleanup and passes it in)
         self.rejections = rejections or CommandRejections(log)
         self.periodic.add(self._watchdog_period(), self.watchdog.check)
-        self.halt_hooks: list[Callable[[], None]] = []  # stop and halt call these (policies)
+        self.halt_hooks: list[Callable[[], None]] = []  # stop and halt call these first (policies)
         self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
         self.commands = CommandPath(device, self.rejections, self.record_targets,
                                     self._send_refusal, self.motion_watch.jogged)
@@ -313,10 +313,12 @@ class GimbalController:
     def _cancel_motion(self) -> None:
         self.watchdog.cancel()
         self.motion_watch.withdraw()
-        self.bump_motion_generation()
         self.commands.drop(None)
+        # the policies learn of the halt before the generation moves on: a procedure that
+        # sees the new generation then knows it was a stop, not a newer command
         for hook in self.halt_hooks:
             hook()
+        self.bump_motion_generation()
 
     def _stop_device(self, joints: Sequence[str] | None) -> None:
         def send() -> None:

@@ -76,7 +76,9 @@ class Motion:
         self.scan_patterns = tuple(scan_patterns)
         self._scan_stop = threading.Event()
         self._scan_thread: threading.Thread | None = None
-        controller.halt_hooks.append(self.preempt)
+        # a halt ends the driver-side scan; the controller withdraws the watch and moves
+        # the generation on itself, after every halt hook ran
+        controller.halt_hooks.append(self._scan_stop.set)
         controller.preempt_hooks.append(self._scan_stop_current)
 
     # ---------------------------------------------------------------- moves

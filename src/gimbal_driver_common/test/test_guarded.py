@@ -192,6 +192,16 @@ def test_stop_ends_it_at_once(procedures, controller, pool) -> None:
         future.result(ENDS_WITHIN)
 
 
+def test_the_policies_hear_of_a_stop_before_the_generation_moves_on(procedures,
+                                                                     controller) -> None:
+    """Else a procedure that polls between the two ends "superseded" after a ~/stop."""
+    before, seen = controller.motion_generation, []
+    controller.halt_hooks.append(lambda: seen.append(controller.motion_generation))
+    controller.stop()
+    assert seen == [before]
+    assert controller.motion_generation == before + 1
+
+
 def test_a_newer_move_ends_it_without_stopping_the_move(procedures, motion, device,
                                                         pool) -> None:
     future = start_run(pool, procedures, Scripted(done_at=None, joints=['tilt']))
