@@ -100,6 +100,8 @@ class GimbalController:
         #: bumped by every stop and halt (:meth:`bump_motion_generation`): a running move
         #: or scan sees it and ends
         self.motion_generation = 0
+        #: :meth:`shutdown` began: what a move that ends now was stopped by
+        self.shutting_down = False
         self._generation_lock = threading.Lock()
         self.watchdog = JogWatchdog(config.command_timeout, self._on_jog_expired)
         self.periodic = periodic or Periodic(on_error=log.error)
@@ -160,6 +162,7 @@ class GimbalController:
 
     def shutdown(self, why: str = 'shutting down') -> None:
         """Stop what this driver was moving, then close."""
+        self.shutting_down = True  # before the halt: the goals it ends say why
         if self.active:
             self.halt(why)
         self.active = False

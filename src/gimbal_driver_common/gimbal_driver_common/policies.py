@@ -129,7 +129,9 @@ class Motion:
                 ctl.stop_joints(names)
                 return MoveOutcome('cancelled', 'cancelled', positions)
             if generation != ctl.motion_generation:
-                return MoveOutcome('stopped', 'stopped (~/stop or a new command)', positions)
+                return MoveOutcome('stopped', 'stopped: the driver is shutting down'
+                                   if ctl.shutting_down else
+                                   'stopped (~/stop or a new command)', positions)
             if not ctl.connected:
                 return MoveOutcome('failed', f'device link lost ({ctl.link_error})', positions)
             stalled = ctl.motion_watch.reason(names)

@@ -23,7 +23,9 @@ from ucamera_driver.sim import UCameraSim
 
 
 def make_client(sim: UCameraSim, **kwargs) -> UCameraClient:
-    kwargs.setdefault("silence_timeout", 0.4)
+    # shorter than the driver's 1.5 s so the silence tests end sooner, and long enough
+    # that a loaded test machine's scheduling gaps (0.4 s was seen) are not silences
+    kwargs.setdefault("silence_timeout", 1.0)
     return UCameraClient(sim.port_name, **kwargs)
 
 

@@ -69,7 +69,7 @@ class Rig:
         self.control_port = wait_for_ready(self.sim, "ucamera_sim")["control_port"]
         params = {"serial_port": self.link, "presets_file": f"{self.tmp.name}/presets.yaml",
                   "velocity_max": "[3.0, 3.0]", "reconnect_period": "0.3",
-                  "silence_timeout": "0.5", "diagnostics_period": "0.3", **node_params}
+                  "silence_timeout": "1.0", "diagnostics_period": "0.3", **node_params}
         args = ["--ros-args"]
         if params_file:
             args += ["--params-file", params_file]

@@ -4,7 +4,9 @@ actions, and a lifecycle guard; mixed into the node."""
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from lifecycle_msgs.srv import ChangeState
 from rclpy.action import ActionServer
@@ -17,6 +19,47 @@ from gimbal_msgs.action import Home, MoveTo
 
 #: builds a device procedure from the adapter and the goal's joint names
 ProcedureFactory = Callable[[Device, Sequence[str]], DeviceProcedure]
+
+
+class OpenGoals:
+    """The goals the node's action servers accepted and have not ended yet.
+
+    A node that shuts down halts the axes, which ends every running goal; its executor must
+    then still run until rclpy has run each execute callback to its end, so that every
+    client hears how its goal ended instead of waiting for a server that is gone.
+    """
+
+    def __init__(self) -> None:
+        self._open = 0
+        self._changed = threading.Condition()
+
+    def accepted(self, goal_handle) -> None:
+        """The ``handle_accepted_callback``: counted, then executed as rclpy does."""
+        with self._changed:
+            self._open += 1
+        goal_handle.execute()
+
+    def tracked(self, execute: Callable[..., Any]) -> Callable[..., Any]:
+        """``execute`` that counts its goal as ended when it returns or raises."""
+        def run(goal_handle):
+            try:
+                return execute(goal_handle)
+            finally:
+                with self._changed:
+                    self._open -= 1
+                    self._changed.notify_all()
+
+        return run
+
+    @property
+    def count(self) -> int:
+        with self._changed:
+            return self._open
+
+    def wait_ended(self, timeout: float) -> bool:
+        """True once no goal is open; False if some still are after ``timeout`` seconds."""
+        with self._changed:
+            return self._changed.wait_for(lambda: self._open == 0, timeout)
 
 
 def end_goal(goal_handle, result, cancelled: bool):

@@ -43,7 +43,11 @@ from gimbal_driver_common.policies import DRIVER_SCAN_PATTERNS, Motion
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.rejections import CommandRejections
 from gimbal_driver_common.ros import messages
-from gimbal_driver_common.ros.actions import MotionActions, guard_change_state_service
+from gimbal_driver_common.ros.actions import (
+    MotionActions,
+    OpenGoals,
+    guard_change_state_service,
+)
 from gimbal_driver_common.ros.common_parameters import declare_common_parameters, limits_from
 from gimbal_driver_common.ros.look_at import LookAtMixin
 from gimbal_driver_common.ros.look_at_geo import LookAtGeoMixin
@@ -94,6 +98,8 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         self.lifecycle_state = 'unconfigured'
         self._joint_rate = FrequencyMonitor(self.publish_rate)
         self.service_group = ReentrantCallbackGroup()
+        #: goals accepted and not ended: run_driver lets them answer before it stops spinning
+        self.open_goals = OpenGoals()
         self._create_ros_interfaces()
         self._declare_common_runtime_parameters()
         self.declare_runtime_parameters()
@@ -132,8 +138,10 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
             on_cancel()
             return CancelResponse.ACCEPT
 
-        return ActionServer(self, action_type, name, execute_callback=execute,
+        return ActionServer(self, action_type, name,
+                            execute_callback=self.open_goals.tracked(execute),
                             goal_callback=lambda _goal: GoalResponse.ACCEPT,
+                            handle_accepted_callback=self.open_goals.accepted,
                             cancel_callback=accept_cancel, callback_group=self.service_group)
 
     def declare_param(self, name: str, default: object, description: str, **kwargs):

@@ -14,7 +14,6 @@ import math
 from pathlib import Path
 
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
 
 from gimbal_driver_common.kinematics import (
@@ -88,12 +87,8 @@ class LookAtMixin:
         except KinematicsError as exc:
             self.aiming_error = str(exc)
             self.get_logger().warning(f'~/look_at unavailable: {exc}')
-        self._look_at_server = ActionServer(
-            self, LookAt, '~/look_at', execute_callback=self._execute_look_at,
-            goal_callback=lambda _goal: GoalResponse.ACCEPT,
-            cancel_callback=lambda _goal: CancelResponse.ACCEPT,
-            callback_group=self.service_group,
-        )
+        self._look_at_server = self.create_accepting_action_server(
+            LookAt, '~/look_at', self._execute_look_at)
 
     def description_path(self) -> str:
         """The URDF file look_at uses: the parameter, else the package's installed one."""

@@ -31,6 +31,8 @@ if TYPE_CHECKING:
 
 #: Python thread switch interval in driver processes (default 5 ms)
 GIL_SWITCH_INTERVAL_S = 0.001
+#: seconds a shutting-down node waits for its action goals to answer their clients
+GOAL_ANSWER_S = 3.0
 #: names of the executor's pool threads (``executor-pool_0`` ...; ARCHITECTURE.md)
 POOL_THREAD_PREFIX = 'executor-pool'
 
@@ -72,6 +74,7 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
     while not stop.wait(1.0):
         pass
     node.on_shutdown(None)
+    answer_open_goals(node, executor)
     # The executor stops before the node is destroyed: destroying it under a spinning
     # executor raced the wait-set build (InvalidHandle from an event handler's
     # add_to_wait_set, a traceback the U-Camera soak caught at shutdown).
@@ -80,6 +83,43 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
     node.destroy_node()
     rclpy.try_shutdown()
     return 0
+
+
+def answer_open_goals(node: GimbalDriverNode, executor: Executor,
+                      timeout: float = GOAL_ANSWER_S) -> bool:
+    """Let the goals the shutdown ended send their results before the executor stops.
+
+    The halt ends every running goal. rclpy then sends each result from a task of its
+    own, which the goal's task queues once the execute callback returned. So: wait for the
+    execute callbacks, then for the pool tasks that ran them, then for the executor to
+    take a task queued after the result sends (it takes tasks in the order they were made)
+    and for the pool to finish them. False, with a warning, after ``timeout`` seconds.
+    """
+    deadline = time.monotonic() + timeout
+
+    def pool_tasks() -> list[Task]:
+        return list(executor.running) if isinstance(executor, InlineGroupExecutor) else []
+
+    def until(condition: Callable[[], bool]) -> bool:
+        while not condition():
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.005)
+        return True
+
+    if not node.open_goals.wait_ended(timeout):
+        node.get_logger().warning(
+            f'{node.open_goals.count} action goal(s) still running {timeout:g} s after the '
+            'shutdown began: their clients get no result')
+        return False
+    goal_tasks = pool_tasks()
+    if not until(lambda: all(task.done() for task in goal_tasks)):
+        return False
+    marker = executor.create_task(lambda: None)
+    if not until(marker.done):
+        return False
+    sends = pool_tasks()
+    return until(lambda: all(task.done() for task in sends))
 
 
 def _spin(executor: Executor, stop: threading.Event) -> None:

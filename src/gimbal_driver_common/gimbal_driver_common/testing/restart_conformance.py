@@ -6,8 +6,10 @@ a restart, link drop, signals and start-up parameters. Mixed into
 from __future__ import annotations
 
 import signal
+from concurrent.futures import ThreadPoolExecutor
 
 import pytest
+from action_msgs.msg import GoalStatus
 from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -131,6 +133,26 @@ class RestartConformance(ConformanceHelpers):
         node.send_signal(sig)
         node.process.wait(30)
         self.wait_stopped(rig, self.far_move[0], f'the axis to stop on {sig!r}')
+        rig.stop_node()
+
+    @pytest.mark.ros
+    def test_a_goal_running_at_shutdown_gets_its_result(
+            self, conformance_rig: ConformanceRig) -> None:
+        """Its client hears how the goal ended (aborted, the axis stopped) instead of
+        waiting for a server that has gone."""
+        rig = conformance_rig
+        node = rig.start_node('command_timeout:=0.0')
+        joint, position, speed = self.far_move
+        with ThreadPoolExecutor(1) as pool:
+            running = pool.submit(self.move_to, rig.ros, {joint: position}, [speed], 40.0)
+            wait_for(lambda: rig.sim.moving(joint) or running.done(), 20.0,
+                     f'{joint} moving for the goal')
+            node.send_signal(signal.SIGINT)
+            result, status, _ = running.result(60)
+        node.process.wait(30)
+        assert status == GoalStatus.STATUS_ABORTED, (status, result.message)
+        assert result.message == 'stopped: the driver is shutting down', result.message
+        self.wait_stopped(rig, joint, 'the axis to stop at the shutdown')
         rig.stop_node()
 
     @pytest.mark.ros
