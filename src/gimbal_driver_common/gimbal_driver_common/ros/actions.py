@@ -9,7 +9,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from lifecycle_msgs.srv import ChangeState
-from rclpy.action import ActionServer
+from rclpy.action import ActionServer, GoalResponse
 from rclpy.lifecycle import LifecycleNode
 
 from gimbal_driver_common.device import Device, DeviceProcedure
@@ -26,18 +26,28 @@ class OpenGoals:
 
     A node that shuts down halts the axes, which ends every running goal; its executor must
     then still run until rclpy has run each execute callback to its end, so that every
-    client hears how its goal ended instead of waiting for a server that is gone.
+    client hears how its goal ended instead of waiting for a server that is gone. A goal
+    that comes once the node is going away is rejected: that answer goes out at once.
     """
 
     def __init__(self) -> None:
         self._open = 0
+        self._closed = False
         self._changed = threading.Condition()
 
-    def accepted(self, goal_handle) -> None:
-        """The ``handle_accepted_callback``: counted, then executed as rclpy does."""
+    def admit(self, _goal: object) -> GoalResponse:
+        """The ``goal_callback``: an accepted goal counts as open from here on (before
+        rclpy answers the client), a goal after :meth:`close` is rejected."""
         with self._changed:
+            if self._closed:
+                return GoalResponse.REJECT
             self._open += 1
-        goal_handle.execute()
+            return GoalResponse.ACCEPT
+
+    def close(self) -> None:
+        """The node is going away: reject new goals."""
+        with self._changed:
+            self._closed = True
 
     def tracked(self, execute: Callable[..., Any]) -> Callable[..., Any]:
         """``execute`` that counts its goal as ended when it returns or raises."""

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action import ActionServer, CancelResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -140,8 +140,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
 
         return ActionServer(self, action_type, name,
                             execute_callback=self.open_goals.tracked(execute),
-                            goal_callback=lambda _goal: GoalResponse.ACCEPT,
-                            handle_accepted_callback=self.open_goals.accepted,
+                            goal_callback=self.open_goals.admit,
                             cancel_callback=accept_cancel, callback_group=self.service_group)
 
     def declare_param(self, name: str, default: object, description: str, **kwargs):

@@ -107,6 +107,7 @@ def answer_open_goals(node: GimbalDriverNode, executor: Executor,
             time.sleep(0.005)
         return True
 
+    node.open_goals.close()  # a goal from now on is rejected: answered at once
     if not node.open_goals.wait_ended(timeout):
         node.get_logger().warning(
             f'{node.open_goals.count} action goal(s) still running {timeout:g} s after the '
