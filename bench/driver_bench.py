@@ -200,11 +200,11 @@ def node_figures(
                 states.clear()
                 # one window: CPU of the node and the reference, and the joint_states
                 # received meanwhile
-                start = time.monotonic()
+                start, start_wall = time.monotonic(), time.time()
                 pids = [node.process.pid] + ([reference.process.pid] if reference else [])
                 threads_before = thread_cpu_seconds(node.process.pid)
                 cpu = cpu_percents(pids, window_seconds)
-                end = time.monotonic()
+                end, end_wall = time.monotonic(), time.time()
                 if os.environ.get('BENCH_THREAD_CPU_DIR'):
                     results['node_cpu_by_thread'] = cpu_by_thread(
                         node.process.pid, threads_before, end - start)
@@ -214,6 +214,8 @@ def node_figures(
             if observe is not None:
                 results.update(observe(start, end))
             results['joint_states_hz'] = received_rate(states)
+            results['joint_states_stamped_in_window_hz'] = stamped_rate(
+                states, start_wall, end_wall)
             results['sim_to_subscriber'] = percentiles(states.stamp_latencies())
             results.update(report_freshness(states))
             if stream is not None and recorder is not None:
@@ -248,6 +250,15 @@ def received_rate(states: JointStateProbe) -> float:
     if len(times) < 2:
         return 0.0
     return round((len(times) - 1) / (times[-1] - times[0]), 1)
+
+
+def stamped_rate(states: JointStateProbe, start: float, end: float) -> float:
+    """Distinct samples per second whose stamps (wall time) fall in the window: the node's
+    own publication rate there, whatever the delivery did before or after (beside
+    :func:`received_rate`, which spans the first to the last arrival)."""
+    with states._lock:
+        stamps = {stamp for _, stamp, _ in states.arrivals if start <= stamp <= end}
+    return round(len(stamps) / max(end - start, 1e-9), 1)
 
 
 def report_freshness(states: JointStateProbe) -> dict:
