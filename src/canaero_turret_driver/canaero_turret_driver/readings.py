@@ -67,8 +67,9 @@ class TurretReadings:
     client: TurretClient
     _published: dict[str, float]
 
-    def _fresh(self, key: str) -> Sample | None:
-        """The latest `key` sample if it is numeric and not stale, else None."""
+    def fresh(self, key: str) -> Sample | None:
+        """The latest `key` sample if it is numeric and not stale, else None (the device's
+        capabilities read their accuracies through it)."""
         sample = self.client.latest(key)
         if si(sample) is None or self.client.is_stale(key):
             return None
@@ -100,10 +101,10 @@ class TurretReadings:
     def new_heading(self, key: str) -> Heading | None:
         """A fresh `rover_heading` or `global_yaw` not handed out before; the accuracy is
         the rover GNSS's (7.3.2) while that is fresh."""
-        sample = self._fresh(key)
+        sample = self.fresh(key)
         if sample is None or not self._unseen(key, sample):
             return None
-        accuracy = self._fresh("rover_heading_accuracy")
+        accuracy = self.fresh("rover_heading_accuracy")
         return Heading(sample.stamp, si(sample), si_magnitude(accuracy))
 
     def new_utc(self) -> tuple[float, float] | None:
@@ -122,5 +123,5 @@ class TurretReadings:
 
     def zoom(self) -> float | None:
         """Camera0 zoom position (counts) while fresh."""
-        sample = self._fresh("zoom_position")
+        sample = self.fresh("zoom_position")
         return si(sample)
