@@ -347,8 +347,12 @@ def test_a_posted_stream_move_is_settled_through_the_link_lock_and_a_stop_wins(t
     assert ctl.rejections.counts()['refused'] == {}
     with tcp_rig.device.link_lock:
         sim.model.lose_replies(1)
+        before = tcp_rig.sent('MOT_SendPosition')
         ctl.command(['pan'], [1.5], [])
         assert tcp_rig.device.client.stats['posted_moves'] == posted + 2
+        # the posted write is on its way: counted once the simulator has taken it
+        wait_for(lambda: tcp_rig.sent('MOT_SendPosition') == before + 1, 10.0,
+                 'the posted move at the simulator')
         sends = tcp_rig.sent('MOT_SendPosition')
         ctl.stop()  # settles the post first (an ACK lost), then stops: no resend
     wait_for(lambda: sim.model.axes[1].velocity == 0.0, 10.0, 'pan stopped')
