@@ -358,3 +358,38 @@ def test_a_posted_stream_move_is_settled_through_the_link_lock_and_a_stop_wins(t
     wait_for(lambda: sim.model.axes[1].velocity == 0.0, 10.0, 'pan stopped')
     assert tcp_rig.sent('MOT_SendPosition') == sends  # the lost move was not sent again
     assert 'pan' not in ctl.commanded_targets or ctl.commanded_targets['pan'] != 1.5
+
+
+def test_a_move_to_drops_the_joint_commands_queued_behind_a_busy_link(tcp_rig):
+    """Issue 39 item 4, over TCP: a pan move and a tilt jog wait behind an exchange in
+    flight; a move_to given meanwhile supersedes both, so neither reaches the pedestal."""
+    ctl, motion = tcp_rig.controller, tcp_rig.motion
+    tilt_before = tcp_rig.sim_axis(2).position
+    speed_modes = tcp_rig.sent('MOT_SetSpeedMode')
+    taken, release = threading.Event(), threading.Event()
+
+    def hold_link() -> None:  # a read waiting for its answer
+        with tcp_rig.device.link_lock:
+            taken.set()
+            release.wait(10.0)
+
+    holder = threading.Thread(target=hold_link, daemon=True)
+    holder.start()
+    assert taken.wait(5.0)
+    try:
+        ctl.command(['pan'], [0.5], [])
+        ctl.command(['tilt'], [], [0.3])
+        generation = ctl.motion_generation
+        mover = threading.Thread(target=motion.start_move, args=(['pan'], [-0.2]),
+                                 daemon=True)
+        mover.start()
+        wait_for(lambda: ctl.motion_generation != generation, 5.0, 'the move_to to preempt')
+    finally:
+        release.set()
+    holder.join(5.0)
+    mover.join(10.0)
+    tcp_rig.wait_positions({'pan': -0.2})
+    assert tcp_rig.sent('MOT_SetSpeedMode') == speed_modes  # the tilt jog never went out
+    assert tcp_rig.sim_axis(2).velocity == 0.0
+    assert tcp_rig.sim_axis(2).position == pytest.approx(tilt_before, abs=1e-6)
+    assert ctl.commanded_targets.get('pan') == pytest.approx(-0.2)

@@ -166,8 +166,11 @@ class Motion:
     def preempt(self) -> None:
         """A new motion command ends a driver-side scan and supersedes a running move goal
         (which then ends "stopped"), so waiting goals never pile up; a device scan ends
-        with the device's new move."""
+        with the device's new move. The joint_commands still queued behind a busy link
+        (and the moves of a posted write not yet settled) are dropped, every joint's: none
+        from before this command may reach the device after it."""
         self._scan_stop.set()
+        self.controller.commands.drop(None)
         self.controller.motion_watch.withdraw()
         self.controller.bump_motion_generation()
 

@@ -851,3 +851,87 @@ def test_a_device_reports_its_own_targets_through_the_contract(controller, devic
     reported['pan'] = 9.0  # the controller keeps its own copy
     assert controller.commanded_targets == {'pan': 0.4}
 
+
+
+# ------------------------------------------- a new motion command drops the queue
+class LinkedRoutines(Homing, DevicePresets, DeviceScans):
+    """Homing, a device preset slot and a device scan that each take the link lock for
+    their exchange and record it, as a request/reply client does."""
+
+    patterns = ('spiral',)
+
+    def __init__(self, device: FakeDevice) -> None:
+        self.device = device
+
+    def _exchange(self, what: str) -> str:
+        with self.device.link_lock, self.device.lock:
+            self.device.sent.append((what, None))
+        return what
+
+    def home(self, joints, report, cancelled) -> str:
+        return self._exchange('home')
+
+    def handles(self, index: int) -> bool:
+        return index == 0
+
+    def set(self, index, name, positions) -> str:
+        return 'stored'
+
+    def goto(self, index, speed) -> str:
+        return self._exchange('preset')
+
+    def list(self):
+        return []
+
+    def clear(self, index) -> str:
+        return 'cleared'
+
+    def start(self, request: ScanRequest) -> str:
+        return self._exchange('scan')
+
+    def stop(self) -> None:
+        self._exchange('scan stop')
+
+
+NEWER_COMMANDS = {
+    'move_to': lambda motion, ctl: motion.start_move(['pan'], [-0.2]),
+    'home': lambda motion, ctl: motion.home(['pan'], lambda state: None),
+    'device preset': lambda motion, ctl: motion.goto_preset(0, 0.0),
+    'yaml preset': lambda motion, ctl: motion.goto_preset(4, 0.0),
+    'device scan': lambda motion, ctl: motion.start_scan(
+        ScanRequest('spiral', -0.2, 0.2, 0, 0, 1.0, 0, 0)),
+    'driver scan': lambda motion, ctl: motion.start_scan(
+        ScanRequest('sector', -0.2, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0)),
+    '~/stop': lambda motion, ctl: ctl.stop(),
+}
+
+
+@pytest.mark.parametrize('newer', list(NEWER_COMMANDS))
+def test_a_new_motion_command_drops_the_joint_commands_queued_before_it(
+        motion, controller, device, newer) -> None:
+    """Issue 39 item 4: joint_commands queued behind a busy link (a move for one joint, a
+    jog for the other) never reach the device after a newer motion command."""
+    routines = LinkedRoutines(device)
+    device.capabilities.homing = routines
+    device.capabilities.presets = routines
+    device.capabilities.scans = routines
+    motion.set_preset(4, 'yaml slot', {'pan': -0.2, 'tilt': 0.0})
+    ended = threading.Event()
+    with link_held(controller):  # a read in flight: both commands wait in the queue
+        controller.command(['pan'], [0.5], [])
+        controller.command(['tilt'], [], [0.3])
+        generation = controller.motion_generation
+        caller = threading.Thread(
+            target=lambda: (NEWER_COMMANDS[newer](motion, controller), ended.set()),
+            daemon=True)
+        caller.start()
+        # the newer command has superseded what came before; its own send waits for
+        # the link like everything else
+        wait_for(lambda: controller.motion_generation != generation, 2.0, 'the preemption')
+    assert ended.wait(5.0), f'{newer} did not return'
+    wait_for(lambda: len(device.sent) >= 1, 2.0, 'the newer command on the link')
+    motion.stop_scan() if newer == 'driver scan' else None
+    with device.lock:
+        sent = list(device.sent)
+    assert ('move', {'pan': (0.5, None)}) not in sent, sent
+    assert ('jog', {'tilt': 0.3}) not in sent, sent
