@@ -1,10 +1,19 @@
 """Launch the Capture pedestal driver as a managed (lifecycle) node.
 
-ros2 launch capture_driver capture_driver.launch.py [params_file:=...] [autostart:=true]
-With autostart false (the default here) a lifecycle manager configures and activates it.
-use_description:=true also starts robot_state_publisher with urdf/capture_driver.urdf
-(or description_file:=...), which the node uses for ~/look_at too.
-sim:=true also starts capture_sim on TCP 127.0.0.1:4949 (config/capture_driver_sim.yaml).
+    ros2 launch capture_driver capture_driver.launch.py [name:=value ...]
+
+Arguments (default after :=; docs/interface.md, "Launch arguments"):
+    params_file:=''          parameter YAML; '' = config/capture_driver.yaml, or
+                             config/capture_driver_sim.yaml with sim:=true
+    autostart:=true          the node configures and activates itself; false: a lifecycle
+                             manager (or ros2 lifecycle set) does
+    namespace:=''            namespace of the node and of robot_state_publisher
+    use_description:=false   true: also start robot_state_publisher with the URDF (TF)
+    description_file:=share/capture_driver/urdf/capture_driver.urdf
+                             the URDF robot_state_publisher publishes and ~/look_at aims with
+    sim:=false               true: also start capture_sim on TCP 127.0.0.1:4949
+                             (config/capture_driver_sim.yaml)
+
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """
 

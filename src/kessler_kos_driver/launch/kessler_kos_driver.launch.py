@@ -1,10 +1,19 @@
 """Launch the Kessler kOS driver as a managed (lifecycle) node.
 
-ros2 launch kessler_kos_driver kessler_kos_driver.launch.py [params_file:=...] [autostart:=true]
-use_description:=true also starts robot_state_publisher with urdf/kessler_kos_driver.urdf
-(or description_file:=...), which the node uses for ~/look_at too.
-sim:=true also starts kessler_kos_sim --precalibrated on TCP 127.0.0.1:5520
-(config/kessler_kos_driver_sim.yaml).
+    ros2 launch kessler_kos_driver kessler_kos_driver.launch.py [name:=value ...]
+
+Arguments (default after :=; docs/interface.md, "Launch arguments"):
+    params_file:=''          parameter YAML; '' = config/kessler_kos_driver.yaml, or
+                             config/kessler_kos_driver_sim.yaml with sim:=true
+    autostart:=true          the node configures and activates itself; false: a lifecycle
+                             manager (or ros2 lifecycle set) does
+    namespace:=''            namespace of the node and of robot_state_publisher
+    use_description:=false   true: also start robot_state_publisher with the URDF (TF)
+    description_file:=share/kessler_kos_driver/urdf/kessler_kos_driver.urdf
+                             the URDF robot_state_publisher publishes and ~/look_at aims with
+    sim:=false               true: also start kessler_kos_sim --precalibrated on TCP
+                             127.0.0.1:5520 (config/kessler_kos_driver_sim.yaml)
+
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """
 

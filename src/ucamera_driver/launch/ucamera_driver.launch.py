@@ -1,10 +1,20 @@
 """Launch the U-Camera driver as a managed (lifecycle) node.
 
-ros2 launch ucamera_driver ucamera_driver.launch.py [params_file:=...] [autostart:=true]
-    [namespace:=...] [use_description:=true] [description_file:=...] [sim:=true]
-With autostart false (the default) a lifecycle manager configures and activates it. The
-serial port is the params file's serial_port (config/ucamera_driver.yaml: /dev/ttyUSB0).
-sim:=true also starts ucamera_sim on /tmp/ucamera_sim_tty (config/ucamera_driver_sim.yaml).
+    ros2 launch ucamera_driver ucamera_driver.launch.py [name:=value ...]
+
+Arguments (default after :=; docs/interface.md, "Launch arguments"):
+    params_file:=''          parameter YAML; '' = config/ucamera_driver.yaml, or
+                             config/ucamera_driver_sim.yaml with sim:=true
+    autostart:=true          the node configures and activates itself; false: a lifecycle
+                             manager (or ros2 lifecycle set) does
+    namespace:=''            namespace of the node and of robot_state_publisher
+    use_description:=false   true: also start robot_state_publisher with the URDF (TF)
+    description_file:=share/ucamera_driver/urdf/ucamera_driver.urdf
+                             the URDF robot_state_publisher publishes and ~/look_at aims with
+    sim:=false               true: also start ucamera_sim on /tmp/ucamera_sim_tty
+                             (config/ucamera_driver_sim.yaml)
+
+The serial port is the params file's serial_port (config/ucamera_driver.yaml: /dev/ttyUSB0).
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """
 

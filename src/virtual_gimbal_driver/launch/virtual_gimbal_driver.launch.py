@@ -1,10 +1,21 @@
 """Launch the reference virtual gimbal driver as a managed (lifecycle) node.
 
-ros2 launch virtual_gimbal_driver virtual_gimbal_driver.launch.py [sim:=true]
-    [params_file:=...] [autostart:=true] [namespace:=...] [use_description:=true]
-    [description_file:=...]
-Its device is its simulator: run `ros2 run virtual_gimbal_driver virtual_gimbal_sim` first,
-or pass sim:=true to start it (TCP 127.0.0.1:4950, config/virtual_gimbal_driver.yaml).
+    ros2 launch virtual_gimbal_driver virtual_gimbal_driver.launch.py [name:=value ...]
+
+Arguments (default after :=; docs/interface.md, "Launch arguments"):
+    params_file:=''          parameter YAML; '' = config/virtual_gimbal_driver.yaml, or
+                             config/virtual_gimbal_driver_sim.yaml with sim:=true
+    autostart:=true          the node configures and activates itself; false: a lifecycle
+                             manager (or ros2 lifecycle set) does
+    namespace:=''            namespace of the node and of robot_state_publisher
+    use_description:=false   true: also start robot_state_publisher with the URDF (TF)
+    description_file:=share/virtual_gimbal_driver/urdf/virtual_gimbal_driver.urdf
+                             the URDF robot_state_publisher publishes and ~/look_at aims with
+    sim:=false               true: also start virtual_gimbal_sim on TCP 127.0.0.1:4950
+                             (config/virtual_gimbal_driver_sim.yaml)
+
+Its device is its simulator: run `ros2 run virtual_gimbal_driver virtual_gimbal_sim --port 4950`
+first, or pass sim:=true.
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """
 

@@ -1,0 +1,11 @@
+"""The launch file's docstring states the defaults the launch really declares."""
+
+from pathlib import Path
+
+from gimbal_driver_common.testing.launch_doc import launch_docstring_errors
+
+LAUNCH_FILE = Path(__file__).resolve().parent.parent / 'launch' / 'canaero_turret_driver.launch.py'
+
+
+def test_launch_docstring_states_the_declared_defaults() -> None:
+    assert launch_docstring_errors(LAUNCH_FILE, 'canaero_turret_driver') == []
