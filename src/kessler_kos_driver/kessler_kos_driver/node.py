@@ -20,7 +20,6 @@ parameter overrides (or `password_file`) and the declared parameter only ever ho
 
 from __future__ import annotations
 
-import logging
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -58,25 +57,6 @@ TRANSPORTS = ('tcp', 'usb')
 UNIT_PARAMETERS = ('calibrated_spans', 'joint_offsets', 'joint_scales')
 
 
-class _RosLogHandler(logging.Handler):
-    """Forward the client's and adapter's Python log records to the node's ROS logger."""
-
-    def __init__(self, node: GimbalDriverNode) -> None:
-        super().__init__()
-        self._logger = node.get_logger()
-
-    def emit(self, record: logging.LogRecord) -> None:
-        text = self.format(record)
-        if record.levelno >= logging.ERROR:
-            self._logger.error(text)
-        elif record.levelno >= logging.WARNING:
-            self._logger.warning(text)
-        elif record.levelno >= logging.INFO:   # a connect, a new end mark (units change)
-            self._logger.info(text)
-        else:
-            self._logger.debug(text)
-
-
 class KosDriverNode(KosServices, GimbalDriverNode):
     DEFAULT_JOINT_NAMES = ('slider', 'pan', 'tilt')
     # One example rig in SI, the same in urdf/kessler_kos_driver.urdf (tests/
@@ -91,10 +71,6 @@ class KosDriverNode(KosServices, GimbalDriverNode):
     def __init__(self, **kwargs: object) -> None:
         self._delay_return = False     # from the last ~/load_trajectory, for ~/setup_playback
         super().__init__('kessler_kos_driver', **kwargs)
-        package_logger = logging.getLogger('kessler_kos_driver')
-        package_logger.addHandler(_RosLogHandler(self))
-        package_logger.setLevel(logging.INFO)
-        package_logger.propagate = False
         self._playback_pub = self.create_publisher(PlaybackStatusMsg, '~/playback_status', 10)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._aux_pub = self.create_publisher(Joy, '~/aux_inputs', latched)

@@ -19,7 +19,6 @@ declares the parameters, builds the adapter and adds the U-Camera extras:
 
 from __future__ import annotations
 
-import logging
 import math
 import threading
 import time
@@ -321,8 +320,6 @@ class UCameraDriverNode(GimbalDriverNode):
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    logging.basicConfig(level=logging.WARNING,
-                        format="[%(levelname)s] [ucamera_driver.%(name)s]: %(message)s")
     return run_driver(UCameraDriverNode, args)
 
 

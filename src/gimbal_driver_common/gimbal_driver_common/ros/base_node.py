@@ -49,6 +49,7 @@ from gimbal_driver_common.ros.actions import (
     guard_change_state_service,
 )
 from gimbal_driver_common.ros.common_parameters import declare_common_parameters, limits_from
+from gimbal_driver_common.ros.log_bridge import install_log_bridge
 from gimbal_driver_common.ros.look_at import LookAtMixin
 from gimbal_driver_common.ros.look_at_geo import LookAtGeoMixin
 from gimbal_driver_common.ros.parameters import ParameterRegistry, declare
@@ -76,6 +77,9 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
     SCAN_JOINTS: tuple[str, str] | None = None
     #: patterns the driver-side scan offers (a device's own scans come from its capability)
     SCAN_PATTERNS: Sequence[str] = DRIVER_SCAN_PATTERNS
+    #: Python loggers bridged to this node's ROS logger besides ``gimbal_driver_common`` and
+    #: the driver's own package (ros/log_bridge.py)
+    LIBRARY_LOGGERS: Sequence[str] = ()
 
     def __init__(self, node_name: str, **kwargs: object) -> None:
         super().__init__(node_name, **kwargs)
@@ -105,6 +109,10 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         self.declare_runtime_parameters()
         self.parameter_registry.check_all()
         self.parameter_registry.attach()
+        #: the core's and the driver's Python log records -> this node's logger (/rosout);
+        #: installed last, so a node refused for its parameters leaves none behind
+        self.log_bridge = install_log_bridge(self.get_logger(), type(self).__module__,
+                                             self.LIBRARY_LOGGERS)
 
     # ------------------------------------------------------------------ hooks
     def declare_device_parameters(self) -> None:
@@ -325,6 +333,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
     def destroy_node(self) -> None:
         self.periodic.stop()
         self.sensor_jobs.stop()
+        self.log_bridge.remove()
         super().destroy_node()
 
     # -------------------------------------------------------------- lifecycle
