@@ -11,15 +11,22 @@ own verbs beside the shared ones. One request line gives one answer line: ``ok``
     nack on|off|COMMAND [COUNT] negative-acknowledge every request / the next COUNT of one
     fault NAME|BITS [AXIS]      set device fault bits (names per simulator)
     ignore_motion on|off        ACK move and jog commands but do not act on them
+    mute REQUEST [off]          never answer this request (it is received and dropped)
+    delay REQUEST SECONDS       answer this request SECONDS late (0: at once again)
     clear                       remove every injected fault (silence, NACKs, fault bits,
-                                ignore_motion)
+                                ignore_motion, mute, delay)
     state                       ok {JSON}: "axes" and the device's own fields
     help                        the verbs of this simulator
     quit                        stop the simulator process
 
 A device without NACKs or a fault register answers ``nack``/``fault`` with an error that
-says why. The same :meth:`SimControl.execute` serves the programmatic API, the stdin
-console and the TCP console on 127.0.0.1 (:class:`ControlServer`). Each simulator's
+says why. ``mute``/``delay`` take the device's own request names (the simulator gives them
+through ``request_names``; an unknown one is answered with the list) and set the
+:class:`~gimbal_driver_common.sim_requests.RequestFaults` the simulator consults
+(``request_faults``); ``state`` shows them as ``muted`` and ``delayed``.
+
+The same :meth:`SimControl.execute` serves the programmatic API, the stdin console and the
+TCP console on 127.0.0.1 (:class:`ControlServer`). Each simulator's
 ``main`` prints one JSON ready line (:func:`ready_line`) naming its port or pty and the
 control port, e.g. ``{"ready": "capture_sim", "port": 4949, "control_port": 40123}``.
 """
@@ -28,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import random
 import signal
@@ -40,11 +48,14 @@ from dataclasses import dataclass, field
 from typing import Protocol, TextIO
 
 from gimbal_driver_common.sim_motion import AxisMotion
+from gimbal_driver_common.sim_requests import RequestFaults, resolve_request
 from gimbal_driver_common.sim_server import LOOPBACK
 
 DEFAULT_GARBAGE_BYTES = 16
 ON_WORDS = ('on', '1', 'true', 'yes')
 OFF_WORDS = ('off', '0', 'false', 'no')
+#: ``help`` lists the request names of a device that has at most this many
+HELP_REQUESTS = 24
 
 
 class Link(Protocol):
@@ -113,6 +124,10 @@ class SimControl:
     on_quit: Callable[[], None] | None = None
     #: the simulator's axis models, for ``ignore_motion`` (None: the verb is refused)
     axes: Callable[[], Iterable[AxisMotion]] | None = None
+    #: the device's request names ``mute``/``delay`` take (None: the verbs are refused)
+    request_names: Callable[[], Iterable[str]] | None = None
+    #: what the simulator consults where it answers a request (``mute``, ``delay``)
+    request_faults: RequestFaults = field(default_factory=RequestFaults)
     seed: int = 1
     verbs: dict[str, Verb] = field(default_factory=dict)
 
@@ -127,6 +142,8 @@ class SimControl:
             'nack': Verb(self._nack, 'nack on|off|COMMAND [COUNT]'),
             'fault': Verb(self._fault, 'fault NAME|BITS [AXIS]'),
             'ignore_motion': Verb(self._ignore_motion, 'ignore_motion on|off'),
+            'mute': Verb(self._mute, 'mute REQUEST [off]'),
+            'delay': Verb(self._delay, 'delay REQUEST SECONDS'),
             'clear': Verb(self._clear, 'clear'),
             'state': Verb(self._state, 'state'),
             'help': Verb(self._help, 'help'),
@@ -218,7 +235,38 @@ class SimControl:
             axis.ignore_commands = ignore
         return f'{len(axes)} axes {"ignore" if ignore else "act on"} move and jog commands'
 
+    def _request(self, verb: str, args: list[str], usage: str) -> str:
+        """The device's spelling of the request named in ``args[0]``."""
+        if self.request_names is None:
+            raise ControlError(f'not applicable to {self.name}: no request names given')
+        known = list(self.request_names())
+        if not args:
+            raise ControlError(f'usage: {usage}; known: {", ".join(sorted(known))}')
+        try:
+            return resolve_request(args[0], known)
+        except LookupError as exc:
+            raise ControlError(str(exc)) from exc
+
+    def _mute(self, args: list[str]) -> str:
+        name = self._request('mute', args, 'mute REQUEST [off]')
+        if len(args) > 2:
+            raise ControlError('usage: mute REQUEST [off]')
+        muted = parse_switch(args[1:]) if len(args) == 2 else True
+        self.request_faults.mute(name, muted)
+        return f'{name} {"never answered" if muted else "answered"}'
+
+    def _delay(self, args: list[str]) -> str:
+        name = self._request('delay', args, 'delay REQUEST SECONDS')
+        if len(args) != 2:
+            raise ControlError('usage: delay REQUEST SECONDS')
+        seconds = float(args[1])
+        if not (math.isfinite(seconds) and seconds >= 0.0):
+            raise ControlError(f'seconds {args[1]!r}: not a finite number >= 0')
+        self.request_faults.delay(name, seconds)
+        return f'{name} answered {seconds:g} s late' if seconds else f'{name} answered at once'
+
     def _clear(self, args: list[str]) -> None:
+        self.request_faults.clear()
         if self.silenced:
             self._silence(['off'])
         if self.axes is not None:
@@ -227,10 +275,17 @@ class SimControl:
             self.clear_device()
 
     def _state(self, args: list[str]) -> str:
-        return json.dumps(self.state(), sort_keys=True, default=str)
+        state = dict(self.state())
+        if self.request_names is not None:
+            state.update(self.request_faults.snapshot())
+        return json.dumps(state, sort_keys=True, default=str)
 
     def _help(self, args: list[str]) -> str:
         names = f' (fault names: {", ".join(self.fault_names)})' if self.fault_names else ''
+        if self.request_names is not None:
+            requests = sorted(self.request_names())
+            names += (f' (requests: {", ".join(requests)})' if len(requests) <= HELP_REQUESTS
+                      else f' ({len(requests)} request names: `mute` alone lists them)')
         return ' | '.join(verb.usage for verb in self.verbs.values()) + names
 
     def _quit(self, args: list[str]) -> None:

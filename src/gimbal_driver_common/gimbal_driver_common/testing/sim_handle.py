@@ -21,7 +21,8 @@ A fault is a method that injects it and returns when the fault has *healed* (the
 back, the device answers again); the soak times joint_states from that moment. The shared
 faults (link drop, silence, garbage) go through the simulator's control protocol
 (:mod:`gimbal_driver_common.sim_control`, :meth:`SimHandle.control`), the same verbs its
-console and TCP control port take. ``link``
+console and TCP control port take; so do the request faults :meth:`SimHandle.mute`,
+:meth:`SimHandle.delay` and :meth:`SimHandle.clear`. ``link``
 marks faults that interrupt joint_states (link drop, silence, restart). Faults a protocol
 cannot carry are listed in ``not_applicable`` with the reason.
 """
@@ -228,6 +229,19 @@ class SimHandle:
     def drop_link(self, seconds: float) -> None:
         """Cut the link to the node and refuse a new one for ``seconds`` (returns at once)."""
         self.control(f'drop {seconds}')
+
+    def mute(self, request: str) -> None:
+        """Never answer ``request`` (the device's own name for it, as the ``mute`` verb
+        takes it): the simulator receives and logs it, then drops it."""
+        self.control(f'mute {request}')
+
+    def delay(self, request: str, seconds: float) -> None:
+        """Answer ``request`` ``seconds`` late; other requests are answered at once."""
+        self.control(f'delay {request} {seconds!r}')
+
+    def clear(self) -> None:
+        """Remove every injected fault (mutes and delays included): the ``clear`` verb."""
+        self.control('clear')
 
     def link_drop(self, rng: random.Random) -> None:
         self.drop_link(LINK_DOWN_S)
