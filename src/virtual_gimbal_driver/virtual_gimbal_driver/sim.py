@@ -3,7 +3,8 @@
 It answers the line protocol of :mod:`virtual_gimbal_driver.protocol`. Motion runs on the
 shared trapezoidal axis model (``sim_motion.AxisMotion``); the simulator is driven by the
 shared control verbs (``sim_control``: drop, silence, garbage, ``nack`` = ERR replies,
-``fault overtemp|BITS``, clear, state, quit).
+``fault overtemp|BITS``, ignore_motion, ``mute VERB``, ``delay VERB SECONDS``, clear, state,
+quit); ``mute``/``delay`` take the request verbs of :data:`REQUESTS`.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from collections.abc import Callable
 
 from gimbal_driver_common.sim_control import ControlError, SimControl, run_simulator
 from gimbal_driver_common.sim_motion import AxisMotion
+from gimbal_driver_common.sim_requests import LateReplies, RequestFaults
 from gimbal_driver_common.sim_server import TcpSimServer
 
 from .protocol import FAULT_NAMES, JOINTS, format_position, verb
@@ -24,6 +26,8 @@ DEFAULT_SPEED = 0.8  # rad/s
 #: rad/s^2, accelerating and braking: DEFAULT_SPEED in 0.1 s, so moves keep nearly the
 #: timing of the earlier constant-speed model (an invented device: no spec to follow)
 DEFAULT_ACCELERATION = 8.0
+#: the request verbs of the line protocol (``mute``/``delay`` take them)
+REQUESTS = ('ID', 'GET', 'MOVE', 'JOG', 'STOP', 'HOME', 'RESET')
 
 
 class VirtualGimbal:
@@ -35,6 +39,8 @@ class VirtualGimbal:
         self.faults = 0
         self.nack_all = False  # sim: answer every request with ERR (the console's nack)
         self.nack_pending: list[str | None] = []  # next requests to refuse (None: any)
+        #: the requests never answered (mute) or answered late (delay, by the session)
+        self.request_faults = RequestFaults()
         self.lock = threading.Lock()
         self._clock = clock
         self._last = clock()
@@ -45,12 +51,16 @@ class VirtualGimbal:
         for axis in self.axes.values():
             axis.step(dt)
 
-    def handle(self, line: str) -> str:
+    def handle(self, line: str) -> str | None:
+        """The reply line to one request line; None for a muted request (received and
+        dropped: not acted on, never answered)."""
         with self.lock:
             self.step()
             command, args = verb(line), line.split()[1:]
             if not command:
                 return 'ERR empty request'
+            if self.request_faults.muted(command):
+                return None
             refused = self._injected_nack(command)
             if refused:
                 return refused
@@ -136,19 +146,36 @@ class VirtualGimbal:
 
 
 class _LineSession:
+    """One TCP connection: request lines in, reply lines out; a delayed request's reply
+    line waits in :attr:`late` for the server's poll, which writes it between other replies
+    (never inside one)."""
+
     def __init__(self, device: VirtualGimbal) -> None:
         self.device = device
         self.buffer = b''
+        self.late: LateReplies[bytes] = LateReplies()
 
     def on_bytes(self, data: bytes) -> bytes:
         self.buffer += data
         out = []
         while b'\n' in self.buffer:
             line, self.buffer = self.buffer.split(b'\n', 1)
-            out.append(self.device.handle(line.decode('ascii', 'replace')) + '\n')
+            text = line.decode('ascii', 'replace')
+            reply = self.device.handle(text)
+            if reply is None:
+                continue
+            encoded = (reply + '\n').encode()
+            seconds = self.device.request_faults.delay_of(verb(text))
+            if seconds:
+                self.late.hold([encoded], seconds)
+            else:
+                out.append(encoded)
         if len(self.buffer) > 4096:
             self.buffer = b''
-        return ''.join(out).encode()
+        return b''.join(out)
+
+    def poll(self) -> bytes:
+        return b''.join(self.late.due())
 
 
 def make_server(port: int = 0) -> tuple[TcpSimServer, VirtualGimbal]:
@@ -161,7 +188,8 @@ def make_control(server: TcpSimServer, device: VirtualGimbal) -> SimControl:
     return SimControl('virtual_gimbal_sim', device.state, links=[server],
                       nack=device.control_nack, fault=device.control_fault,
                       fault_names=tuple(FAULT_NAMES), clear_device=device.control_clear,
-                      axes=lambda: device.axes.values())
+                      axes=lambda: device.axes.values(), request_names=lambda: REQUESTS,
+                      request_faults=device.request_faults)
 
 
 def main(argv: list[str] | None = None) -> int:

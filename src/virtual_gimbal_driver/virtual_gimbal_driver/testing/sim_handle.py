@@ -33,7 +33,7 @@ class VirtualGimbalSim(SimHandle):
         server, self.device = make_server(self.port)
         handle = self.device.handle
 
-        def recorded(line: str) -> str:
+        def recorded(line: str) -> str | None:
             self.record(line.strip())
             return handle(line)
 
