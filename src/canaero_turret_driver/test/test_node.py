@@ -284,6 +284,35 @@ def test_diagnostics_on_injected_faults_and_reset(rig):
     wait_diag(ros, "data freshness", 0)
 
 
+def test_an_emergency_event_shows_in_diagnostics_and_in_the_node_log(rig):
+    """An EED from the turret (the simulator's `eed` verb): the "emergency events" part
+    turns WARN with its code, operation, location and the count, and the client's warning
+    is in the node's log at WARN under its logger's name (the core's log bridge)."""
+    ros, control, _, node = rig
+
+    def events(array: DiagnosticArray) -> dict[str, str]:
+        return {kv.key: kv.value for kv in part(array, "emergency events").values}
+
+    seen = ros.wait_for_message("/diagnostics", DiagnosticArray,
+                                lambda a: part(a, "emergency events") is not None)
+    before = int(events(seen)["count"])
+    assert control.command("eed 0x4321 7 3") == "ok"
+    diag = ros.wait_for_message(
+        "/diagnostics", DiagnosticArray,
+        lambda a: part(a, "emergency events") is not None
+        and events(a).get("last_error_code") == "0x4321", 15)
+    status = part(diag, "emergency events")
+    assert status.level[0] == 1 and "error 0x4321" in status.message, status
+    values = events(diag)
+    assert values["count"] == str(before + 1)
+    assert (values["last_node"], values["last_operation"], values["last_location"]) == (
+        "1", "7", "3")
+    text = "canaero_turret_driver.client: EED from node 1"
+    node.wait_for_output("error 0x4321")
+    lines = [line for line in node.output().splitlines() if "error 0x4321" in line]
+    assert len(lines) == 1 and text in lines[0] and "[WARN]" in lines[0], lines
+
+
 def test_turret_silence_is_an_error_and_recovers(rig):
     ros, control, _, _ = rig
     assert control.command("node_silence turret") == "ok"

@@ -206,8 +206,13 @@ class Session:
                 return
             self.error = error
         self._stop.set()
-        LOG.warning('%s: %s', self.link.description, error)
+        LOG.warning('%s', self._about_link(str(error)))
         self._fail_pending(error)
+
+    def _about_link(self, text: str) -> str:
+        """``text`` naming the link once (a stream's own errors already name it)."""
+        description = self.link.description
+        return text if description in text else f'{description}: {text}'
 
     # --- sending and requests ------------------------------------------------------
     def write(self, data: Any) -> None:
@@ -300,7 +305,7 @@ class Session:
                 except (LinkError, OSError) as exc:
                     if not self._stop.is_set():
                         self.lose(exc if isinstance(exc, self.link_error) else
-                                  self.link_error(f'{self.link.description}: {exc}'))
+                                  self.link_error(self._about_link(str(exc))))
                     break
                 if self._stop.is_set():
                     break

@@ -1,8 +1,14 @@
 """The virtual gimbal's session: request lines answered one reply line each, in order
-(no ROS)."""
+(no ROS).
+
+It logs through :mod:`logging` (``virtual_gimbal_driver.client``), as every driver's
+library code does; the node's log bridge (``gimbal_driver_common.ros.log_bridge``) takes
+the lines to the node's ROS logger and /rosout.
+"""
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Sequence
 
@@ -11,6 +17,10 @@ from gimbal_driver_common.link_lock import LinkLock
 from gimbal_driver_common.transport import TcpStream
 
 from .protocol import Refused, check_reply, verb
+
+LOG = logging.getLogger(__name__)
+#: how many discarded bytes a warning shows
+SHOWN_BYTES = 40
 
 
 class VirtualGimbalClient:
@@ -40,6 +50,7 @@ class VirtualGimbalClient:
     def request(self, line: str) -> str:
         """Send ``line``; the reply line, DeviceRefused for ERR, DeviceTimeout for none."""
         with self._lock:
+            self._discard_unsolicited()
             self.stream.write(line.encode() + b'\n')
             reply = self._reply_to(line)
         try:
@@ -51,6 +62,7 @@ class VirtualGimbalClient:
         """Write ``lines`` in one write without waiting for their replies (the caller, the
         core's command path, holds the link lock); returns what :meth:`settle` takes."""
         with self._lock:  # reentrant: the caller's hold
+            self._discard_unsolicited()
             self.stream.write(b''.join(line.encode() + b'\n' for line in lines))
             return self._opened, list(lines)
 
@@ -80,3 +92,14 @@ class VirtualGimbalClient:
             self._buffer += self.stream.read(4096, remaining)
         reply, self._buffer = self._buffer.split(b'\n', 1)
         return reply.decode('ascii', 'replace')
+
+    def _discard_unsolicited(self) -> None:
+        """Drop what arrived while no request was out (caller holds the lock, every posted
+        reply settled): noise, or a reply that came after its request timed out, which the
+        next request would otherwise take for its own reply."""
+        stale, self._buffer = self._buffer, b''
+        while data := self.stream.read(4096, 0.0):
+            stale += data
+        if stale:
+            LOG.warning('discarded %d bytes that no request asked for (noise, or a reply '
+                        'after its timeout): %r', len(stale), stale[:SHOWN_BYTES])

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.sim_control import SimControl
-from gimbal_driver_common.testing.sim_handle import SimHandle
+from gimbal_driver_common.testing.sim_handle import LibraryWarning, SimHandle
 
 
 class CanaeroSimHandle(SimHandle):
@@ -119,3 +119,8 @@ class CanaeroSimHandle(SimHandle):
         self.simulator.set_axis_fault(axis, True)
         time.sleep(0.5)
         self.simulator.set_axis_fault(axis, False)  # the cause goes away; reset_faults follows
+
+    def provoke_library_warning(self) -> LibraryWarning:
+        # an emergency event: the client decodes it and warns (canaero_turret_driver.client)
+        self.control('eed 0x0042 1 2')
+        return LibraryWarning('canaero_turret_driver.client', 'error 0x0042 operation 1')

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.sim_control import SimControl
-from gimbal_driver_common.testing.sim_handle import SimHandle, Takeover
+from gimbal_driver_common.testing.sim_handle import LibraryWarning, SimHandle, Takeover
 
 #: commands that move or stop a Capture axis
 MOTION_COMMANDS = ('MOT_SendPosition', 'MOT_Update', 'MOT_SetSpeed', 'MOT_SetSpeedMode',
@@ -108,3 +108,8 @@ class CaptureSimHandle(SimHandle):
 
     def fault_bits(self, rng: random.Random) -> None:
         self.sim.model.inject_fault(rng.choice((1, 2)), 'over_current')
+
+    def provoke_library_warning(self) -> LibraryWarning:
+        # the client finds the connection closed under it (capture_driver.client)
+        self.drop_link(0.5)
+        return LibraryWarning('capture_driver.client', 'link lost')

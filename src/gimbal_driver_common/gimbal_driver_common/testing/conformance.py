@@ -35,6 +35,7 @@ from gimbal_driver_common.testing.conformance_rig import (
     GoalStatus,
     SimulatorHandle,
 )
+from gimbal_driver_common.testing.log_conformance import LogConformance
 from gimbal_driver_common.testing.motion_start_conformance import MotionStartConformance
 from gimbal_driver_common.testing.restart_conformance import RestartConformance
 from gimbal_driver_common.testing.topic_system_conformance import TopicInterfaceConformance
@@ -47,7 +48,8 @@ __all__ = ['ConformanceRig', 'DriverConformance', 'GoalStatus', 'SimulatorHandle
 REJECTED_BURSTS = 6
 
 
-class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionStartConformance):
+class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionStartConformance,
+                        LogConformance):
     """The common contract of every gimbal driver node, tested through the real transport.
 
     Subclasses set the attributes below; the package, node and simulator come from the

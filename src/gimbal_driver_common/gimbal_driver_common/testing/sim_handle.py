@@ -72,6 +72,18 @@ class Takeover(enum.Enum):
     STOPS_WITH_NODE = 'stops with the node'
 
 
+@dataclass(frozen=True)
+class LibraryWarning:
+    """A WARNING the driver's library code (client, adapter, the core's session) logs
+    through :mod:`logging`, not the node: the log conformance test looks for it on
+    /rosout (``gimbal_driver_common.testing.log_conformance``)."""
+
+    #: the Python logger that logs it (its name starts the line on /rosout)
+    logger: str
+    #: a piece of its text
+    text: str
+
+
 class SimHandle:
     """One in-process simulator; subclasses build it (:meth:`start`), know its faults and
     classify the requests it receives.
@@ -255,6 +267,12 @@ class SimHandle:
     def garbage(self, rng: random.Random) -> None:
         data = bytes(rng.randrange(256) for _ in range(rng.randrange(16, 200)))
         self.control(f'garbage hex {data.hex()}')
+
+    def provoke_library_warning(self) -> LibraryWarning:
+        """Make the driver's library code log a WARNING on a real path (a link drop, bytes
+        that do not frame, a device event) and say what it logs. Called again while the
+        line does not show (an injection can race the driver's own exchange)."""
+        raise NotImplementedError(f'{type(self).__name__} names no library warning')
 
     def faults(self) -> list[Fault]:
         """The faults every server has, plus those the subclass implements (a method named

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.sim_control import SimControl
-from gimbal_driver_common.testing.sim_handle import SimHandle
+from gimbal_driver_common.testing.sim_handle import LibraryWarning, SimHandle
 
 from ..registration import SIM_RIG
 
@@ -109,3 +109,8 @@ class KesslerSimHandle(SimHandle):
 
         with self.sim.device.lock:
             self.sim.device.broadcast(ErrorStatus(16, 1))  # axis fault reported on the slider
+
+    def provoke_library_warning(self) -> LibraryWarning:
+        # bytes without the 0x04 version byte: skipped while resynchronising
+        self.control(f'garbage hex {"ff" * 8}')
+        return LibraryWarning('kessler_kos_driver.client', 'garbage bytes')

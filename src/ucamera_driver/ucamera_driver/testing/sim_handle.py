@@ -10,7 +10,7 @@ from pathlib import Path
 
 from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.sim_control import SimControl
-from gimbal_driver_common.testing.sim_handle import SimHandle, Takeover
+from gimbal_driver_common.testing.sim_handle import LibraryWarning, SimHandle, Takeover
 
 
 class UCameraSimHandle(SimHandle):
@@ -106,3 +106,8 @@ class UCameraSimHandle(SimHandle):
 
     def malformed_frames(self, rng: random.Random) -> None:
         self.sim.corrupt(next_frames=rng.randrange(1, 8))
+
+    def provoke_library_warning(self) -> LibraryWarning:
+        # the pty goes away under the reader: the core's session reports the loss
+        self.drop_link(0.5)
+        return LibraryWarning('gimbal_driver_common.session', str(self.link))

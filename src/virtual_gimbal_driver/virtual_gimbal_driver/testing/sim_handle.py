@@ -8,7 +8,7 @@ from typing import Any
 
 from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.sim_control import SimControl
-from gimbal_driver_common.testing.sim_handle import SimHandle
+from gimbal_driver_common.testing.sim_handle import LibraryWarning, SimHandle
 
 from ..protocol import MOTION, READS, verb
 from ..sim import make_control, make_server
@@ -70,3 +70,9 @@ class VirtualGimbalSim(SimHandle):
 
     def fault_bits(self, rng: random.Random) -> None:
         self.control('fault overtemp')
+
+    def provoke_library_warning(self) -> LibraryWarning:
+        # a line nobody asked for: the client discards it before its next request (if it
+        # lands inside an exchange it is read as a reply instead: the caller tries again)
+        self.control('garbage hex ' + b'NOISE\n'.hex())
+        return LibraryWarning('virtual_gimbal_driver.client', 'NOISE')
