@@ -281,7 +281,7 @@ class CaptureDriverNode(GimbalDriverNode):
 
         Without a subscriber the read is skipped: each is one or more request/reply
         transactions (the IMU six) that would take the link from commands and polls, and
-        measured, a third of an idle node's CPU (bench/README.md).
+        measured, a third of an idle node's CPU (bench/HISTORY.md).
         """
         if rate <= 0 or not self.active or not self.connected:
             return None
