@@ -13,7 +13,8 @@ from typing import Any
 
 from gimbal_driver_common.transport import TransportError
 
-from .errors import NotConnected, NotSupported, WrongReply
+from .device_requests import request_key
+from .errors import DeviceTimeout, NotConnected, NotSupported, WrongReply
 from .protocol import Frame, ProtocolError, ReplyByte, command
 
 LOG = logging.getLogger('capture_driver.batch')
@@ -54,8 +55,8 @@ class BatchedReads:
             frames.append((cmd, axis, cmd.frame(axis, None, self.group)))
         with self._lock:
             values: list[Any] = [None] * len(frames)
-            asked = [i for i, (cmd, _, _) in enumerate(frames)
-                     if not (optional and cmd.name in self.unsupported)]
+            asked = [i for i, (cmd, axis, _) in enumerate(frames)
+                     if not (optional and self._left_out(cmd.name, axis))]
             replies: list[Frame | None] = [None] * len(asked)
             if self.batching and len(asked) >= 2:
                 replies = self._transact_batch([frames[i][2] for i in asked])
@@ -69,9 +70,16 @@ class BatchedReads:
                 if not optional:
                     values[i] = self._request_locked(cmd.name, axis, None)
                     continue
-                with contextlib.suppress(NotSupported):  # None: not asked again
+                # None: not asked again (unsupported), or not now (unanswered: back-off)
+                with contextlib.suppress(NotSupported, DeviceTimeout):
                     values[i] = self.poll(cmd.name, axis)
             return values
+
+    def _left_out(self, name: str, axis: int | None) -> bool:
+        """An optional read not to send now: the device does not know it, or it went
+        unanswered and waits out its back-off (see :meth:`DeviceRequests.poll`)."""
+        return (name in self.unsupported
+                or self.unanswered.waiting(request_key(name, axis)) is not None)
 
     def _transact_batch(self, frames: list[Frame]) -> list[Frame | None]:
         """Write ``frames`` in one go; the reply to each, or None for those that got no

@@ -47,6 +47,7 @@ from typing import Any
 
 from gimbal_driver_common.link_lock import LinkLock
 from gimbal_driver_common.transport import ByteStream, TransportError
+from gimbal_driver_common.unanswered import Unanswered
 
 from .batch import BatchedReads
 from .device_requests import DeviceRequests
@@ -113,6 +114,9 @@ class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
         self.unsupported: dict[str, str] = {}
         #: replies of the wrong kind per command (name -> (count, the last answer))
         self.wrong_replies: dict[str, tuple[int, str]] = {}
+        #: requests the host makes on its own that went unanswered, each asked again only
+        #: after its back-off (:meth:`DeviceRequests.poll`); named in diagnostics
+        self.unanswered = Unanswered()
         self._keepalive_on = False
 
     # ---------------------------------------------------------------- link
@@ -145,6 +149,7 @@ class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
             self.batching, self._batch_failures = self.batch_reads, 0
             self.unsupported = {}  # a new connection may be a different controller
             self.wrong_replies = {}
+            self.unanswered.clear()
             self._keepalive_on = False
             try:
                 self._handshake()
@@ -243,8 +248,12 @@ class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
 
     # ------------------------------------------------------------- requests
     def request(self, name: str, axis: int | None = None, value: Any = None,
-                timeout: float | None = None) -> Any:
+                timeout: float | None = None, optional: bool = False) -> Any:
         """Send one table command and return its decoded reply (None for ACK-only commands).
+
+        ``optional``: a getter the host asks on its own (a sensor, a register): asked
+        once, not retried after a timeout, and its timeout does not count toward calling
+        the device silent (a device that answers the rest is not silent).
 
         Raises :class:`ProtocolError` for bad arguments (nothing is sent),
         :class:`DeviceNack`, :class:`WrongReply`, :class:`DeviceTimeout` or
@@ -252,10 +261,11 @@ class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
         """
         cmd = command(name)
         with self._lock:
-            return self._request_locked(cmd.name, axis, value, timeout)
+            return self._request_locked(cmd.name, axis, value, timeout, optional=optional)
 
     def _request_locked(self, name: str, axis: int | None, value: Any,
-                        timeout: float | None = None, group: int | None = None) -> Any:
+                        timeout: float | None = None, group: int | None = None,
+                        optional: bool = False) -> Any:
         cmd = command(name)
         # validates before anything is sent
         frame = cmd.frame(axis, value, self.group if group is None else group)
@@ -266,18 +276,21 @@ class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
         for attempt in (1, 2):
             try:
                 reply = self._transact(name, frame, cmd.replies_with_data,
-                                       self.timeout if timeout is None else timeout)
+                                       self.timeout if timeout is None else timeout,
+                                       optional=optional)
                 return self._decode(name, frame, reply) if cmd.replies_with_data else None
             except DeviceNack as exc:
                 # 0xF6: the controller did not execute the packet, so resending is safe.
                 if exc.code == ReplyCode.WRONG_CHECKSUM and attempt == 1:
                     continue
                 raise
-            except (DeviceTimeout, WrongReply):
+            except (DeviceTimeout, WrongReply) as exc:
                 # A getter changes nothing, so it is retried once (a reply of the wrong kind
                 # is named only when the device gives it twice: noise can look like an ACK
-                # byte); a setter is not.
-                if cmd.replies_with_data and attempt == 1:
+                # byte); a setter is not, nor an optional getter that got no answer (it
+                # would hold the link twice as long for what the device does not serve).
+                retry = not (optional and isinstance(exc, DeviceTimeout))
+                if cmd.replies_with_data and attempt == 1 and retry:
                     continue
                 raise
         raise DeviceTimeout(f'{name}: no reply')  # pragma: no cover
@@ -290,14 +303,16 @@ class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
             raise self._wrong_reply(name, frame, f'{len(reply.data)} data bytes ({exc})',
                                     'data') from None
 
-    def _transact(self, name: str, frame: Frame, expect_data: bool, timeout: float) -> Frame:
+    def _transact(self, name: str, frame: Frame, expect_data: bool, timeout: float,
+                  optional: bool = False) -> Frame:
         stream = self._stream
         if stream is None:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
         self.stats['requests'] += 1
         try:
             late_possible = self._send(stream, frame.encode())
-            reply = self._await_reply(stream, name, frame, expect_data, timeout, late_possible)
+            reply = self._await_reply(stream, name, frame, expect_data, timeout, late_possible,
+                                      optional)
         except TransportError as exc:
             self._link_lost(f'{name}: {exc}')
             raise NotConnected(f'{name}: link lost ({exc})') from exc
@@ -349,7 +364,7 @@ class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
                     LOG.info('controller re-sent its greeting (0x%04X)', item.opcode)
 
     def _await_reply(self, stream: ByteStream, name: str, frame: Frame, expect_data: bool,
-                     timeout: float, late_possible: bool) -> Frame:
+                     timeout: float, late_possible: bool, optional: bool = False) -> Frame:
         """The reply to ``frame``: its data packet (getters) or the ACK (the rest).
 
         The other kind of reply is this request's protocol error (:class:`WrongReply`) when
@@ -385,7 +400,10 @@ class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
                         f'data of opcode 0x{item.opcode:04X} (axis {item.axis})')
         if unexpected:
             raise self._wrong_reply(name, frame, unexpected, 'data' if expect_data else 'ACK')
-        self._count_timeout(name)
+        if optional:
+            self.stats['timeouts'] += 1  # the device may answer the rest: not silence
+        else:
+            self._count_timeout(name)
         raise DeviceTimeout(f'{self._label(name, frame)}: no reply within {timeout:g} s')
 
     def _wrong_reply(self, name: str, frame: Frame, answer: str, expected: str) -> WrongReply:

@@ -13,6 +13,7 @@ from typing import Any
 
 from .errors import (
     REQUEST_ERRORS,
+    BackingOff,
     CaptureError,
     DeviceNack,
     DeviceTimeout,
@@ -38,6 +39,11 @@ SCAN_COMMANDS = {
     'snake': 'SCN_StartScanSnake',
     'square': 'SCN_StartScanSquare',
 }
+
+
+def request_key(name: str, axis: int | None) -> str:
+    """How one request is named in the unanswered book and in diagnostics."""
+    return f'{name} (axis {axis})' if axis else name
 
 
 IDENTITY_GETTERS = (('serial_number', 'COM_GetSn'), ('firmware', 'COM_GetFw'),
@@ -101,15 +107,30 @@ class DeviceRequests:
         (:class:`NotSupported`, now and on every later call), so the host does not keep
         raising the controller's protocol-error flag; the one flag an 0xA6 raised is cleared
         again when it is the only CSR bit set (ERR_ClearErrors would otherwise also clear
-        real errors). Timeouts and other NACKs raise as :meth:`request` does, for this call
-        only.
+        real errors). Other NACKs raise as :meth:`request` does, for this call only.
+
+        A timeout is not retried and does not count toward calling the device silent; the
+        getter is then asked again only after a back-off that doubles with every timeout in
+        a row (:attr:`unanswered`, named in diagnostics): until then it raises
+        :class:`BackingOff` without sending anything, so an optional sensor the device
+        never answers costs the link one timeout per back-off, not one per ask.
         """
         answer = self.unsupported.get(name)
         if answer is not None:
             raise NotSupported(name, answer)
+        key = request_key(name, axis)
+        waiting = self.unanswered.waiting(key)
+        if waiting is not None:
+            record, left = waiting
+            raise BackingOff(key, record.in_a_row, left)
         opcode = f'0x{command(name).opcode:04X}'
         try:
-            return self.request(name, axis)
+            value = self.request(name, axis, optional=True)
+        except DeviceTimeout:
+            record = self.unanswered.timed_out(key)
+            if record.in_a_row == 1:
+                LOG.warning('%s went unanswered; asked again after a growing back-off', key)
+            raise
         except WrongReply as exc:
             self._not_supported(name, f'{opcode} answered {exc.answer}, expected {exc.expected}')
             raise NotSupported(name, self.unsupported[name]) from exc
@@ -118,12 +139,14 @@ class DeviceRequests:
                 raise
             self._not_supported(name, f'{opcode} answered NACK 0xA6', exc)
             raise NotSupported(name, self.unsupported[name]) from exc
+        self.unanswered.answered(key)
+        return value
 
     def optional(self, name: str, axis: int | None = None) -> Any:
         """:meth:`poll`, with None for every answer that is not the value."""
         try:
             return self.poll(name, axis)
-        except NotSupported:
+        except (NotSupported, BackingOff):
             return None
         except (DeviceNack, DeviceTimeout) as exc:
             LOG.info('%s', exc)

@@ -5,7 +5,7 @@ them at one boundary; each message is meant for a person.
 
 from __future__ import annotations
 
-from gimbal_driver_common import errors
+from gimbal_driver_common import errors, unanswered
 
 from .protocol import (
     REPLY_INFO,
@@ -23,6 +23,11 @@ class NotConnected(CaptureError, errors.LinkError):
 
 class DeviceTimeout(CaptureError, errors.DeviceTimeout):
     """The controller did not answer in time."""
+
+
+class BackingOff(DeviceTimeout, unanswered.BackingOff):
+    """Not sent: a request the host makes on its own went unanswered and waits out its
+    back-off (:attr:`CaptureClient.unanswered`)."""
 
 
 class WrongReply(CaptureError, errors.DeviceRefused):

@@ -72,6 +72,8 @@ class CaptureStatus(StatusReport):
         # identity getters that failed otherwise (no reply, another NACK)
         values += [(f'identity.{name}', how) for name, how in device.identity.problems.items()
                    if name not in unsupported]
+        silent = client.unanswered.silent()
+        values += client.unanswered.diagnostics()
         values += [('link', client.description)] + [
             (f'link.{k}', str(v)) for k, v in client.stats.items()
         ] + [('link.garbage_bytes', str(client.garbage_bytes)),
@@ -89,6 +91,10 @@ class CaptureStatus(StatusReport):
             part.message += ' | ' + '; '.join(texts)
         if unsupported:  # informational: an optional function the device lacks
             part.message += ' | device does not know: ' + ', '.join(unsupported)
+        if silent:  # the device answers the rest: named, asked again after a back-off
+            part.level = max(part.level, Level.WARN)
+            part.message += ' | unanswered: ' + ', '.join(
+                f'{r.name} ({r.in_a_row}x)' for r in silent)
         wrong = [name for name in client.wrong_replies if name not in unsupported]
         if wrong:  # answered, but not as the protocol says: named, not called silence
             part.message += ' | wrong kind of reply from: ' + ', '.join(wrong)

@@ -18,7 +18,7 @@ import pytest
 
 from capture_driver.client import CaptureClient
 from capture_driver.device import CaptureDevice, CaptureSettings
-from capture_driver.errors import DeviceTimeout, NotSupported, WrongReply
+from capture_driver.errors import BackingOff, DeviceTimeout, NotSupported, WrongReply
 from capture_driver.protocol import BY_OPCODE, COMMANDS
 from capture_driver.protocol.registers import REGISTERS
 from capture_driver.sim import KNOWN_SETS, CaptureSimulator, PedestalModel
@@ -27,6 +27,7 @@ from gimbal_driver_common.diagnostics import Level
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import TcpStream
+from gimbal_driver_common.unanswered import Unanswered
 
 LOG = logging.getLogger('test_partial_device')
 POLL = [(name, axis) for axis in (1, 2) for name in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')]
@@ -160,11 +161,13 @@ def test_identity_is_best_effort(connect, model):
 
 def test_identity_timeouts_are_named_too(connect):
     sim, client = connect(timeout=0.1, max_timeouts=5)
-    sim.model.lose_replies(2)  # COM_GetSn and its retry
+    sim.model.lose_replies(1)  # COM_GetSn: a getter the host asks on its own is not retried
     ident = client.identity()
     assert ident.serial_number == '' and ident.firmware == '2.24.0'
     assert 'no reply' in ident.problems['COM_GetSn']
     assert 'COM_GetSn' not in client.unsupported  # a timeout is not "unknown"
+    assert [r.name for r in client.unanswered.silent()] == ['COM_GetSn']  # back-off
+    assert client.connected  # one unanswered getter is not a silent device
 
 
 # ------------------------------------------------------------------ rule 3: partial device
@@ -211,13 +214,30 @@ def test_sensor_polls_stop_once_not_answered_with_data(connect, model):
     assert sent(sim, 'IMU_GetPitch') == 0
 
 
-def test_a_timeout_of_a_sensor_poll_does_not_stop_it(connect):
-    sim, client = connect(timeout=0.1, max_timeouts=5)
-    sim.model.lose_replies(2)
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_a_timeout_of_a_sensor_poll_backs_off_and_does_not_stop_it(connect):
+    """An unanswered sensor getter is asked once (no retry), then not again until its
+    back-off runs out (nothing sent meanwhile), then again: not "unsupported"."""
+    sim, client = connect(timeout=0.1, max_timeouts=1)
+    client.unanswered = Unanswered(first=1.0, longest=4.0, clock=(clock := FakeClock()))
+    sim.model.lose_replies(1)
     with pytest.raises(DeviceTimeout):
         client.gps_fix()
+    assert sent(sim, 'GPS_PositionReady') == 1  # not retried
+    assert client.connected  # max_timeouts=1, yet an optional getter is not silence
+    with pytest.raises(BackingOff, match='GPS_PositionReady: unanswered 1 time'):
+        client.gps_fix()
+    assert sent(sim, 'GPS_PositionReady') == 1  # backing off: nothing sent
+    clock.now += 1.0
     assert client.gps_fix() is not None
-    assert not client.unsupported
+    assert not client.unsupported and client.unanswered.silent() == []
 
 
 # ------------------------------------------------------------------ the adapter and controller
