@@ -301,8 +301,8 @@ def explain_latency(results: dict, cause: str, label: str = '') -> None:
 
 
 def check_targets(results: dict, rate_target_hz: float | None = None) -> None:
-    """``results['targets']``: each issue-7 target with the measured value, met or not, and
-    the margin (positive = better than the target)."""
+    """``results['targets']``: each target (bench/README.md, "Targets") with the measured
+    value, met or not, and the margin (positive = better than the target)."""
     checks: dict[str, tuple[float | None, float, bool]] = {
         'codec decode >= 100,000 frames/s': (
             results.get('codec', {}).get('decode_frames_per_s'), 100_000.0, True),

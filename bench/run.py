@@ -88,7 +88,7 @@ def main() -> int:
     return 0 if not any('error' in v for v in results.values() if isinstance(v, dict)) else 1
 
 
-#: issue 12: a node uses at most this multiple of a bare rclpy publisher's CPU at its rate
+#: a node uses at most this multiple of a bare rclpy publisher's CPU at its rate
 CPU_RATIO_TARGET = 1.5
 
 

@@ -1,6 +1,6 @@
 """Tracking: a 100 Hz interpolated trajectory through ros2_control's topic interface.
 
-What a user's ros2_control stack does with a driver (issue 23): the controller manager at
+What a user's ros2_control stack does with a driver: the controller manager at
 100 Hz, a joint_trajectory_controller running a rest-to-rest trajectory (its quintic
 spline), joint_state_topic_hardware_interface writing every cycle to the node's
 joint_command. ``trajectory_publisher.py`` (its own process) plays that with the package's

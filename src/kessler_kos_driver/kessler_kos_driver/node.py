@@ -163,7 +163,7 @@ class KosDriverNode(KosServices, GimbalDriverNode):
             'fraction of each motor\'s MaxMaxAcceleration used for moves and jogs',
             value_range=(0.01, 1.0))
         # Positions come from MotorInfo polls, so the poll runs at publish_rate by default:
-        # joint_states then arrive at publish_rate (issue 12; a fixed 0.05 s gave 20 Hz).
+        # joint_states then arrive at publish_rate (a fixed 0.05 s gave 20 Hz).
         self.poll_period = self.declare_param(
             'poll_period', 1.0 / self.publish_rate,
             's between (Get)MotorInfo state polls (default 1/publish_rate; 0 = notifications '

@@ -4,7 +4,7 @@ The joints are ordered ``[pan, tilt, slider]`` (motor addresses 2, 3, 1): the ba
 scans sweep the *first* joint, and with the package default ``[slider, pan, tilt]`` a
 sector "pan" scan would drive the slider.
 
-Units (issue 22): the simulator's ``--precalibrated`` axes (``sim.DEFAULT_RANGES``: slider
+Units: the simulator's ``--precalibrated`` axes (``sim.DEFAULT_RANGES``: slider
 0..200 rotations, pan 0..100, tilt 0..-40) are the example rig of the node's defaults and
 the URDF, in SI, through ``calibrated_spans`` and ``joint_offsets`` (:data:`SIM_RIG`):
 

@@ -31,7 +31,7 @@ MOTION_SETUP = ('MOT_SetPositionMode', 'MOT_SetSpeedMode', 'MOT_SetPositionAbsol
                 'MOT_SetPositionRelative', 'MOT_SetAcceleration', 'MOT_SetSpeed',
                 'MOT_SendPosition', 'MOT_Update')
 #: named command subsets for ``known_commands`` (``--only``): controllers that know only
-#: part of the table (issue 26)
+#: part of the table (a third-party simulator, firmware without some subsystems)
 KNOWN_SETS: dict[str, tuple[str, ...]] = {
     # a third-party Cap-Track simulator: motion, load position and speed, voltage, current,
     # the motor error register and COM_Connect (it ACKs the rest: ``--ack-unknown``)

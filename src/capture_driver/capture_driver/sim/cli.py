@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--only', action='append', default=None, metavar='NAMES',
                         help='play a device that knows only these table commands (comma-'
                              'separated, repeatable; the sets ' + ', '.join(KNOWN_SETS)
-                             + ' name the command subsets of issue 26); the rest get 0xA6, '
+                             + ' name what partial controllers know); the rest get 0xA6, '
                              'or an ACK with --ack-unknown')
     parser.add_argument('--ack-unknown', action='store_true',
                         help='answer ACK (0x06) instead of NACK 0xA6 to every opcode the '

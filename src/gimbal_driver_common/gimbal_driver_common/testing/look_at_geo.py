@@ -38,7 +38,7 @@ from gimbal_driver_common.testing.look_at import installed_description
 from gimbal_driver_common.testing.ros import joint_positions
 from gimbal_msgs.action import LookAtGeo
 
-#: the independent check's tolerance (deg), issue 24
+#: the independent check's tolerance (deg)
 ANGLE_TOLERANCE_DEG = 0.1
 #: mean earth radius for the independent elevation (m): the drop over a few km differs
 #: from the ellipsoid's by far less than the tolerance
