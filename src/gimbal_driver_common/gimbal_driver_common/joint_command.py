@@ -44,9 +44,6 @@ class JointLimits:
         if not self.velocity_max > 0:
             raise ValueError(f'velocity_max must be > 0, got {self.velocity_max}')
 
-    def clamp_position(self, position: float) -> float:
-        return min(max(position, self.position_min), self.position_max)
-
 
 @dataclass
 class CommandPlan:

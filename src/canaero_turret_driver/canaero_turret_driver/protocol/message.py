@@ -140,10 +140,6 @@ class CanAerospaceMessage:
             raw = raw.ljust(8, b"\x00")
         return raw
 
-    def with_message_code(self, message_code: int) -> CanAerospaceMessage:
-        return CanAerospaceMessage(self.can_id, self.node_id, self.data_type,
-                                   self.service_code, message_code, self.payload)
-
     def describe(self) -> str:
         """Short text for logs."""
         try:

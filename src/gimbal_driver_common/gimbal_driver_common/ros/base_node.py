@@ -191,10 +191,6 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
     def active(self) -> bool:
         return self._active
 
-    @property
-    def latest_sample(self) -> JointSample | None:
-        return self.controller.latest if self.controller else None
-
     def current_positions(self) -> dict[str, float]:
         return self.controller.positions() if self.controller else {}
 
@@ -209,9 +205,6 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         if self.controller is None:
             return self.command_refusal()
         return self.controller.refusal(list(joints))
-
-    def axes_busy(self) -> str | None:
-        return self.controller.busy() if self.controller else None
 
     def serve_request(self, response: object, action: Callable[[], str]) -> object:
         """Answer a service with ``success``/``message`` from ``action()``.

@@ -126,14 +126,6 @@ class BlockId(IntEnum):
     SEGMENT = 6
 
 
-class AuxInputBit(IntEnum):
-    MASTER_TIP = 0
-    MASTER_RING = 1
-    SLAVE_TIP = 2
-    SLAVE_RING = 3
-    SLAVE_CONTROLLER_PRESENT = 4
-
-
 @dataclass(frozen=True)
 class ErrorCodeInfo:
     code: int

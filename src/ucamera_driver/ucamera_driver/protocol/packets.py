@@ -186,9 +186,6 @@ class Packet:
         """Complete wire packet (range-checked)."""
         return encode_frame(self.CATEGORY, self.PACKET_ID, self.to_payload())
 
-    def to_frame(self) -> Frame:
-        return Frame(self.CATEGORY, self.PACKET_ID, self.to_payload())
-
 
 class _EmptyPacket(Packet):
     FORMAT = "<"
