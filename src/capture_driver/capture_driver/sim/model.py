@@ -16,6 +16,8 @@ from collections import deque
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
+from gimbal_driver_common.sim_requests import RequestFaults
+
 from ..protocol import BY_OPCODE, COMMANDS, Frame, GeoPoint, PresetRecord, ProtocolError, ReplyCode
 from ..protocol import registers as reg
 from ..protocol.datatypes import DataType, encode_value
@@ -118,6 +120,9 @@ class PedestalModel(CommandHandlers):
         self.nack_queue: deque[tuple[ReplyCode, int | None]] = deque()
         self.nack_all: ReplyCode | None = None  # NACK every request with this code
         self.drop_replies = 0
+        #: commands never answered (``mute``: received, not executed) or answered late
+        #: (``delay``: the session holds the reply); by table command name
+        self.request_faults = RequestFaults()
         #: play a controller that takes one packet per receive and drops the rest (the
         #: worst case for the client's batched reads; see CaptureClient.read_many)
         self.one_request_per_read = False
@@ -349,6 +354,9 @@ class PedestalModel(CommandHandlers):
             self.requests.append(frame)
             if len(self.requests) > 5000:
                 del self.requests[:1000]
+            command = BY_OPCODE.get(frame.opcode)
+            if command is not None and self.request_faults.muted(command.name):
+                return b''  # mute: received and dropped, never executed or answered
             if self.nack_all is not None:
                 self.protocol_error = f'injected NACK 0x{int(self.nack_all):02X}'
                 return bytes([self.nack_all])

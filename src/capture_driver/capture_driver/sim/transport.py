@@ -10,6 +10,7 @@ from gimbal_driver_common.sim_control import (
     control_request,
     control_state,
 )
+from gimbal_driver_common.sim_requests import LateReplies
 from gimbal_driver_common.sim_server import PtySimServer, TcpSimServer
 
 from ..protocol import BY_OPCODE, COMMANDS, Frame, ReplyByte, ReplyCode, StreamDecoder
@@ -18,7 +19,13 @@ from .model import PedestalModel
 
 
 class CaptureSession:
-    """One connection: byte parsing, the TCP greeting and reply generation."""
+    """One connection: byte parsing, the TCP greeting and reply generation.
+
+    The reply to a delayed command (``delay``), an ACK byte or a data packet alike, waits in
+    :attr:`late` until the server's poll writes it on this connection, whole, after the
+    replies to the requests that came meanwhile: an ACK carries no opcode, so the host sees
+    it as the answer to whatever it asked last, as from a real controller that answers late.
+    """
 
     def __init__(self, model: PedestalModel, greet: bool, each_reply: bool = False) -> None:
         self.model = model
@@ -26,10 +33,11 @@ class CaptureSession:
         self.decoder = StreamDecoder()
         self.connected = False
         self._greeting = COMMANDS['COM_Connect'].encode() if greet else b''
+        self.late: LateReplies[bytes] = LateReplies()
 
     def poll(self) -> bytes:
         greeting, self._greeting = self._greeting, b''
-        return greeting
+        return greeting + b''.join(self.late.due())
 
     def on_bytes(self, data: bytes) -> bytes | list[bytes]:
         replies: list[bytes] = []
@@ -39,7 +47,13 @@ class CaptureSession:
                 if handled and self.model.one_request_per_read:
                     continue
                 handled = True
-                replies.append(bytes(self.model.handle(item, self)))
+                reply = bytes(self.model.handle(item, self))
+                command = BY_OPCODE.get(item.opcode)
+                seconds = self.model.request_faults.delay_of(command.name) if command else 0.0
+                if seconds and reply:
+                    self.late.hold([reply], seconds)
+                else:
+                    replies.append(reply)
             elif isinstance(item, ReplyByte):
                 continue  # the host never sends reply bytes; ignore
             elif item.reason == 'checksum mismatch':
@@ -113,7 +127,9 @@ class CaptureSimulator:
         control = SimControl('capture_sim', self.state, links=links, nack=self._nack,
                              fault=self._fault, fault_names=(*FAULTS, *SYSTEM_FAULTS),
                              clear_device=model.clear_injected,
-                             axes=lambda: model.axes.values())
+                             axes=lambda: model.axes.values(),
+                             request_names=lambda: COMMANDS,
+                             request_faults=model.request_faults)
         control.add_verb('lose', lambda a: model.lose_replies(int(a[0]) if a else 1),
                          'lose [COUNT]')
         control.add_verb('unknown', lambda a: self._toggle(model.unknown_opcodes, a),
