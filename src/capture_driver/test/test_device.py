@@ -393,3 +393,42 @@ def test_a_move_to_drops_the_joint_commands_queued_behind_a_busy_link(tcp_rig):
     assert tcp_rig.sim_axis(2).velocity == 0.0
     assert tcp_rig.sim_axis(2).position == pytest.approx(tilt_before, abs=1e-6)
     assert ctl.commanded_targets.get('pan') == pytest.approx(-0.2)
+
+
+def test_a_stop_goes_ahead_of_a_sensor_read_queued_for_the_link(tcp_rig):
+    """Issue 39 item 2, over TCP: with an exchange in flight and an IMU read waiting for the
+    link, ~/stop is the next request the pedestal gets."""
+    ctl, sim = tcp_rig.controller, tcp_rig.sim
+    client = tcp_rig.device.client
+    taken, release, reading = threading.Event(), threading.Event(), threading.Event()
+
+    def hold_link() -> None:
+        with tcp_rig.device.link_lock:
+            taken.set()
+            release.wait(10.0)
+
+    def read_imu() -> None:
+        reading.set()
+        client.imu()
+
+    holder = threading.Thread(target=hold_link, daemon=True)
+    holder.start()
+    assert taken.wait(5.0)
+    since = len(sim.model.requests)
+    try:
+        reader = threading.Thread(target=read_imu, daemon=True)
+        reader.start()
+        assert reading.wait(5.0)
+        wait_for(lambda: tcp_rig.device.link_lock.waiting() == 1, 5.0,
+                 'the IMU read waiting for the link')
+        stopper = threading.Thread(target=ctl.stop, daemon=True)
+        stopper.start()
+        wait_for(lambda: tcp_rig.device.link_lock.waiting(urgent=True) == 1, 5.0,
+                 'the stop waiting')
+    finally:
+        release.set()
+    for thread in (holder, reader, stopper):
+        thread.join(10.0)
+    names = [BY_OPCODE[frame.opcode].name for frame in list(sim.model.requests)[since:]]
+    imu = names.index('IMU_GetRoll')
+    assert 'SCN_StopScan' in names[:imu], names  # the stop went first

@@ -135,12 +135,14 @@ class CommandPath:
         return posted
 
     # -------------------------------------------------------- other senders
-    def send(self, joints: Sequence[str] | None, request: Callable[[], object]) -> None:
+    def send(self, joints: Sequence[str] | None, request: Callable[[], object],
+             urgent: bool = False) -> None:
         """Run another send (move_to, a stop) now: the queued commands of ``joints``
         (None: all) are dropped, a posted write is settled first and not sent again for
-        them. The caller's own refusals raise (device_boundary)."""
+        them. ``urgent`` (a stop): next on the link after the exchange in flight, ahead of
+        every queued read. The caller's own refusals raise (device_boundary)."""
         self.drop(joints)  # before the lock's settle, which would send them again
-        with self.lock:
+        with self.lock.urgent() if urgent else self.lock:
             self.drop(joints)  # and what the caller queued meanwhile
             with device_boundary():
                 request()

@@ -330,7 +330,7 @@ class GimbalController:
                 scans.stop()
             self.device.stop(None if joints is None else list(joints))
 
-        self.commands.send(joints, send)
+        self.commands.send(joints, send, urgent=True)  # ahead of every queued read
         self.motion_watch.withdraw(joints)
 
     def _on_jog_expired(self, joints: list[str]) -> None:

@@ -19,17 +19,20 @@ from collections import deque
 
 
 class FairRLock:
-    """Reentrant, first come first served: ``release`` hands the lock to the oldest waiter."""
+    """Reentrant, first come first served: ``release`` hands the lock to the oldest waiter,
+    an urgent one (a stop) before every other."""
 
     def __init__(self) -> None:
         self._mutex = threading.Lock()
         self._owner: int | None = None
         self._count = 0
         self._waiters: deque[tuple[int, threading.Lock]] = deque()
+        self._urgent: deque[tuple[int, threading.Lock]] = deque()
 
-    def acquire(self, blocking: bool = True) -> bool:
+    def acquire(self, blocking: bool = True, urgent: bool = False) -> bool:
         """Take the lock; ``blocking=False`` returns False at once when another thread
-        holds it or waits for it (a waiter is not overtaken)."""
+        holds it or waits for it (a waiter is not overtaken). ``urgent``: go ahead of
+        every waiter that is not urgent itself (a stop before the queued reads)."""
         me = threading.get_ident()
         with self._mutex:
             if self._owner == me:
@@ -42,9 +45,14 @@ class FairRLock:
                 return False
             gate = threading.Lock()
             gate.acquire()
-            self._waiters.append((me, gate))
+            (self._urgent if urgent else self._waiters).append((me, gate))
         gate.acquire()  # released by the holder that hands the lock to this thread
         return True
+
+    def waiting(self, urgent: bool = False) -> int:
+        """How many threads wait for the lock (``urgent``: the urgent ones only)."""
+        with self._mutex:
+            return len(self._urgent) + (0 if urgent else len(self._waiters))
 
     def release(self) -> None:
         with self._mutex:
@@ -53,8 +61,9 @@ class FairRLock:
             self._count -= 1
             if self._count:
                 return
-            if self._waiters:
-                self._owner, gate = self._waiters.popleft()
+            queue = self._urgent or self._waiters
+            if queue:
+                self._owner, gate = queue.popleft()
                 self._count = 1
                 gate.release()
             else:

@@ -18,12 +18,15 @@ The callback's one non-blocking try (:meth:`LinkLock.try_hold`) does not settle:
 only when nothing is posted.
 
 Fair (:class:`~gimbal_driver_common.fair_lock.FairRLock`): a command stream sent back to
-back does not starve the joint poll.
+back does not starve the joint poll. A stop (``~/stop``, the dead-man stop, a cancelled
+goal's stop) holds it with :meth:`LinkLock.urgent`: it goes next after the exchange in
+flight, ahead of every queued read.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator
 
 from gimbal_driver_common.fair_lock import FairRLock
 
@@ -39,16 +42,34 @@ class LinkLock:
         self.before_use: Callable[[], None] = lambda: None
 
     def __enter__(self) -> LinkLock:
-        self._lock.acquire()
+        self.hold()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self._lock.release()
+
+    def hold(self, urgent: bool = False) -> None:
+        """Take the lock (``urgent``: ahead of every queued exchange that is not urgent,
+        for a stop) and settle a posted write; give it back with :meth:`release`."""
+        self._lock.acquire(urgent=urgent)
         try:
             self.before_use()
         except BaseException:
             self._lock.release()
             raise
-        return self
 
-    def __exit__(self, *exc_info: object) -> None:
-        self._lock.release()
+    @contextlib.contextmanager
+    def urgent(self) -> Iterator[LinkLock]:
+        """``with lock.urgent():`` a stop's exchange, next after the one in flight."""
+        self.hold(urgent=True)
+        try:
+            yield self
+        finally:
+            self._lock.release()
+
+    def waiting(self, urgent: bool = False) -> int:
+        """How many exchanges wait for the link (``urgent``: the stops only)."""
+        return self._lock.waiting(urgent)
 
     def try_hold(self) -> bool:
         """Take the lock if nobody holds or waits for it, without settling anything (the

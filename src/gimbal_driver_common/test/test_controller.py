@@ -935,3 +935,35 @@ def test_a_new_motion_command_drops_the_joint_commands_queued_before_it(
         sent = list(device.sent)
     assert ('move', {'pan': (0.5, None)}) not in sent, sent
     assert ('jog', {'tilt': 0.3}) not in sent, sent
+
+
+@pytest.mark.parametrize('stop', ['~/stop', 'dead-man'])
+def test_a_stop_goes_ahead_of_the_reads_queued_for_the_link(controller, device, stop) -> None:
+    """Issue 39 item 2: while one exchange is in flight and reads wait for the link (a
+    sensor, a status register), a stop is the next thing on the link."""
+    if stop == 'dead-man':
+        controller.command(['pan'], [], [0.5])
+        wait_for(lambda: ('jog', {'pan': 0.5}) in device.sent, 2.0, 'the jog')
+    waiting = []
+
+    def queued_read(name: str) -> None:
+        waiting.append(name)
+        with device.link_lock, device.lock:
+            device.sent.append(('read', name))
+
+    with link_held(controller):
+        readers = [threading.Thread(target=queued_read, args=(name,), daemon=True)
+                   for name in ('imu', 'registers')]
+        for reader in readers:
+            reader.start()
+        wait_for(lambda: len(waiting) == 2, 2.0, 'two reads waiting for the link')
+        if stop == '~/stop':
+            stopper = threading.Thread(target=controller.stop, daemon=True)
+            stopper.start()
+        wait_for(lambda: controller.commands.lock.waiting(urgent=True) == 1, 5.0,
+                 'the stop queued')
+    for reader in readers:
+        reader.join(5.0)
+    wait_for(lambda: device.kinds().count('read') == 2, 2.0, 'both reads done')
+    kinds = [kind for kind in device.kinds() if kind in ('stop', 'read')]
+    assert kinds[0] == 'stop', device.sent

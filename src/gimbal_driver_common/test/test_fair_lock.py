@@ -45,6 +45,24 @@ def test_waiters_are_served_in_the_order_they_asked() -> None:
     assert order == [0, 1, 2, 3, 4]
 
 
+def test_an_urgent_waiter_goes_before_every_other_waiter() -> None:
+    """A stop queued behind three reads is next after the holder; urgent ones in turn."""
+    lock, order = FairRLock(), []
+    lock.acquire()
+    threads = []
+    for index, urgent in enumerate([False, False, True, False, True]):
+        thread = threading.Thread(target=lambda i=index, u=urgent: (
+            lock.acquire(urgent=u), order.append(i), lock.release()))
+        thread.start()
+        wait_for(lambda n=index + 1: lock.waiting() == n, 5.0,
+                 f'waiter {index}')
+        threads.append(thread)
+    lock.release()
+    for thread in threads:
+        thread.join(5.0)
+    assert order == [2, 4, 0, 1, 3]
+
+
 def test_it_is_reentrant_and_only_its_holder_releases_it() -> None:
     lock, refused = FairRLock(), []
 
