@@ -12,9 +12,15 @@ one of these variables is set, and Python imports this module at start-up:
   publication (start, end) is recorded too, to relate a command's delay to its phase in
   the node's device cycle.
 * ``BENCH_EXECUTOR=events``: ``run_driver`` spins ``rclpy.experimental.EventsExecutor``
-  instead of ``MultiThreadedExecutor(num_threads=4)`` (an experiment; see bench/README.md).
+  instead of ``InlineGroupExecutor(num_threads=4)`` (an experiment; see bench/HISTORY.md,
+  "EventsExecutor experiment").
 * ``BENCH_EXECUTOR=single``: ``rclpy.executors.SingleThreadedExecutor`` (an experiment:
   it serialises the blocking action callbacks, so ``~/stop`` waits behind a ``move_to``).
+
+The executor is swapped from here, outside the driver: ``run_driver`` builds
+``run.InlineGroupExecutor(num_threads=4)``, a module global looked up when it runs, so this
+hook replaces that name with a class of the experiment (see ``_experiment_executor``);
+nothing in ``gimbal_driver_common`` exists for the bench's sake.
 * ``BENCH_SWITCH_INTERVAL_S``: the GIL switch interval instead of the driver's 1 ms.
 * ``BENCH_THREAD_CPU_DIR``: the node writes ``<dir>/threads_<pid>.json`` (native thread id
   -> Python thread name) every 0.5 s, so the bench can split the node's CPU by thread.
@@ -23,6 +29,29 @@ one of these variables is set, and Python imports this module at start-up:
 from __future__ import annotations
 
 import os
+
+
+def _experiment_executor(name: str) -> type:
+    """A stand-in for ``run.InlineGroupExecutor``: called as ``run_driver`` calls it
+    (``num_threads=4``), it returns the executor ``BENCH_EXECUTOR`` names. It is a class, not
+    a function, because ``run.answer_open_goals`` asks ``isinstance(executor,
+    InlineGroupExecutor)`` (false here: the experiment has no pool tasks to wait for).
+    rclpy's ``EventsExecutor`` is a factory function, so this builds and does not subclass."""
+    import rclpy.executors
+    import rclpy.experimental
+
+    if name == 'events':
+        make = rclpy.experimental.EventsExecutor
+    elif name == 'single':
+        make = rclpy.executors.SingleThreadedExecutor
+    else:
+        raise ValueError(f"BENCH_EXECUTOR={name!r}: expected 'events' or 'single'")
+
+    class ExperimentExecutor:
+        def __new__(cls, num_threads: int = 4, *, context: object = None) -> object:
+            return make(context=context)
+
+    return ExperimentExecutor
 
 
 def _install() -> None:
@@ -36,14 +65,8 @@ def _install() -> None:
     from gimbal_driver_common.ros import base_node, run
 
     executor = os.environ.get('BENCH_EXECUTOR', '')
-    if executor == 'events':
-        from rclpy.experimental import EventsExecutor
-
-        run.MultiThreadedExecutor = lambda num_threads=None: EventsExecutor()
-    elif executor == 'single':
-        from rclpy.executors import SingleThreadedExecutor
-
-        run.MultiThreadedExecutor = lambda num_threads=None: SingleThreadedExecutor()
+    if executor:
+        run.InlineGroupExecutor = _experiment_executor(executor)
     interval = os.environ.get('BENCH_SWITCH_INTERVAL_S')
     if interval:
         run.GIL_SWITCH_INTERVAL_S = float(interval)   # run_driver applies it
@@ -128,7 +151,7 @@ def _install() -> None:
 
     def dump() -> None:
         path = Path(trace_dir, f'trace_{os.getpid()}.json')
-        path.write_text(json.dumps({'executor': executor or 'MultiThreadedExecutor(4)',
+        path.write_text(json.dumps({'executor': executor or 'InlineGroupExecutor(4)',
                                     'records': records, 'joint_states': joint_states}))
 
     atexit.register(dump)

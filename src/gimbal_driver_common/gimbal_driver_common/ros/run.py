@@ -16,7 +16,6 @@ from rclpy.executors import (
     ConditionReachedException,
     Executor,
     ExternalShutdownException,
-    MultiThreadedExecutor,
     ShutdownException,
     TimeoutException,
 )
@@ -62,9 +61,7 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
         rclpy.logging.get_logger(node_class.__name__).fatal(f'invalid parameter: {exc}')
         rclpy.try_shutdown()
         return 2
-    executor = MultiThreadedExecutor(num_threads=4)  # the class is swapped by bench hooks
-    if type(executor) is MultiThreadedExecutor:
-        executor = InlineGroupExecutor(num_threads=4)
+    executor = InlineGroupExecutor(num_threads=4)
     executor.add_node(node)
     spinner = threading.Thread(target=_spin, args=(executor, stop), name='executor',
                                daemon=True)
