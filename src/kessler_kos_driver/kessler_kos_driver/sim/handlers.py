@@ -54,6 +54,11 @@ if TYPE_CHECKING:
 
 LOG = logging.getLogger('kessler_kos_sim')
 
+#: the client messages the device answers (``mute``/``delay`` take these names)
+REQUESTS = tuple(message.__name__ for message in (
+    GetDeviceGuid, GetDeviceInfo, GetLedStatus, GetMotorInfo, GetNetworkInfo, GetSoftwareId,
+    GetTrajectoryData))
+
 
 class MessageHandlers:
     """The client messages of :class:`~.model.SimulatedRig`, a base of it whose state they
@@ -63,6 +68,8 @@ class MessageHandlers:
     def handle(self, message: Message, frame: bytes, session: KosSession) -> None:
         """Apply one decoded client message; replies go to session.outbox."""
         self.frames_received += 1
+        if self.request_faults.muted(type(message).__name__):
+            return  # mute: received and dropped, never acted on or answered
         out = session.outbox
         if not session.unlocked and not isinstance(message, ALLOWED_WHILE_LOCKED):
             return   # "the Device will simply ignore most messages"

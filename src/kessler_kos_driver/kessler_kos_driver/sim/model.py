@@ -6,6 +6,8 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
+from gimbal_driver_common.sim_requests import RequestFaults
+
 from ..protocol import (
     DOCUMENTED_MAXIMA,
     DeviceInfo,
@@ -58,6 +60,9 @@ class SimulatedRig(MessageHandlers):
         self.frames_received = 0
         self.photos_taken = 0
         self.reboot_requested = False
+        #: requests never answered (``mute``: received, dropped) or answered late
+        #: (``delay``: the session holds the reply), by message name (:data:`REQUESTS`)
+        self.request_faults = RequestFaults()
 
     # ----------------------------------------------------------------- notifications
     def broadcast(self, message: Message) -> None:

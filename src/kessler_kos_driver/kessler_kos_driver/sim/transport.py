@@ -10,6 +10,7 @@ import threading
 import time
 
 from gimbal_driver_common.sim_control import ControlServer, SimControl, control_request
+from gimbal_driver_common.sim_requests import LateReplies
 from gimbal_driver_common.sim_server import TcpSimServer
 
 from ..protocol import (
@@ -23,6 +24,7 @@ from ..protocol import (
     decode,
 )
 from ..protocol.usb import REPORT_SIZE, USB_KEEPALIVE, ReportReassembler, encode_reports
+from .handlers import REQUESTS
 from .model import SimulatedRig
 from .motor import SimSettings, _Playback
 
@@ -30,7 +32,11 @@ LOG = logging.getLogger('kessler_kos_sim')
 
 
 class KosSession:
-    """One TCP connection or USB HID link: framing, lock state, keep-alive, reply queue."""
+    """One TCP connection or USB HID link: framing, lock state, keep-alive, reply queue.
+
+    The replies to a delayed request (``delay``) wait in :attr:`late`; :meth:`poll` (the
+    server's, or the HID device's read) sends them when due, whole, between other messages.
+    """
 
     def __init__(self, device: SimulatedRig, usb: bool = False) -> None:
         self.device = device
@@ -41,6 +47,7 @@ class KosSession:
         self.outbox: list[bytes] = []
         self.last_rx = time.monotonic()
         self.malformed = 0
+        self.late: LateReplies[bytes] = LateReplies()
         with device.lock:
             device.sessions.append(self)
 
@@ -61,7 +68,12 @@ class KosSession:
                     if self.unlocked:
                         self.outbox.append(UnsupportedMessage(frame[:64]).encode())
                     continue
+                answered = len(self.outbox)
                 device.handle(message, frame, self)
+                seconds = device.request_faults.delay_of(type(message).__name__)
+                if seconds and len(self.outbox) > answered:
+                    self.late.hold(self.outbox[answered:], seconds)
+                    del self.outbox[answered:]
             return self._drain()
 
     def poll(self) -> bytes:
@@ -77,7 +89,7 @@ class KosSession:
             return self._drain()
 
     def _drain(self) -> bytes:
-        data = b''.join(self.outbox)
+        data = b''.join(self.outbox + self.late.due())
         self.outbox.clear()
         return data
 
@@ -259,7 +271,8 @@ class KosSimulator:
             no_nack='kOS answers a bad request with ErrorStatus (see fault and error), '
                     'it has no negative acknowledge',
             fault=self._fault, fault_names=('axis',), clear_device=self._clear_injected,
-            axes=lambda: device.motors.values())
+            axes=lambda: device.motors.values(), request_names=lambda: REQUESTS,
+            request_faults=device.request_faults)
         control.add_verb('offline', lambda a: device.set_motor_online(int(a[0]), False),
                          'offline MOTOR')
         control.add_verb('online', lambda a: device.set_motor_online(int(a[0]), True),
