@@ -344,3 +344,32 @@ def test_a_drive_off_is_named_after_the_registers_that_said_so(drive, model, nam
         assert absent not in refusal
         assert not any(key.startswith(f'{absent}.') for key in keys), sorted(keys)
         assert absent not in parts['pan'].message
+
+
+def test_a_register_the_device_never_answers_is_named_and_backs_off(drive):
+    """Issue 39 item 1: with ERR_OperationRegister muted in the simulator, the device
+    stays connected (not "silent"), the joints still move and report, and the device status
+    is WARN naming the register; it is not asked back to back."""
+    sim, device, controller = drive()
+    device.client.unanswered = Unanswered(clock=FakeClock())  # its back-off never runs out
+    before = sent(sim, 'ERR_OperationRegister')
+    sim.model.request_faults.mute('ERR_OperationRegister')
+    device.expire_status()
+    wait_for(lambda: device.client.unanswered.silent(), 20.0, 'the register unanswered')
+    controller.command(['pan'], [0.1], [])
+    wait_for(lambda: at(controller, {'pan': 0.1}), 20.0, 'the move carried out')
+    assert controller.connected and controller.reconnects == 0
+    parts = {p.part: p for p in device.capabilities.status.parts()}
+    assert parts['device'].level == Level.WARN
+    assert 'unanswered: ERR_OperationRegister (axis 1)' in parts['device'].message
+    values = dict(parts['device'].values)
+    assert values['unanswered.ERR_OperationRegister (axis 1)'].startswith('1 time(s) in a row')
+    device.expire_status()
+    wait_for(lambda: device.status_snapshot() is not None, 10.0, 'another register poll')
+    asked = sent(sim, 'ERR_OperationRegister') - before
+    assert asked <= 5, asked  # pan and tilt: in a batch and once alone each, then backing off
+    sim.model.request_faults.clear()
+    device.client.unanswered.clear()  # the back-off ran out (not waited for here)
+    device.expire_status()
+    wait_for(lambda: all(p.level == Level.OK for p in device.capabilities.status.parts()),
+             20.0, 'the register answered again')
