@@ -5,7 +5,7 @@ and the package READMEs resolves in the repository; nothing in the repository po
 it (``../shared``); user documents name no issue numbers; and the commands the top README
 shows are ones the workspace really has: its ``make`` targets exist in the Makefile and
 ``.ci/run`` runs its test command, its ``ros2 launch`` line loads and runs under the launch
-stand-in (tests/launch_standin.py) with those arguments and starts the node with the
+stand-in (gimbal_driver_common.testing.launch_standin) with those arguments and starts the node with the
 README's parameters file, whose keys the driver's reference lists, and its ``ros2 topic``,
 ``ros2 action`` and ``ros2 service`` lines name interfaces of the reference with their
 types and message fields that exist, and its Capture walkthrough (parameters file, move, jog,
@@ -21,10 +21,11 @@ import shlex
 import subprocess
 from pathlib import Path
 
-import launch_standin
 import pytest
 import yaml
 from test_reference import COMMON_REFERENCE, reference_entries
+
+from gimbal_driver_common.testing import launch_standin
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / 'README.md'
@@ -157,12 +158,19 @@ def test_readme_launch_line_runs_with_its_arguments(monkeypatch, tmp_path: Path)
             written = tmp_path / given['params_file']
             written.write_text(yaml.safe_dump(params))
             given['params_file'] = str(written)
-        context = launch_standin.run(description, given)
+        context = launch_standin.run(description, given, tmp_path)
         node = context.launched[-1]
         assert node.package == package and node.parameters[1]['autostart'] is True
         if 'params_file' in given:
             assert node.parameters[0] == Path(given['params_file'])
-            section = params[node.name]['ros__parameters']
+            assert set(params) == {'/**'}, 'key the README parameters file /** (any namespace)'
+            section = params['/**']['ros__parameters']
+            # what the node gets from the launch's command line, under a namespace too
+            for namespace in ('', 'robot/gimbal'):
+                started = launch_standin.run(description, {**given, 'namespace': namespace},
+                                             tmp_path).launched[-1]
+                resolved = launch_standin.node_parameters(started.cmd)
+                assert {k: resolved[k] for k in section} == section, namespace
             listed = {name for kind, name in interface(package) if kind == 'parameter'}
             assert set(section) <= listed, set(section) - listed
 

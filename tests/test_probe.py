@@ -69,7 +69,7 @@ def test_the_probe_finds_each_simulator_and_sends_only_reads(simulator: SimHandl
     assert f'({spec.name} driver, node {spec.node_name})' in text, text
     changes = [r for r in simulator.requests() if simulator.changing(r)]
     assert not changes, f'the probe sent requests that change the device: {changes}'
-    found = yaml.safe_load(output.read_text())[spec.node_name]['ros__parameters']
+    found = yaml.safe_load(output.read_text())['/**']['ros__parameters']
     for key in ('host', 'port', 'serial_port', 'can_channel', 'can_interface'):
         if key in parameters:
             assert found[key] == parameters[key], key
@@ -125,7 +125,7 @@ def test_a_turret_at_another_node_id_is_found_by_listening(tmp_path: Path) -> No
         server.stop()
     assert status == probe_cli.EXIT_FOUND, text
     assert 'turret_node_id 7' in text
-    found = yaml.safe_load(output.read_text())['canaero_turret_driver']['ros__parameters']
+    found = yaml.safe_load(output.read_text())['/**']['ros__parameters']
     assert (found['turret_node_id'], found['can_bitrate']) == (7, 500000)
 
 
@@ -276,7 +276,7 @@ def test_the_installed_executable(simulator: SimHandle, tmp_path: Path) -> None:
         capture_output=True, text=True, timeout=60, check=False)
     assert result.returncode == 0, result.stdout + result.stderr
     assert 'Found: virtual gimbal' in result.stdout
-    assert yaml.safe_load(output.read_text()) == {'virtual_gimbal_driver': {
+    assert yaml.safe_load(output.read_text()) == {'/**': {
         'ros__parameters': {'host': '127.0.0.1', 'port': simulator.port}}}
 
 

@@ -92,10 +92,15 @@ def split_host_port(text: str) -> tuple[str, int]:
 
 
 def parameters_yaml(found: Sequence[Found]) -> str:
-    """A ROS 2 parameters file: ``<node_name>: ros__parameters: {...}`` per device."""
+    """A ROS 2 parameters file the launch's ``params_file`` applies under any namespace:
+    ``/**: ros__parameters: {...}`` for one device (any node name, as config/*.yaml), and
+    ``/**/<node_name>:`` per device when several answered, so each keeps its own values
+    (rclpy matches a key's ``/**`` against any run of names of the node's full name:
+    rclpy/src/rclpy/node.cpp ``_populate_node_parameters_from_rcl_params``)."""
     document: dict[str, Any] = {}
     for device in found:
-        document[device.node_name] = {'ros__parameters': dict(device.parameters)}
+        key = '/**' if len(found) == 1 else f'/**/{device.node_name}'
+        document[key] = {'ros__parameters': dict(device.parameters)}
     return yaml.safe_dump(document, sort_keys=False, default_flow_style=False)
 
 

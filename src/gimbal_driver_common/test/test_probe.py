@@ -123,7 +123,14 @@ def test_the_parameters_file_has_the_ros2_params_shape() -> None:
     device = found(4949)
     device.node_name = 'capture_driver'
     document = yaml.safe_load(probe_cli.parameters_yaml([device]))
-    assert document == {'capture_driver': {'ros__parameters': {'host': 'h', 'port': 4949}}}
+    assert document == {'/**': {'ros__parameters': {'host': 'h', 'port': 4949}}}
+    # several devices: one section each, still under any namespace
+    other = found(5520)
+    other.node_name = 'kessler_kos_driver'
+    document = yaml.safe_load(probe_cli.parameters_yaml([device, other]))
+    assert document == {'/**/capture_driver': {'ros__parameters': {'host': 'h', 'port': 4949}},
+                        '/**/kessler_kos_driver': {'ros__parameters': {'host': 'h',
+                                                                      'port': 5520}}}
 
 
 @pytest.mark.parametrize(('text', 'expected'), [
@@ -173,7 +180,7 @@ def test_the_cli_prints_the_device_and_writes_the_file(monkeypatch: pytest.Monke
     assert 'Found: fake (kos driver, node kos_driver)' in text
     assert 'identity: serial S1' in text
     written = yaml.safe_load(output.read_text())
-    assert written == {'kos_driver': {'ros__parameters': {'host': 'h', 'port': 5520}}}
+    assert written == {'/**': {'ros__parameters': {'host': 'h', 'port': 5520}}}
 
 
 def test_nothing_found_says_what_was_tried_and_exits_1(monkeypatch: pytest.MonkeyPatch,

@@ -63,7 +63,7 @@ def test_the_sim_rig_spans_lie_over_the_simulators_calibrated_ranges():
 
 def test_the_sim_config_file_is_the_sim_rig():
     config = yaml.safe_load((PACKAGE / 'config' / 'kessler_kos_driver_sim.yaml').read_text())
-    parameters = config['kessler_kos_driver']['ros__parameters']
+    parameters = config['/**']['ros__parameters']
     expected = sim_rig_parameters(tuple(parameters['joint_names']))
     for name, values in expected.items():
         assert parameters[name] == pytest.approx(values, abs=1e-12), name

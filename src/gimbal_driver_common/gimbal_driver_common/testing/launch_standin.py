@@ -22,16 +22,37 @@ the jazzy branch of ros2/launch and ros2/launch_ros, file and function named bel
 * ``OpaqueFunction`` calls its function when it is reached
   (launch/launch/actions/opaque_function.py, ``execute``).
 * ``Node``/``LifecycleNode`` resolve name, namespace, parameters and remappings when they
-  are executed (launch_ros/launch_ros/actions/node.py, ``Node._perform_substitutions``);
-  a dict value that is a substitution is performed and read as YAML
-  (launch_ros/launch_ros/utilities/evaluate_parameters.py, ``evaluate_parameter_dict``), a
-  parameter file is a path that must be a file (else a warning and it is left out);
+  are executed and build the command line as launch_ros does
+  (launch_ros/launch_ros/actions/node.py, ``Node.__init__``, ``Node._perform_substitutions``
+  and ``Node.execute``): ``<exe> [arguments] [--ros-args ros_arguments] --ros-args
+  [-r __node:=NAME] [-r __ns:=NS] [--params-file FILE]... [-r FROM:=TO]...``. The namespace
+  is made absolute (launch_ros/utilities/namespace_utils.py, ``prefix_namespace`` and
+  ``make_namespace_absolute``: ``''`` becomes ``/``). Each entry of ``parameters`` becomes one
+  ``--params-file`` in order: a path as it is (one that is not a file: a warning, left out),
+  a dict written to a temporary file keyed with the node's full name when name and namespace
+  are both given, else ``/**`` (node.py ``_create_params_file_from_dict``); a dict value that
+  is a substitution is performed and read as YAML
+  (launch_ros/launch_ros/utilities/evaluate_parameters.py, ``evaluate_parameter_dict``).
   ``LifecycleNode`` takes ``name`` and ``namespace`` as required keywords
   (launch_ros/launch_ros/actions/lifecycle_node.py). Every ``Node`` command line gets
-  ``--ros-args`` (node.py ``Node.__init__``), so a program that is not a ROS node runs
+  ``--ros-args``, so a program that is not a ROS node runs
   through ``ExecuteProcess`` with ``ExecutableInPackage``
   (launch_ros/launch_ros/substitutions/executable_in_package.py: the executable in
   ``<prefix>/lib/<package>``, else ``SubstitutionFailure``).
+
+:func:`node_parameters` then says what the started node gets from that command line, by
+rcl's and rclpy's rules: every ``--params-file`` and ``-p`` goes, in command-line order, into
+one table of node-name keys (rcl/src/rcl/arguments.c ``_rcl_parse_param_file`` and
+``_rcl_parse_param_rule``, a ``-p`` being keyed ``/**``; rcl_yaml_param_parser/src/parse.c
+``parse_key``: nested keys above ``ros__parameters`` are joined with ``/``, ``find_node``
+keeps the keys in the order first seen), and a node takes, key by key in that order, the
+values of every key that matches its full name with ``/*`` read as one ``/name`` and ``/**``
+as any run of them (rclpy/src/rclpy/node.cpp ``_populate_node_parameters_from_rcl_params``:
+a key without a leading ``/`` gets one; ``std::regex_match`` of the rewritten key). A file
+keyed ``capture_driver:`` therefore reaches ``/capture_driver`` only, never
+``/robot/gimbal/capture_driver``.
+
+The tests start the real node from :attr:`Launched.cmd` too, so rclpy itself applies the files.
 
 ``install()`` puts these classes in ``sys.modules`` under the real module names; each
 executed process is recorded as a :class:`Launched` (its command line and, for nodes, the
@@ -41,7 +62,9 @@ resolved parameters) in the order launch would start them.
 from __future__ import annotations
 
 import importlib.util
+import re
 import sys
+import tempfile
 import types
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -76,10 +99,12 @@ class Launched:
 
 
 class LaunchContext:
-    def __init__(self) -> None:
+    def __init__(self, params_dir: Path | None = None) -> None:
         self.launch_configurations: dict[str, str] = {}
         self.launched: list[Launched] = []
         self.warnings: list[str] = []
+        #: where dict parameters are written (launch_ros: NamedTemporaryFile in the temp dir)
+        self.params_dir = params_dir
 
 
 def perform(context: LaunchContext, value: object) -> str:
@@ -243,31 +268,136 @@ class Node(Action):
         package = perform(context, self.package) if self.package is not None else ''
         executable = perform(context, self.executable)
         name = perform(context, self.name) if self.name is not None else None
-        namespace = perform(context, self.namespace) if self.namespace is not None else ''
-        if namespace and not namespace.startswith('/'):
-            namespace = '/' + namespace  # make_namespace_absolute
+        namespace = (perform(context, self.namespace) if self.namespace is not None
+                     else None)
+        namespace = _absolute(_prefix(context.launch_configurations.get('ros_namespace'),
+                                      namespace))
+        full_name = (None if name is None or namespace is None
+                     else _prefix(namespace, name))
         parameters: list[Path | dict[str, Any]] = []
+        files: list[str] = []
         for entry in self.parameters:
             if isinstance(entry, dict):
-                parameters.append({perform(context, k): _yaml_value(context, str(k), v)
-                                   for k, v in entry.items()})
+                values = {perform(context, k): _yaml_value(context, str(k), v)
+                          for k, v in entry.items()}
+                parameters.append(values)
+                files.append(_params_file(context, full_name, values))
                 continue
             path = Path(perform(context, entry))
             if not path.is_file():
                 context.warnings.append(f'Parameter file path is not a file: {path}')
                 continue
             parameters.append(path)
+            files.append(str(path))
         remappings = [(perform(context, a), perform(context, b)) for a, b in self.remappings]
         path = (find_executable(package, executable) if package not in NOT_HERE
                 else f'{package}/lib/{executable}') if package else executable
-        cmd = [path, *(perform(context, a) for a in self.arguments), '--ros-args',
-               *(perform(context, a) for a in self.ros_arguments)]
+        cmd = [path, *(perform(context, a) for a in self.arguments)]
+        if self.ros_arguments:
+            cmd += ['--ros-args', *(perform(context, a) for a in self.ros_arguments)]
+        cmd.append('--ros-args')
         if name is not None:
             cmd += ['-r', f'__node:={name}']
-        if namespace:
+        if namespace is not None:
             cmd += ['-r', f'__ns:={namespace}']
-        context.launched.append(Launched(self.kind, cmd, package, executable, name, namespace,
-                                         parameters, remappings))
+        for file in files:
+            cmd += ['--params-file', file]
+        for source, target in remappings:
+            cmd += ['-r', f'{source}:={target}']
+        context.launched.append(Launched(self.kind, cmd, package, executable, name,
+                                         namespace or '', parameters, remappings))
+
+
+def _prefix(base: str | None, namespace: str | None) -> str | None:
+    """namespace_utils.prefix_namespace."""
+    if base is None and namespace is None:
+        return None
+    if namespace is None:
+        combined = base
+    elif not base or namespace.startswith('/'):
+        combined = namespace
+    else:
+        combined = ('' if base == '/' else base) + '/' + namespace
+    return combined if combined == '/' else combined.rstrip('/')
+
+
+def _absolute(namespace: str | None) -> str | None:
+    """namespace_utils.make_namespace_absolute."""
+    if namespace is None or namespace.startswith('/'):
+        return namespace
+    return '/' + namespace
+
+
+def _params_file(context: LaunchContext, full_name: str | None,
+                 values: dict[str, Any]) -> str:
+    """Node._create_params_file_from_dict: the dict under the node's full name (``/**``
+    when launch does not know it), in a file of its own."""
+    with tempfile.NamedTemporaryFile('w', prefix='launch_params_', delete=False,
+                                     dir=context.params_dir) as handle:
+        yaml.dump({full_name or '/**': {'ros__parameters': values}}, handle,
+                  default_flow_style=False)
+        return handle.name
+
+
+def _key_matches(key: str, full_name: str) -> bool:
+    """rclpy node.cpp _populate_node_parameters_from_rcl_params: '/' prepended if missing,
+    then every ``/*`` replaced by ``(/\\w+)`` (so ``/**`` becomes ``(/\\w+)*``) and the
+    result used as a regular expression that must match the whole full name."""
+    key = key if key.startswith('/') else '/' + key
+    return re.fullmatch(key.replace('/*', r'(/\w+)'), full_name) is not None
+
+
+def _flatten(prefix: str, value: object, into: dict[str, Any]) -> None:
+    """Nested parameter maps become dotted names (parse.c: the parameter namespace)."""
+    if isinstance(value, dict):
+        for key, sub in value.items():
+            _flatten(f'{prefix}.{key}' if prefix else str(key), sub, into)
+    else:
+        into[prefix] = value
+
+
+def _node_sections(document: dict[str, Any], above: str = '') -> list[tuple[str, dict]]:
+    """(node key, flat parameters) of a parameters file, keys above ros__parameters joined
+    with '/' (parse.c parse_key, MAP_NODE_NAME_LVL)."""
+    sections: list[tuple[str, dict]] = []
+    for key, value in document.items():
+        name = f'{above}/{key}' if above else str(key)
+        if not isinstance(value, dict):
+            raise ValueError(f'{name}: no ros__parameters under a node name')
+        if 'ros__parameters' in value:
+            flat: dict[str, Any] = {}
+            _flatten('', value['ros__parameters'] or {}, flat)
+            sections.append((name, flat))
+        others = {k: v for k, v in value.items() if k != 'ros__parameters'}
+        sections += _node_sections(others, name) if others else []
+    return sections
+
+
+def node_parameters(cmd: Sequence[str], full_name: str | None = None) -> dict[str, Any]:
+    """The parameter overrides rclpy gives the node that ``cmd`` starts (its full name from
+    ``__node``/``__ns`` in ``cmd`` unless given), by the rules in this module's docstring."""
+    node, namespace = Path(cmd[0]).name, '/'
+    table: dict[str, dict[str, Any]] = {}  # key -> values, in the order keys were first seen
+    i = 0
+    while i < len(cmd):
+        if cmd[i] == '-r' and cmd[i + 1].startswith('__node:='):
+            node = cmd[i + 1].split(':=', 1)[1]
+        elif cmd[i] == '-r' and cmd[i + 1].startswith('__ns:='):
+            namespace = cmd[i + 1].split(':=', 1)[1]
+        elif cmd[i] == '--params-file':
+            document = yaml.safe_load(Path(cmd[i + 1]).read_text()) or {}
+            for key, values in _node_sections(document):
+                table.setdefault(key, {}).update(values)
+        elif cmd[i] == '-p':
+            name, _, value = cmd[i + 1].partition(':=')
+            table.setdefault('/**', {})[name] = yaml.safe_load(value)
+        i += 2 if cmd[i] in ('-r', '--params-file', '-p') else 1
+    full_name = full_name or _prefix(namespace, node)
+    resolved: dict[str, Any] = {}
+    for key, values in table.items():
+        if _key_matches(key, full_name):
+            resolved.update(values)
+    return resolved
 
 
 class LifecycleNode(Node):
@@ -313,11 +443,12 @@ def load_description(path: Path) -> LaunchDescription:
     return module.generate_launch_description()
 
 
-def run(description: LaunchDescription, arguments: dict[str, str] | None = None
-        ) -> LaunchContext:
+def run(description: LaunchDescription, arguments: dict[str, str] | None = None,
+        params_dir: Path | None = None) -> LaunchContext:
     """Launch ``description`` as `ros2 launch ... name:=value` would; the context records
-    what was started (``launched``) and the warnings launch would log."""
-    context = LaunchContext()
+    what was started (``launched``) and the warnings launch would log. Dict parameters are
+    written to ``params_dir`` (default: the temp dir, as launch_ros does)."""
+    context = LaunchContext(params_dir)
     entities: list[object] = [SetLaunchConfiguration(k, v) for k, v in (arguments or {}).items()]
     entities.append(description)
     for entity in entities:
