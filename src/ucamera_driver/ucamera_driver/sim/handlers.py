@@ -33,6 +33,10 @@ from ..protocol import (
 
 LOG = logging.getLogger("ucamera_sim")
 
+#: the UCSP requests the gimbal answers (``mute``/``delay`` take these packet names)
+REQUESTS = tuple(packet.__name__ for packet in (
+    AntennaPositionRequest, TelemetryRateRequest, VersionRequest))
+
 
 class CommandHandlers:
     """The commands of :class:`~.model.UCameraModel`, a base of it whose state they read
@@ -48,6 +52,8 @@ class CommandHandlers:
                 self.ignored[name] = self.ignored.get(name, 0) + 1
                 return []
             self.received[name] = self.received.get(name, 0) + 1
+            if self.request_faults.muted(name):
+                return []  # mute: received and dropped, never answered
             answers: list[Packet] = []
             if isinstance(packet, SetMode):
                 if packet.mode in set(GimbalMode):

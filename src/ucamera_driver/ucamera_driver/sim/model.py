@@ -9,6 +9,7 @@ import time
 from dataclasses import dataclass, field
 
 from gimbal_driver_common.sim_motion import AxisMotion
+from gimbal_driver_common.sim_requests import RequestFaults
 
 from ..protocol import (
     AnglesReport,
@@ -95,6 +96,9 @@ class UCameraModel(CommandHandlers):
         self.nv: dict[str, object] = {}
         self.received: dict[str, int] = {}
         self.ignored: dict[str, int] = {}
+        #: requests never answered (``mute``: received, dropped) or answered late
+        #: (``delay``: the session holds the answer), by packet name (:data:`REQUESTS`)
+        self.request_faults = RequestFaults()
         self._last_step = clock()
 
     # --- simulation step -------------------------------------------------

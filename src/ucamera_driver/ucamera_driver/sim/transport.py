@@ -9,6 +9,7 @@ import time
 from dataclasses import dataclass, field
 
 from gimbal_driver_common.sim_control import ControlError, SimControl
+from gimbal_driver_common.sim_requests import LateReplies
 from gimbal_driver_common.sim_server import PtySimServer
 
 from ..protocol import (
@@ -18,6 +19,7 @@ from ..protocol import (
     expected_payload_length,
     mode_name,
 )
+from .handlers import REQUESTS
 from .model import SimConfig, UCameraModel
 
 LOG = logging.getLogger("ucamera_sim")
@@ -52,12 +54,15 @@ class Faults:
 
 
 class UCameraSession:
-    """One link's byte handling (the server makes one per pty generation)."""
+    """One link's byte handling (the server makes one per pty generation). The answer to a
+    delayed request (``delay``) waits in :attr:`late` until :meth:`poll` writes it, whole,
+    between the periodic reports."""
 
     def __init__(self, sim: UCameraSim) -> None:
         self._sim = sim
         self._parser = FrameParser(expected_payload_length)
         self._next_report = 0.0
+        self.late: LateReplies[bytes] = LateReplies()
 
     def on_bytes(self, data: bytes) -> bytes:
         out = bytearray()
@@ -68,8 +73,13 @@ class UCameraSession:
                 self._sim.bad_packets += 1
                 LOG.debug("ignored frame: %s", exc)
                 continue
-            for answer in self._sim.model.handle(packet):
-                out += self._sim.faults.apply(answer.encode())
+            answers = [self._sim.faults.apply(answer.encode())
+                       for answer in self._sim.model.handle(packet)]
+            seconds = self._sim.model.request_faults.delay_of(type(packet).__name__)
+            if seconds and answers:
+                self.late.hold(answers, seconds)
+            else:
+                out += b"".join(answers)
         self._sim.checksum_errors = self._parser.stats.checksum_errors
         return bytes(out)
 
@@ -77,11 +87,13 @@ class UCameraSession:
         model = self._sim.model
         now = time.monotonic()
         model.step(now)
-        if model.silent(now) or now < self._next_report:
+        if model.silent(now):  # a held answer waits for the gimbal to speak again
             return b""
+        out = bytearray(b"".join(self.late.due(now)))
+        if now < self._next_report:
+            return bytes(out)
         period = 1.0 / max(1, model.telemetry_rate)
         self._next_report = max(self._next_report + period, now - period)
-        out = bytearray()
         for report in model.periodic_reports():
             out += self._sim.faults.apply(report.encode())
         return bytes(out)
@@ -168,7 +180,8 @@ class UCameraSim:
                 no_nack="UCSP has no acknowledge or negative acknowledge",
                 no_fault="UCSP reports no fault register (and has no fault reset)",
                 clear_device=self._clear_injected,
-                axes=lambda: (self.model.pan, self.model.tilt))
+                axes=lambda: (self.model.pan, self.model.tilt),
+                request_names=lambda: REQUESTS, request_faults=self.model.request_faults)
             control.add_verb("noise", lambda a: self.inject_noise(int(a[0]) if a else 64),
                              "noise [N] (random bytes with false 0xCC syncs)")
             control.add_verb("noise_rate", lambda a: self.set_noise_rate(float(a[0])),
