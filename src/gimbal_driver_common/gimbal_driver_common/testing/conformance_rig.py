@@ -204,7 +204,8 @@ class ConformanceHelpers(RegisteredDriver):
         prefix = f'{self.node_name}: '
         return [s for s in array.status if s.name.startswith(prefix)]
 
-    def wait_connection(self, ros: RosTestClient, level: int, timeout: float = 30.0
-                        ) -> DiagnosticStatus:
+    def wait_connection(self, ros: RosTestClient, level: int, timeout: float = 30.0,
+                        since: int | None = None) -> DiagnosticStatus:
         return ros.wait_for_diagnostic(self.node_name, 'connection',
-                                       lambda s: s.level[0] == level, timeout=timeout)
+                                       lambda s: s.level[0] == level, timeout=timeout,
+                                       since=since)

@@ -10,6 +10,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 from action_msgs.msg import GoalStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from lifecycle_msgs.msg import Transition
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
@@ -93,8 +94,12 @@ class RestartConformance(ConformanceHelpers):
         # a reconnect that comes quickly cannot hide the disconnected messages
         statuses = ros.subscribe(self.srv('status'), GimbalStatus)
         wait_for(lambda: statuses, 15.0, 'a first ~/status')
+        # /diagnostics too: the link may be back (2 s) before the refused command below is
+        # counted, and the STALE joints were published while it was down
+        diagnostics = ros.subscribe('/diagnostics', DiagnosticArray)
+        dropped_at = len(diagnostics)
         rig.sim.drop_link(2.0)
-        status = self.wait_connection(ros, ERROR)
+        status = self.wait_connection(ros, ERROR, since=dropped_at)
         assert self.link_lost_text in status.message, status.message
         # a joint_command while the link is down is refused and counted by its reason
         key = 'refused: device not connected'
@@ -107,7 +112,8 @@ class RestartConformance(ConformanceHelpers):
 
         wait_for(refused_while_down, 20.0, 'a joint_command refused while disconnected')
         # the axes' last values are stale, and ~/status says the link is down
-        ros.wait_for_diagnostic(self.node_name, self.joints[0], lambda s: s.level[0] == STALE)
+        ros.wait_for_diagnostic(self.node_name, self.joints[0], lambda s: s.level[0] == STALE,
+                                since=dropped_at)
         wait_for(lambda: any(m.connection != GimbalStatus.CONNECTION_CONNECTED
                              for m in list(statuses)), 15.0, 'a ~/status saying the link is down')
         status = self.wait_connection(ros, OK, timeout=40)

@@ -139,11 +139,13 @@ class RosTestClient:
 
     def wait_for_message(
         self, topic: str, msg_type: type, predicate: Callable[[Any], bool] | None = None,
-        timeout: float = 15.0, fresh: bool = True,
+        timeout: float = 15.0, fresh: bool = True, since: int | None = None,
     ) -> Any:
-        """Wait for a message on ``topic`` matching ``predicate`` (only new ones if ``fresh``)."""
+        """Wait for a message on ``topic`` matching ``predicate`` (only new ones if ``fresh``;
+        ``since``: from that index of the recorded list on, for a state that may have come
+        and gone before the wait began)."""
         received = self.subscribe(topic, msg_type)
-        start = len(received) if fresh else 0
+        start = since if since is not None else len(received) if fresh else 0
 
         def match() -> Any:
             with self._lock:
@@ -157,14 +159,17 @@ class RosTestClient:
     def wait_for_diagnostic(
         self, node: str, part: str,
         predicate: Callable[[DiagnosticStatus], bool] | None = None, timeout: float = 15.0,
+        since: int | None = None,
     ) -> DiagnosticStatus:
-        """Wait for a new ``<node>: <part>`` status on /diagnostics matching ``predicate``."""
+        """Wait for a new ``<node>: <part>`` status on /diagnostics matching ``predicate``
+        (``since``: recorded from that index on, see :meth:`wait_for_message`)."""
 
         def match(array: DiagnosticArray) -> bool:
             status = find_diagnostic(array, node, part)
             return status is not None and (predicate is None or predicate(status))
 
-        array = self.wait_for_message('/diagnostics', DiagnosticArray, match, timeout)
+        array = self.wait_for_message('/diagnostics', DiagnosticArray, match, timeout,
+                                      since=since)
         return find_diagnostic(array, node, part)
 
     def mean_stamp_gap(self, topic: str, msg_type: type, count: int,
