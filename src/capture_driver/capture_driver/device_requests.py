@@ -293,7 +293,7 @@ class DeviceRequests:
         self.run('GPS_SetTargetLLA', target, point)
         self.run('GPS_GoToTarget', target)
 
-    # ------------------------------------- issue 15: first-class device functions
+    # -------------------------------------------------- first-class device functions
     def set_tracking(self, camera: int, mode: int) -> None:
         """VDT_setTrackingOn: 0 off, 1 manual, 2 automatic (4.11.1) for camera 0..3."""
         self.run('VDT_setTrackingOn', camera, mode)
