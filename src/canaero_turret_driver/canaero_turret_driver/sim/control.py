@@ -7,7 +7,7 @@ import math
 from gimbal_driver_common.sim_control import ControlError, SimControl
 
 from .axis import YAW
-from .model import TurretSimulator
+from .model import REQUESTS, TurretSimulator
 
 FAULT_NAMES = ("drive", "case_sensor")
 
@@ -19,7 +19,8 @@ def make_control(simulator: TurretSimulator, link: object | None = None) -> SimC
     ``silence on|off`` silences every CAN node (the slcan adapter keeps answering, as a
     real adapter on a bus whose nodes went quiet); ``fault drive [yaw|pitch]`` trips a
     drive (EED + disabled axis), ``fault case_sensor`` the periphery's case sensor.
-    Device verbs: node_silence, lose, repeat, malformed, eed.
+    Device verbs: node_silence, lose, repeat, malformed, eed. ``mute``/``delay`` take the
+    node services the nodes answer (IDS, DDS, DUS, TIS, FPS, NIS).
     """
 
     def silence(silent: bool) -> None:
@@ -71,7 +72,8 @@ def make_control(simulator: TurretSimulator, link: object | None = None) -> SimC
         no_nack="CANaerospace services have no negative acknowledge the turret sends; its "
                 "error path is the EED event (fault, eed)",
         fault=fault, fault_names=FAULT_NAMES, clear_device=simulator.clear_faults,
-        axes=lambda: simulator.axes.values())
+        axes=lambda: simulator.axes.values(), request_names=lambda: REQUESTS,
+        request_faults=simulator.request_faults)
     control.add_verb("node_silence", node_silence,
                      "node_silence NODE|all [on|off|SECONDS] "
                      "(NODE: turret, cover, rover_gnss, base_gnss, zoom)")

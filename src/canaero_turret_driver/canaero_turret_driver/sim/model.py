@@ -10,6 +10,8 @@ from collections.abc import Callable
 
 import can
 
+from gimbal_driver_common.sim_requests import LateReplies, RequestFaults
+
 from ..protocol import nodeservice as ns
 from ..protocol.datatypes import DataType
 from ..protocol.eed import build_eed
@@ -43,6 +45,11 @@ from .axis import (
 from .handlers import CommandHandlers
 
 LOG = logging.getLogger("canaero_turret_sim")
+
+#: the node services the simulated nodes answer (``mute``/``delay`` take these names)
+REQUESTS = tuple(service.name for service in (
+    ns.ServiceCode.IDS, ns.ServiceCode.DDS, ns.ServiceCode.DUS, ns.ServiceCode.TIS,
+    ns.ServiceCode.FPS, ns.ServiceCode.NIS))
 
 
 class TurretSimulator(CommandHandlers):
@@ -106,6 +113,10 @@ class TurretSimulator(CommandHandlers):
         self._repeat: dict[int, int] = {}
         self._malformed_pending = 0
         self._outbox: list[can.Message] = []
+        #: node services never answered (``mute``: received, dropped) or answered late
+        #: (``delay``: the responses wait in ``_late`` for :meth:`poll`), by service name
+        self.request_faults = RequestFaults()
+        self._late: LateReplies[tuple[int, can.Message]] = LateReplies(clock)
         self.memories: dict[int, Memory] = {  # turret node memories by MEMID
             SCRATCH_MEMORY_ID: Memory(bytearray(64), writable=True),
             IDENT_MEMORY_ID: Memory(bytearray(b"CANAERO-TURRET-SIM hw2 sw7\0"),
@@ -209,6 +220,9 @@ class TurretSimulator(CommandHandlers):
                 self.cover_state = CoverState(self._cover_target)
                 self._cover_target = None
             out, self._outbox = self._outbox, []
+            # late service responses go on the bus unless their node has fallen silent since
+            out.extend(frame for node_id, frame in self._late.due(now)
+                       if not self._is_silent(node_id, now))
             for can_id, interval in self._intervals.items():
                 if interval <= 0 or now < self._next_due[can_id]:
                     continue
@@ -280,7 +294,16 @@ class TurretSimulator(CommandHandlers):
                 channel, is_request = service
                 if not is_request:
                     return []
-                return [self._frame(reply) for reply in self._service(message, channel)]
+                name = service_name(message.service_code)
+                if self.request_faults.muted(name):
+                    return []  # mute: received and dropped, never served or answered
+                replies = list(self._service(message, channel))
+                seconds = self.request_faults.delay_of(name)
+                if seconds and replies:
+                    self._late.hold([(reply.node_id, self._frame(reply)) for reply in replies],
+                                    seconds)
+                    return []
+                return [self._frame(reply) for reply in replies]
             ident = self._table.get(message.can_id)
             if ident is None or ident.direction is not Direction.COMMAND:
                 return []
@@ -371,3 +394,11 @@ class TurretSimulator(CommandHandlers):
                                     self.received_commands[-10:]],
                 "malformed_received": self.malformed_received,
             }
+
+
+def service_name(code: int) -> str:
+    """A node service's name (``IDS``, ``TIS``, ...), or its number for one the ICD lacks."""
+    try:
+        return ns.ServiceCode(code).name
+    except ValueError:
+        return str(code)
