@@ -11,9 +11,11 @@ system state) whose bits follow the motion.
 Axes run on the shared trapezoidal model (``gimbal_driver_common.sim_motion``). Fault
 injection (methods of :class:`PedestalModel`, and the shared control verbs of
 ``gimbal_driver_common.sim_control`` on stdin and the ``--control-port`` console: drop,
-silence, garbage, nack, fault, clear, state, quit, plus Capture's lose, unknown, wrong, pose,
-detect, dio, count): latched axis and system faults, NACK replies, lost replies, garbage
-bytes, a silent device and a dropped link, replies of the wrong kind (``wrong``). A device
+silence, garbage, nack, fault, ignore_motion, mute, delay, clear, state, quit, plus
+Capture's lose, unknown, wrong, pose, detect, dio, count): latched axis and system faults,
+NACK replies, lost replies, garbage bytes, a silent device and a dropped link, replies of
+the wrong kind (``wrong``), a command never answered (``mute``) or answered late
+(``delay``: the session holds the reply, an ACK byte or a data packet). A device
 that knows only part of the table (``known_commands`` / ``--only``, ``unknown_commands`` /
 ``--unknown``) answers the rest with NACK 0xA6, or with an ACK (``ack_unknown`` /
 ``--ack-unknown``) as a third-party controller does.
