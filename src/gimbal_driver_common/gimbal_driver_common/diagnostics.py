@@ -8,6 +8,7 @@ Levels use DiagnosticStatus numbering so no ROS import is needed here.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -93,7 +94,9 @@ class FrequencyMonitor:
     """Measures an event rate over a sliding window (like diagnostic_updater's FrequencyStatus).
 
     ``tick`` on every published message; ``status`` compares the measured rate
-    with the expected one within ``tolerance`` (0.1 = +-10 %).
+    with the expected one within ``tolerance`` (0.1 = +-10 %). Thread-safe (ticks come from
+    the device thread, samples from the diagnostics timer, rate changes from parameters),
+    as FrequencyStatus keeps its statistics under a lock.
     """
 
     def __init__(self, expected_hz: float, tolerance: float = 0.1, window: int = 5) -> None:
@@ -102,9 +105,12 @@ class FrequencyMonitor:
         self._window = window
         self._counts: list[tuple[float, int]] = []
         self._count = 0
+        self._lock = threading.Lock()
+        self._publish_rate: float | None = None
 
     def tick(self) -> None:
-        self._count += 1
+        with self._lock:
+            self._count += 1
 
     def sample(self, now: float, live: bool = True) -> None:
         """Call periodically (each diagnostics period) to close a window slot.
@@ -114,24 +120,51 @@ class FrequencyMonitor:
         periods after publishing resumes: a healthy device read WARN "frequency too low"
         for a few seconds after activation (seen in a full test run).
         """
-        if not live:
-            self._counts.clear()
-            return
-        self._counts.append((now, self._count))
-        if len(self._counts) > self._window:
-            self._counts.pop(0)
+        with self._lock:
+            if not live:
+                self._counts.clear()
+                return
+            self._counts.append((now, self._count))
+            if len(self._counts) > self._window:
+                self._counts.pop(0)
+
+    def restart(self) -> None:
+        """Start the window again at the newest sample, as diagnostic_updater's
+        ``FrequencyStatus.clear()`` (diagnostic_updater/_update_functions.py, and
+        update_functions.hpp) resets its history: the rate is then measured only over what
+        was published after it. Here the window starts at the newest sample rather than at
+        the call, so the first rate after a restart spans a whole period, never a few ms."""
+        with self._lock:
+            self._counts = self._counts[-1:]
+
+    def follow_publish_rate(self, publish_rate: float) -> None:
+        """The node's ``publish_rate`` now: when it changed since the last call, the window
+        restarts (:meth:`restart`), so a window that is half old rate, half new does not read
+        "too low" or "too high" for ``window`` periods. Call it after :meth:`sample` of the
+        same period: that sample was taken after the change and starts the new window."""
+        with self._lock:
+            changed = self._publish_rate is not None and publish_rate != self._publish_rate
+            self._publish_rate = publish_rate
+        if changed:
+            self.restart()
 
     @property
     def rate_hz(self) -> float:
-        if len(self._counts) < 2:
-            return 0.0
-        (t0, c0), (t1, c1) = self._counts[0], self._counts[-1]
-        return (c1 - c0) / (t1 - t0) if t1 > t0 else 0.0
+        return self._measured()[0]
+
+    def _measured(self) -> tuple[float, bool]:
+        """(rate, whether the window has two samples yet), from one view of the window."""
+        with self._lock:
+            counts = list(self._counts)
+        if len(counts) < 2:
+            return 0.0, False
+        (t0, c0), (t1, c1) = counts[0], counts[-1]
+        return ((c1 - c0) / (t1 - t0) if t1 > t0 else 0.0), True
 
     def status(self) -> tuple[Level, str]:
-        if len(self._counts) < 2:
+        rate, measured = self._measured()
+        if not measured:
             return Level.OK, 'measuring'
-        rate = self.rate_hz
         low = self.expected_hz * (1.0 - self.tolerance)
         high = self.expected_hz * (1.0 + self.tolerance)
         if rate == 0.0:

@@ -11,6 +11,13 @@ position, or which was told to jog, and which has not moved within
 position), it is logged once per axis and episode, and a running goal ends at once with
 :meth:`reason`.
 
+A stalled episode ends when the axis moves (or reaches its target) or when a new motion
+command for that axis is accepted, not on a stop: the stop that ends the goal it aborted
+would otherwise clear the WARN before the next diagnostics publish, and nobody would see
+it (docs/interface.md). A stop (or a superseding command of other axes) ends an episode
+that has not stalled yet, so a stopped axis is never reported. A command stream to an
+axis that still ignores it is one episode (the same command again does not restart it).
+
 What counts as motion: a position that changed by more than :data:`MOTION_EPSILON` since
 the command, and nothing else. A "moving" bit or a speed is not trusted here: some
 adapters derive the bit from what was commanded (U-Camera), some devices report the
@@ -46,6 +53,9 @@ class Episode:
     start: float | None       # the position when it was commanded (None: not known yet)
     position: float = math.nan
     stalled: bool = False
+    #: stopped or superseded after it stalled: still shown, no longer waited for (a goal
+    #: does not end on it, it does not go on as a stream)
+    withdrawn: bool = False
 
     def describe(self, joint: str, timeout: float) -> str:
         what = (f'target {self.target:.4f}' if self.target is not None
@@ -85,26 +95,36 @@ class MotionWatch:
             for joint, velocity in velocities.items():
                 direction = math.copysign(1.0, velocity)
                 if velocity == 0.0:
-                    self._episodes.pop(joint, None)
-                    self._running_jogs.pop(joint, None)
+                    self._withdraw(joint)
                 elif self._running_jogs.get(joint) != direction:
                     self._running_jogs.pop(joint, None)
                     self._start(joint, None, velocity)
 
     def withdraw(self, joints: Iterable[str] | None = None) -> None:
-        """The commands were stopped or superseded (None: every joint)."""
+        """The commands were stopped or superseded (None: every joint). An episode that
+        has not stalled ends; a stalled one stays shown until the axis moves or a new
+        command for it is accepted."""
         with self._lock:
+            for joint in list(self._episodes) if joints is None else joints:
+                self._withdraw(joint)
             if joints is None:
-                self._episodes.clear()
                 self._running_jogs.clear()
-            for joint in joints or ():
-                self._episodes.pop(joint, None)
-                self._running_jogs.pop(joint, None)
+
+    def _withdraw(self, joint: str) -> None:
+        self._running_jogs.pop(joint, None)
+        episode = self._episodes.get(joint)
+        if episode is None:
+            return
+        if episode.stalled:
+            episode.withdrawn = True
+        else:
+            del self._episodes[joint]
 
     def _start(self, joint: str, target: float | None, velocity: float) -> None:
         position = self._position(joint)
         episode = self._episodes.get(joint)
-        if episode is None or (episode.target is None) != (target is None):
+        if episode is None or episode.withdrawn or \
+                (episode.target is None) != (target is None):
             episode = Episode(target, velocity, time.monotonic(), position)
             self._episodes[joint] = episode
         episode.target, episode.velocity = target, velocity
@@ -143,7 +163,7 @@ class MotionWatch:
                 moved = abs(position - episode.start) > MOTION_EPSILON
                 if reached or moved:
                     del self._episodes[joint]
-                    if moved and episode.target is None:
+                    if moved and episode.target is None and not episode.withdrawn:
                         self._running_jogs[joint] = math.copysign(1.0, episode.velocity)
                 elif timeout > 0 and now - episode.since >= timeout and not episode.stalled:
                     episode.stalled = True
@@ -154,12 +174,13 @@ class MotionWatch:
 
     # ------------------------------------------------------------- reading
     def stalled(self) -> dict[str, Episode]:
-        """The stalled joints now (a copy)."""
+        """The stalled joints now, withdrawn ones included (what diagnostics show; a copy)."""
         with self._lock:
             return {j: Episode(**vars(e)) for j, e in self._episodes.items() if e.stalled}
 
     def reason(self, joints: Iterable[str]) -> str | None:
-        """Why a goal on ``joints`` cannot end well, or None."""
-        stalled = self.stalled()
+        """Why a goal on ``joints`` cannot end well, or None (only commands still waited
+        for: a withdrawn episode is shown, not waited for)."""
+        stalled = {j: e for j, e in self.stalled().items() if not e.withdrawn}
         found = [stalled[j].describe(j, self._timeout()) for j in joints if j in stalled]
         return '; '.join(found) if found else None

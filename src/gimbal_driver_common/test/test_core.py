@@ -269,6 +269,40 @@ def test_a_pause_in_publishing_does_not_read_as_a_low_rate_afterwards() -> None:
     monitor.sample(3.0)
     assert monitor.status() == (Level.OK, '50.0 Hz')
 
+def test_a_new_publish_rate_restarts_the_window() -> None:
+    """diagnostic_updater's FrequencyStatus.clear(): after publish_rate goes from 10 to 50
+    Hz the window no longer mixes both rates (it read "too low" for a whole window)."""
+    def run(monitor: FrequencyMonitor, start: float, rate: int, periods: int) -> float:
+        for step in range(periods):
+            for _ in range(rate):
+                monitor.tick()
+            monitor.sample(start + step + 1)
+        return start + periods
+
+    restarted, mixed = FrequencyMonitor(10.0), FrequencyMonitor(10.0)
+    for monitor in (restarted, mixed):
+        monitor.sample(0.0)
+        monitor.follow_publish_rate(10.0)
+        run(monitor, 0.0, 10, 5)
+        assert monitor.status() == (Level.OK, '10.0 Hz')
+    restarted.follow_publish_rate(10.0)   # unchanged: the window goes on
+    assert restarted.status() == (Level.OK, '10.0 Hz')
+    # the rate changes at 5 s; the first diagnostics period after it is at 6 s
+    for monitor in (restarted, mixed):
+        monitor.expected_hz = 50.0
+        run(monitor, 5.0, 50, 1)
+    restarted.follow_publish_rate(50.0)
+    assert restarted.status() == (Level.OK, 'measuring')
+    assert mixed.status()[0] == Level.WARN   # without the restart: 20 Hz, "too low"
+    run(restarted, 6.0, 50, 1)
+    run(mixed, 6.0, 50, 1)
+    assert restarted.status() == (Level.OK, '50.0 Hz')
+    assert restarted.rate_hz == 50.0
+    assert 'too low' in mixed.status()[1]
+    restarted.sample(8.0, live=False)   # a pause still empties it
+    assert restarted.status() == (Level.OK, 'measuring')
+
+
 # --------------------------------------------------------------------- scans
 def scan(pattern: str, **overrides: float) -> ScanRequest:
     fields = dict(pan_min=-1.0, pan_max=1.0, tilt_min=-0.4, tilt_max=0.4, speed=0.5,

@@ -124,8 +124,45 @@ def test_an_ignored_move_ends_the_goal_at_once_with_the_reason(rig) -> None:
     # ends at the watch's timeout, long before move_timeout (20 s)
     assert time.monotonic() - started < ctl.config.move_timeout / 2
     assert len(lines.stalls()) == 1, lines.lines
-    # the goal stopped the axis it could not move: the episode is over
+    # the goal stopped the axis it could not move; the WARN stays for diagnostics to show
+    # (the stop would otherwise clear it before the next publish), but nothing waits on it
+    stalled = ctl.motion_watch.stalled()
+    assert list(stalled) == ['pan'] and stalled['pan'].withdrawn, stalled
+    assert ctl.motion_watch.reason(['pan']) is None
+    time.sleep(3 * TIMEOUT)   # several samples of the stopped axis: still shown
+    assert list(ctl.motion_watch.stalled()) == ['pan']
+    # the next motion command for that axis clears it (and it moves this time)
+    device.ignore(False)
+    targets = motion.start_move(['pan'], [0.5])
     assert ctl.motion_watch.stalled() == {}
+    assert motion.wait_move(targets).state == 'reached'
+    assert ctl.motion_watch.stalled() == {} and len(lines.stalls()) == 1, lines.lines
+
+
+def test_the_warn_of_one_axis_stays_through_commands_to_another(rig) -> None:
+    """Per axis: a move_to of tilt (which preempts everything) leaves pan's WARN shown; the
+    axis moving clears it (here the device moves it by itself)."""
+    ctl, device, lines = rig
+    device.ignore(True)
+    motion = Motion(ctl)
+    assert motion.wait_move(motion.start_move(['pan'], [0.5])).state == 'failed'
+    device.ignore(False)
+    assert motion.wait_move(motion.start_move(['tilt'], [0.3])).state == 'reached'
+    assert list(ctl.motion_watch.stalled()) == ['pan']
+    with device.lock:
+        device.axes['pan'].move_to(-0.5)   # motion the driver did not command
+    wait_for(lambda: not ctl.motion_watch.stalled(), 5.0, 'pan moving to clear its WARN')
+    assert len(lines.stalls()) == 1, lines.lines
+
+
+def test_a_command_stopped_before_it_stalls_is_never_reported(rig) -> None:
+    ctl, device, lines = rig
+    device.ignore(True)
+    ctl.command(['pan'], [0.5], [])
+    ctl.stop()
+    time.sleep(4 * TIMEOUT)
+    assert ctl.motion_watch.stalled() == {}
+    assert lines.stalls() == []
 
 
 def test_a_command_stream_to_an_axis_that_ignores_it_is_reported_once(rig) -> None:
@@ -144,11 +181,14 @@ def test_a_command_stream_to_an_axis_that_ignores_it_is_reported_once(rig) -> No
     assert list(stalled) == ['tilt'], stalled
     assert stalled['tilt'].position == 0.0
     assert len(lines.stalls()) == 1, lines.lines
-    ctl.stop()  # withdrawn: diagnostics clear
+    ctl.stop()  # withdrawn, still shown until the next command for tilt
+    assert ctl.motion_watch.stalled()['tilt'].withdrawn
+    device.ignore(False)
+    ctl.command(['tilt'], [target], [])
     assert ctl.motion_watch.stalled() == {}
 
 
-def test_an_ignored_jog_is_reported_and_a_stop_clears_it(rig) -> None:
+def test_an_ignored_jog_is_reported_until_the_next_jog(rig) -> None:
     ctl, device, lines = rig
     device.ignore(True)
     ctl.command(['pan'], [], [0.4])
@@ -156,8 +196,16 @@ def test_an_ignored_jog_is_reported_and_a_stop_clears_it(rig) -> None:
     assert ctl.motion_watch.stalled()['pan'].target is None
     assert 'jog +0.4000/s' in ctl.motion_watch.reason(['pan'])
     assert len(lines.stalls()) == 1, lines.lines
-    ctl.command(['pan'], [], [0.0])  # a zero jog is a stop: never reported
-    wait_for(lambda: not ctl.motion_watch.stalled(), 5.0, 'the zero jog to clear it')
+    ctl.command(['pan'], [], [0.0])  # a zero jog is a stop: the WARN stays shown
+    time.sleep(3 * TIMEOUT)
+    assert ctl.motion_watch.stalled()['pan'].withdrawn
+    assert ctl.motion_watch.reason(['pan']) is None
+    device.ignore(False)
+    ctl.command(['pan'], [], [0.4])  # the next jog clears it, and moves
+    wait_for(lambda: device.axes['pan'].position > 0.01, 5.0, 'pan to jog')
+    assert ctl.motion_watch.stalled() == {}
+    ctl.command(['pan'], [], [0.0])
+    assert len(lines.stalls()) == 1, lines.lines
 
 
 def test_a_jog_streamed_into_its_limit_is_not_reported(rig) -> None:

@@ -53,6 +53,7 @@ def diagnostic_parts(
         return parts + [StatusPart(n, Level.STALE, 'no data: device disconnected')
                         for n in joint_names]
     if active:
+        rate.follow_publish_rate(ctl.config.publish_rate)  # a new rate restarts the window
         rate.expected_hz = ctl.device.expected_rate(ctl.config.publish_rate)
         level, message = rate.status()
         parts.append(StatusPart('joint_states frequency', level, message, [

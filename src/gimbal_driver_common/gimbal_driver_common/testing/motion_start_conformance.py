@@ -1,6 +1,7 @@
 """The motion-start part of the conformance suite: a command the device ACKs and ignores
 is reported (diagnostics WARN with target and position, one log line, a running goal ends
-with the reason), and a slow but moving axis is not.
+with the reason), the WARN stays on /diagnostics after the stop that ends the goal until the
+next motion command for the axis, and a slow but moving axis is not reported.
 
 The simulators' shared fault ``ignore_motion on`` (:mod:`gimbal_driver_common.sim_control`)
 makes the device accept moves and jogs and drop them, as a drive in a mode that ignores
@@ -13,6 +14,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
@@ -45,13 +47,29 @@ class MotionStartConformance(ConformanceHelpers):
                                          default).successful
 
     @contextmanager
-    def ignoring_motion(self, rig: ConformanceRig) -> Iterator[None]:
+    def ignoring_motion(self, rig: ConformanceRig, joint: str) -> Iterator[None]:
+        """The device ignores motion commands; afterwards ``joint`` is stopped and its WARN
+        (which a stop leaves shown) cleared by a new command: to where it is."""
         rig.sim.control('ignore_motion on')
         try:
             yield
         finally:
             rig.sim.control('ignore_motion off')
             rig.ros.call(Trigger, self.srv('stop'), Trigger.Request())
+            here = joint_positions(rig.ros.wait_for_message('joint_states', JointState))[joint]
+            rig.ros.publish('joint_command', JointState(name=[joint], position=[here]))
+            self.wait_not_stalled(rig, joint)
+
+    def wait_not_stalled(self, rig: ConformanceRig, joint: str) -> None:
+        rig.ros.wait_for_diagnostic(self.node_name, joint,
+                                    lambda s: STALLED not in s.message, timeout=30)
+
+    def wait_stalled(self, rig: ConformanceRig, joint: str) -> DiagnosticStatus:
+        """A /diagnostics status published from now on that shows the axis WARN."""
+        status = rig.ros.wait_for_diagnostic(self.node_name, joint,
+                                             lambda s: STALLED in s.message, timeout=30)
+        assert status.level[0] == WARN, status
+        return status
 
     def away_target(self, rig: ConformanceRig) -> tuple[str, float]:
         """A safe target of the first small-move joint, well away from where it is."""
@@ -64,23 +82,29 @@ class MotionStartConformance(ConformanceHelpers):
     @pytest.mark.ros
     def test_an_ignored_move_to_goal_ends_with_the_reason(self, rig: ConformanceRig) -> None:
         joint, target = self.away_target(rig)
-        with self.motion_start_timeout(rig, TEST_TIMEOUT), self.ignoring_motion(rig):
+        with self.motion_start_timeout(rig, TEST_TIMEOUT), self.ignoring_motion(rig, joint):
             # move_timeout stays at its default: only the motion watch ends this goal soon
             result, status, _ = self.move_to(rig.ros, {joint: target})
-        assert status == GoalStatus.STATUS_ABORTED and not result.success, result.message
-        assert f'{joint}: {STALLED} (target {target:.4f}' in result.message, result.message
+            assert status == GoalStatus.STATUS_ABORTED and not result.success, result.message
+            assert f'{joint}: {STALLED} (target {target:.4f}' in result.message, result.message
+            # the goal stopped the axis; the WARN is on /diagnostics after that stop
+            values = {kv.key: kv.value for kv in self.wait_stalled(rig, joint).values}
+            assert values['commanded'] == f'{target:.4f}', values
+            # ... until the next motion command for that axis (the device obeys it now)
+            rig.sim.control('ignore_motion off')
+            result, status, _ = self.move_to(rig.ros, {joint: target})
+            assert result.success, result.message
+            self.wait_not_stalled(rig, joint)
 
     @pytest.mark.ros
     def test_an_ignored_joint_command_warns_on_the_axis_once(self, rig: ConformanceRig) -> None:
         joint, target = self.away_target(rig)
         logged = len(rig.node.output())
-        with self.motion_start_timeout(rig, TEST_TIMEOUT), self.ignoring_motion(rig):
+        with self.motion_start_timeout(rig, TEST_TIMEOUT), self.ignoring_motion(rig, joint):
             for _ in range(3):   # the same unmet command again: still one episode
                 rig.ros.publish('joint_command', JointState(name=[joint], position=[target]))
-                status = rig.ros.wait_for_diagnostic(
-                    self.node_name, joint, lambda s: STALLED in s.message, timeout=30)
+                status = self.wait_stalled(rig, joint)
             values = {kv.key: kv.value for kv in status.values}
-            assert status.level[0] == WARN, status
             assert values['commanded'] == f'{target:.4f}', values
             assert 'position' in values
             rig.node.wait_for_output(STALLED)
@@ -89,9 +113,11 @@ class MotionStartConformance(ConformanceHelpers):
             assert len(lines) == 1, lines
             stop = rig.ros.call(Trigger, self.srv('stop'), Trigger.Request())
             assert stop.success, stop.message
-            # a stop withdraws the command: the warning goes
-            rig.ros.wait_for_diagnostic(self.node_name, joint,
-                                        lambda s: STALLED not in s.message, timeout=30)
+            # a stop leaves the warning shown; the next command for the axis clears it
+            self.wait_stalled(rig, joint)
+            rig.sim.control('ignore_motion off')
+            rig.ros.publish('joint_command', JointState(name=[joint], position=[target]))
+            self.wait_not_stalled(rig, joint)
 
     @pytest.mark.ros
     def test_a_slow_move_is_not_reported(self, rig: ConformanceRig) -> None:
