@@ -35,6 +35,7 @@ from gimbal_driver_common.testing.conformance_rig import (
     GoalStatus,
     SimulatorHandle,
 )
+from gimbal_driver_common.testing.diagnostics_conformance import DiagnosticsConformance
 from gimbal_driver_common.testing.log_conformance import LogConformance
 from gimbal_driver_common.testing.motion_start_conformance import MotionStartConformance
 from gimbal_driver_common.testing.restart_conformance import RestartConformance
@@ -49,7 +50,7 @@ REJECTED_BURSTS = 6
 
 
 class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionStartConformance,
-                        LogConformance):
+                        LogConformance, DiagnosticsConformance):
     """The common contract of every gimbal driver node, tested through the real transport.
 
     Subclasses set the attributes below; the package, node and simulator come from the
