@@ -15,6 +15,7 @@ test:
 
 lint: setup
 	.venv/bin/ruff check .
+	.venv/bin/mypy
 
 demo:
 	scripts/demo.sh

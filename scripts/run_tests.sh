@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Set up from nothing if needed, lint, and run every test of every package.
+# Set up from nothing if needed, lint, type-check, and run every test of every package.
 # Extra arguments go to pytest (e.g. -k capture, -m "not ros").
 # The tests run side by side in PYTEST_WORKERS processes (pytest-xdist, default 8): they
 # mostly wait on simulators, nodes and DDS, and each leases its own ROS domain and ports,
@@ -10,5 +10,7 @@ scripts/setup_env.sh
 source scripts/ros_env.sh
 echo "test: ruff check"
 ruff check .
+echo "test: mypy"
+mypy  # mypy.ini: gimbal_driver_common and every driver's runtime code
 echo "test: pytest"
 python -m pytest -n "${PYTEST_WORKERS:-8}" src tests "$@"
