@@ -18,6 +18,7 @@ import pytest
 from gimbal_driver_common.controller import ControllerConfig, GimbalController, is_moving
 from gimbal_driver_common.errors import (
     DeviceRefused,
+    GimbalError,
     InvalidRequest,
     LinkError,
     Unsupported,
@@ -311,3 +312,35 @@ def test_link_drop_then_the_supervisor_reconnects(rig: Rig, caplog) -> None:
 def test_enu_flu_to_ned_frd(enu, ned) -> None:
     yaw, pitch, roll = enu_flu_to_ned_frd(*enu)
     assert (abs(yaw), pitch, roll) == pytest.approx((abs(ned[0]), ned[1], ned[2]), abs=1e-9)
+
+
+def test_an_unanswered_best_effort_read_never_keeps_the_gimbal_from_connecting(
+        sim: UCameraSim, caplog) -> None:
+    """The telemetry-rate read-back and the antenna position are best effort: the gimbal
+    that never answers them connects, streams and moves; each is a WARN and a key."""
+    sim.model.request_faults.mute("TelemetryRateRequest")
+    sim.model.request_faults.mute("AntennaPositionRequest")
+    setup = Rig(sim)
+    with caplog.at_level(logging.WARNING):
+        setup.start()
+    try:
+        assert setup.move(0.2, 0.1).success
+        warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+        for name in ("TelemetryRateRequest", "AntennaPositionRequest"):
+            assert any(name in line and "connecting without it" in line for line in warned)
+        device = setup.device.capabilities.status.parts()[0]
+        values = dict(device.values)
+        assert device.level >= 1 and "TelemetryRateRequest" in device.message
+        assert "unanswered.TelemetryRateRequest" in values
+        assert "unanswered.AntennaPositionRequest" in values
+    finally:
+        setup.close()
+
+
+def test_an_unanswered_required_request_names_itself(sim: UCameraSim) -> None:
+    """The version answer is the handshake: without it nothing connects, and it is named."""
+    sim.model.request_faults.mute("VersionRequest")
+    setup = Rig(sim, connect_timeout=1.0)
+    with pytest.raises(GimbalError, match="Request Gimbal Version") as raised:
+        setup.controller.open()
+    assert setup.controller.link_error == str(raised.value)

@@ -47,6 +47,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 from gimbal_driver_common.config import Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves, PostedWrite
@@ -59,6 +60,7 @@ from .device_functions import UCameraFunctions
 from .protocol import AnglesReport, GimbalMode, GimbalType, GpsFeed, Packet
 
 LOG = logging.getLogger(__name__)
+T = TypeVar("T")
 
 
 @dataclass
@@ -109,6 +111,8 @@ class UCameraDevice(UCameraFunctions, Device):
             silence_timeout=settings.silence_timeout, request_timeout=settings.request_timeout,
             on_report=self._on_report)
         self.antenna: tuple[float, ...] | None = None
+        #: best-effort connect-time reads the gimbal left unanswered (packet name -> why)
+        self.unanswered: dict[str, str] = {}
         self._lock = threading.RLock()  # set-point, ramp and jog state (several threads)
         self._setpoint: dict[str, float] = {}
         self._ramp: dict[str, tuple[float, float]] = {}  # joint -> (target, speed)
@@ -149,6 +153,7 @@ class UCameraDevice(UCameraFunctions, Device):
         client.refresh_period = 1.0 / self.settings.refresh_rate
         version = client.start(timeout=self.settings.connect_timeout)
         self._forget_motion()
+        self.unanswered.clear()
         try:
             self._apply_connect_settings()
             # a jog may have been running when the link was lost and the gimbal keeps its last
@@ -176,8 +181,10 @@ class UCameraDevice(UCameraFunctions, Device):
         """The connect-time parameters (volatile until ~/save_configuration)."""
         client, settings = self.client, self.settings
         if settings.telemetry_rate:
-            achieved = client.set_telemetry_rate(settings.telemetry_rate)
-            if achieved != settings.telemetry_rate:
+            client.set_telemetry_rate(settings.telemetry_rate, verify=False)
+            # the read-back is best effort: the angles reports are what the node needs
+            achieved = self._best_effort("TelemetryRateRequest", client.request_telemetry_rate)
+            if achieved is not None and achieved != settings.telemetry_rate:
                 self.log.warning(
                     f"telemetry_rate {settings.telemetry_rate} Hz requested, device reports "
                     f"{achieved} Hz")
@@ -188,10 +195,21 @@ class UCameraDevice(UCameraFunctions, Device):
             client.set_antenna_position(*settings.antenna_position)
         if settings.ir_palette >= 0:
             client.set_ir_palette(settings.ir_palette)
+        self.antenna = self._best_effort("AntennaPositionRequest",
+                                         client.request_antenna_position)
+
+    def _best_effort(self, name: str, read: Callable[[], T]) -> T | None:
+        """A connect-time read the node can work without (a read-back, an identity detail):
+        unanswered, it is a WARN and a diagnostics key (:attr:`unanswered`), and connecting
+        goes on; only the version answer and the angles reports are required."""
         try:
-            self.antenna = client.request_antenna_position()
+            value = read()
         except DeviceTimeout as exc:
-            self.log.warning(f"antenna position not read: {exc}")
+            self.unanswered[name] = str(exc)
+            self.log.warning(f"{name} unanswered at connect, connecting without it: {exc}")
+            return None
+        self.unanswered.pop(name, None)
+        return value
 
     def close(self) -> None:
         self.client.stop()
