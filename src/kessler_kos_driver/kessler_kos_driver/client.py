@@ -150,6 +150,8 @@ class KosClient(KosNotifications, KosCommands, Protocol):
         self.connected = False
         self.device_info: DeviceInfo | None = None
         self.guid = ''
+        #: best-effort connect requests the device left unanswered (message name -> why)
+        self.unanswered: dict[str, str] = {}
         self.motors: dict[int, MotorState] = {}
         self.playback = PlaybackInfo()
         self.errors: deque[ErrorEvent] = deque(maxlen=50)
@@ -240,9 +242,19 @@ class KosClient(KosNotifications, KosCommands, Protocol):
         self._finish_initialisation(info)
 
     def _finish_initialisation(self, info: DeviceInfo) -> None:
-        guid = self.request(GetDeviceGuid())
-        assert isinstance(guid, DeviceGuid)
-        self.guid = guid.text
+        """The GUID is best effort (an identity detail): DeviceInfo, the password and the
+        motors are what the node cannot work without, and their failures name them."""
+        self.unanswered = {}
+        try:
+            guid = self.request(GetDeviceGuid())
+        except (DeviceTimeout, MessageUnsupported) as exc:
+            self.guid = ''
+            self.unanswered['GetDeviceGuid'] = str(exc)
+            LOG.warning('GetDeviceGuid unanswered at connect, connecting without the GUID: '
+                        '%s', exc)
+        else:
+            assert isinstance(guid, DeviceGuid)
+            self.guid = guid.text
         with self._lock:
             self.playback.status = info.playback_status
 

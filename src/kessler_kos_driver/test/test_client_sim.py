@@ -14,6 +14,7 @@ import pytest
 
 from kessler_kos_driver.client import (
     CommandRejected,
+    DeviceTimeout,
     KosClient,
     MessageUnsupported,
     NotConnected,
@@ -128,6 +129,31 @@ def test_initialisation_sequence(make_sim, make_client):
     assert not any(m.calibrated for m in client.motors.values())
     assert client.motors[3].max_move_speed == 65.0        # tilt maxima from the document
     assert PASSWORD not in repr(client.device_info)
+
+
+def test_an_unanswered_guid_never_keeps_the_device_from_connecting(make_sim, make_client):
+    """GetDeviceGuid is an identity detail: unanswered, the client connects without it and
+    says so; the motors are polled and a move runs."""
+    sim = make_sim(precalibrated=True)
+    sim.device.request_faults.mute('GetDeviceGuid')
+    client = make_client(sim, reply_timeout=0.5)
+    client.connect()
+    assert client.connected and client.guid == ''
+    assert 'GetDeviceGuid' in client.unanswered
+    assert sorted(client.motors) == [1, 2, 3]
+    sim.device.request_faults.clear()
+    client.connect()   # answered on the next connection: nothing left on record
+    assert client.guid == sim.device.settings.guid.hex() and not client.unanswered
+
+
+@pytest.mark.parametrize('required', ['GetDeviceInfo', 'GetMotorInfo'])
+def test_an_unanswered_required_request_names_itself(make_sim, make_client, required):
+    sim = make_sim(precalibrated=True)
+    sim.device.request_faults.mute(required)
+    client = make_client(sim, reply_timeout=0.5)
+    with pytest.raises(DeviceTimeout, match=required):
+        client.connect()
+    assert not client.connected
 
 
 def test_wrong_password_is_refused_without_sending_it(make_sim, make_client):
