@@ -29,8 +29,10 @@ from gimbal_driver_common.errors import InvalidRequest, LinkError
 
 from .capabilities import TurretGeolocation, TurretPresets
 from .client import AXES, CommandError, Sample, TurretClient
+from .client_types import ServiceTimeout
 from .node_services import TurretNodeServices
 from .protocol.identifiers import ActuatorMode, AxisStatus, TargetState
+from .protocol.nodeservice import IdentificationInfo
 from .readings import TurretReadings, si
 from .status import TurretStatus
 
@@ -102,6 +104,8 @@ class TurretDevice(TurretReadings, TurretNodeServices, Device):
         self._latest: JointSample | None = None
         self._speed_warned = False
         self._tis_refusal_logged = False
+        #: best-effort connect requests the turret left unanswered (service -> why)
+        self.unanswered: dict[str, str] = {}
         self._published: dict[str, float] = {}  # reading -> arrival of the last one handed out
         self.presets = TurretPresets(self)
         self.capabilities.presets = self.presets
@@ -143,7 +147,7 @@ class TurretDevice(TurretReadings, TurretNodeServices, Device):
         client = self.client
         self._cycle.clear()
         client.open()
-        info = client.identify()
+        info = self._identify()
         refused = client.request_intervals(self.interval_requests())
         if refused and not self._tis_refusal_logged:
             self._tis_refusal_logged = True
@@ -152,10 +156,30 @@ class TurretDevice(TurretReadings, TurretNodeServices, Device):
                 "checks follow the intervals it actually sends (see /diagnostics "
                 "'transmission intervals')")
         node = client.config.turret_node_id
+        firmware = ("unknown (IDS unanswered)" if info is None else
+                    f"hw {info.hardware_revision} sw {info.software_revision}")
         return DeviceInfo(
             model="CANaerospace turret", serial_number=f"node {node}",
-            firmware_version=f"hw {info.hardware_revision} sw {info.software_revision}",
+            firmware_version=firmware,
             hardware_id=f"canaerospace node {node} on {self.description()}")
+
+    def _identify(self) -> IdentificationInfo | None:
+        """IDS, best effort: the turret's broadcasts are what the node needs. Unanswered
+        while they arrive, it is a WARN and a diagnostics key (:attr:`unanswered`) and
+        connecting goes on; unanswered with the turret silent, the error names both."""
+        client = self.client
+        self.unanswered.pop("IDS", None)
+        try:
+            return client.identify()
+        except ServiceTimeout as exc:
+            node = client.config.turret_node_id
+            if client.node_silent():
+                raise ServiceTimeout(f"{exc}; no broadcast from turret node {node} either"
+                                     ) from exc
+            self.unanswered["IDS"] = str(exc)
+            self.log.warning(f"IDS unanswered while turret node {node} broadcasts, "
+                             f"connecting without its identification: {exc}")
+            return None
 
     def close(self) -> None:
         self.client.close()

@@ -18,7 +18,7 @@ from canaero_turret_driver.device import TurretDevice, TurretSettings
 from canaero_turret_driver.protocol.identifiers import STOP_PITCH_BIT, ActuatorMode
 from canaero_turret_driver.sim import YAW, SimConfig, SlcanSession, TurretSimulator
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
-from gimbal_driver_common.errors import DeviceRefused, InvalidRequest
+from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest
 from gimbal_driver_common.policies import Motion
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.sim_server import PtySimServer
@@ -357,3 +357,33 @@ def test_bus_errors_drop_the_link_and_the_controller_reopens_it(channel_name, si
         assert any("adapter unplugged" in why for up, why in links if not up)
         wait_for(lambda: not client.is_stale("yaw_position"), 30, "data after reopening")
         assert client.identify().software_revision == 7
+
+
+def test_an_unanswered_ids_never_keeps_the_turret_from_connecting(tmp_path, controller_config,
+                                                                 caplog):
+    """IDS is identification only: unanswered while the turret broadcasts, it is a WARN and
+    a diagnostics key, the node connects and the turret moves."""
+    rig = Rig(tmp_path, controller_config())
+    rig.simulator.request_faults.mute("IDS")
+    with caplog.at_level(logging.WARNING):
+        rig.start()
+    try:
+        assert "IDS unanswered" in caplog.text
+        assert "IDS unanswered" in rig.controller.device_info.firmware_version
+        node = next(p for p in rig.device.capabilities.status.parts()
+                    if p.part == "turret node")
+        assert node.level == 1 and "unanswered.IDS" in dict(node.values), node
+        assert rig.move({"yaw": 0.2}).success
+    finally:
+        rig.close()
+
+
+def test_an_unanswered_ids_from_a_silent_turret_names_both(tmp_path, controller_config):
+    rig = Rig(tmp_path, controller_config())
+    rig.simulator.request_faults.mute("IDS")
+    rig.simulator.silence_all()
+    try:
+        with pytest.raises(GimbalError, match=r"no IDS response.*no broadcast from turret node"):
+            rig.controller.open()
+    finally:
+        rig.close()
