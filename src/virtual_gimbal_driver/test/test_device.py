@@ -6,13 +6,16 @@ Waits are "up to a timeout" for a condition, never timing assertions.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
+import socket
+import threading
 
 import pytest
 
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
-from gimbal_driver_common.errors import DeviceRefused
+from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.link_lock import LinkLock
 from gimbal_driver_common.testing import wait_for
@@ -28,9 +31,12 @@ JOINTS = ['pan', 'tilt']
 class Rig:
     """The simulator's TCP server, the adapter and a started controller."""
 
-    def __init__(self) -> None:
+    def __init__(self, muted: tuple[str, ...] = (), request_timeout: float = 1.0) -> None:
         self.server, self.sim = make_server()
-        self.device = VirtualGimbalDevice('127.0.0.1', self.server.port)
+        for verb in muted:  # the simulator's mute VERB: received, never answered
+            self.sim.request_faults.mute(verb)
+        self.device = VirtualGimbalDevice('127.0.0.1', self.server.port,
+                                          request_timeout=request_timeout)
         config = ControllerConfig(
             joint_names=list(JOINTS),
             limits={'pan': JointLimits(-math.pi, math.pi, 1.5),
@@ -189,3 +195,65 @@ def test_a_command_stream_is_written_from_the_callback(rig):
     posted.clear()
     wait_for(stream_until_posted, 10.0, 'a move posted to the refusing device')
     wait_for(lambda: total_refused() > posted[0][1], 5.0, 'the posted move refused')
+
+
+
+
+def test_bytes_no_request_asked_for_are_discarded_with_a_warning(caplog) -> None:
+    """Noise (or a reply after its timeout) waiting on the link is not taken for the next
+    request's reply: the client drops it and says so (virtual_gimbal_driver.client). A bare
+    socket plays the device, so the noise is on the link before the request goes out."""
+    listener = socket.create_server(('127.0.0.1', 0))
+    client = VirtualGimbalClient('127.0.0.1', listener.getsockname()[1])
+    client.open()
+    device, _ = listener.accept()
+
+    def answer() -> None:
+        with contextlib.suppress(OSError):
+            for line in device.makefile('rb'):
+                device.sendall(b'ID model serial 1.0\n' if line.startswith(b'ID') else b'OK\n')
+
+    threading.Thread(target=answer, daemon=True).start()
+    try:
+        assert client.request('ID') == 'ID model serial 1.0'
+        device.sendall(b'NOISE\nOK\n')  # on loopback: in the client's buffer on return
+        with caplog.at_level(logging.WARNING, logger='virtual_gimbal_driver.client'):
+            assert client.request('ID') == 'ID model serial 1.0'
+            assert client.request('STOP') == 'OK'
+        records = [r for r in caplog.records if r.name == 'virtual_gimbal_driver.client']
+        assert len(records) == 1 and records[0].levelno == logging.WARNING
+        assert "discarded 9 bytes" in records[0].getMessage()
+        assert "NOISE" in records[0].getMessage()
+    finally:
+        client.close()
+        device.close()
+        listener.close()
+
+
+def test_an_unanswered_id_never_keeps_the_device_from_connecting(caplog):
+    """ID is identity only: unanswered, a WARN and a diagnostics key; the node connects
+    and moves (request_timeout sets how long the link waits for it)."""
+    with caplog.at_level(logging.WARNING):
+        rig = Rig(muted=('ID',), request_timeout=0.2)
+    try:
+        assert 'ID unanswered at connect' in caplog.text
+        assert rig.controller.device_info.model == 'virtual gimbal (ID unanswered)'
+        [part] = rig.device.parts()
+        assert part.level == 1 and 'unanswered.ID' in dict(part.values), part
+        rig.controller.command(['pan'], [0.2], [])
+        wait_for(lambda: rig.axis('pan')['target'] == pytest.approx(0.2), 5.0, 'the pan target')
+    finally:
+        rig.close()
+
+
+def test_unanswered_joint_data_names_itself():
+    """GET is what the node cannot work without: connecting fails and names it."""
+    server, sim = make_server()
+    sim.request_faults.mute('GET')
+    device = VirtualGimbalDevice('127.0.0.1', server.port, request_timeout=0.2)
+    try:
+        with pytest.raises(DeviceTimeout, match='no reply to GET within 0.2 s'):
+            device.open()
+    finally:
+        device.close()
+        server.stop()
