@@ -131,7 +131,8 @@ class LogBridge(logging.Handler):
     # ------------------------------------------------------------------ forwarding
     def emit(self, record: logging.LogRecord) -> None:
         if getattr(self._inside, 'active', False):
-            logging.lastResort.handle(record)  # logged while forwarding: no loop
+            if logging.lastResort is not None:  # logged while forwarding: no loop
+                logging.lastResort.handle(record)
             return
         self._inside.active = True
         try:
