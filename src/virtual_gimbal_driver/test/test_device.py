@@ -252,7 +252,7 @@ def test_unanswered_joint_data_names_itself():
     sim.request_faults.mute('GET')
     device = VirtualGimbalDevice('127.0.0.1', server.port, request_timeout=0.2)
     try:
-        with pytest.raises(DeviceTimeout, match='no reply to GET within 0.2 s'):
+        with pytest.raises(DeviceTimeout, match=r'no reply to GET within 0\.2 s'):
             device.open()
     finally:
         device.close()

@@ -6,6 +6,7 @@ contract in SI units and REP-103 signs (this invented device already speaks both
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -33,6 +34,7 @@ from .protocol import (
     stop_request,
 )
 
+LOG = logging.getLogger(__name__)
 FAULT_FLAGS = [RegisterFlag(0, 'overtemperature', Level.ERROR, 'motor over temperature')]
 assert 1 << FAULT_FLAGS[0].bit == FAULT_OVERTEMP
 
@@ -40,9 +42,13 @@ assert 1 << FAULT_FLAGS[0].bit == FAULT_OVERTEMP
 class VirtualGimbalDevice(Device, Homing, StatusReport):
     """The virtual gimbal's line protocol as a device (it already speaks SI units)."""
 
-    def __init__(self, host: str, port: int, home_timeout: float = 60.0) -> None:
+    def __init__(self, host: str, port: int, home_timeout: float = 60.0,
+                 request_timeout: float = 1.0) -> None:
         super().__init__()
-        self.client = VirtualGimbalClient(host, port, link_lock=self.link_lock)
+        self.client = VirtualGimbalClient(host, port, timeout=request_timeout,
+                                          link_lock=self.link_lock)
+        #: best-effort connect requests the device left unanswered (verb -> why)
+        self.unanswered: dict[str, str] = {}
         self.home_timeout = home_timeout
         self._faults = 0
         self._latest: JointSample | None = None
@@ -50,9 +56,22 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
         self.capabilities.status = self
 
     def open(self) -> DeviceInfo:
+        """Connect; only the joint data (GET) is required, its failure names it. The
+        identity (ID) is best effort: unanswered, a WARN and a diagnostics key, and
+        connecting goes on."""
         self.client.open()
-        identity = parse_identity(self.client.request('ID'))
-        return DeviceInfo(identity.model, identity.serial_number, identity.firmware_version)
+        self.unanswered.pop('ID', None)
+        try:
+            identity = parse_identity(self.client.request('ID'))
+        except DeviceTimeout as exc:
+            self.unanswered['ID'] = str(exc)
+            LOG.warning('ID unanswered at connect, connecting without the identity: %s', exc)
+            info = DeviceInfo('virtual gimbal (ID unanswered)')
+        else:
+            info = DeviceInfo(identity.model, identity.serial_number,
+                              identity.firmware_version)
+        self.read()  # the joint data: required
+        return info
 
     def close(self) -> None:
         self.client.close()
@@ -116,7 +135,14 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
 
     def parts(self) -> list[StatusPart]:
         active = decode_register(self._faults, FAULT_FLAGS, 'faults')
-        return [StatusPart.from_flags('device', active, [('fault_bits', hex(self._faults))])]
+        unanswered = dict(self.unanswered)
+        part = StatusPart.from_flags('device', active, [
+            ('fault_bits', hex(self._faults)),
+            *[(f'unanswered.{name}', why) for name, why in unanswered.items()]])
+        if unanswered:  # best effort at connect: the node works without it
+            part.level = max(part.level, Level.WARN)
+            part.message += f' | unanswered at connect: {", ".join(unanswered)}'
+        return [part]
 
     def errors(self) -> list[str]:
         return [a.flag.name for a in decode_register(self._faults, FAULT_FLAGS)]
