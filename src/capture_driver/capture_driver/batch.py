@@ -1,7 +1,7 @@
 """Batched reads of the Capture client (no ROS): several getters in one write, their
 replies matched by opcode and axis, and the way back to one request at a time when a
-controller drops what it queues. A mixin of :class:`~.client.CaptureClient`, whose link,
-lock and counters it uses.
+controller drops what it queues. A part of :class:`~.client.CaptureClient`, handed the
+link (:class:`~.link.CaptureLink`) and the polls (:class:`~.device_requests.Polls`) it uses.
 """
 
 from __future__ import annotations
@@ -13,8 +13,9 @@ from typing import Any
 
 from gimbal_driver_common.transport import TransportError
 
-from .device_requests import request_key
+from .device_requests import Polls, request_key
 from .errors import DeviceTimeout, NotConnected, NotSupported, WrongReply
+from .link import CaptureLink
 from .protocol import Frame, ProtocolError, ReplyByte, command
 
 LOG = logging.getLogger('capture_driver.batch')
@@ -25,7 +26,20 @@ BATCH_FAILURES = 3
 
 
 class BatchedReads:
-    """:meth:`read_many` of :class:`~.client.CaptureClient` (a mixin)."""
+    """:meth:`read_many` of :class:`~.client.CaptureClient`, and whether it batches on this
+    connection (:attr:`batching`; back to :attr:`batch_reads` on every connect)."""
+
+    def __init__(self, link: CaptureLink, polls: Polls, batch_reads: bool = True) -> None:
+        self._link = link
+        self._polls = polls
+        #: getters of :meth:`read_many` go out in one write (False: one at a time)
+        self.batch_reads = batch_reads
+        self.batching = batch_reads
+        self._failures = 0
+        link.connect_hooks.append(self._new_connection)
+
+    def _new_connection(self) -> None:
+        self.batching, self._failures = self.batch_reads, 0
 
     def read_many(self, reads: Sequence[tuple[str, int | None]],
                   optional: bool = False) -> list[Any]:
@@ -52,8 +66,9 @@ class BatchedReads:
             cmd = command(name)
             if not cmd.replies_with_data:
                 raise ProtocolError(f'{name} is not a getter: only getters are batched')
-            frames.append((cmd, axis, cmd.frame(axis, None, self.group)))
-        with self._lock:
+            frames.append((cmd, axis, cmd.frame(axis, None, self._link.group)))
+        link = self._link
+        with link.lock:
             values: list[Any] = [None] * len(frames)
             asked = [i for i, (cmd, axis, _) in enumerate(frames)
                      if not (optional and self._left_out(cmd.name, axis))]
@@ -64,73 +79,73 @@ class BatchedReads:
                 cmd, axis, frame = frames[i]
                 if reply is not None:
                     with contextlib.suppress(WrongReply):  # undecodable: asked alone below
-                        values[i] = self._decode(cmd.name, frame, reply)
+                        values[i] = link.decode(cmd.name, frame, reply)
                         continue
                 # NACKed, answered without data or unanswered: once more, on its own
                 if not optional:
-                    values[i] = self._request_locked(cmd.name, axis, None)
+                    values[i] = link.request_locked(cmd.name, axis, None)
                     continue
                 # None: not asked again (unsupported), or not now (unanswered: back-off)
                 with contextlib.suppress(NotSupported, DeviceTimeout):
-                    values[i] = self.poll(cmd.name, axis)
+                    values[i] = self._polls.poll(cmd.name, axis)
             return values
 
     def _left_out(self, name: str, axis: int | None) -> bool:
         """An optional read not to send now: the device does not know it, or it went
-        unanswered and waits out its back-off (see :meth:`DeviceRequests.poll`)."""
-        return (name in self.unsupported
-                or self.unanswered.waiting(request_key(name, axis)) is not None)
+        unanswered and waits out its back-off (see :meth:`Polls.poll`)."""
+        return (name in self._link.unsupported
+                or self._link.unanswered.waiting(request_key(name, axis)) is not None)
 
     def _transact_batch(self, frames: list[Frame]) -> list[Frame | None]:
         """Write ``frames`` in one go; the reply to each, or None for those that got no
         data reply within :attr:`timeout` (a NACK or an ACK ends the wait for one of them:
         which one, the reply byte does not say)."""
-        stream = self._stream
+        link = self._link
+        stream = link.stream
         if stream is None:
-            raise NotConnected(f'batched read: not connected ({self.last_error})')
-        self.stats['requests'] += len(frames)
+            raise NotConnected(f'batched read: not connected ({link.last_error})')
+        link.stats['requests'] += len(frames)
         replies: list[Frame | None] = [None] * len(frames)
         waiting = len(frames)
         try:
-            self._send(stream, b''.join(frame.encode() for frame in frames))
-            for item in self._input_until(stream, self._last_activity + self.timeout):
+            link.send(stream, b''.join(frame.encode() for frame in frames))
+            for item in link.input_until(stream, link.last_activity + link.timeout):
                 if isinstance(item, ReplyByte):
                     if not item.is_ack:
-                        self.stats['nacks'] += 1
+                        link.stats['nacks'] += 1
                     waiting -= 1  # one of the reads answered without data
                 elif isinstance(item, Frame):
                     slot = next((i for i, frame in enumerate(frames) if replies[i] is None
                                  and (frame.opcode, frame.axis) == (item.opcode, item.axis)),
                                 None)
                     if slot is None:
-                        self.stats['stale'] += 1
+                        link.stats['stale'] += 1
                     else:
                         replies[slot] = item
                         waiting -= 1
                 if not waiting:
                     break
         except TransportError as exc:
-            self._link_lost(f'batched read: {exc}')
+            link.link_lost(f'batched read: {exc}')
             raise NotConnected(f'batched read: link lost ({exc})') from exc
         if waiting == len(frames):  # not one answer: a timeout, as for a single request
-            self._count_timeout('batched read')
+            link.count_timeout('batched read')
         # each read answered (a NACK or ACK too): nothing late can come, and the controller
         # handles queued requests (those reads are named alone)
-        self._count_batch(complete=not waiting)
+        self.count_batch(complete=not waiting)
         return replies
 
-    def _count_batch(self, complete: bool) -> None:
+    def count_batch(self, complete: bool) -> None:
         """One batch (the poll's getters, or a posted stream move) came back whole or not.
         A whole one leaves nothing late to come; ``BATCH_FAILURES`` incomplete ones in a
         row end batching for the connection (one request at a time)."""
         if complete:
-            self._stale_possible = False
-            self._consecutive_timeouts = 0
-            self._batch_failures = 0
+            self._link.settled()
+            self._failures = 0
             return
-        self.stats['incomplete_batches'] += 1
-        self._batch_failures += 1
-        if self._batch_failures >= BATCH_FAILURES:
+        self._link.stats['incomplete_batches'] += 1
+        self._failures += 1
+        if self._failures >= BATCH_FAILURES:
             self.batching = False
             LOG.info('%d batches in a row came back incomplete: one request at a time on '
-                     'this connection', self._batch_failures)
+                     'this connection', self._failures)

@@ -1,65 +1,43 @@
-"""Capture pedestal session: handshake, request/reply, keep-alive, resync and reconnect.
+"""Capture pedestal client (no ROS): the request/reply link (:class:`~.link.CaptureLink`:
+handshake, requests, resync, the link lock) and the parts composed on it, each handed what
+it uses:
 
-One request is in flight at a time: every exchange holds the device's link lock
-(:class:`~gimbal_driver_common.link_lock.LinkLock`, which the adapter passes in; a client
-made alone makes its own), and so does the core's command path for its sends. A stream
-move posted without waiting (:meth:`MotionRequests.post_moves`) is settled by that lock
-before the link's next exchange. A request
-writes one packet and reads until its reply: a data packet with the same opcode and axis
-for getters, a single ACK byte for everything else, or a NACK byte, which raises
-:class:`DeviceNack` carrying the spec's meaning and advice. A reply of the other kind (an
-ACK to a getter, data to a setter) raises :class:`WrongReply`: the device answered, so it
-is a protocol error of that request, never silence; only no answer at all is a
-:class:`DeviceTimeout`, and only timeouts in a row close the link ("device silent").
-Garbage and corrupted or truncated packets are skipped by
-:class:`~.protocol.StreamDecoder`; if a started packet stalls for ``resync_gap`` the
-decoder gives it up and rescans, so a lost byte costs at most one request.
+- :attr:`CaptureClient.polls` (:class:`~.device_requests.Polls`): the requests the host
+  makes on its own, not asked again once the device does not know them, backed off when
+  unanswered;
+- :attr:`CaptureClient.batch` (:class:`~.batch.BatchedReads`): several getters in one write;
+- :attr:`CaptureClient.motion` (:class:`~.motion.MotionRequests`): the motion set-ups and
+  the posted stream move;
+- :attr:`CaptureClient.device_requests` (:class:`~.device_requests.DeviceRequests`):
+  identity, registers, scans, presets, IMU, GPS, tracking, power, digital I/O.
 
-Requests the host makes on its own (identity, probes, the status registers, the sensor
-polls: :meth:`CaptureClient.optional` and :meth:`CaptureClient.poll`) stop being sent once
-the device answered one with 0xA6 or with the wrong kind of reply (:attr:`unsupported`);
-so does the one advisory step of a move, MOT_SetTum (4.2.14, 7.1 "as needed").
-
-Handshake (section 6.1): over TCP the controller sends a COM_Connect packet as soon as the
-connection opens; the client answers with a COM_Connect packet carrying the opcode the
-controller used (so a wrong reconstruction of that opcode cannot break the handshake) and
-waits for the ACK. On a serial line there is no greeting; the client sends COM_Connect.
-
-Keep-alive (4.6.5): with ``keepalive_period`` > 0 the client configures the controller's
-supervision (COM_setKeepAliveTimeout/Count, COM_StartKeepAlive) so a dead host makes the
-pedestal stop, and a background thread (:meth:`CaptureClient.start`) sends COM_IsKeepAliveOn
-whenever the link has been idle for ``keepalive_period``.
-
-A lost link raises :class:`NotConnected` and stays closed: reopening it is the job of the
-one connection supervisor, :class:`gimbal_driver_common.controller.GimbalController`, which
-calls :meth:`CaptureClient.connect` through the device adapter (``device.py``). The errors
-subclass the shared hierarchy in :mod:`gimbal_driver_common.errors`.
+The client keeps the old names as one-line delegates (the device adapter, probes and tests
+call them), and the keep-alive thread: a background thread (:meth:`CaptureClient.start`)
+sends COM_IsKeepAliveOn whenever the link has been idle for ``keepalive_period``.
 """
 
 from __future__ import annotations
 
 import contextlib
-import logging
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from gimbal_driver_common.link_lock import LinkLock
-from gimbal_driver_common.transport import ByteStream, TransportError
-from gimbal_driver_common.unanswered import Unanswered
+from gimbal_driver_common.transport import ByteStream
 
 from .batch import BatchedReads
-from .device_requests import DeviceRequests
-from .errors import CaptureError, DeviceNack, DeviceTimeout, NotConnected, WrongReply
-from .motion import MotionRequests
-from .protocol import Frame, ProtocolError, ReplyByte, ReplyCode, StreamDecoder, command
+from .device_requests import DeviceRequests, Identity, Polls, TrackingState
+from .errors import CaptureError, DeviceNack
+from .link import CaptureLink
+from .motion import MotionRequests, PostedMoves
+from .protocol import GeoPoint, PresetRecord
 
-LOG = logging.getLogger('capture_driver.client')
 
-
-class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
-    """Thread-safe session with one Capture controller over any :class:`ByteStream`."""
+class CaptureClient(CaptureLink):
+    """Thread-safe session with one Capture controller over any :class:`ByteStream`: the
+    link, with its parts as attributes."""
 
     def __init__(
         self,
@@ -75,153 +53,19 @@ class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
         batch_reads: bool = True,
         link_lock: LinkLock | None = None,
     ) -> None:
-        self._stream_factory = stream_factory
-        self.group = group
-        self.timeout = timeout
-        self.greeting_timeout = greeting_timeout
-        self.expect_greeting = expect_greeting
-        self.keepalive_period = keepalive_period
-        self.keepalive_count = keepalive_count
-        self.resync_gap = resync_gap
-        self.max_timeouts = max_timeouts
-        # the device's one link lock (fair: a command stream must not starve the joint poll)
-        self._lock = link_lock if link_lock is not None else LinkLock()
-        self._stream: ByteStream | None = None
-        self._decoder = StreamDecoder()
-        self._connected = False
-        self._connect_opcode = command('COM_Connect').opcode
-        self._last_activity = 0.0
-        self._consecutive_timeouts = 0
-        # axis -> (mode, acceleration, speed, TUM armed) this client's last motion set-up
-        # left on the device (armed: a TUM was sent for the next absolute move, see
-        # move_absolute); forgotten on connect and on any other command that changes something
-        self._setups: dict[int, tuple[str, float | None, float | None, bool]] = {}
-        self._in_setup = False
-        #: input may hold a reply to an earlier request (see :meth:`_drain`)
-        self._stale_possible = True
-        #: getters of :meth:`read_many` go out in one write (False: one at a time)
-        self.batch_reads = batch_reads
-        self.batching = batch_reads
-        self._batch_failures = 0
+        super().__init__(stream_factory, group=group, timeout=timeout,
+                         greeting_timeout=greeting_timeout, expect_greeting=expect_greeting,
+                         keepalive_period=keepalive_period, keepalive_count=keepalive_count,
+                         resync_gap=resync_gap, max_timeouts=max_timeouts,
+                         link_lock=link_lock)
+        self.polls = Polls(self)
+        self.batch = BatchedReads(self, self.polls, batch_reads)
+        self.motion = MotionRequests(self, self.setups, self.polls, self.batch)
+        self.device_requests = DeviceRequests(self, self.polls, self.batch, self.motion)
         self._worker: threading.Thread | None = None
         self._stop = threading.Event()
-        self.last_error = 'not connected'
-        self.connects = 0
-        self.stats = {'requests': 0, 'timeouts': 0, 'nacks': 0, 'wrong_replies': 0,
-                      'stale': 0, 'incomplete_batches': 0, 'posted_moves': 0}
-        # Commands the host sends on its own that the device answered with 0xA6 or with the
-        # wrong kind of reply (name -> its answer); never sent again on this connection.
-        self.unsupported: dict[str, str] = {}
-        #: replies of the wrong kind per command (name -> (count, the last answer))
-        self.wrong_replies: dict[str, tuple[int, str]] = {}
-        #: requests the host makes on its own that went unanswered, each asked again only
-        #: after its back-off (:meth:`DeviceRequests.poll`); named in diagnostics
-        self.unanswered = Unanswered()
-        self._keepalive_on = False
 
-    # ---------------------------------------------------------------- link
-    @property
-    def connected(self) -> bool:
-        return self._connected
-
-    @property
-    def description(self) -> str:
-        stream = self._stream
-        return stream.description if stream is not None else ''
-
-    @property
-    def garbage_bytes(self) -> int:
-        return self._decoder.garbage_bytes
-
-    def connect(self) -> None:
-        """Open the link and run the handshake; raises :class:`CaptureError` on failure."""
-        with self._lock:
-            self._close_locked()
-            stream = self._stream_factory()
-            try:
-                stream.open()
-            except TransportError as exc:
-                self.last_error = str(exc)
-                raise NotConnected(str(exc)) from exc
-            self._stream = stream
-            self._decoder.reset()
-            self._stale_possible = True
-            self.batching, self._batch_failures = self.batch_reads, 0
-            self.unsupported = {}  # a new connection may be a different controller
-            self.wrong_replies = {}
-            self.unanswered.clear()
-            self._keepalive_on = False
-            try:
-                self._handshake()
-                self._connected = True
-                self._consecutive_timeouts = 0
-                if self.keepalive_period > 0:
-                    self._configure_keepalive()
-            except (CaptureError, TransportError) as exc:
-                self.last_error = f'handshake with {stream.description} failed: {exc}'
-                self._close_locked()
-                raise NotConnected(self.last_error) from exc
-            self.connects += 1
-            self.last_error = ''
-        LOG.info('connected to %s', self.description)
-
-    def _handshake(self) -> None:
-        if self.expect_greeting:
-            greeting = self._wait_greeting(self.greeting_timeout)
-            if greeting is not None:
-                self._connect_opcode = greeting.opcode
-        frame = Frame(self.group, 0, self._connect_opcode)
-        self._transact('COM_Connect', frame, expect_data=False, timeout=self.timeout)
-
-    def _wait_greeting(self, timeout: float) -> Frame | None:
-        assert self._stream is not None
-        deadline = time.monotonic() + timeout
-        while (remaining := deadline - time.monotonic()) > 0:
-            for item in self._decoder.feed(self._stream.read(256, remaining)):
-                if isinstance(item, Frame) and not item.data and 0x0700 <= item.opcode <= 0x07FF:
-                    return item
-        return None
-
-    def _configure_keepalive(self) -> None:
-        timeout_ms = max(int(self.keepalive_period * 1000), 100)
-        try:
-            self._request_locked('COM_setKeepAliveTimeout', None, min(timeout_ms, 0xFFFF))
-            self._request_locked('COM_setKeepAliveCount', None, self.keepalive_count)
-            self._request_locked('COM_StartKeepAlive', None, 1)
-        except (DeviceNack, WrongReply) as exc:  # firmware before 2.13.6 has no keep-alive
-            LOG.warning('controller keep-alive not available: %s', exc)
-            return
-        self._keepalive_on = True
-
-    def close(self, send_disconnect: bool = False) -> None:
-        """Close the link cleanly.
-
-        A configured controller keep-alive is switched off first (a clean close is not a
-        dead host: the axes keep their power and position); with ``send_disconnect`` the
-        controller also gets COM_Disconnect, which powers the motors off (4.6.3).
-        """
-        with self._lock:
-            if self._connected and self._keepalive_on:
-                with contextlib.suppress(CaptureError, TransportError, ProtocolError):
-                    self._request_locked('COM_StartKeepAlive', None, 0, timeout=0.2)
-            if send_disconnect and self._connected:
-                with contextlib.suppress(CaptureError, TransportError, ProtocolError):
-                    self._request_locked('COM_Disconnect', None, None, timeout=0.2)
-            self._close_locked()
-
-    def _close_locked(self) -> None:
-        self._connected = False
-        self._setups.clear()
-        stream, self._stream = self._stream, None
-        if stream is not None:
-            stream.close()
-
-    def _link_lost(self, why: str) -> None:
-        self.last_error = why
-        if self._connected:
-            LOG.warning('link lost: %s', why)
-        self._close_locked()
-
+    # ------------------------------------------------------------ keep-alive
     def start(self) -> None:
         """Start the keep-alive thread (needed only with ``keepalive_period`` > 0)."""
         if self._worker is not None and self._worker.is_alive():
@@ -240,195 +84,114 @@ class CaptureClient(BatchedReads, MotionRequests, DeviceRequests):
     def _run(self) -> None:
         tick = 0.05
         while not self._stop.wait(tick):
-            if self._connected and self._keepalive_on and (
-                time.monotonic() - self._last_activity >= self.keepalive_period
+            if self.connected and self.keepalive_on and (
+                time.monotonic() - self.last_activity >= self.keepalive_period
             ):
                 with contextlib.suppress(CaptureError):
-                    self.optional('COM_IsKeepAliveOn')
+                    self.polls.optional('COM_IsKeepAliveOn')
 
-    # ------------------------------------------------------------- requests
-    def request(self, name: str, axis: int | None = None, value: Any = None,
-                timeout: float | None = None, optional: bool = False) -> Any:
-        """Send one table command and return its decoded reply (None for ACK-only commands).
+    # ------------------------------------------- the parts under their old names
+    @property
+    def batch_reads(self) -> bool:
+        return self.batch.batch_reads
 
-        ``optional``: a getter the host asks on its own (a sensor, a register): asked
-        once, not retried after a timeout, and its timeout does not count toward calling
-        the device silent (a device that answers the rest is not silent).
+    @property
+    def batching(self) -> bool:
+        return self.batch.batching
 
-        Raises :class:`ProtocolError` for bad arguments (nothing is sent),
-        :class:`DeviceNack`, :class:`WrongReply`, :class:`DeviceTimeout` or
-        :class:`NotConnected`.
-        """
-        cmd = command(name)
-        with self._lock:
-            return self._request_locked(cmd.name, axis, value, timeout, optional=optional)
+    def read_many(self, reads: Sequence[tuple[str, int | None]],
+                  optional: bool = False) -> list[Any]:
+        return self.batch.read_many(reads, optional)
 
-    def _request_locked(self, name: str, axis: int | None, value: Any,
-                        timeout: float | None = None, group: int | None = None,
-                        optional: bool = False) -> Any:
-        cmd = command(name)
-        # validates before anything is sent
-        frame = cmd.frame(axis, value, self.group if group is None else group)
-        if self._stream is None:
-            raise NotConnected(f'{name}: not connected ({self.last_error})')
-        if not cmd.replies_with_data and not self._in_setup:
-            self._setups.clear()  # anything may have changed an axis' mode or profile
-        for attempt in (1, 2):
-            try:
-                reply = self._transact(name, frame, cmd.replies_with_data,
-                                       self.timeout if timeout is None else timeout,
-                                       optional=optional)
-                return self._decode(name, frame, reply) if cmd.replies_with_data else None
-            except DeviceNack as exc:
-                # 0xF6: the controller did not execute the packet, so resending is safe.
-                if exc.code == ReplyCode.WRONG_CHECKSUM and attempt == 1:
-                    continue
-                raise
-            except (DeviceTimeout, WrongReply) as exc:
-                # A getter changes nothing, so it is retried once (a reply of the wrong kind
-                # is named only when the device gives it twice: noise can look like an ACK
-                # byte); a setter is not, nor an optional getter that got no answer (it
-                # would hold the link twice as long for what the device does not serve).
-                retry = not (optional and isinstance(exc, DeviceTimeout))
-                if cmd.replies_with_data and attempt == 1 and retry:
-                    continue
-                raise
-        raise DeviceTimeout(f'{name}: no reply')  # pragma: no cover
+    def explain_nack(self, exc: DeviceNack) -> DeviceNack:
+        return self.polls.explain_nack(exc)
 
-    def _decode(self, name: str, frame: Frame, reply: Frame) -> Any:
-        """A getter's value; data that does not decode is a reply of the wrong kind."""
-        try:
-            return command(name).decode_reply(reply)
-        except ProtocolError as exc:
-            raise self._wrong_reply(name, frame, f'{len(reply.data)} data bytes ({exc})',
-                                    'data') from None
+    def run(self, name: str, axis: int | None = None, value: Any = None) -> Any:
+        return self.polls.run(name, axis, value)
 
-    def _transact(self, name: str, frame: Frame, expect_data: bool, timeout: float,
-                  optional: bool = False) -> Frame:
-        stream = self._stream
-        if stream is None:
-            raise NotConnected(f'{name}: not connected ({self.last_error})')
-        self.stats['requests'] += 1
-        try:
-            late_possible = self._send(stream, frame.encode())
-            reply = self._await_reply(stream, name, frame, expect_data, timeout, late_possible,
-                                      optional)
-        except TransportError as exc:
-            self._link_lost(f'{name}: {exc}')
-            raise NotConnected(f'{name}: link lost ({exc})') from exc
-        except WrongReply:
-            self._consecutive_timeouts = 0  # the device answered: it is not silent
-            raise
-        self._stale_possible = False
-        self._consecutive_timeouts = 0
-        return reply
+    def poll(self, name: str, axis: int | None = None) -> Any:
+        return self.polls.poll(name, axis)
 
-    def _send(self, stream: ByteStream, data: bytes) -> bool:
-        """Write one request (or a batch), after draining stale input if there can be any;
-        until its reply is in, input may hold a stale reply again. Returns True when a late
-        reply to an earlier request may still arrive (one was left unanswered)."""
-        late_possible = self._stale_possible
-        if late_possible:
-            self._drain(stream)
-        stream.write(data)
-        self._last_activity = time.monotonic()
-        self._stale_possible = True
-        return late_possible
+    def optional(self, name: str, axis: int | None = None) -> Any:
+        return self.polls.optional(name, axis)
 
-    def _input_until(self, stream: ByteStream, deadline: float) -> Iterator[Frame | ReplyByte]:
-        """Decoded input as it arrives, until ``deadline``; a packet left partial for
-        ``resync_gap`` is given up (the decoder resynchronises). The caller stops iterating
-        once it has its answer: what else came in the same read was not asked for."""
-        while (remaining := deadline - time.monotonic()) > 0:
-            wait = min(remaining, self.resync_gap) if self._decoder.has_partial else remaining
-            data = stream.read(4096, wait)
-            yield from self._decoder.feed(data) if data else self._decoder.flush_partial()
+    def move_absolute(self, axis: int, position_deg: float, speed_deg_s: float,
+                      acceleration: float) -> None:
+        self.motion.move_absolute(axis, position_deg, speed_deg_s, acceleration)
 
-    def _drain(self, stream: ByteStream) -> None:
-        """Discard stale input before a new request.
+    def post_moves(self, moves: dict[int, tuple[float, float, float]]) -> PostedMoves | None:
+        return self.motion.post_moves(moves)
 
-        Only a request whose reply never came (a timeout, a NACK-triggered resend, a
-        connection just made) can leave a reply behind that would answer the next
-        request; everything else is skipped by :meth:`_await_reply` as it reads. So the
-        drain runs only then: on loopback its poll() cost 10-18 us on every transaction,
-        three times before a position command reaches MOT_Update.
-        """
-        self._stale_possible = False
-        while True:
-            data = stream.read(4096, 0.0)
-            if not data:
-                break
-            for item in self._decoder.feed(data):
-                self.stats['stale'] += 1
-                if isinstance(item, Frame) and 0x0700 <= item.opcode <= 0x07FF and not item.data:
-                    LOG.info('controller re-sent its greeting (0x%04X)', item.opcode)
+    def settle_posted(self, posted: PostedMoves) -> bool:
+        return self.motion.settle_posted(posted)
 
-    def _await_reply(self, stream: ByteStream, name: str, frame: Frame, expect_data: bool,
-                     timeout: float, late_possible: bool, optional: bool = False) -> Frame:
-        """The reply to ``frame``: its data packet (getters) or the ACK (the rest).
+    def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:
+        self.motion.jog(axis, velocity_deg_s, acceleration)
 
-        The other kind of reply is this request's protocol error (:class:`WrongReply`) when
-        nothing else can have sent it: an ACK to a getter while no earlier request is left
-        unanswered, a data packet with this request's opcode and axis to a setter. Anything
-        that may be a late reply to an earlier request (a data packet of another opcode, an
-        ACK after a timeout) is skipped while the real reply can still come; if nothing else
-        comes, the request is named with what it got at the deadline. Only a device that
-        answers nothing at all times out.
-        """
-        unexpected = ''  # the first answer of the wrong kind that may have been stale
-        for item in self._input_until(stream, time.monotonic() + timeout):
-            if isinstance(item, ReplyByte):
-                if not item.is_ack:
-                    self.stats['nacks'] += 1
-                    raise DeviceNack(self._label(name, frame), item.code)
-                if not expect_data:
-                    return frame
-                if not late_possible:
-                    self._stale_possible = False
-                    raise self._wrong_reply(name, frame, 'ACK', 'data')
-                unexpected = unexpected or 'ACK'
-                self.stats['stale'] += 1
-            elif isinstance(item, Frame):
-                if (item.opcode, item.axis) == (frame.opcode, frame.axis):
-                    if expect_data:
-                        return item
-                    self._stale_possible = False
-                    raise self._wrong_reply(name, frame, 'data', 'ACK')
-                self.stats['stale'] += 1
-                if not (0x0700 <= item.opcode <= 0x07FF and not item.data):  # greeting
-                    unexpected = unexpected or (
-                        f'data of opcode 0x{item.opcode:04X} (axis {item.axis})')
-        if unexpected:
-            raise self._wrong_reply(name, frame, unexpected, 'data' if expect_data else 'ACK')
-        if optional:
-            self.stats['timeouts'] += 1  # the device may answer the rest: not silence
-        else:
-            self._count_timeout(name)
-        raise DeviceTimeout(f'{self._label(name, frame)}: no reply within {timeout:g} s')
+    def stop_axis(self, axis: int) -> None:
+        self.motion.stop_axis(axis)
 
-    def _wrong_reply(self, name: str, frame: Frame, answer: str, expected: str) -> WrongReply:
-        """Count a reply of the wrong kind for ``name`` (diagnostics, per command)."""
-        self.stats['wrong_replies'] += 1
-        count, _ = self.wrong_replies.get(name, (0, ''))
-        error = WrongReply(self._label(name, frame), answer, expected)
-        self.wrong_replies[name] = (count + 1, f'0x{frame.opcode:04X} answered {answer}, '
-                                               f'expected {expected}')
-        return error
+    def identity(self) -> Identity:
+        return self.device_requests.identity()
 
-    def _count_timeout(self, what: str) -> None:
-        """One more unanswered request; after ``max_timeouts`` in a row the link is closed
-        for the supervisor to reopen (raises :class:`NotConnected`)."""
-        self.stats['timeouts'] += 1
-        self._consecutive_timeouts += 1
-        if self._consecutive_timeouts >= self.max_timeouts:
-            self._link_lost(f'device silent: {self._consecutive_timeouts} requests unanswered')
-            raise NotConnected(f'{what}: device silent, link closed for reconnect')
+    def read_axis(self, axis: int, with_current: bool = False) -> tuple[float, float, float | None]:
+        return self.device_requests.read_axis(axis, with_current)
 
-    @staticmethod
-    def _label(name: str, frame: Frame) -> str:
-        return f'{name} (axis {frame.axis})' if frame.axis else name
+    def stop_all(self, axes: list[int]) -> list[str]:
+        return self.device_requests.stop_all(axes)
 
-    def exclusive(self) -> LinkLock:
-        """The link lock, for a caller that sends a whole motion set-up (several axes)
-        without the poll thread's requests in between: ``with client.exclusive(): ...``."""
-        return self._lock
+    def reset_faults(self, axis: int) -> None:
+        self.device_requests.reset_faults(axis)
+
+    def registers(self, axis: int | None) -> dict[str, int]:
+        return self.device_requests.registers(axis)
+
+    def error_strings(self, csr: int) -> dict[str, str]:
+        return self.device_requests.error_strings(csr)
+
+    def configure_scan(self, yaw_min: float, yaw_max: float, pitch_min: float, steps: int,
+                       step_height: float, speed: float) -> None:
+        self.device_requests.configure_scan(yaw_min, yaw_max, pitch_min, steps, step_height,
+                                            speed)
+
+    def start_scan(self, pattern: str) -> None:
+        self.device_requests.start_scan(pattern)
+
+    def set_preset(self, index: int, name: str, angles: list[float]) -> None:
+        self.device_requests.set_preset(index, name, angles)
+
+    def get_preset(self, index: int) -> PresetRecord:
+        return self.device_requests.get_preset(index)
+
+    def preset_indices(self) -> list[int]:
+        return self.device_requests.preset_indices()
+
+    def imu(self) -> dict[str, float]:
+        return self.device_requests.imu()
+
+    def gps_fix(self) -> tuple[bool, float, float] | None:
+        return self.device_requests.gps_fix()
+
+    def goto_lla(self, target: int, point: GeoPoint) -> None:
+        self.device_requests.goto_lla(target, point)
+
+    def set_tracking(self, camera: int, mode: int) -> None:
+        self.device_requests.set_tracking(camera, mode)
+
+    def tracking_state(self, camera: int) -> TrackingState:
+        return self.device_requests.tracking_state(camera)
+
+    def set_axis_power(self, axis: int, on: bool) -> None:
+        self.device_requests.set_axis_power(axis, on)
+
+    def digital_io(self, numbers: list[int]) -> dict[int, bool]:
+        return self.device_requests.digital_io(numbers)
+
+    def set_digital_output(self, number: int, on: bool) -> None:
+        self.device_requests.set_digital_output(number, on)
+
+    def gps_heading(self) -> tuple[bool, float]:
+        return self.device_requests.gps_heading()
+
+    def stored_targets(self) -> dict[int, GeoPoint]:
+        return self.device_requests.stored_targets()

@@ -1,7 +1,8 @@
 """What the host asks the Capture controller for (no ROS): identity, registers, scans,
 presets, IMU, GPS, tracking, power, digital I/O, and the requests it makes on its own
-(:meth:`DeviceRequests.poll`: not asked again once the device does not know them). A
-mixin of :class:`~.client.CaptureClient`, whose request/reply link it uses.
+(:meth:`Polls.poll`: not asked again once the device does not know them). Two parts of
+:class:`~.client.CaptureClient`: :class:`Polls` is handed the link
+(:class:`~.link.CaptureLink`); :class:`DeviceRequests` the link and the parts it drives.
 """
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import logging
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .errors import (
     REQUEST_ERRORS,
@@ -29,6 +30,11 @@ from .protocol import (
     ddmm_to_degrees,
 )
 from .protocol.registers import CSR_ERROR_STRINGS, CSR_PROTOCOL_ERROR, REGISTERS
+
+if TYPE_CHECKING:  # the parts import this module for request_key: no import cycle at run time
+    from .batch import BatchedReads
+    from .link import CaptureLink
+    from .motion import MotionRequests
 
 LOG = logging.getLogger('capture_driver.device_requests')
 
@@ -77,8 +83,13 @@ class TrackingState:
 
 
 
-class DeviceRequests:
-    """Device functions of :class:`~.client.CaptureClient` (a mixin)."""
+class Polls:
+    """The requests the host makes on its own, over the link it is handed: asked once, not
+    again once the device does not know them (the link's :attr:`~.link.CaptureLink.unsupported`),
+    backed off when unanswered (its :attr:`~.link.CaptureLink.unanswered`)."""
+
+    def __init__(self, link: CaptureLink) -> None:
+        self._link = link
 
     def explain_nack(self, exc: DeviceNack) -> DeviceNack:
         """Add the controller's own reason (ERR_GetProtocolErrorString) to an 0xA6 NACK."""
@@ -93,7 +104,7 @@ class DeviceRequests:
     def run(self, name: str, axis: int | None = None, value: Any = None) -> Any:
         """:meth:`request`, with the controller's reason attached to an 0xA6 NACK."""
         try:
-            return self.request(name, axis, value)
+            return self._link.request(name, axis, value)
         except DeviceNack as exc:
             raise self.explain_nack(exc) from None
 
@@ -115,31 +126,31 @@ class DeviceRequests:
         :class:`BackingOff` without sending anything, so an optional sensor the device
         never answers costs the link one timeout per back-off, not one per ask.
         """
-        answer = self.unsupported.get(name)
+        answer = self._link.unsupported.get(name)
         if answer is not None:
             raise NotSupported(name, answer)
         key = request_key(name, axis)
-        waiting = self.unanswered.waiting(key)
+        waiting = self._link.unanswered.waiting(key)
         if waiting is not None:
             record, left = waiting
             raise BackingOff(key, record.in_a_row, left)
         opcode = f'0x{command(name).opcode:04X}'
         try:
-            value = self.request(name, axis, optional=True)
+            value = self._link.request(name, axis, optional=True)
         except DeviceTimeout:
-            record = self.unanswered.timed_out(key)
+            record = self._link.unanswered.timed_out(key)
             if record.in_a_row == 1:
                 LOG.warning('%s went unanswered; asked again after a growing back-off', key)
             raise
         except WrongReply as exc:
-            self._not_supported(name, f'{opcode} answered {exc.answer}, expected {exc.expected}')
-            raise NotSupported(name, self.unsupported[name]) from exc
+            self.not_supported(name, f'{opcode} answered {exc.answer}, expected {exc.expected}')
+            raise NotSupported(name, self._link.unsupported[name]) from exc
         except DeviceNack as exc:
             if exc.code != ReplyCode.INVALID_COMMAND:
                 raise
-            self._not_supported(name, f'{opcode} answered NACK 0xA6', exc)
-            raise NotSupported(name, self.unsupported[name]) from exc
-        self.unanswered.answered(key)
+            self.not_supported(name, f'{opcode} answered NACK 0xA6', exc)
+            raise NotSupported(name, self._link.unsupported[name]) from exc
+        self._link.unanswered.answered(key)
         return value
 
     def optional(self, name: str, axis: int | None = None) -> Any:
@@ -152,24 +163,35 @@ class DeviceRequests:
             LOG.info('%s', exc)
             return None
 
-    def _not_supported(self, name: str, answer: str, nack: DeviceNack | None = None) -> None:
+    def not_supported(self, name: str, answer: str, nack: DeviceNack | None = None) -> None:
         """Record ``name`` as unknown to the device (said once, here); for an 0xA6, with the
         device's reason, and the protocol-error flag it raised cleared."""
-        self.unsupported[name] = answer  # first: explaining it asks the device again
+        self._link.unsupported[name] = answer  # first: explaining it asks the device again
         if nack is not None:
             detail = self.explain_nack(nack).detail
             if detail:
-                self.unsupported[name] = f'{answer} "{detail}"'
+                self._link.unsupported[name] = f'{answer} "{detail}"'
         LOG.warning('%s: the device does not support it (%s); not sent again on this '
-                    'connection', name, self.unsupported[name])
+                    'connection', name, self._link.unsupported[name])
         if nack is not None:
-            self._clear_own_protocol_error()
+            self.clear_own_protocol_error()
 
-    def _clear_own_protocol_error(self) -> None:
+    def clear_own_protocol_error(self) -> None:
         with contextlib.suppress(CaptureError, ProtocolError):
             if self.optional('ERR_CaptureSystemRegister') == CSR_PROTOCOL_ERROR:
-                self.request('ERR_ClearErrors')
+                self._link.request('ERR_ClearErrors')
 
+
+class DeviceRequests:
+    """Device functions of :class:`~.client.CaptureClient`: requests over the link, the
+    host's own polls, the batched register reads and the motion part's stops."""
+
+    def __init__(self, link: CaptureLink, polls: Polls, batch: BatchedReads,
+                 motion: MotionRequests) -> None:
+        self._link = link
+        self._polls = polls
+        self._batch = batch
+        self._motion = motion
 
     def identity(self) -> Identity:
         """Serial number, firmware, hardware and part number, best effort: blank where the
@@ -177,7 +199,7 @@ class DeviceRequests:
         ident = Identity()
         for attr, name in IDENTITY_GETTERS:
             try:
-                value = self.poll(name)
+                value = self._polls.poll(name)
             except NotSupported as exc:
                 ident.problems[name] = exc.answer
                 continue
@@ -189,9 +211,9 @@ class DeviceRequests:
 
     def read_axis(self, axis: int, with_current: bool = False) -> tuple[float, float, float | None]:
         """Load position (deg), speed (deg/s) and optionally current (mA) of one axis."""
-        position = self.request('MOT_GetLoadPosition', axis)
-        speed = self.request('MOT_GetMotorSpeed', axis)
-        current = self.request('MOT_GetMotorCurrent', axis) if with_current else None
+        position = self._link.request('MOT_GetLoadPosition', axis)
+        speed = self._link.request('MOT_GetMotorSpeed', axis)
+        current = self._link.request('MOT_GetMotorCurrent', axis) if with_current else None
         return position, speed, current
 
     def stop_all(self, axes: list[int]) -> list[str]:
@@ -199,20 +221,20 @@ class DeviceRequests:
         problems = []
         for name in ('SCN_StopScan', 'PRST_StopPresetLooping', 'GPS_StopTargetLooping'):
             try:
-                self.request(name)
+                self._link.request(name)
             except REQUEST_ERRORS as exc:
                 LOG.debug('stop: %s', exc)
         for axis in axes:
             try:
-                self.stop_axis(axis)
+                self._motion.stop_axis(axis)
             except REQUEST_ERRORS as exc:
                 problems.append(str(exc))
         return problems
 
     def reset_faults(self, axis: int) -> None:
         """4.10: "send the 'Reset faults' and the 'AxisOn' commands"."""
-        self.run('MOT_ResetFaults', axis)
-        self.run('MOT_AxisOn', axis)
+        self._polls.run('MOT_ResetFaults', axis)
+        self._polls.run('MOT_AxisOn', axis)
 
     def registers(self, axis: int | None) -> dict[str, int]:
         """Raw per-axis registers (``axis``) or system registers (``None``): those the
@@ -220,7 +242,7 @@ class DeviceRequests:
         not asked again (:meth:`poll`)."""
         wanted = [register for register in REGISTERS.values()
                   if register.per_axis == (axis is not None)]
-        values = self.read_many([(register.command, axis) for register in wanted],
+        values = self._batch.read_many([(register.command, axis) for register in wanted],
                                 optional=True)
         return {register.name: value for register, value in zip(wanted, values, strict=True)
                 if value is not None}
@@ -232,7 +254,7 @@ class DeviceRequests:
         for bit, name in CSR_ERROR_STRINGS.items():
             if csr & (1 << bit):
                 try:
-                    texts[name] = self.poll(name)
+                    texts[name] = self._polls.poll(name)
                 except NotSupported:
                     continue
                 except REQUEST_ERRORS as exc:
@@ -247,7 +269,7 @@ class DeviceRequests:
             ('SCN_SetPitchMin', pitch_min), ('SCN_SetNumSteps', steps),
             ('SCN_SetStepHeight', step_height), ('SCN_SetScanSpeed', speed),
         ):
-            self.run(name, None, value)
+            self._polls.run(name, None, value)
 
     def start_scan(self, pattern: str) -> None:
         try:
@@ -256,17 +278,18 @@ class DeviceRequests:
             raise CaptureError(
                 f'pattern {pattern!r} not available; the device has {sorted(SCAN_COMMANDS)}'
             ) from None
-        self.run(name)
+        self._polls.run(name)
 
     def set_preset(self, index: int, name: str, angles: list[float]) -> None:
-        full = [*angles, *([0.0] * (6 - len(angles)))][:6]
-        self.run('PRST_SetPreset', index, PresetRecord(name, tuple(full)))
+        a = [*angles, *([0.0] * 6)]  # the record holds six angles: padded, then cut
+        full = (a[0], a[1], a[2], a[3], a[4], a[5])
+        self._polls.run('PRST_SetPreset', index, PresetRecord(name, full))
 
     def get_preset(self, index: int) -> PresetRecord:
-        return self.run('PRST_GetPreset', index)
+        return self._polls.run('PRST_GetPreset', index)
 
     def preset_indices(self) -> list[int]:
-        flags = self.request('PRST_GetPresetFlag')
+        flags = self._link.request('PRST_GetPresetFlag')
         return [bit + 1 for bit in range(15) if flags & (1 << bit)]
 
     def imu(self) -> dict[str, float]:
@@ -275,64 +298,64 @@ class DeviceRequests:
         names = ('IMU_GetRoll', 'IMU_GetPitch', 'IMU_GetYaw',
                  'IMU_GetGyroX', 'IMU_GetGyroY', 'IMU_GetGyroZ')
         keys = ('roll', 'pitch', 'yaw', 'gyro_x', 'gyro_y', 'gyro_z')
-        return {key: self.poll(name) for key, name in zip(keys, names, strict=True)}
+        return {key: self._polls.poll(name) for key, name in zip(keys, names, strict=True)}
 
     def gps_fix(self) -> tuple[bool, float, float] | None:
         """(position valid, latitude deg, longitude deg), converted from DDMM.mmmm (4.4.1);
         None once the device does not answer one of the three with data (the fix poll then
         stops); a timeout or another NACK raises, for this read only."""
-        if any(name in self.unsupported for name in GPS_FIX_COMMANDS):
+        if any(name in self._link.unsupported for name in GPS_FIX_COMMANDS):
             return None  # nothing is sent for a fix the device cannot give
         try:
-            ready, latitude, longitude = (self.poll(name) for name in GPS_FIX_COMMANDS)
+            ready, latitude, longitude = (self._polls.poll(name) for name in GPS_FIX_COMMANDS)
         except NotSupported:
             return None
         return bool(ready), ddmm_to_degrees(latitude), ddmm_to_degrees(longitude)
 
     def goto_lla(self, target: int, point: GeoPoint) -> None:
-        self.run('GPS_SetTargetLLA', target, point)
-        self.run('GPS_GoToTarget', target)
+        self._polls.run('GPS_SetTargetLLA', target, point)
+        self._polls.run('GPS_GoToTarget', target)
 
     # -------------------------------------------------- first-class device functions
     def set_tracking(self, camera: int, mode: int) -> None:
         """VDT_setTrackingOn: 0 off, 1 manual, 2 automatic (4.11.1) for camera 0..3."""
-        self.run('VDT_setTrackingOn', camera, mode)
+        self._polls.run('VDT_setTrackingOn', camera, mode)
 
     def tracking_state(self, camera: int) -> TrackingState:
         """Tracking active, automatic mode and target detection of one camera (4.11.2-4)."""
         return TrackingState(
             camera=camera,
-            active=bool(self.poll('VDT_isTrackingOn', camera)),
-            automatic=bool(self.poll('VDT_isAutoModeOn', camera)),
-            target_detected=bool(self.poll('VDT_isTargetDetected', camera)),
+            active=bool(self._polls.poll('VDT_isTrackingOn', camera)),
+            automatic=bool(self._polls.poll('VDT_isAutoModeOn', camera)),
+            target_detected=bool(self._polls.poll('VDT_isTargetDetected', camera)),
         )
 
     def set_axis_power(self, axis: int, on: bool) -> None:
         """MOT_AxisOn / MOT_AxisOff (4.2.11-12). Switching on also cancels the motion the
         drive buffered while off (AxisOn would resume it) by stopping the axis."""
         if on:
-            self.run('MOT_AxisOn', axis)
-            self.stop_axis(axis)
+            self._polls.run('MOT_AxisOn', axis)
+            self._motion.stop_axis(axis)
         else:
-            self.run('MOT_AxisOff', axis)
+            self._polls.run('MOT_AxisOff', axis)
 
     def digital_io(self, numbers: list[int]) -> dict[int, bool]:
         """State of digital I/O 1..6 (COM_getDigitalIO, the number in the axis byte)."""
-        return {n: bool(self.poll('COM_getDigitalIO', n)) for n in numbers}
+        return {n: bool(self._polls.poll('COM_getDigitalIO', n)) for n in numbers}
 
     def set_digital_output(self, number: int, on: bool) -> None:
-        self.run('COM_setDigitalIO', number, int(on))
+        self._polls.run('COM_setDigitalIO', number, int(on))
 
     def gps_heading(self) -> tuple[bool, float]:
         """(heading valid, system heading in compass degrees clockwise from north)."""
-        ready = bool(self.poll('GPS_HeadingReady'))
-        return ready, self.poll('GPS_GetHeading')
+        ready = bool(self._polls.poll('GPS_HeadingReady'))
+        return ready, self._polls.poll('GPS_GetHeading')
 
     def stored_targets(self) -> dict[int, GeoPoint]:
         """Targets 1..15 that hold a position (4.4.12: a cleared target reads all zero)."""
         targets = {}
         for number in range(1, 16):
-            point = self.request('GPS_GetTargetLLA', number)
+            point = self._link.request('GPS_GetTargetLLA', number)
             if (point.longitude, point.latitude, point.altitude) != (0.0, 0.0, 0.0):
                 targets[number] = point
         return targets

@@ -1,6 +1,8 @@
 """The Capture motion set-ups (no ROS): the 7.1 motion profile, speed mode, stops and the
-stream move written without waiting for its ACKs. A mixin of :class:`~.client.CaptureClient`,
-whose request/reply link (``request``, ``run``, the link lock) it drives.
+stream move written without waiting for its ACKs. A part of :class:`~.client.CaptureClient`,
+handed the link (:class:`~.link.CaptureLink`), its set-up memory (:class:`~.link.AxisSetups`),
+the polls (``run``, what the device does not know) and the batch part (whether stream
+moves may be posted, and their count).
 """
 
 from __future__ import annotations
@@ -11,11 +13,14 @@ from typing import Any
 
 from gimbal_driver_common.transport import ByteStream, TransportError
 
+from .batch import BatchedReads
+from .device_requests import Polls
 from .errors import (
     CaptureError,
     DeviceNack,
     NotConnected,
 )
+from .link import AxisSetups, CaptureLink
 from .protocol import (
     Frame,
     ProtocolError,
@@ -45,7 +50,14 @@ class PostedMoves:
 
 
 class MotionRequests:
-    """Motion set-ups of :class:`~.client.CaptureClient` (a mixin)."""
+    """Motion set-ups of :class:`~.client.CaptureClient`."""
+
+    def __init__(self, link: CaptureLink, setups: AxisSetups, polls: Polls,
+                 batch: BatchedReads) -> None:
+        self._link = link
+        self._setups = setups
+        self._polls = polls
+        self._batch = batch
 
     def move_absolute(self, axis: int, position_deg: float, speed_deg_s: float,
                       acceleration: float) -> None:
@@ -67,39 +79,40 @@ class MotionRequests:
         commanded on the link forgets the armed TUM, and the next move sends it first again.
         """
         speed = abs(speed_deg_s)
-        with self._lock:
-            known = self._setups.pop(axis, None)
-            same_mode = known is not None and known[0] == 'absolute'
+        with self._link.lock:
+            known = self._setups.known.pop(axis, None)
+            if known is not None and known[0] != 'absolute':
+                known = None  # another mode: the whole set-up goes out
             steps: list[tuple[str, Any]] = []
-            if not same_mode:
+            if known is None:
                 steps.append(('MOT_SetPositionMode', None))
-            if not (same_mode and known[3]):  # no TUM armed for this session
+            if known is None or not known[3]:  # no TUM armed for this session
                 steps.append(('MOT_SetTum', None))
-            if not same_mode:
+            if known is None:
                 steps.append(('MOT_SetPositionAbsolute', None))
-            if not same_mode or known[1] != acceleration:
+            if known is None or known[1] != acceleration:
                 steps.append(('MOT_SetAcceleration', acceleration))
-            if not same_mode or known[2] != speed:
+            if known is None or known[2] != speed:
                 steps.append(('MOT_SetSpeed', speed))
             steps += [('MOT_SendPosition', position_deg), ('MOT_Update', None)]
             self._run_setup(axis, steps)
-            self._setups[axis] = ('absolute', acceleration, speed, self._arm_tum(axis))
+            self._setups.known[axis] = ('absolute', acceleration, speed, self._arm_tum(axis))
 
     def _arm_tum(self, axis: int) -> bool:
         """MOT_SetTum for the axis' next session (see :meth:`move_absolute`); False when it
         failed, so that session sends it itself (and judges an 0xA6 with the rest of its
         set-up), or when the device does not know it. The move already happened: a failure
         here is not the move's."""
-        if 'MOT_SetTum' in self.unsupported:
+        if 'MOT_SetTum' in self._link.unsupported:
             return False
-        self._in_setup = True
+        self._setups.in_setup = True
         try:
-            self.request('MOT_SetTum', axis)
+            self._link.request('MOT_SetTum', axis)
         except CaptureError as exc:
             LOG.debug('TUM for the next move of axis %d: %s', axis, exc)
             return False
         finally:
-            self._in_setup = False
+            self._setups.in_setup = False
         return True
 
     def post_moves(self, moves: dict[int, tuple[float, float, float]]) -> PostedMoves | None:
@@ -122,29 +135,29 @@ class MotionRequests:
         and arms the next TUM. A NACK to SendPosition leaves the MOT_Update that follows it
         to re-run the previous profile: the target the axis already has.
         """
-        with self._lock:  # reentrant: the caller's hold
-            stream = self._stream
-            if stream is None or not self.batching:
+        with self._link.lock:  # reentrant: the caller's hold
+            stream = self._link.stream
+            if stream is None or not self._batch.batching:
                 return None
-            if any(self._setups.get(axis) != ('absolute', acceleration, abs(speed), True)
+            if any(self._setups.known.get(axis) != ('absolute', acceleration, abs(speed), True)
                    for axis, (_, speed, acceleration) in moves.items()):
                 return None
             try:
-                frames = [(name, command(name).frame(axis, value, self.group))
+                frames = [(name, command(name).frame(axis, value, self._link.group))
                           for axis, (position, _, _) in moves.items()
                           for name, value in (('MOT_SendPosition', position),
                                               ('MOT_Update', None))]
             except ProtocolError:
                 return None  # move_absolute raises it, with nothing sent
             for axis, (_, speed, acceleration) in moves.items():
-                self._setups[axis] = ('absolute', acceleration, abs(speed), False)
-            self.stats['requests'] += len(frames)
+                self._setups.known[axis] = ('absolute', acceleration, abs(speed), False)
+            self._link.stats['requests'] += len(frames)
             try:
-                self._send(stream, b''.join(frame.encode() for _, frame in frames))
+                self._link.send(stream, b''.join(frame.encode() for _, frame in frames))
             except TransportError as exc:
-                self._link_lost(f'stream move: {exc}')
+                self._link.link_lost(f'stream move: {exc}')
                 raise NotConnected(f'stream move: link lost ({exc})') from exc
-            self.stats['posted_moves'] += 1
+            self._link.stats['posted_moves'] += 1
             return PostedMoves(dict(moves), frames, stream)
 
     def settle_posted(self, posted: PostedMoves) -> bool:
@@ -154,23 +167,23 @@ class MotionRequests:
         caller sends the moves again with :meth:`move_absolute` (the axes' set-up is
         forgotten: the whole 7.1 sequence goes out). Run under the link lock before its
         next exchange, so no other setter went out since the post."""
-        with self._lock:
-            if self._stream is not posted.stream:
+        with self._link.lock:
+            if self._link.stream is not posted.stream:
                 for axis in posted.moves:
-                    self._setups.pop(axis, None)
+                    self._setups.known.pop(axis, None)
                 raise NotConnected(f'stream move: link closed before its ACKs came '
-                                   f'({self.last_error})')
+                                   f'({self._link.last_error})')
             error, resend = self._read_posted_answers(posted)
             if error is not None or resend:
                 for axis in posted.moves:
-                    self._setups.pop(axis, None)
+                    self._setups.known.pop(axis, None)
             if error is not None and not resend:
                 raise error
             if resend:
                 return False
             for axis, (_, speed, acceleration) in posted.moves.items():
-                if self._setups.get(axis) == ('absolute', acceleration, abs(speed), False):
-                    self._setups[axis] = ('absolute', acceleration, abs(speed),
+                if self._setups.known.get(axis) == ('absolute', acceleration, abs(speed), False):
+                    self._setups.known[axis] = ('absolute', acceleration, abs(speed),
                                           self._arm_tum(axis))
             return True
 
@@ -178,30 +191,31 @@ class MotionRequests:
         """The ACK of each posted frame, in order (under the lock): the first refusal (or
         the link lost) and whether to send the moves again (an ACK missing, or 0xF6)."""
         answers: list[ReplyByte] = []
+        link = self._link
         try:
-            for item in self._input_until(posted.stream, self._last_activity + self.timeout):
+            for item in link.input_until(posted.stream, link.last_activity + link.timeout):
                 if not isinstance(item, ReplyByte):
-                    self.stats['stale'] += 1
+                    self._link.stats['stale'] += 1
                     continue
                 answers.append(item)
                 if len(answers) == len(posted.frames):
                     break
         except TransportError as exc:
-            self._link_lost(f'stream move: {exc}')
+            self._link.link_lost(f'stream move: {exc}')
             return NotConnected(f'stream move: link lost ({exc})'), False
         error: CaptureError | None = None
         resend = False
         for (name, frame), answer in zip(posted.frames, answers, strict=False):
             if not answer.is_ack:
-                self.stats['nacks'] += 1
+                self._link.stats['nacks'] += 1
                 if error is None:
-                    error = DeviceNack(self._label(name, frame), answer.code)
+                    error = DeviceNack(self._link.label(name, frame), answer.code)
                     resend = answer.code == ReplyCode.WRONG_CHECKSUM
-        self._count_batch(complete=len(answers) == len(posted.frames))
+        self._batch.count_batch(complete=len(answers) == len(posted.frames))
         if len(answers) == len(posted.frames):
             return error, resend
         if not answers:
-            self._count_timeout('stream move')
+            self._link.count_timeout('stream move')
         return error, True
 
     def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:
@@ -211,26 +225,27 @@ class MotionRequests:
         set-up of the axis left it in speed mode (a jog or a stop) and nothing else was
         commanded since: a stream of jog commands costs 2 round trips each, not 4.
         """
-        with self._lock:
-            known = self._setups.pop(axis, None)
-            same_mode = known is not None and known[0] == 'speed'
+        with self._link.lock:
+            known = self._setups.known.pop(axis, None)
+            if known is not None and known[0] != 'speed':
+                known = None  # another mode: the whole set-up goes out
             steps: list[tuple[str, Any]] = []
-            if not same_mode:
+            if known is None:
                 steps.append(('MOT_SetSpeedMode', None))
-            if not same_mode or known[1] != acceleration:
+            if known is None or known[1] != acceleration:
                 steps.append(('MOT_SetAcceleration', acceleration))
             steps += [('MOT_SetSpeed', velocity_deg_s), ('MOT_Update', None)]
             self._run_setup(axis, steps)
-            self._setups[axis] = ('speed', acceleration, velocity_deg_s, False)
+            self._setups.known[axis] = ('speed', acceleration, velocity_deg_s, False)
 
     def stop_axis(self, axis: int) -> None:
         """Decelerate to rest: speed mode with speed 0 (works from position or speed mode).
         Always the full sequence: a stop never relies on what the client remembers."""
-        with self._lock:
-            known = self._setups.pop(axis, None)
+        with self._link.lock:
+            known = self._setups.known.pop(axis, None)
             self._run_setup(axis, [('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
                                    ('MOT_Update', None)])
-            self._setups[axis] = ('speed', known[1] if known else None, 0.0, False)
+            self._setups.known[axis] = ('speed', known[1] if known else None, 0.0, False)
 
     def _run_setup(self, axis: int, steps: list[tuple[str, Any]]) -> None:
         """Send one axis' motion set-up under the lock; the setters in it do not count as
@@ -243,22 +258,23 @@ class MotionRequests:
         stabilising, ...), and the set-up fails with the later refusal as before.
         """
         refused: tuple[str, DeviceNack] | None = None
-        self._in_setup = True
+        self._setups.in_setup = True
         try:
             for name, value in steps:
                 if name not in ADVISORY_STEPS:
-                    self.run(name, axis, value)
-                elif name not in self.unsupported:
+                    self._polls.run(name, axis, value)
+                elif name not in self._link.unsupported:
                     try:
-                        self.run(name, axis, value)
+                        self._polls.run(name, axis, value)
                     except DeviceNack as exc:
                         if exc.code != ReplyCode.INVALID_COMMAND:
                             raise
                         refused = (name, exc)
         finally:
-            self._in_setup = False
+            self._setups.in_setup = False
         if refused is not None:
-            name, exc = refused
+            name, nack = refused
             answer = f'0x{command(name).opcode:04X} answered NACK 0xA6'
-            self._not_supported(name, f'{answer} "{exc.detail}"' if exc.detail else answer)
-            self._clear_own_protocol_error()
+            self._polls.not_supported(name,
+                                      f'{answer} "{nack.detail}"' if nack.detail else answer)
+            self._polls.clear_own_protocol_error()
