@@ -5,8 +5,9 @@ and the package READMEs resolves in the repository; nothing in the repository po
 it (``../shared``); user documents name no issue numbers; and the commands the top README
 shows are ones the workspace really has: its ``make`` targets exist in the Makefile and
 ``.ci/run`` runs its test command, its ``ros2 launch`` line loads and runs under the launch
-stand-in (gimbal_driver_common.testing.launch_standin) with those arguments and starts the node with the
-README's parameters file, whose keys the driver's reference lists, and its ``ros2 topic``,
+stand-in (gimbal_driver_common.testing.launch_standin) with those arguments and starts the
+node with the README's parameters file (keyed ``/**``, so it applies under a namespace
+too), whose keys the driver's reference lists, and its ``ros2 topic``,
 ``ros2 action`` and ``ros2 service`` lines name interfaces of the reference with their
 types and message fields that exist, and its Capture walkthrough (parameters file, move, jog,
 stop, diagnostics) works as written against the Capture simulator. Every package has a

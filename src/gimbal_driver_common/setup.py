@@ -21,4 +21,7 @@ setup(
     maintainer_email='drivers@example.com',
     description='Shared infrastructure of the gimbal driver suite',
     license='Apache-2.0',
+    # colcon test runs pytest only for a package that lists it here (else unittest, which
+    # finds none of these tests): colcon_core/task/python/test/pytest.py, match()
+    tests_require=['pytest'],
 )

@@ -77,9 +77,9 @@ def test_invalid_parameters_name_the_parameter(context, overrides, message) -> N
 
 # ~/look_at set-up (ros/look_at.py): which description, and clear refusals. ThreeAxisNode's
 # package (this test module) installs no description.
-# the reference driver's description, from the source tree (a package beside this one)
-VIRTUAL_GIMBAL = (Path(__file__).parents[2] / 'virtual_gimbal_driver' / 'urdf'
-                  / 'virtual_gimbal_driver.urdf')
+# the reference driver's chain (test/pan_tilt.urdf: a copy, so this package's tests read
+# only its own files)
+VIRTUAL_GIMBAL = Path(__file__).resolve().parent / 'pan_tilt.urdf'
 
 
 def look_at_refusal(context, **overrides) -> str:

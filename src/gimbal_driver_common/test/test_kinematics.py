@@ -17,9 +17,9 @@ from gimbal_driver_common.kinematics import (
     wrap_angle,
 )
 
-# the reference driver's description, from the source tree (a package beside this one)
-VIRTUAL_GIMBAL = (Path(__file__).parents[2] / 'virtual_gimbal_driver' / 'urdf'
-                  / 'virtual_gimbal_driver.urdf')
+# the reference driver's chain (test/pan_tilt.urdf: a copy, so this package's tests read
+# only its own files)
+VIRTUAL_GIMBAL = Path(__file__).resolve().parent / 'pan_tilt.urdf'
 
 #: a camera mounted 0.1 m to the right of, 0.05 m above and 0.2 m ahead of the tilt axis,
 #: with the pan joint mounted yawed by 90 degrees: every offset the solver must handle

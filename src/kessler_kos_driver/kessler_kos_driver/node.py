@@ -59,9 +59,9 @@ UNIT_PARAMETERS = ('calibrated_spans', 'joint_offsets', 'joint_scales')
 
 class KosDriverNode(KosServices, GimbalDriverNode):
     DEFAULT_JOINT_NAMES = ('slider', 'pan', 'tilt')
-    # One example rig in SI, the same in urdf/kessler_kos_driver.urdf (tests/
-    # test_descriptions.py checks they agree): a slider of 1.5 m from its begin mark at up
-    # to 0.5 m/s, a pan of +-pi at up to 1.5 rad/s and a tilt of +-pi/2 at up to 1 rad/s.
+    # One example rig in SI, the same in urdf/kessler_kos_driver.urdf (the package's
+    # test/test_description_files.py checks they agree): a slider of 1.5 m from its begin mark
+    # at up to 0.5 m/s, a pan of +-pi at up to 1.5 rad/s and a tilt of +-pi/2 at up to 1 rad/s.
     # The device checks its calibrated ranges and MaxMax speeds as well (the adapter, in SI).
     DEFAULT_POSITION_MIN = (0.0, -math.pi, -math.pi / 2)
     DEFAULT_POSITION_MAX = (1.5, math.pi, math.pi / 2)

@@ -1,6 +1,6 @@
 """The SI <-> rotation rule (units.py), and the one example rig everywhere it is written:
 the simulator's calibrated ranges, registration.SIM_RIG, config/kessler_kos_driver_sim.yaml
-and the node's default limits (the URDF equals those: tests/test_descriptions.py)."""
+and the node's default limits (the URDF equals those: test/test_description_files.py)."""
 
 from __future__ import annotations
 

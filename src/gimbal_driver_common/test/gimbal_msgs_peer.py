@@ -1,4 +1,5 @@
-"""Peer process for test_interfaces: echoes every gimbal_msgs type back over ROS."""
+"""Peer process for test_gimbal_msgs_cross_process: echoes every gimbal_msgs type back over
+ROS."""
 
 from __future__ import annotations
 
@@ -10,11 +11,17 @@ import rclpy
 from rclpy.action import ActionServer
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
-MESSAGES = ['AxisState', 'GimbalStatus', 'Preset', 'PlaybackStatus', 'BezierSegment',
-            'AxisTrajectory']
-SERVICES = ['SetPreset', 'GotoPreset', 'ListPresets', 'ClearPreset', 'StartScan',
-            'LoadTrajectory', 'SetMode', 'DeviceCommand', 'Calibrate']
-ACTIONS = ['MoveTo', 'Home', 'LookAt', 'LookAtGeo']
+
+def interface_names(kind: str) -> list[str]:
+    """The types rosidl generated in ``gimbal_msgs.<kind>`` (msg, srv or action): every one
+    of them, with no list here to keep in step with CMakeLists.txt."""
+    module = importlib.import_module(f'gimbal_msgs.{kind}')
+    return sorted(name for name in dir(module)  # not the generated Foo_Request etc.
+                  if name[:1].isupper() and '_' not in name
+                  and isinstance(getattr(module, name), type))
+
+
+MESSAGES, SERVICES, ACTIONS = (interface_names(kind) for kind in ('msg', 'srv', 'action'))
 
 
 def main() -> int:
