@@ -13,7 +13,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from gimbal_driver_common import geodesy
-from gimbal_driver_common.config import scan_joints
+from gimbal_driver_common.config import ControllerConfig, scan_joints
 from gimbal_driver_common.device import (
     DevicePresets,
     DeviceScans,
@@ -35,6 +35,14 @@ LOG = logging.getLogger('capture_driver.capabilities')
 
 MAX_PRESETS = 15
 
+
+
+def _attached_config(device: CaptureDevice) -> ControllerConfig:
+    """The controller's configuration: the controller attaches it before any request
+    reaches a capability, so a capability asked without one is refused, not crashed."""
+    if device.config is None:
+        raise DeviceRefused('the device is not attached to a controller')
+    return device.config
 
 class CaptureHoming(Homing):
     """MOT_Homing per axis; progress from SRL bit 8 (homing active) and the load position."""
@@ -133,7 +141,7 @@ class CapturePresets(DevicePresets):
         self._check_index(index)
         device, client = self.device, self.device.client
         record = self.checked_record(index)
-        limits = device.config.limits
+        limits = _attached_config(device).limits
         if speed > 0:
             for joint in device.joint_names:
                 if speed > limits[joint].velocity_max:
@@ -176,7 +184,8 @@ class CaptureScans(DeviceScans):
         """The core's scan-request check, then what the device adds: yaw and pitch are axes
         1 and 2, at most 255 rows; limits go out in motor degrees."""
         device = self.device
-        pan, tilt = check_scan(request, scan_joints(device.config), device.config.limits,
+        config = _attached_config(device)
+        pan, tilt = check_scan(request, scan_joints(config), config.limits,
                                self.patterns, 'the Capture device')
         if device.axis(pan) != 1 or device.axis(tilt) != 2:
             raise ScanError(f'device scans move yaw (axis 1) and pitch (axis 2); map the scan '

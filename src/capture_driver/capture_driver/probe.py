@@ -9,6 +9,8 @@ flag that NACK raised (ERR_ClearErrors, a write), which a probe must not send.
 
 from __future__ import annotations
 
+from functools import partial
+
 from gimbal_driver_common.probe import (
     Attempt,
     Found,
@@ -40,7 +42,7 @@ def probe(link: ProbeLink) -> list[Attempt]:
     if link.kind == 'serial':
         return [Attempt(f'COM_Connect + identity getters at {baud} baud 8N1',
                         f'serial {link.serial_port}',
-                        lambda baud=baud: identify_serial(link.serial_port, baud, link.timeout))
+                        partial(identify_serial, link.serial_port, baud, link.timeout))
                 for baud in BAUD_RATES]
     return []
 
