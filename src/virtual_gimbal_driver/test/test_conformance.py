@@ -7,7 +7,16 @@ import pytest
 
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 
+from std_srvs.srv import Trigger
+
 from gimbal_driver_common.testing.conformance import DriverConformance
+from gimbal_driver_common.testing.silent_request_conformance import SilentRequest
+
+#: what the virtual gimbal's client lacks for the silent-request figures
+ONE_LINK_LOCK = ('the client holds the one link lock for the whole wait of a request (reply '
+                 'lines carry no request name, so nothing else may go out meanwhile); needs '
+                 'one owner thread per link that puts a stop or a jog ahead of a waiting '
+                 'request')
 
 
 class TestVirtualGimbalConformance(DriverConformance):
@@ -20,3 +29,15 @@ class TestVirtualGimbalConformance(DriverConformance):
     tolerance = 0.011
     preset_index = 4
     scan = dict(pattern='sector', pan_min=-0.2, pan_max=0.2, speed=1.2)
+    silent_requests = (
+        SilentRequest('identity read', 'ID', at_connect=True),
+        SilentRequest('service request', 'RESET', timeout_parameter='request_timeout',
+                      service=(Trigger, 'reset_faults', Trigger.Request)),
+    )
+    required_request = ('GET', 'no reply to GET')
+    handshake_request = 'ID'
+    silent_request_gaps = {
+        ('cost', 'RESET'): 'joint_states stop while RESET waits: ' + ONE_LINK_LOCK,
+        ('stop', 'RESET'): ONE_LINK_LOCK,
+        ('jog', 'RESET'): ONE_LINK_LOCK,
+    }

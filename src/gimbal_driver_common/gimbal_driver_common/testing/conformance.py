@@ -39,6 +39,7 @@ from gimbal_driver_common.testing.diagnostics_conformance import DiagnosticsConf
 from gimbal_driver_common.testing.log_conformance import LogConformance
 from gimbal_driver_common.testing.motion_start_conformance import MotionStartConformance
 from gimbal_driver_common.testing.restart_conformance import RestartConformance
+from gimbal_driver_common.testing.silent_request_conformance import SilentRequestConformance
 from gimbal_driver_common.testing.topic_system_conformance import TopicInterfaceConformance
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
@@ -50,7 +51,7 @@ REJECTED_BURSTS = 6
 
 
 class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionStartConformance,
-                        LogConformance, DiagnosticsConformance):
+                        LogConformance, DiagnosticsConformance, SilentRequestConformance):
     """The common contract of every gimbal driver node, tested through the real transport.
 
     Subclasses set the attributes below; the package, node and simulator come from the
