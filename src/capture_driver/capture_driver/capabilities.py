@@ -38,11 +38,8 @@ MAX_PRESETS = 15
 
 
 def _attached_config(device: CaptureDevice) -> ControllerConfig:
-    """The controller's configuration: the controller attaches it before any request
-    reaches a capability, so a capability asked without one is refused, not crashed."""
-    if device.config is None:
-        raise DeviceRefused('the device is not attached to a controller')
-    return device.config
+    """The controller's configuration (refused, not crashed, before it is attached)."""
+    return device.attached_config()
 
 class CaptureHoming(Homing):
     """MOT_Homing per axis; progress from SRL bit 8 (homing active) and the load position."""
@@ -54,7 +51,7 @@ class CaptureHoming(Homing):
              cancelled: threading.Event) -> str:
         device, client = self.device, self.device.client
         try:
-            device.leave_device_programs()
+            device.programs.leave()
             for joint in joints:
                 client.run('MOT_Homing', device.axis(joint))
             deadline = time.monotonic() + device.settings.home_timeout
@@ -149,7 +146,7 @@ class CapturePresets(DevicePresets):
                                          f'{limits[joint].velocity_max:.4f}')
             for joint in device.joint_names:
                 client.run('CFG_SetGeneralSpd', device.axis(joint), math.degrees(speed))
-        device.leave_device_programs()
+        device.programs.leave()
         client.run('PRST_GoToPreset', index)
         device.report_targets(self.positions(record))
         return f'moving to device preset {index} ({record.name or "unnamed"})'
@@ -200,12 +197,12 @@ class CaptureScans(DeviceScans):
 
         yaw = sorted((motor(pan, request.pan_min), motor(pan, request.pan_max)))
         pitch_min = min(motor(tilt, request.tilt_min), motor(tilt, request.tilt_max))
-        device.leave_device_programs()
+        device.programs.leave()
         device.client.configure_scan(yaw[0], yaw[1], pitch_min, steps,
                                      math.degrees(request.tilt_step) * abs(gear[tilt]),
                                      math.degrees(request.speed) * abs(gear[pan]))
         device.client.start_scan(request.pattern)
-        device.device_scanning = True
+        device.programs.scanning = True
         device.expire_status()
         return (f'device {request.pattern} scan started: yaw {yaw[0]:.2f}..{yaw[1]:.2f} deg, '
                 f'{steps} step(s) of {math.degrees(request.tilt_step):.2f} deg')
@@ -219,10 +216,10 @@ class CaptureScans(DeviceScans):
             try:
                 device.client.request('SCN_StopScan')
             except (DeviceNack, WrongReply) as exc:
-                if device.device_scanning:
+                if device.programs.scanning:
                     raise
                 LOG.debug('SCN_StopScan with no device scan known: %s', exc)
-        device.device_scanning = False
+        device.programs.scanning = False
 
 
 
@@ -255,7 +252,7 @@ class CaptureGeolocation(Geolocation):
                     INSERTED_SOURCE),
                 geodesy.OrientationFix(geodesy.Attitude.from_heading(math.radians(heading)),
                                        'inserted heading (GPS_GetInsertedHeading)'))
-        if not self.device.has_gps:
+        if not self.device.functions.has_gps:
             reason = ('no GPS (GPS_isConnectedGPS 0) and no inserted position (override flag '
                       '0)')
             return geodesy.DevicePose(missing={'position': reason, 'orientation': reason})
@@ -268,7 +265,7 @@ class CaptureGeolocation(Geolocation):
                 'the GPS gives no altitude (GPS_GetAltitude has no established opcode); or '
                 'insert the position on the pedestal (GPS_SetInsertedLLA, '
                 'GPS_SetInsertedHeading, GPS_SetOvdPosGPS 1)')
-        heading = self.device.gps_heading()
+        heading = self.device.functions.gps_heading()
         orientation = None
         if heading is None:
             missing['orientation'] = 'no valid GPS heading (GPS_HeadingReady 0)'
@@ -295,7 +292,7 @@ class CaptureTargetPointing(TargetPointing):
     def point_at(self, target: geodesy.GeoPoint) -> str:
         device = self.device
         slot = device.settings.gps_target_slot
-        device.leave_device_programs()
+        device.programs.leave()
         device.client.goto_lla(slot, GeoPoint(target.longitude, target.latitude,
                                                target.altitude))
         return f'GPS_SetTargetLLA + GPS_GoToTarget on target {slot}'

@@ -49,8 +49,9 @@ def parse_arguments(dtype: DataType, args: Sequence[str]) -> Any:
             lon, lat, alt = (float(a) for a in _split(args, 3))
             return GeoPoint(lon, lat, alt)
         if dtype is DataType.PRESET:
-            parts = _split(args, 7)
-            return PresetRecord(parts[0], tuple(float(a) for a in parts[1:]))
+            name, *angles = _split(args, 7)  # _split checks there are 7
+            a1, a2, a3, a4, a5, a6 = (float(a) for a in angles)
+            return PresetRecord(name, (a1, a2, a3, a4, a5, a6))
         (text,) = _split(args, 1)
         if dtype in (DataType.F32, DataType.F64):
             return float(text)

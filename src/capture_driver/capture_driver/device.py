@@ -8,8 +8,10 @@ polls :meth:`CaptureDevice.read`, sends moves, jogs and stops, and asks
 :meth:`CaptureDevice.refusal` before motion. Homing, the device's preset slots (all of
 them), its own scans and the register-based status are small capability objects; the
 device's extras (IMU, GPS, rangefinder, video tracker, digital I/O, loops, levelling,
-gyro drift, ``~/command``) are plain methods the node's services call through
-``controller.call"""
+gyro drift, ``~/command``) are the part :attr:`CaptureDevice.functions`
+(:class:`~.functions.CaptureFunctions`), whose methods the node's services call through
+``controller.call``; the device's own programs (scan, loops) are the part
+:attr:`CaptureDevice.programs` (:class:`~.programs.DevicePrograms`)."""
 
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from gimbal_driver_common.config import ControllerConfig
 from gimbal_driver_common.device import (
     Device,
     DeviceInfo,
@@ -46,6 +49,7 @@ from .device_requests import IDENTITY_GETTERS, Identity
 from .errors import REQUEST_ERRORS, NotSupported
 from .functions import CaptureFunctions
 from .motion import PostedMoves
+from .programs import DevicePrograms
 from .status import CaptureStatus, axis_flags
 
 LOG = logging.getLogger('capture_driver.device')
@@ -91,6 +95,14 @@ class CaptureSettings:
         self.direction = dict(zip(self.joint_names, self.joint_directions, strict=True))
         self.gear = dict(zip(self.joint_names, self.gear_ratios, strict=True))
 
+    def to_device(self, joint: str, radians: float) -> float:
+        """rad (REP-103) -> device degrees on this joint's axis."""
+        return math.degrees(radians) * self.direction[joint]
+
+    def from_device(self, joint: str, degrees: float) -> float:
+        """device degrees -> rad (REP-103)."""
+        return math.radians(degrees * self.direction[joint])
+
     def link_description(self) -> str:
         if self.transport == 'tcp':
             return f'tcp://{self.host}:{self.port}'
@@ -122,8 +134,10 @@ def device_info(ident: Identity, link: str) -> DeviceInfo:
                       firmware_version=firmware, hardware_id=hardware_id(ident, link))
 
 
-class CaptureDevice(CaptureFunctions, Device):
-    """One Capture controller in SI units; thread-safe (the client serialises requests)."""
+class CaptureDevice(Device):
+    """One Capture controller in SI units; thread-safe (the client serialises requests).
+    Its parts: ``programs`` (the device's own scan and loops), the capability objects, and
+    ``functions`` (the extras), each handed what it uses."""
 
     def __init__(self, settings: CaptureSettings) -> None:
         super().__init__()  # the controller attaches its config (live limits) and logger
@@ -137,28 +151,27 @@ class CaptureDevice(CaptureFunctions, Device):
         self._status_lock = threading.Lock()
         self._next_status = 0.0
         self._warned: dict[str, float] = {}
-        self.has_imu = self.has_gps = self.has_tracker = self.has_digital_io = False
-        self.has_heading = False
-        self.tracker_problem = ''
         #: the identity the device gave at the last open (what it did not: ``problems``)
         self.identity = Identity()
-        self.ranging = False
-        self.device_scanning = self.preset_looping = self.target_looping = False
+        self.programs = DevicePrograms(self.client)
+        presets, status = CapturePresets(self), CaptureStatus(self)
+        self.functions = CaptureFunctions(self.client, settings, self.programs, status,
+                                          presets, checks=self)
         self.capabilities.homing = CaptureHoming(self)
         self.capabilities.geolocation = CaptureGeolocation(self)
         self.capabilities.target_pointing = CaptureTargetPointing(self)
-        self.capabilities.presets = CapturePresets(self)
+        self.capabilities.presets = presets
         self.capabilities.scans = CaptureScans(self)
-        self.capabilities.status = CaptureStatus(self)
+        self.capabilities.status = status
 
     # ----------------------------------------------------------- units
     def to_device(self, joint: str, radians: float) -> float:
         """rad (REP-103) -> device degrees on this joint's axis."""
-        return math.degrees(radians) * self.settings.direction[joint]
+        return self.settings.to_device(joint, radians)
 
     def from_device(self, joint: str, degrees: float) -> float:
         """device degrees -> rad (REP-103)."""
-        return math.radians(degrees * self.settings.direction[joint])
+        return self.settings.from_device(joint, degrees)
 
     def axis(self, joint: str) -> int:
         return self.settings.axis[joint]
@@ -189,35 +202,16 @@ class CaptureDevice(CaptureFunctions, Device):
             self.log.warning(f'identity: {", ".join(unread)} {UNKNOWN} ('
                              + '; '.join(f'{name}: {how}' for name, how in
                                          ident.problems.items()) + ')')
-        self.has_imu = bool(client.optional('IMU_IsReadyImu'))
-        self.has_gps = self.has_heading = bool(client.optional('GPS_isConnectedGPS'))
-        self.device_scanning = bool(client.optional('SCN_IsScanOn'))
-        self.preset_looping = self.target_looping = False
-        self._probe_extras()
+        functions = self.functions
+        functions.probe(self.log.warning)
+        self.programs.clear()
+        self.programs.scanning = bool(client.optional('SCN_IsScanOn'))
         self._next_status = 0.0
         client.start()
         self.log.info(
-            f'Capture controller on {client.description}: IMU {"yes" if self.has_imu else "no"}'
-            f', GPS {"yes" if self.has_gps else "no"}')
+            f'Capture controller on {client.description}: IMU '
+            f'{"yes" if functions.has_imu else "no"}, GPS {"yes" if functions.has_gps else "no"}')
         return device_info(ident, self.settings.link_description())
-
-    def _probe_extras(self) -> None:
-        """Which optional units answer (a missing video tracker NACKs with 0x76); ranging
-        that was on before a reconnect is started again (the controller may have rebooted)."""
-        client = self.client
-        if self.ranging:
-            try:
-                client.run('LRF_StartMeasurement')
-            except REQUEST_ERRORS as exc:
-                self.ranging = False
-                self.log.warning(f'ranging not restarted after reconnect: {exc}')
-        # firmware before 2.22.0 has no digital I/O: polling it would latch protocol errors
-        # optional(): a device without the function answers 0xA6 once and is not asked again
-        self.has_digital_io = client.optional('COM_getDigitalIO', 1) is not None
-        camera = self.settings.tracker_camera
-        self.has_tracker = client.optional('VDT_isTrackingOn', camera) is not None
-        self.tracker_problem = '' if self.has_tracker else client.unsupported.get(
-            'VDT_isTrackingOn', 'VDT_isTrackingOn refused or unanswered (no video tracker)')
 
     def close(self) -> None:
         self.client.stop()
@@ -284,10 +278,7 @@ class CaptureDevice(CaptureFunctions, Device):
             status['problems'].append(f'system: {exc}')
         status['refusals'] = {joint: self._axis_refusal(joint, registers)
                               for joint, registers in status['axes'].items()}
-        sys_state = status.get('system', {}).get('SYS', 0)
-        self.device_scanning = bool(sys_state & (1 << 2))
-        self.preset_looping = bool(sys_state & (1 << 3))
-        self.target_looping = bool(sys_state & (1 << 4))
+        self.programs.from_system_state(status.get('system', {}).get('SYS', 0))
         with self._status_lock:
             self._status = status
 
@@ -300,25 +291,11 @@ class CaptureDevice(CaptureFunctions, Device):
         self._next_status = 0.0
 
     # ---------------------------------------------------------- motion
-    def leave_device_programs(self) -> None:
-        """A new motion command ends a device scan or preset/target loop first (4.3 refuses
-        motor writes with 0xA6 while scanning)."""
-        client = self.client
-        if self.device_scanning:
-            client.request('SCN_StopScan')
-            self.device_scanning = False
-        if self.preset_looping:
-            client.request('PRST_StopPresetLooping')
-            self.preset_looping = False
-        if self.target_looping:
-            client.request('GPS_StopTargetLooping')
-            self.target_looping = False
-
     def move(self, moves: Moves) -> None:
         """Absolute moves; the whole set-up of every axis under one hold of the link
         lock, so the poll does not interleave its reads."""
         with self.client.exclusive():
-            self.leave_device_programs()
+            self.programs.leave()
             for axis, (position, speed, acceleration) in self._axis_moves(moves).items():
                 self.client.move_absolute(axis, position, speed, acceleration)
 
@@ -336,13 +313,12 @@ class CaptureDevice(CaptureFunctions, Device):
         by :meth:`settle` when the link lock is next taken), so the joint_command
         callback writes it without waiting; not a jog, nor while a device program runs (a
         move ends it first, with requests that wait)."""
-        if jogs or not moves or self.device_scanning or self.preset_looping \
-                or self.target_looping:
+        if jogs or not moves or self.programs.any:
             return None
         written = self.client.post_moves(self._axis_moves(moves))
         if written is None:
             return None
-        return PostedWrite(dict(moves), {}, replies=len(written.frames), expected=written)
+        return PostedWrite(dict(moves), {}, replies=len(written.waitings), expected=written)
 
     def settle(self, posted: PostedWrite) -> bool:
         assert isinstance(posted.expected, PostedMoves)
@@ -350,7 +326,7 @@ class CaptureDevice(CaptureFunctions, Device):
 
     def jog(self, velocities: dict[str, float]) -> None:
         with self.client.exclusive():
-            self.leave_device_programs()
+            self.programs.leave()
             for joint, velocity in velocities.items():
                 if velocity == 0.0:
                     self.client.stop_axis(self.axis(joint))
@@ -364,7 +340,7 @@ class CaptureDevice(CaptureFunctions, Device):
         with self.client.exclusive():
             if joints is None:
                 problems = self.client.stop_all([self.axis(j) for j in self.joint_names])
-                self.device_scanning = self.preset_looping = self.target_looping = False
+                self.programs.clear()
             else:
                 problems = []
                 for joint in joints:
@@ -422,16 +398,15 @@ class CaptureDevice(CaptureFunctions, Device):
             return f'{joint} drive is off ({", ".join(off)}); switch it on with ~/enable'
         return None
 
-    def program_running(self) -> str | None:
-        """Why the device is busy with a motion program of its own (scan, loop), or None."""
-        if self.device_scanning:
-            return 'a scan is running; stop it with ~/stop_scan first'
-        if self.preset_looping or self.target_looping:
-            return 'a preset or target loop is running; stop it first'
-        return None
-
     def check_pose(self, pose: dict[str, float], what: str) -> None:
         """The core's one pose check (unknown joint, outside the live limits) of a pose
         the device itself moves to, naming ``what`` (a preset, a target, ...)."""
-        check_positions(pose, self.config.limits, what)
+        check_positions(pose, self.attached_config().limits, what)
+
+    def attached_config(self) -> ControllerConfig:
+        """The controller's configuration: the controller attaches it before any request
+        reaches the device, so a request without one is refused, not crashed."""
+        if self.config is None:
+            raise DeviceRefused('the device is not attached to a controller')
+        return self.config
 

@@ -1,8 +1,14 @@
 """The Capture pedestal's extras in SI units (no ROS): IMU, GPS, rangefinder, video
 tracker, digital I/O, preset and target loops, levelling, gyro drift and the raw
-``~/command``. A mixin of :class:`~.device.CaptureDevice`, kept apart so the adapter's
-core (link, poll, motion, refusals) reads in one sitting; the node's services call these
-through ``controller.call``.
+``~/command``. A part of :class:`~.device.CaptureDevice` (its ``functions`` attribute),
+kept apart so the adapter's core (link, poll, motion, refusals) reads in one sitting; the
+node's services call these through ``controller.call``.
+
+The part owns what it knows of the extras (which units answered at connect, whether
+ranging is on, why there is no tracker) and is handed the rest: the client, the settings
+(joint map and units), the device's programs (:class:`~.programs.DevicePrograms`), the
+status and preset capabilities, and the adapter's public motion checks
+(:class:`MotionChecks`).
 """
 
 from __future__ import annotations
@@ -10,10 +16,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
-from gimbal_driver_common.config import scan_joints
-from gimbal_driver_common.device import AxisStateCode, DeviceProcedure, ProcedureProgress
+from gimbal_driver_common.config import ControllerConfig, scan_joints
+from gimbal_driver_common.device import AxisStateCode
 from gimbal_driver_common.errors import DeviceRefused, InvalidRequest
 
 from .client import CaptureClient
@@ -27,12 +33,16 @@ from .command_text import (
 )
 from .device_requests import TrackingState
 from .errors import REQUEST_ERRORS, NotSupported
+from .procedures import GyroDriftMeasurement, LevelErrors, Levelling
+from .programs import DevicePrograms
 from .protocol import COMMANDS, GeoPoint, ProtocolError, Safety
 from .protocol import command as lookup_command
 from .protocol.geometry import aim_at
 
 if TYPE_CHECKING:
+    from .capabilities import CapturePresets
     from .device import CaptureSettings
+    from .status import CaptureStatus
 
 T = TypeVar('T')
 
@@ -59,103 +69,87 @@ class GpsFix:
     altitude: float  # m, NaN while GPS_GetAltitude's opcode is not established
 
 
-@dataclass
-class LevelErrors:
-    """Per joint, how far the IMU angle is from its levelling value (reported in degrees,
-    as the device counts them)."""
+class MotionChecks(Protocol):
+    """What the functions use of the device adapter (:class:`~.device.CaptureDevice`):
+    its public motion checks and the core's ``Device`` contract, nothing of its state."""
 
-    degrees: dict[str, float]
+    def attached_config(self) -> ControllerConfig:
+        """The controller's live configuration (limits, tolerances, timeouts)."""
 
-    def within(self, tolerance: float) -> bool:
-        """All within ``tolerance`` rad."""
-        return all(abs(math.radians(e)) <= tolerance for e in self.degrees.values())
+    def refusal(self, joints: Sequence[str]) -> str | None:
+        """Why these joints cannot move now (fault, drive off), or None."""
 
-    def progress(self) -> str:
-        return ', '.join(f'{j}: {abs(e):.3f} deg from level' for j, e in self.degrees.items())
+    def check_pose(self, pose: dict[str, float], what: str) -> None:
+        """The core's pose check of a pose the device moves to by itself."""
 
-    def summary(self) -> str:
-        return ', '.join(f'{j} ({abs(e):.3f} deg)' for j, e in self.degrees.items())
+    def report_targets(self, targets: dict[str, float]) -> None:
+        """Tell the controller where a device-run motion goes."""
 
-
-class CaptureProcedure(DeviceProcedure):
-    """Levelling and the drift measurement share the IMU and run one at a time; a device
-    program (scan, loop) keeps them from starting."""
-
-    group = 'a levelling or drift compensation'
-
-    def __init__(self, device: CaptureFunctions) -> None:
-        self.device = device
-
-    def busy(self) -> str | None:
-        return self.device.program_running()
-
-
-class Levelling(CaptureProcedure):
-    """IMU_Leveling (4.5.11): the controller turns the joints until the IMU reads its
-    levelling values; done once every angle is within ``goal_tolerance`` and the axes
-    rest, failed after ``move_timeout``."""
-
-    name = 'levelling'
-    cancelled = 'levelling cancelled; axes stopped'
-    superseded = 'levelling ended by a newer motion command, which now moves the axes'
-
-    def __init__(self, device: CaptureFunctions, joints: Sequence[str]) -> None:
-        super().__init__(device)
-        self.joints = list(joints) or list(device.joint_names)
-        self.timeout = device.config.move_timeout
-        self.timed_out = f'not level within move_timeout {self.timeout:g} s'
-
-    def start(self) -> None:
-        self.device.start_leveling(self.joints)
-
-    def poll(self, elapsed: float) -> ProcedureProgress:
-        errors = self.device.level_errors(self.joints)
-        done = errors.within(self.device.config.goal_tolerance)
-        return ProcedureProgress(errors.progress(), 'levelled ' + errors.summary() if done
-                                 else None)
-
-
-class GyroDriftMeasurement(CaptureProcedure):
-    """IMU_GyroDriftCompensation (4.5.28): the pedestal holds still for ``duration`` s
-    while the controller measures the drift (the spec gives no duration), then the
-    result is read; any motion meanwhile makes it untrusted."""
-
-    name = 'the drift measurement'
-    cancelled = ('drift measurement cancelled (the controller may still finish it; '
-                 '~/reset_gyro_drift clears it)')
-    hold_still = True
-    period = 0.2
-
-    def __init__(self, device: CaptureFunctions, joints: Sequence[str],
-                 duration: float) -> None:
-        super().__init__(device)
-        self.requested_joints, self.duration = list(joints), duration
-
-    def start(self) -> None:
-        if self.requested_joints:
-            raise InvalidRequest('the drift compensation takes no joint names (it measures '
-                                 f'IMU sensor {self.device.settings.gyro_drift_sensor}, '
-                                 'gyro_drift_sensor)')
-        self.device.start_gyro_drift()
-
-    def poll(self, elapsed: float) -> ProcedureProgress:
-        if elapsed >= self.duration:
-            return ProcedureProgress(result=self.device.gyro_drift_result())
-        return ProcedureProgress(f'holding still while measuring the gyro drift: '
-                                 f'{elapsed:.1f} of {self.duration:g} s')
+    def expire_status(self) -> None:
+        """Read the registers on the next poll (after a command that changes them)."""
 
 
 class CaptureFunctions:
-    """The device functions of :class:`~.device.CaptureDevice` (which provides
-    ``client``, ``settings``, ``config`` and the refusals they use)."""
+    """The device functions of :class:`~.device.CaptureDevice`: a part handed what it uses.
 
-    client: CaptureClient
-    settings: CaptureSettings
+    Its own state: which optional units answered at the last connect (``has_*``, set by
+    :meth:`probe`, a flag cleared once the device stops answering that unit's getters),
+    ``tracker_problem`` and ``ranging`` (on by ``~/set_ranging``, restarted on reconnect).
+    """
 
+    def __init__(self, client: CaptureClient, settings: CaptureSettings,
+                 programs: DevicePrograms, status: CaptureStatus, presets: CapturePresets,
+                 checks: MotionChecks) -> None:
+        self.client = client
+        self.settings = settings
+        self.programs = programs
+        self.status = status
+        self.presets = presets
+        self.checks = checks
+        self.has_imu = self.has_gps = self.has_heading = False
+        self.has_tracker = self.has_digital_io = False
+        self.tracker_problem = ''
+        self.ranging = False
+
+    # ----------------------------------------------------------- units
+    @property
+    def joint_names(self) -> list[str]:
+        return list(self.settings.joint_names)
+
+    def axis(self, joint: str) -> int:
+        return self.settings.axis[joint]
+
+    def from_device(self, joint: str, degrees: float) -> float:
+        return self.settings.from_device(joint, degrees)
+
+    # ---------------------------------------------------------- connect
+    def probe(self, log: Callable[[str], object]) -> None:
+        """Which optional units answer, at each connect; ``optional()``: a device without a
+        function answers 0xA6 once and is not asked again (a missing video tracker NACKs
+        with 0x76). Ranging that was on before a reconnect is started again (the
+        controller may have rebooted); ``log`` warns when that fails."""
+        client = self.client
+        self.has_imu = bool(client.optional('IMU_IsReadyImu'))
+        self.has_gps = self.has_heading = bool(client.optional('GPS_isConnectedGPS'))
+        if self.ranging:
+            try:
+                client.run('LRF_StartMeasurement')
+            except REQUEST_ERRORS as exc:
+                self.ranging = False
+                log(f'ranging not restarted after reconnect: {exc}')
+        # firmware before 2.22.0 has no digital I/O: polling it would latch protocol errors
+        self.has_digital_io = client.optional('COM_getDigitalIO', 1) is not None
+        camera = self.settings.tracker_camera
+        self.has_tracker = client.optional('VDT_isTrackingOn', camera) is not None
+        self.tracker_problem = '' if self.has_tracker else client.unsupported.get(
+            'VDT_isTrackingOn', 'VDT_isTrackingOn refused or unanswered (no video tracker)')
+
+    # ----------------------------------------------------------- sensors
     def _sensor(self, flag: str, read: Callable[[], T]) -> T:
         """One sensor read for its topic. When the device does not answer one of its
-        getters with data (:class:`NotSupported`, which says which and how), ``flag`` is
-        cleared: the topic stops asking until the next connection."""
+        getters with data (:class:`NotSupported`, which says which and how), ``flag`` (one
+        of this part's ``has_*``/``ranging``) is cleared: the topic stops asking until the
+        next connection."""
         try:
             return read()
         except NotSupported:
@@ -219,13 +213,13 @@ class CaptureFunctions:
     # ---------------------------------------------------------- extras
     def set_stabilization(self, on: bool) -> str:
         self.client.run('STB_StabilizationOn' if on else 'STB_StabilizationOff')
-        self.expire_status()
+        self.checks.expire_status()
         return f'stabilisation {"on" if on else "off"}'
 
     def set_emergency_stop(self, on: bool) -> str:
         self.client.run('MOT_SetEmgStopAxes', None, int(on))
-        self.device_scanning = self.preset_looping = False
-        self.expire_status()
+        self.programs.scanning = self.programs.preset_looping = False
+        self.checks.expire_status()
         if on:
             return 'emergency stop set: all axes stopped, motion commands refused'
         return 'emergency stop cleared (the controller reset the axes to relative mode)'
@@ -257,10 +251,10 @@ class CaptureFunctions:
         if not self.has_tracker:
             raise DeviceRefused(f'no video tracker on camera {camera}: {self.tracker_problem}')
         if mode != 'off':
-            refusal = self.refusal(scan_joints(self.config))
+            refusal = self.checks.refusal(scan_joints(self.checks.attached_config()))
             if refusal:
                 raise DeviceRefused(refusal)
-            self.leave_device_programs()
+            self.programs.leave()
         self.client.set_tracking(camera, TRACKING_MODES[mode])
         state = self.client.tracking_state(camera)
         if mode == 'manual' and not state.active:
@@ -274,7 +268,7 @@ class CaptureFunctions:
         return f'digital output {number} {"set (on)" if on else "reset (off)"}'
 
     def faulted_joints(self) -> list[str]:
-        status = self.capabilities.status
+        status = self.status
         return [j for j in self.joint_names
                 if status.axis_details(j).get('state') == AxisStateCode.FAULT]
 
@@ -282,25 +276,25 @@ class CaptureFunctions:
         """MOT_AxisOn / MOT_AxisOff on every joint (stop the axes before switching off)."""
         for joint in self.joint_names:
             self.client.set_axis_power(self.axis(joint), on)
-        self.expire_status()
+        self.checks.expire_status()
         verb = 'on (MOT_AxisOn)' if on else 'off (MOT_AxisOff)'
         return f'drives {verb}: {", ".join(self.joint_names)}'
 
     def start_preset_loop(self) -> str:
-        presets = self.capabilities.presets
+        presets = self.presets
         indices = self.client.preset_indices()
         if not indices:
             raise DeviceRefused('no device presets stored; set some with ~/set_preset')
         for index in indices:
             presets.checked_record(index)
-        self.leave_device_programs()
+        self.programs.leave()
         self.client.run('PRST_StartPresetLooping')
-        self.preset_looping = True
+        self.programs.preset_looping = True
         return f'looping over device presets {indices}'
 
     def stop_preset_loop(self) -> None:
         self.client.run('PRST_StopPresetLooping')
-        self.preset_looping = False
+        self.programs.preset_looping = False
 
     def target_pose(self, target: GeoPoint) -> dict[str, float]:
         """Joint positions (rad) the device takes to look at ``target``, from the GPS or
@@ -329,10 +323,10 @@ class CaptureFunctions:
                 raise InvalidRequest(f'{label} {value} outside +-{bound}')
         target = GeoPoint(longitude, latitude, altitude if math.isfinite(altitude) else 0.0)
         pose = self.target_pose(target)
-        self.check_pose(pose, f'the pose for lat {latitude:.6f} lon {longitude:.6f}')
-        self.leave_device_programs()
+        self.checks.check_pose(pose, f'the pose for lat {latitude:.6f} lon {longitude:.6f}')
+        self.programs.leave()
         self.client.goto_lla(self.settings.gps_target_slot, target)
-        self.report_targets(pose)
+        self.checks.report_targets(pose)
         return pose
 
     def start_target_loop(self) -> str:
@@ -341,17 +335,17 @@ class CaptureFunctions:
             raise DeviceRefused('no GPS targets stored; set some with ~/command '
                                 'GPS_SetTargetLLA')
         for number, point in targets.items():
-            self.check_pose(self.target_pose(point),
+            self.checks.check_pose(self.target_pose(point),
                             f'target {number} (lat {point.latitude:.6f} lon '
                             f'{point.longitude:.6f})')
-        self.leave_device_programs()
+        self.programs.leave()
         self.client.run('GPS_StartTargetLooping')
-        self.target_looping = True
+        self.programs.target_looping = True
         return f'looping over GPS targets {sorted(targets)}'
 
     def stop_target_loop(self) -> None:
         self.client.run('GPS_StopTargetLooping')
-        self.target_looping = False
+        self.programs.target_looping = False
 
     def reset_gyro_drift(self) -> str:
         if not self.has_imu:
@@ -391,24 +385,24 @@ class CaptureFunctions:
         if not self.has_imu:
             raise DeviceRefused('levelling needs an IMU on the load; the controller reports '
                                 'none (IMU_IsReadyImu)')
-        refusal = self.refusal(joints)
+        refusal = self.checks.refusal(joints)
         if refusal:
             raise DeviceRefused(refusal)
         errors = self.level_errors(joints).degrees
         targets = {j: self.from_device(j, self.client.request('MOT_GetLoadPosition',
                                                                self.axis(j)) + errors[j])
                    for j in joints}
-        self.check_pose(targets, 'the levelled pose')
-        self.leave_device_programs()
+        self.checks.check_pose(targets, 'the levelled pose')
+        self.programs.leave()
         for joint in joints:
             self.client.run('IMU_Leveling', self.axis(joint))
-        self.report_targets(targets)
+        self.checks.report_targets(targets)
 
     def start_gyro_drift(self) -> None:
         """IMU_GyroDriftCompensation on ``gyro_drift_sensor``."""
         if not self.has_imu:
             raise DeviceRefused('the controller reports no IMU (IMU_IsReadyImu)')
-        refusal = self.refusal(self.joint_names)
+        refusal = self.checks.refusal(self.joint_names)
         if refusal:
             raise DeviceRefused(refusal)
         self.client.run('IMU_GyroDriftCompensation', self.settings.gyro_drift_sensor)
@@ -442,7 +436,7 @@ class CaptureFunctions:
                                 f'parameter {opt_in}:=true to allow it')
         value = parse_arguments(cmd.arg, list(arguments))
         if cmd.name in JOINT_MOTION and value != 0:  # 0 switches tracking/sync off
-            refusal = self.refusal(self.joint_names)
+            refusal = self.checks.refusal(self.joint_names)
             if refusal:
                 raise DeviceRefused(f'{cmd.name} refused, nothing sent: {refusal}')
         target_axis = axis if (cmd.axis.low != cmd.axis.high or axis) else None
@@ -453,7 +447,7 @@ class CaptureFunctions:
         # VDT_* take the camera index as `axis`; the codec puts it in the group byte (4.11)
         result = self.client.run(cmd.name, target_axis, value)
         results = format_result(cmd.name, result) if cmd.replies_with_data else []
-        self.expire_status()
+        self.checks.expire_status()
         if results:
             return f'{cmd.name}: ' + ', '.join(results), results
         return f'{cmd.name}: ACK', results

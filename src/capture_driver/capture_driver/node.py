@@ -38,7 +38,7 @@ from gimbal_msgs.srv import DeviceCommand, SetMode
 
 from .capabilities import CaptureScans
 from .device import CaptureDevice, CaptureSettings
-from .functions import DIGITAL_IO_COUNT
+from .functions import DIGITAL_IO_COUNT, CaptureFunctions
 
 T = TypeVar('T')
 
@@ -83,10 +83,12 @@ class CaptureDriverNode(GimbalDriverNode):
         self.create_subscription(NavSatFix, '~/goto_lla', self._on_goto_lla, 1,
                                  callback_group=self.service_group)
         # guarded device procedures: the core's policy runs them (gimbal_driver_common.guarded)
-        self.create_procedure_action('~/level', lambda device, joints: device.levelling(joints))
+        self.create_procedure_action(
+            '~/level', lambda device, joints: device.functions.levelling(joints))
         self.create_procedure_action(
             '~/compensate_gyro_drift',
-            lambda device, joints: device.gyro_drift_measurement(joints, self.gyro_drift_time))
+            lambda device, joints: device.functions.gyro_drift_measurement(
+                joints, self.gyro_drift_time))
 
     # ------------------------------------------------------------ parameters
     def declare_device_parameters(self) -> None:
@@ -249,13 +251,14 @@ class CaptureDriverNode(GimbalDriverNode):
             self.sensor_jobs.trigger(job)
         return result
 
-    def _device_call(self, request: Callable[[CaptureDevice], T],
+    def _device_call(self, request: Callable[[CaptureFunctions], T],
                      joints: Sequence[str] | None = None) -> T:
-        """One adapter request through the controller's ``call()`` boundary (refused while
-        inactive, disconnected or, with ``joints``, while they cannot move)."""
-        return self.controller.call(lambda: request(self.controller.device), joints)
+        """One request to the device's functions (its part ``functions``) through the
+        controller's ``call()`` boundary (refused while inactive, disconnected or, with
+        ``joints``, while they cannot move)."""
+        return self.controller.call(lambda: request(self.controller.device.functions), joints)
 
-    def _device_service(self, response: object, request: Callable[[CaptureDevice], str],
+    def _device_service(self, response: object, request: Callable[[CaptureFunctions], str],
                         joints: Sequence[str] | None = None) -> object:
         """Answer a service with one adapter call (refusals and errors: success=false)."""
         return self.serve_request(response, lambda: self._device_call(request, joints))
@@ -272,11 +275,11 @@ class CaptureDriverNode(GimbalDriverNode):
         return 1.0 / rate if rate > 0 else 1.0  # at rate 0 the job looks once a second
 
     def _read_sensor(self, name: str, publisher: Publisher,
-                     available: Callable[[CaptureDevice], bool],
-                     rate: float, read: Callable[[CaptureDevice], T]) -> T | None:
+                     available: Callable[[CaptureFunctions], bool],
+                     rate: float, read: Callable[[CaptureFunctions], T]) -> T | None:
         """One sensor read while active, connected, the device has the sensor and someone
         subscribes to its topic; a failed read is a throttled warning, never an exception.
-        A getter the device does not answer with data stops the topic (the device clears
+        A getter the device does not answer with data stops the topic (the functions clear
         its flag), said here once.
 
         Without a subscriber the read is skipped: each is one or more request/reply
@@ -404,7 +407,7 @@ class CaptureDriverNode(GimbalDriverNode):
         return self._stop_program(response, lambda d: d.stop_target_loop(),
                                   'target looping stopped')
 
-    def _stop_program(self, response: object, stop: Callable[[CaptureDevice], None],
+    def _stop_program(self, response: object, stop: Callable[[CaptureFunctions], None],
                       message: str) -> object:
         """End a device program (loop), then stop every axis as ~/stop does: two calls to
         the controller, one after the other."""
@@ -419,7 +422,7 @@ class CaptureDriverNode(GimbalDriverNode):
         return self._device_service(response, lambda d: d.reset_gyro_drift())
 
     def _on_set_ranging(self, request, response):
-        def ranging(device: CaptureDevice) -> str:
+        def ranging(device: CaptureFunctions) -> str:
             message = device.set_ranging(request.data)
             if request.data:
                 self.sensor_jobs.trigger(self._publish_range)
@@ -429,7 +432,7 @@ class CaptureDriverNode(GimbalDriverNode):
         return self._device_service(response, ranging)
 
     def _on_set_tracking(self, request, response):
-        def tracking(device: CaptureDevice) -> str:
+        def tracking(device: CaptureFunctions) -> str:
             message = device.set_tracking(request.mode)
             self.sensor_jobs.trigger(self._publish_tracking)
             return message
@@ -437,7 +440,7 @@ class CaptureDriverNode(GimbalDriverNode):
         return self._device_service(response, tracking)
 
     def _on_set_output(self, number: int, request, response):
-        def output(device: CaptureDevice) -> str:
+        def output(device: CaptureFunctions) -> str:
             message = device.set_digital_output(number, request.data)
             self.sensor_jobs.trigger(self._publish_digital_io)
             return message
@@ -461,7 +464,7 @@ class CaptureDriverNode(GimbalDriverNode):
         return self.serve_request(response, enable)
 
     def _on_command(self, request, response):
-        def run(device: CaptureDevice) -> str:
+        def run(device: CaptureFunctions) -> str:
             message, response.results = device.command(
                 request.command, request.axis, list(request.arguments))
             return message

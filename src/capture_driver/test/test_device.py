@@ -111,7 +111,7 @@ def test_connect_reads_the_identity(tcp_rig):
     assert info.firmware_version.startswith('2.24.0')
     assert info.hardware_id == 'capture-pnCAP-PT2-SIM-sn24017-hw3.1-fw2.24.0'
     assert tcp_rig.device.description() == f'tcp://127.0.0.1:{tcp_rig.sim.tcp.port}'
-    assert tcp_rig.device.has_imu and tcp_rig.device.has_gps
+    assert tcp_rig.device.functions.has_imu and tcp_rig.device.functions.has_gps
 
 
 def _device_part(rig):
@@ -201,9 +201,9 @@ def test_faulted_and_off_axes_are_refused_with_the_reason_and_nothing_sent(tcp_r
     assert 'ACKed MOT_ResetFaults' in message and 'pan on, no fault' in message
     assert ctl.refusal(['pan']) is None
     # a drive switched off: refused with the axis state
-    ctl.call(lambda: device.set_power(False))
+    ctl.call(lambda: device.functions.set_power(False))
     wait_for(lambda: 'pan drive is off' in (ctl.refusal(['pan']) or ''), 10.0, 'drive off')
-    ctl.call(lambda: device.set_power(True))
+    ctl.call(lambda: device.functions.set_power(True))
     wait_for(lambda: ctl.refusal(JOINTS) is None, 10.0, 'drives on again')
 
 
@@ -221,11 +221,11 @@ def test_invalid_requests_send_nothing(tcp_rig):
     with pytest.raises(InvalidRequest, match='preset index 16'):
         ctl.call(lambda: device.capabilities.presets.set(16, 'x', {'pan': 0.0}))
     with pytest.raises(InvalidRequest, match='bad argument'):
-        ctl.call(lambda: device.command('MOT_SetSpeed', 1, ['fast']))
+        ctl.call(lambda: device.functions.command('MOT_SetSpeed', 1, ['fast']))
     with pytest.raises(DeviceRefused, match='allow_reboot'):
-        ctl.call(lambda: device.command('COM_Reboot', 0, []))
+        ctl.call(lambda: device.functions.command('COM_Reboot', 0, []))
     with pytest.raises(InvalidRequest, match='latitude'):
-        ctl.call(lambda: device.goto_lla(91.0, 0.0, 0.0))
+        ctl.call(lambda: device.functions.goto_lla(91.0, 0.0, 0.0))
     # only the controller's own polls reached the device
     polls = {COMMANDS[n].opcode for n in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed',
                                            'MOT_GetMotorCurrent')}
@@ -288,11 +288,11 @@ def test_device_scan_requests_are_checked_before_anything_is_sent(tcp_rig, reque
 def test_imu_reading_is_rep103(tcp_rig):
     device = tcp_rig.device
     model = tcp_rig.sim.model
-    reading = tcp_rig.controller.call(device.imu)
+    reading = tcp_rig.controller.call(device.functions.imu)
     raw = tcp_rig.controller.call(device.client.imu)
     assert reading.yaw == pytest.approx(-math.radians(raw['yaw']), abs=1e-6)
     assert reading.pitch == pytest.approx(math.radians(raw['pitch']), abs=1e-6)
-    fix = tcp_rig.controller.call(device.gps_fix)
+    fix = tcp_rig.controller.call(device.functions.gps_fix)
     assert (fix.latitude, fix.longitude) == pytest.approx(
         (model.gps_position.latitude, model.gps_position.longitude), abs=1e-6)
 
@@ -321,15 +321,15 @@ def test_levelling_targets_and_reaches_the_leveling_value(tcp_rig):
     ctl, device = tcp_rig.controller, tcp_rig.device
     tcp_rig.sim.model.set_pose(2, 10.0)
     tcp_rig.wait_positions({'tilt': math.radians(10.0)})
-    ctl.call(lambda: device.command('IMU_setLevelingValue', 2, ['-3']))
-    ctl.call(lambda: device.start_leveling(['tilt']))
+    ctl.call(lambda: device.functions.command('IMU_setLevelingValue', 2, ['-3']))
+    ctl.call(lambda: device.functions.start_leveling(['tilt']))
     # the end pose is reported (and was limit-checked) in rad, REP-103
     assert ctl.commanded_targets['tilt'] == pytest.approx(math.radians(-3.0), abs=1e-3)
-    wait_for(lambda: ctl.call(lambda: device.level_errors(['tilt'])).within(2e-3)
+    wait_for(lambda: ctl.call(lambda: device.functions.level_errors(['tilt'])).within(2e-3)
              and not ctl.moving('tilt'), 20.0, 'levelled')
     assert tcp_rig.sim_axis(2).position == pytest.approx(-3.0, abs=0.1)
     with pytest.raises(InvalidRequest, match='unknown joint'):
-        ctl.call(lambda: device.start_leveling(['elbow']))
+        ctl.call(lambda: device.functions.start_leveling(['elbow']))
 
 
 def test_a_posted_stream_move_is_settled_through_the_link_lock_and_a_stop_wins(tcp_rig):
@@ -395,40 +395,24 @@ def test_a_move_to_drops_the_joint_commands_queued_behind_a_busy_link(tcp_rig):
     assert ctl.commanded_targets.get('pan') == pytest.approx(-0.2)
 
 
-def test_a_stop_goes_ahead_of_a_sensor_read_queued_for_the_link(tcp_rig):
-    """Issue 39 item 2, over TCP: with an exchange in flight and an IMU read waiting for the
-    link, ~/stop is the next request the pedestal gets."""
+def test_a_stop_goes_out_while_a_sensor_read_waits_for_an_answer_that_never_comes(tcp_rig):
+    """Issue 39 items 1 and 2, over TCP: with IMU_GetRoll muted in the simulator and an IMU
+    read waiting for it, ~/stop reaches the pedestal and is answered while that read still
+    waits, and the joint poll goes on beside it."""
     ctl, sim = tcp_rig.controller, tcp_rig.sim
     client = tcp_rig.device.client
-    taken, release, reading = threading.Event(), threading.Event(), threading.Event()
-
-    def hold_link() -> None:
-        with tcp_rig.device.link_lock:
-            taken.set()
-            release.wait(10.0)
-
-    def read_imu() -> None:
-        reading.set()
-        client.imu()
-
-    holder = threading.Thread(target=hold_link, daemon=True)
-    holder.start()
-    assert taken.wait(5.0)
-    since = len(sim.model.requests)
-    try:
-        reader = threading.Thread(target=read_imu, daemon=True)
-        reader.start()
-        assert reading.wait(5.0)
-        wait_for(lambda: tcp_rig.device.link_lock.waiting() == 1, 5.0,
-                 'the IMU read waiting for the link')
-        stopper = threading.Thread(target=ctl.stop, daemon=True)
-        stopper.start()
-        wait_for(lambda: tcp_rig.device.link_lock.waiting(urgent=True) == 1, 5.0,
-                 'the stop waiting')
-    finally:
-        release.set()
-    for thread in (holder, reader, stopper):
-        thread.join(10.0)
-    names = [BY_OPCODE[frame.opcode].name for frame in list(sim.model.requests)[since:]]
-    imu = names.index('IMU_GetRoll')
-    assert 'SCN_StopScan' in names[:imu], names  # the stop went first
+    client.timeout = 5.0  # a long wait for the muted getter: the stop comes well inside it
+    sim.model.request_faults.mute('IMU_GetRoll')
+    asked = tcp_rig.sent('IMU_GetRoll')
+    reader = threading.Thread(target=client.optional, args=('IMU_GetRoll',), daemon=True)
+    reader.start()
+    wait_for(lambda: tcp_rig.sent('IMU_GetRoll') == asked + 1, 5.0, 'the IMU read sent')
+    polls = tcp_rig.sent('MOT_GetLoadPosition')
+    wait_for(lambda: tcp_rig.sent('MOT_GetLoadPosition') >= polls + 4, 5.0,
+             'the joint poll going on beside the waiting read')
+    stops = tcp_rig.sent('SCN_StopScan')
+    assert ctl.stop().startswith('all axes stopped')
+    assert tcp_rig.sent('SCN_StopScan') == stops + 1
+    assert reader.is_alive()  # the read still waits for its answer
+    sim.model.request_faults.clear()
+    reader.join(10.0)

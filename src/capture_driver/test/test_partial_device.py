@@ -286,7 +286,8 @@ def test_the_controller_drives_a_partial_device(drive, model):
     assert info.serial_number == 'unknown' and info.firmware_version == 'unknown'
     assert info.hardware_id == ('capture-pnunknown-snunknown-hwunknown-fwunknown'
                                 f'@tcp://127.0.0.1:{sim.tcp.port}')
-    assert not device.has_imu and not device.has_gps and not device.has_tracker
+    functions = device.functions
+    assert not functions.has_imu and not functions.has_gps and not functions.has_tracker
     assert device.refusal(['pan', 'tilt']) is None  # no "axis off" from absent registers
     controller.command(['pan', 'tilt'], [0.2, -0.1], [])
     wait_for(lambda: at(controller, {'pan': 0.2, 'tilt': -0.1}), 20.0, 'the move carried out')
@@ -333,7 +334,7 @@ def test_a_drive_off_is_named_after_the_registers_that_said_so(drive, model, nam
     """"drive is off" names the register each flag came from, and never a register the
     device did not answer (a controller without SRL reports the drive off in CMER)."""
     _, device, controller = drive(model)
-    controller.call(lambda: device.set_power(False))
+    controller.call(lambda: device.functions.set_power(False))
     wait_for(lambda: 'pan drive is off' in (device.refusal(['pan']) or ''), 10.0, 'drive off')
     refusal = device.refusal(['pan'])
     assert f'({", ".join(named)})' in refusal, refusal
