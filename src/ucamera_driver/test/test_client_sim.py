@@ -118,24 +118,24 @@ def test_ffc_on_daylight_gimbal_is_reported(make_config) -> None:
 
 
 def test_requests_frequency_and_antenna(sim: UCameraSim, client: UCameraClient) -> None:
-    assert client.set_telemetry_rate(20) == 20
+    assert client.commands.set_telemetry_rate(20) == 20
     assert client.request_telemetry_rate() == 20
-    client.set_antenna_position(0.12, -0.034, 0.5)
+    client.commands.set_antenna_position(0.12, -0.034, 0.5)
     assert client.request_antenna_position() == pytest.approx((0.12, -0.034, 0.5))
 
 
 def test_zoom_and_palette(sim: UCameraSim, client: UCameraClient) -> None:
-    client.set_zoom(0.25)
-    client.set_ir_palette(4)
+    client.commands.set_zoom(0.25)
+    client.commands.set_ir_palette(4)
     wait_for(lambda: close(client.state().zoom, 0.25, 1e-3), what="zoom")
     wait_for(lambda: client.state().ir_palette == 4, what="palette")
 
 
 def test_external_gps_feed_reaches_system_position(sim, client) -> None:
-    client.configure_gps_feed(GpsFeed.EXTERNAL)
-    client.send_gps(10.5, -20.25, 123.0, 1.0, 2.0, -0.5)
-    client.send_vehicle_angles(0.1, 0.2, -0.3)
-    client.send_vehicle_rates(0.01, 0.02, 0.03)
+    client.commands.configure_gps_feed(GpsFeed.EXTERNAL)
+    client.commands.send_gps(10.5, -20.25, 123.0, 1.0, 2.0, -0.5)
+    client.commands.send_vehicle_angles(0.1, 0.2, -0.3)
+    client.commands.send_vehicle_rates(0.01, 0.02, 0.03)
     wait_for(lambda: close(client.state().latitude, 10.5, 1e-6), what="external position")
     assert client.state().altitude == pytest.approx(123.0)
     assert sim.model.vehicle_angles == pytest.approx((0.1, 0.2, -0.3), abs=1e-6)
@@ -148,7 +148,7 @@ def test_out_of_range_command_sends_nothing(sim: UCameraSim, client: UCameraClie
     with pytest.raises(RangeError, match="pan"):
         client.set_angles(10.0, 0.0)
     with pytest.raises(RangeError, match="zoom"):
-        client.set_zoom(2.0)
+        client.commands.set_zoom(2.0)
     with pytest.raises(RangeError, match="not a U-Camera mode"):
         client.set_mode(12)
     assert client.stats.commands_sent == sent
@@ -230,12 +230,12 @@ def test_errors_are_the_core_hierarchy(sim: UCameraSim, client: UCameraClient) -
         client.request(VersionRequest(), AntennaPositionReport, timeout=0.05, attempts=1)
     client.stop()
     with pytest.raises(LinkError, match=r"link .* is down"):
-        client.set_zoom(0.5)
+        client.commands.set_zoom(0.5)
 
 
 def test_save_configuration_pause_is_not_silence(sim: UCameraSim, client: UCameraClient) -> None:
-    client.set_telemetry_rate(25)
-    client.save_configuration()
+    client.commands.set_telemetry_rate(25)
+    client.commands.save_configuration()
     wait_for(lambda: sim.model.nv_saves == 1, what="NV write")
     wait_for(lambda: sim.model.silent(), what="device quiet", timeout=1.0)
     wait_for(lambda: not sim.model.silent(), what="device back")

@@ -60,7 +60,7 @@ class Rig:
     def start(self) -> Rig:
         self.controller.open()
         self.controller.activate()
-        wait_for(lambda: self.device.mode() == "angles", what="end of INIT")
+        wait_for(lambda: self.device.functions.mode() == "angles", what="end of INIT")
         return self
 
     def close(self) -> None:
@@ -212,15 +212,15 @@ def test_refusals_send_nothing(rig: Rig) -> None:
     with pytest.raises(InvalidRequest, match="velocity_max"):
         rig.controller.command(["pan"], [], [5.0])
     with pytest.raises(InvalidRequest, match="modes are"):
-        rig.controller.call(lambda: rig.device.set_mode("warp"))
+        rig.controller.call(lambda: rig.device.functions.set_mode("warp"))
     with pytest.raises(Unsupported, match="no fault-reset"):
         rig.controller.reset_faults()
     with pytest.raises(DeviceRefused, match="allow_nv_write"):
-        rig.controller.call(rig.device.save_configuration)
+        rig.controller.call(rig.device.functions.save_configuration)
     with pytest.raises(InvalidRequest, match="zoom"):
-        rig.controller.call(lambda: rig.device.set_zoom(1.5))
+        rig.controller.call(lambda: rig.device.functions.set_zoom(1.5))
     with pytest.raises(InvalidRequest, match="quaternion norm"):
-        rig.controller.call(lambda: rig.device.send_external_attitude(0.0, 0.0, 0.0, 2.0))
+        rig.controller.call(lambda: rig.device.functions.send_external_attitude(0.0, 0.0, 0.0, 2.0))
     assert rig.device_commanded() == before
     assert rig.sim.model.nv_saves == 0
     rig.controller.deactivate()
@@ -236,29 +236,30 @@ def test_home_goes_to_pilot(rig: Rig) -> None:
     message = rig.motion.home([], progress.append)
     assert "pilot" in message
     assert progress
-    assert rig.device.mode() == "pilot"
+    assert rig.device.functions.mode() == "pilot"
     assert rig.at(0.0, 0.0)
 
 
 def test_set_mode_and_nv_save_with_opt_in(sim: UCameraSim) -> None:
     setup = Rig(sim, allow_nv_write=True).start()
     try:
-        assert "mode stow active" in setup.controller.call(lambda: setup.device.set_mode("stow"))
+        functions = setup.device.functions
+        assert "mode stow active" in setup.controller.call(lambda: functions.set_mode("stow"))
         wait_for(lambda: setup.at(0.0, math.pi / 2), what="stow pose (tilt up)")
-        answer = setup.controller.call(lambda: setup.device.set_mode("gyro_autoalign"))
+        answer = setup.controller.call(lambda: setup.device.functions.set_mode("gyro_autoalign"))
         assert "returns to angles by itself" in answer
-        assert "saved" in setup.controller.call(setup.device.save_configuration)
+        assert "saved" in setup.controller.call(setup.device.functions.save_configuration)
         wait_for(lambda: sim.model.nv_saves == 1, what="the NV write")
-        wait_for(lambda: setup.device.mode() == "angles", what="back in angles")
+        wait_for(lambda: setup.device.functions.mode() == "angles", what="back in angles")
         assert setup.controller.connected  # the save pause is not a link loss
     finally:
         setup.close()
 
 
 def test_external_feed_in_gimbal_frames(rig: Rig) -> None:
-    rig.device.send_external_velocity(east=1.0, north=2.0, up=0.5)
-    rig.device.send_external_attitude(0.0, 0.0, 0.0, 1.0)  # facing east, level
-    rig.device.send_external_body_rates(0.01, 0.02, 0.03)  # FLU
+    rig.device.functions.send_external_velocity(east=1.0, north=2.0, up=0.5)
+    rig.device.functions.send_external_attitude(0.0, 0.0, 0.0, 1.0)  # facing east, level
+    rig.device.functions.send_external_body_rates(0.01, 0.02, 0.03)  # FLU
     wait_for(lambda: rig.sim.model.vehicle_rates is not None, what="vehicle rates")
     model = rig.sim.model
     assert model.external_velocity == pytest.approx((2.0, 1.0, -0.5))  # N, E, D

@@ -46,7 +46,7 @@ class UCameraGeolocation(Geolocation):
         else:
             position = PositionFix(GeoPoint(state.latitude, state.longitude, state.altitude),
                                    self.POSITION_SOURCE, stamp=state.position_time)
-        attitude = self.device.vehicle_attitude
+        attitude = self.device.functions.vehicle_attitude
         if attitude is None:
             missing["orientation"] = (
                 "the U-Camera reports no vehicle attitude: publish it as sensor_msgs/Imu on "
@@ -65,7 +65,7 @@ class PilotHoming(Homing):
     def home(self, joints: Sequence[str], report: Callable[[str], None],
              cancelled: threading.Event) -> str:
         device, client = self.device, self.device.client
-        device.command_mode(GimbalMode.PILOT)
+        device.functions.command_mode(GimbalMode.PILOT)
         report("pilot mode requested")
         timeout = device.settings.home_timeout
         deadline = time.monotonic() + timeout
@@ -93,7 +93,7 @@ class UCameraStatus(StatusReport):
         self._last_checksum_errors = 0
 
     def mode(self) -> str:
-        return self.device.mode()
+        return self.device.functions.mode()
 
     def errors(self) -> list[str]:
         error = self.device.client.mode_error
@@ -109,7 +109,7 @@ class UCameraStatus(StatusReport):
         achieved = client.telemetry_rate_achieved()
         new_errors = max(0, stats.checksum_errors - self._last_checksum_errors)
         self._last_checksum_errors = stats.checksum_errors
-        mode = device.mode()
+        mode = device.functions.mode()
         level, message = Level.OK, f"mode {mode or '?'}"
         if settings.telemetry_rate and achieved < 0.7 * settings.telemetry_rate:
             level = Level.WARN

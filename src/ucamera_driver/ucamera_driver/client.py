@@ -34,7 +34,7 @@ from gimbal_driver_common.errors import DeviceTimeout, LinkError
 from gimbal_driver_common.session import Protocol, Session, StreamLink
 from gimbal_driver_common.transport import ByteStream, SerialStream, TransportError
 
-from .client_commands import UCameraCommands
+from .client_commands import QuietPeriod, UCameraCommands
 from .client_types import (
     ONE_SHOT_MODES,
     PERSISTENT_MODES,
@@ -74,8 +74,9 @@ from .protocol import (
 
 LOG = logging.getLogger(__name__)
 
-class UCameraClient(UCameraCommands, Protocol):
-    """Session with one U-Camera; thread-safe. The client is its session's protocol."""
+class UCameraClient(Protocol):
+    """Session with one U-Camera; thread-safe. The client is its session's protocol; its
+    device-function commands are the part :attr:`commands`."""
 
     _reading: Session  # the session whose reader runs the protocol methods
 
@@ -104,7 +105,8 @@ class UCameraClient(UCameraCommands, Protocol):
         self.refresh_period = 1.0 / refresh_rate
         self.silence_timeout = silence_timeout
         self.request_timeout = request_timeout
-        self.save_pause_grace = save_pause_grace
+        #: the silence an NV save may add (``save_pause_grace``), opened by ``commands``
+        self.quiet = QuietPeriod(save_pause_grace)
         self.one_shot_timeout = one_shot_timeout
         self._on_report = on_report
 
@@ -127,9 +129,9 @@ class UCameraClient(UCameraCommands, Protocol):
         self._sessions = 0
         self._last_rx = 0.0
         self._last_packet = 0.0  # any well-framed packet, understood or not
-        self._quiet_until = 0.0
         self._alive = False
         self._next_refresh = 0.0
+        self.commands = UCameraCommands(self, self.quiet)
 
     # --- lifecycle -------------------------------------------------------
     def start(self, timeout: float = 3.0) -> VersionReport:
@@ -342,8 +344,7 @@ class UCameraClient(UCameraCommands, Protocol):
 
     def tick(self, now: float) -> float | None:
         """Give the link up after a silence; re-send the mode and set-point when due."""
-        quiet = self.silence_timeout + (self.save_pause_grace if now < self._quiet_until
-                                        else 0.0)
+        quiet = self.silence_timeout + self.quiet.extra(now)
         if now - self._last_rx > quiet:
             self.stats.silences += 1
             raise NotConnectedError(self._no_telemetry(now))

@@ -4,8 +4,8 @@ Wraps one :class:`UCameraClient` and speaks the device contract: SI units,
 REP-103 signs and joint names. Everything that converts between the gimbal and
 ROS conventions lives here: axis signs (``invert_pan``/``invert_tilt``), the
 set-point ramp that gives angle moves a speed (the gimbal has no speed input),
-the "moving" bits, and (in its mixin, ``device_functions.py``) the external-feed
-frames (ENU/FLU in, NED/FRD out).
+the "moving" bits, and (in its part ``functions``, ``device_functions.py``) the
+external-feed frames (ENU/FLU in, NED/FRD out).
 
 What lives where:
 
@@ -15,7 +15,7 @@ What lives where:
 * this module: the adapter;
 * ``device_functions.py``: the device extras the node exposes (modes, zoom, IR
   palette, external feed, non-volatile saves behind ``allow_nv_write``), the
-  :class:`~.device_functions.UCameraFunctions` mixin of the adapter;
+  :class:`~.device_functions.UCameraFunctions` part of the adapter (``functions``);
 * ``capabilities.py``: its capability objects (:class:`~.capabilities.PilotHoming`,
   :class:`~.capabilities.UCameraStatus`, :class:`~.capabilities.UCameraGeolocation`);
 * ``node.py``: parameters, ``make_device()`` and the ROS topics and services of
@@ -52,7 +52,6 @@ from typing import TypeVar
 from gimbal_driver_common.config import Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves, PostedWrite
 from gimbal_driver_common.errors import DeviceTimeout, Unsupported
-from gimbal_driver_common.geodesy import Attitude
 
 from .capabilities import PilotHoming, UCameraGeolocation, UCameraStatus
 from .client import NotConnectedError, UCameraClient
@@ -86,8 +85,9 @@ class UCameraSettings:
     allow_nv_write: bool = False
 
 
-class UCameraDevice(UCameraFunctions, Device):
-    """One U-Camera in joint space (REP-103); thread-safe."""
+class UCameraDevice(Device):
+    """One U-Camera in joint space (REP-103); thread-safe. Its extras are the part
+    :attr:`functions`."""
 
     streamed = True  # angles arrive as periodic reports: publish each as it comes
 
@@ -119,8 +119,7 @@ class UCameraDevice(UCameraFunctions, Device):
         self._ramp_time = 0.0
         self._jog_rates: dict[str, float] = {}
         self._rates_check_pending = False
-        #: the vehicle attitude last sent to the gimbal (~/ext/imu) and when (time.time())
-        self.vehicle_attitude: tuple[Attitude, float] | None = None
+        self.functions = UCameraFunctions(self.client, settings, axes=self)
         self.capabilities.homing = PilotHoming(self)
         self.capabilities.status = UCameraStatus(self)
         self.capabilities.geolocation = UCameraGeolocation(self)
@@ -181,7 +180,7 @@ class UCameraDevice(UCameraFunctions, Device):
         """The connect-time parameters (volatile until ~/save_configuration)."""
         client, settings = self.client, self.settings
         if settings.telemetry_rate:
-            client.set_telemetry_rate(settings.telemetry_rate, verify=False)
+            client.commands.set_telemetry_rate(settings.telemetry_rate, verify=False)
             # the read-back is best effort: the angles reports are what the node needs
             achieved = self._best_effort("TelemetryRateRequest", client.request_telemetry_rate)
             if achieved is not None and achieved != settings.telemetry_rate:
@@ -189,12 +188,12 @@ class UCameraDevice(UCameraFunctions, Device):
                     f"telemetry_rate {settings.telemetry_rate} Hz requested, device reports "
                     f"{achieved} Hz")
         if settings.gps_feed:
-            client.configure_gps_feed(
+            client.commands.configure_gps_feed(
                 GpsFeed.EXTERNAL if settings.gps_feed == "external" else GpsFeed.INTERNAL)
         if len(settings.antenna_position) == 3:
-            client.set_antenna_position(*settings.antenna_position)
+            client.commands.set_antenna_position(*settings.antenna_position)
         if settings.ir_palette >= 0:
-            client.set_ir_palette(settings.ir_palette)
+            client.commands.set_ir_palette(settings.ir_palette)
         self.antenna = self._best_effort("AntennaPositionRequest",
                                          client.request_antenna_position)
 
@@ -328,6 +327,13 @@ class UCameraDevice(UCameraFunctions, Device):
 
     def reset_faults(self) -> str:
         raise Unsupported("the U-Camera protocol (UCSP) has no fault-reset command")
+
+    def release_axes(self, then: Callable[[], None]) -> None:
+        """A device mode takes the axes: the set-point, ramp and jog end, and ``then``
+        (the mode command) goes out under the same hold of the motion lock."""
+        with self._lock:
+            self._forget_motion()
+            then()
 
     def _forget_motion(self) -> None:
         with self._lock:

@@ -1,15 +1,18 @@
 """The U-Camera's device extras (no ROS): modes, telemetry and refresh rates, zoom, IR
 palette, the external feed (ENU/FLU in, NED/FRD out) and the non-volatile saves behind
-``allow_nv_write``. A mixin of :class:`~.device.UCameraDevice`, kept apart so the adapter's
-core (signs, set-point ramp, moving bits, link) reads in one sitting; the node's topics and
-services call these.
+``allow_nv_write``. A part of :class:`~.device.UCameraDevice` (its ``functions``
+attribute), kept apart so the adapter's core (signs, set-point ramp, moving bits, link)
+reads in one sitting; the node's topics and services call these. It is handed the client,
+the settings and the adapter's motion (:class:`AxesRelease`: a device mode takes the axes
+from the driver's set-point, ramp and jog), and owns the vehicle attitude last sent.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
 
 from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, InvalidRequest
 from gimbal_driver_common.geodesy import Attitude
@@ -35,13 +38,24 @@ def enu_flu_to_ned_frd(roll: float, pitch: float, yaw: float) -> tuple[float, fl
     return wrap_angle(math.pi / 2 - yaw), -pitch, roll
 
 
-class UCameraFunctions:
-    """The device extras of :class:`~.device.UCameraDevice` (a mixin: the device provides
-    ``client``, ``settings``, its motion lock ``_lock`` and ``_forget_motion``)."""
+class AxesRelease(Protocol):
+    """What the functions use of the adapter's motion."""
 
-    client: UCameraClient
-    settings: UCameraSettings
-    vehicle_attitude: tuple[Attitude, float] | None
+    def release_axes(self, then: Callable[[], None]) -> None:
+        """End the driver's set-point, ramp and jog, and run ``then`` (the command that
+        hands the axes to a device mode) before any other motion command can start."""
+
+
+class UCameraFunctions:
+    """The device extras of :class:`~.device.UCameraDevice`."""
+
+    def __init__(self, client: UCameraClient, settings: UCameraSettings,
+                 axes: AxesRelease) -> None:
+        self.client = client
+        self.settings = settings
+        self.axes = axes
+        #: the vehicle attitude last sent to the gimbal (~/ext/imu) and when (time.time())
+        self.vehicle_attitude: tuple[Attitude, float] | None = None
 
     # ------------------------------------------------------------------ extras
     def mode(self) -> str:
@@ -76,20 +90,23 @@ class UCameraFunctions:
 
         ``angles`` holds the current position and ``rates`` starts with zero rates.
         """
-        with self._lock:
-            self._forget_motion()
+        client = self.client
+
+        def hand_over() -> None:
             if mode == GimbalMode.ANGLES:
-                self.client.hold_angles()
+                client.hold_angles()
             elif mode == GimbalMode.RATES:
-                self.client.set_rates(0.0, 0.0)
+                client.set_rates(0.0, 0.0)
             else:
-                self.client.set_mode(mode)
+                client.set_mode(mode)
+
+        self.axes.release_axes(hand_over)
 
     def set_telemetry_rate(self, rate: int) -> None:
         """Send a new report rate now (volatile); refused when the gimbal reports another."""
         if not self.client.connected or rate == 0:
             return  # applied when the link opens
-        achieved = self.client.set_telemetry_rate(rate)
+        achieved = self.client.commands.set_telemetry_rate(rate)
         if achieved != rate:
             raise DeviceRefused(f"the gimbal reports {achieved} Hz")
 
@@ -98,19 +115,19 @@ class UCameraFunctions:
 
     def set_zoom(self, level: float) -> None:
         """Zoom 0 (wide) .. 1 (tele)."""
-        self.client.set_zoom(level)
+        self.client.commands.set_zoom(level)
 
     def set_ir_palette(self, palette: int) -> None:
-        self.client.set_ir_palette(palette)
+        self.client.commands.set_ir_palette(palette)
 
     def send_external_velocity(self, east: float, north: float, up: float) -> None:
         """ENU ground velocity (m/s) -> the gimbal's NED GPS velocities."""
-        self.client.send_gps_velocity(north, east, -up)
+        self.client.commands.send_gps_velocity(north, east, -up)
 
     def send_external_fix(self, latitude: float, longitude: float, altitude: float,
                           east: float, north: float, up: float) -> None:
         """A fix (degrees, m) with its ENU velocity -> Send GPS Position and Velocities."""
-        self.client.send_gps(latitude, longitude, altitude, north, east, -up)
+        self.client.commands.send_gps(latitude, longitude, altitude, north, east, -up)
 
     def send_external_attitude(self, x: float, y: float, z: float, w: float) -> None:
         """Vehicle orientation quaternion (ENU world, FLU body) -> Send Vehicle Angles."""
@@ -119,23 +136,23 @@ class UCameraFunctions:
             raise InvalidRequest(f"quaternion norm {norm:.3f} is not 1")
         rep103 = euler_from_quaternion(x / norm, y / norm, z / norm, w / norm)
         yaw, pitch, roll = enu_flu_to_ned_frd(*rep103)
-        self.client.send_vehicle_angles(yaw, pitch, roll)
+        self.client.commands.send_vehicle_angles(yaw, pitch, roll)
         self.vehicle_attitude = (Attitude(*rep103), time.time())
 
     def send_external_body_rates(self, x: float, y: float, z: float) -> None:
         """FLU body rates (rad/s) -> FRD p, q, r -> Send Vehicle Angular Velocities."""
-        self.client.send_vehicle_rates(-z, -y, x)
+        self.client.commands.send_vehicle_rates(-z, -y, x)
 
     def save_configuration(self) -> str:
         self._check_nv_allowed("save_configuration")
-        self.client.save_configuration()
+        self.client.commands.save_configuration()
         return "configuration saved to non-volatile memory (the gimbal is silent for about 1 s)"
 
     def save_ffc(self) -> str:
         self._check_nv_allowed("save_ffc")
         if self.client.state().gimbal_type != GimbalType.IR:
             raise DeviceRefused("save_ffc needs an IR gimbal")
-        self.client.save_ffc()
+        self.client.commands.save_ffc()
         return "FFC calibration saved to the IR module (may take up to 10 s)"
 
     def _check_nv_allowed(self, what: str) -> None:

@@ -37,6 +37,7 @@ from gimbal_driver_common.ros.run import run_driver
 from gimbal_msgs.srv import SetMode
 
 from .device import UCameraDevice, UCameraSettings
+from .device_functions import UCameraFunctions
 from .protocol import IrPaletteReport, Packet, SystemPositionReport, ZoomReport
 
 NODE_NAME = "ucamera_driver"
@@ -177,12 +178,12 @@ class UCameraDriverNode(GimbalDriverNode):
 
         def send_telemetry_rate(rate: int) -> None:
             if self.device is not None:
-                self.device.set_telemetry_rate(rate)
+                self.device.functions.set_telemetry_rate(rate)
 
         def set_refresh_rate(rate: float) -> None:
             self.settings.refresh_rate = rate
             if self.device is not None:
-                self.device.set_refresh_rate(rate)
+                self.device.functions.set_refresh_rate(rate)
 
         def set_feed_rate(rate: float) -> None:
             self.external_feed_rate = rate
@@ -253,10 +254,11 @@ class UCameraDriverNode(GimbalDriverNode):
             self._fix_pub.publish(fix)
 
     # -------------------------------------------------------------- services
-    def _serve_device(self, response, request: Callable[[UCameraDevice], str]):
-        """A service answered by the device: refused while inactive, errors as success=false."""
+    def _serve_device(self, response, request: Callable[[UCameraFunctions], str]):
+        """A service answered by the device's functions: refused while inactive, errors as
+        success=false."""
         return self.serve_request(
-            response, lambda: self.controller.call(lambda: request(self.device)))
+            response, lambda: self.controller.call(lambda: request(self.device.functions)))
 
     def _on_set_mode(self, request: SetMode.Request, response: SetMode.Response):
         return self._serve_device(response, lambda device: device.set_mode(request.mode))
@@ -268,12 +270,12 @@ class UCameraDriverNode(GimbalDriverNode):
         return self._serve_device(response, lambda device: device.save_ffc())
 
     # ----------------------------------------------------------- subscribers
-    def _forward(self, what: str, send: Callable[[UCameraDevice], None]) -> None:
+    def _forward(self, what: str, send: Callable[[UCameraFunctions], None]) -> None:
         """Hand a topic message to the device; a refusal or bad value is logged, never raised."""
         try:
             if self.controller is None:
                 raise DeviceRefused(self.command_refusal())
-            self.controller.call(lambda: send(self.device))
+            self.controller.call(lambda: send(self.device.functions))
         except DeviceRefused as exc:
             self.get_logger().warning(f"{what} ignored: {exc}", throttle_duration_sec=2.0)
         except GimbalError as exc:
