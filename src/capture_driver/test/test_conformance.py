@@ -8,7 +8,18 @@ import pytest
 
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 
+from sensor_msgs.msg import Imu
+
 from gimbal_driver_common.testing.conformance import DriverConformance
+from gimbal_driver_common.testing.silent_request_conformance import SilentRequest
+from gimbal_msgs.srv import DeviceCommand
+
+#: what the Capture client lacks for the silent-request figures (measured: joint_states at
+#: 0-38 Hz of 50, ~/stop and jogs at the simulator only as the silent request's wait ended)
+ONE_LINK_LOCK = ('every thread of the node (joint poll, sensors, status, services, '
+                 'commands) takes the one link lock for a whole request/reply exchange, so '
+                 'a silent or late request holds the link for its whole wait; needs one '
+                 'owner thread per link')
 
 
 class TestCaptureConformance(DriverConformance):
@@ -23,3 +34,25 @@ class TestCaptureConformance(DriverConformance):
     scan = dict(pattern='snake', pan_min=-0.2, pan_max=0.2, tilt_min=0.0, tilt_max=0.2,
                 speed=0.5, tilt_step=0.1)
 
+    # the kinds of request a controller may leave unanswered (the simulator's mute/delay)
+    silent_requests = (
+        # the IMU is read while ~/imu has a subscriber, as in the measurement of the issue
+        SilentRequest('sensor getter', 'IMU_GetRoll', periodic=True,
+                      timeout_parameter='request_timeout', topic=('imu', Imu)),
+        SilentRequest('status register', 'ERR_OperationRegister', periodic=True,
+                      timeout_parameter='request_timeout'),
+        SilentRequest('identity read', 'COM_GetPn', at_connect=True),
+        SilentRequest('service request', 'COM_GetFw', timeout_parameter='request_timeout',
+                      service=(DeviceCommand, 'command',
+                               lambda: DeviceCommand.Request(command='COM_GetFw'))),
+    )
+    required_request = ('COM_Connect', 'COM_Connect')
+    silent_request_gaps = {
+        ('cost', '*'): 'joint_states fall below 90 % of their rate: the joint poll waits '
+                       'behind the silent request; ' + ONE_LINK_LOCK,
+        ('stop', '*'): '~/stop goes next after the exchange in flight (LinkLock.urgent), not '
+                       'while a read waits for its answer (data replies carry their opcode, '
+                       'so it could); ' + ONE_LINK_LOCK,
+        ('jog', '*'): 'a jog waits behind the silent request; ' + ONE_LINK_LOCK,
+    }
+    handshake_request = 'COM_Connect'
