@@ -9,6 +9,7 @@ import pytest
 pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (make build)")
 
 from gimbal_driver_common.testing.conformance import ConformanceRig, DriverConformance
+from gimbal_driver_common.testing.silent_request_conformance import SilentRequest
 from gimbal_msgs.msg import GimbalStatus
 
 
@@ -22,6 +23,15 @@ class TestUCameraConformance(DriverConformance):
     tolerance = 0.02
     preset_index = 3
     scan = dict(pattern="sector", pan_min=-0.3, pan_max=0.3, speed=1.0)
+
+    # the kinds of request a gimbal may leave unanswered (the simulator's mute/delay): UCSP
+    # has no request the node makes on its own after connecting
+    silent_requests = (
+        SilentRequest("read-back", "TelemetryRateRequest", at_connect=True),
+        SilentRequest("identity read", "AntennaPositionRequest", at_connect=True),
+    )
+    required_request = ("VersionRequest", "Request Gimbal Version")
+    handshake_request = "VersionRequest"
 
     def node_parameters(self) -> list[str]:
         return [*super().node_parameters(), "velocity_max:=[3.0, 3.0]"]
