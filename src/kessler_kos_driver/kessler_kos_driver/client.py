@@ -13,8 +13,12 @@ which the client reports through `connected` and `last_error_text`. Over USB
 4 s USB keep-alive) and no password message is sent: the document's USB notes say
 UserPassword and DevicePassword are "not required or supported".
 
-The notification handling is the :class:`~.client_notifications.KosNotifications` mixin,
-the commands the :class:`~.client_commands.KosCommands` mixin.
+The client's parts, each handed what it uses: the state the session keeps
+(:attr:`KosClient.state`, :class:`~.client_state.KosState`), the notification handling
+(:attr:`KosClient.notifications`, :class:`~.client_notifications.KosNotifications`, which
+writes that state and owns the adapter's ``on_*`` callbacks) and the commands
+(:attr:`KosClient.commands`, :class:`~.client_commands.KosCommands`, handed the client's
+messaging and the state).
 
 Design notes:
 - Set messages and actions have no reply. Where the caller needs to know the outcome the client
@@ -30,19 +34,20 @@ Design notes:
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from collections import deque
 from collections.abc import Callable
 
 from gimbal_driver_common import errors
+from gimbal_driver_common.errors import LinkError
 from gimbal_driver_common.session import Protocol, Session, StreamLink
 from gimbal_driver_common.transport import ByteStream, TcpStream, TransportError
 
 from .client_commands import KosCommands
 from .client_notifications import KosNotifications
+from .client_state import KosState
 from .client_types import (
-    CommandRejected,
+    CommandRejected,  # noqa: F401 - re-exported: the client's callers catch it from here
     DeviceTimeout,
     ErrorEvent,
     KosError,
@@ -76,12 +81,14 @@ from .protocol import (
     MotorStatus,
     PlaybackStatus,
     ProtocolError,
+    TrajectoryData,
     UnknownMessage,
     UnsupportedMessage,
     UserPassword,
     decode,
     unpack_header,
 )
+from .protocol.messages import MotorInfoEntry
 from .usb_link import HidDevice, HidStream, UsbTarget
 
 LOG = logging.getLogger('kessler_kos_driver.client')
@@ -92,7 +99,7 @@ NOTIFICATIONS = (PlaybackStatus, MotorPosition, MotorCalibrated, MotorStatus, Er
                  AuxInputStatus, UnsupportedMessage, UnknownMessage)
 
 
-class KosClient(KosNotifications, KosCommands, Protocol):
+class KosClient(Protocol):
     """A session with one kOS device. Thread-safe; callbacks run on the reader thread."""
 
     def __init__(
@@ -138,10 +145,11 @@ class KosClient(KosNotifications, KosCommands, Protocol):
         self._session: Session | None = None
         self._parser = FrameParser()
         self._connected_host = ''
-        self._lock = threading.RLock()
-        self._cond = threading.Condition(self._lock)
-        self._seq: dict[int, int] = {}   # notifications counted by kind (see _completed)
-        self._motor_parts: list = []
+        self.state = KosState()
+        self._lock = self.state.lock
+        self.notifications = KosNotifications(self.state)
+        self.commands = KosCommands(self, self.state)
+        self._motor_parts: list[MotorInfoEntry] = []
         self._last_tx = 0.0
         self._last_rx = 0.0
         self._unanswered_since: float | None = None   # first send after the last receive
@@ -152,18 +160,37 @@ class KosClient(KosNotifications, KosCommands, Protocol):
         self.guid = ''
         #: best-effort connect requests the device left unanswered (message name -> why)
         self.unanswered: dict[str, str] = {}
-        self.motors: dict[int, MotorState] = {}
-        self.playback = PlaybackInfo()
-        self.errors: deque[ErrorEvent] = deque(maxlen=50)
-        self.error_total = 0           # ErrorStatus notifications received so far
         self.malformed_frames = 0
-        self.unsupported_replies = 0
         self.last_error_text = ''      # why the link was lost (for the supervisor's reason)
-        self.on_playback: Callable[[PlaybackStatus], None] | None = None
-        self.on_error: Callable[[ErrorEvent], None] | None = None
-        self.on_motor_update: Callable[[], None] | None = None
-        self.aux_inputs = 0            # AuxInputStatus bits (DeviceInfo, then notifications)
-        self.on_aux_inputs: Callable[[int], None] | None = None
+
+    # ----------------------------------------------- the state, read-only (see state)
+    @property
+    def motors(self) -> dict[int, MotorState]:
+        return self.state.motors
+
+    @property
+    def playback(self) -> PlaybackInfo:
+        return self.state.playback
+
+    @property
+    def playback_running(self) -> bool:
+        return self.state.playback_running
+
+    @property
+    def errors(self) -> deque[ErrorEvent]:
+        return self.state.errors
+
+    @property
+    def error_total(self) -> int:
+        return self.state.error_total
+
+    @property
+    def aux_inputs(self) -> int:
+        return self.state.aux_inputs
+
+    @property
+    def unsupported_replies(self) -> int:
+        return self.state.unsupported_replies
 
     # ------------------------------------------------------------------ connection
     @property
@@ -193,9 +220,9 @@ class KosClient(KosNotifications, KosCommands, Protocol):
         except TransportError as exc:
             raise NotConnected(str(exc)) from exc
         self._connected_host = host
+        self.state.reset_counts()
         with self._lock:
             self._stream = stream
-            self._seq.clear()
             self._motor_parts = []
             self._unanswered_since = None
         self._parser = FrameParser()
@@ -219,7 +246,7 @@ class KosClient(KosNotifications, KosCommands, Protocol):
         assert isinstance(info, DeviceInfo)
         self.device_info = info
         with self._lock:
-            self.aux_inputs = info.aux_input_status
+            self.state.aux_inputs = info.aux_input_status
         if self.usb is not None:   # USB: no password messages
             self.refresh_motors()
             self._finish_initialisation(info)
@@ -235,7 +262,8 @@ class KosClient(KosNotifications, KosCommands, Protocol):
         try:
             self.refresh_motors()
         except DeviceTimeout as exc:
-            if any(e.code == ErrorCode.LOCKED_OUT for e in self._errors_since(errors_before)):
+            if any(e.code == ErrorCode.LOCKED_OUT
+                   for e in self.state.errors_since(errors_before)):
                 raise PasswordRejected('the device rejected the password (ErrorStatus 15, '
                                        'locked out)') from exc
             raise
@@ -256,7 +284,7 @@ class KosClient(KosNotifications, KosCommands, Protocol):
             assert isinstance(guid, DeviceGuid)
             self.guid = guid.text
         with self._lock:
-            self.playback.status = info.playback_status
+            self.state.playback.status = info.playback_status
 
     def close(self) -> None:
         """Close the link and end the session's reader (safe to call repeatedly)."""
@@ -266,10 +294,10 @@ class KosClient(KosNotifications, KosCommands, Protocol):
             session.close()
         with self._lock:
             self._stream = None
-            self._cond.notify_all()
+        self.state.wake()
 
     # ------------------------------------------------------------------- messaging
-    def send(self, message: Message) -> None:
+    def send(self, message: Message | TrajectoryData) -> None:
         """Encode (checks ranges) and send one message."""
         data = message.encode()
         session = self._session
@@ -322,7 +350,7 @@ class KosClient(KosNotifications, KosCommands, Protocol):
 
     # ------------------------------------------------------- session (reader thread)
     def connection_made(self, session: Session) -> None:
-        session.on(Message, self._dispatch)
+        session.on(Message, self.notifications.dispatch)
 
     def data_received(self, data: bytes) -> None:
         """Frames → messages (MotorInfo parts joined into one) → the session's dispatch."""
@@ -349,13 +377,12 @@ class KosClient(KosNotifications, KosCommands, Protocol):
             LOG.warning('skipped %d garbage bytes from %s while resynchronising',
                         parser.discarded_bytes - before, self.description)
 
-    def connection_lost(self, error: errors.LinkError | None) -> None:
+    def connection_lost(self, error: LinkError | None) -> None:
         """The link is gone (``error``) or was closed: requests and the poll stop."""
         was_connected, self.connected = self.connected, False
         if error is not None and was_connected:
             self.last_error_text = f'link lost: {error}'
-        with self._lock:
-            self._cond.notify_all()
+        self.state.wake()
 
     def tick(self, now: float) -> float | None:
         """State polling (GetMotorInfo), the keep-alive (GetNetworkInfo when idle) and the
@@ -381,38 +408,9 @@ class KosClient(KosNotifications, KosCommands, Protocol):
         return self.motors
 
     def motor(self, address: int) -> MotorState:
-        motor = self.motors.get(address)
-        if motor is None:
-            known = ', '.join(str(a) for a in sorted(self.motors)) or 'none'
-            raise CommandRejected(f'motor {address} is not connected (connected: {known})')
-        if not motor.online:
-            raise CommandRejected(f'motor {address} is offline')
-        return motor
+        """A connected, online motor (:meth:`KosState.motor`)."""
+        return self.state.motor(address)
 
     def wait_for(self, predicate: Callable[[], bool], timeout: float) -> bool:
         """Wait until predicate() (evaluated under the state lock) holds."""
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while not predicate():
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    return False
-                self._cond.wait(min(remaining, 0.1))
-        return True
-
-    def _errors_since(self, marker: int) -> list[ErrorEvent]:
-        """ErrorStatus events received after `marker` (a previous error_total)."""
-        with self._lock:
-            count = min(self.error_total - marker, len(self.errors))
-            return list(self.errors)[len(self.errors) - count:] if count > 0 else []
-
-    def _checked(self, action: Message, what: str) -> None:
-        """Send an action followed by a barrier; raise if the device reported an error."""
-        marker = self.error_total
-        self.send(action)
-        self.barrier()
-        errors = self._errors_since(marker)
-        if errors:
-            first = errors[0]
-            raise CommandRejected(f'{what}: device reported error {first.code} '
-                                  f'({first.description}, motor {first.motor_address})')
+        return self.state.wait_for(predicate, timeout)

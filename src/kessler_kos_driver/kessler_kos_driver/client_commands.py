@@ -1,21 +1,21 @@
 """The kOS client's commands, in the device's units (rotations): motion, device settings,
 calibration and playback (no ROS).
 
-A mixin of :class:`~.client.KosClient`, which gives it the session: ``send``, ``request``,
-``barrier``, ``_checked`` (an action followed by a barrier, raising the device's error),
-``motor``, ``refresh_motors``, ``wait_for``, ``_errors_since`` and the state (``motors``,
-``playback``, ``errors``, ``_seq``, ``_lock``). Limits are the adapter's to check
-(``device.py``, in SI) before it calls these.
+A part of :class:`~.client.KosClient` (its ``commands`` attribute), handed the session's
+messaging (:class:`MessageLink`: ``send``, ``request``, ``barrier``, ``refresh_motors``)
+and the state the notifications keep (:class:`~.client_state.KosState`). Limits are the
+adapter's to check (``device.py``, in SI) before it calls these.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Protocol
 
-from .client_types import CommandRejected, DeviceTimeout
+from .client_state import KosState, calibrated_key
+from .client_types import CommandRejected, DeviceTimeout, MotorState
 from .protocol import (
     ALL_MOTORS,
-    PLAYBACK_RUNNING_STATES,
     BumpPositionSpeedAcceleration,
     ErrorCode,
     GetLedStatus,
@@ -25,6 +25,7 @@ from .protocol import (
     LedStatus,
     MarkBeginPosition,
     MarkEndPosition,
+    Message,
     ProtocolError,
     RapidToFirstKeyFrame,
     ResetAxis,
@@ -40,15 +41,50 @@ from .protocol import (
 )
 
 
+class MessageLink(Protocol):
+    """What the commands use of the session (:class:`~.client.KosClient`)."""
+
+    reply_timeout: float
+
+    def send(self, message: Message | TrajectoryData) -> None:
+        """Encode (checks ranges) and send one message."""
+
+    def request(self, message: Message, timeout: float | None = None) -> Message:
+        """Send a Get and wait for its response."""
+
+    def barrier(self) -> None:
+        """Wait until the device has handled everything sent so far."""
+
+    def refresh_motors(self) -> dict[int, MotorState]:
+        """Read MotorInfo again (the state's motors)."""
+
+
 class KosCommands:
     """Motion, settings, calibration and playback messages of a kOS session."""
 
+    def __init__(self, link: MessageLink, state: KosState) -> None:
+        self._link = link
+        self._state = state
+
+    def send(self, message: Message | TrajectoryData) -> None:
+        self._link.send(message)
+
+    def motor(self, address: int) -> MotorState:
+        return self._state.motor(address)
+
+    def _checked(self, action: Message, what: str) -> None:
+        """Send an action followed by a barrier; raise if the device reported an error."""
+        marker = self._state.error_total
+        self.send(action)
+        self._link.barrier()
+        errors = self._state.errors_since(marker)
+        if errors:
+            first = errors[0]
+            raise CommandRejected(f'{what}: device reported error {first.code} '
+                                  f'({first.description}, motor {first.motor_address})')
+
     # Motor messages in rotations, unchecked: the adapter (device.py) checks every target
     # and speed against the motor's range and maxima, in SI, before calling these.
-    @property
-    def playback_running(self) -> bool:
-        """True while the device executes a move (it then owns the motors)."""
-        return self.playback.status in PLAYBACK_RUNNING_STATES
 
     def move_to(self, address: int, position: float, speed: float,
                 acceleration: float | None = None) -> None:
@@ -89,7 +125,7 @@ class KosCommands:
     def stop_all(self) -> None:
         """StopPlayback (stops every motor immediately) and speed 0 for each motor."""
         self.send(StopPlayback())
-        for address, motor in list(self.motors.items()):
+        for address, motor in list(self._state.motors.items()):
             if motor.online:
                 self.send(SetPositionSpeedAcceleration(address, motor.position, 0.0,
                                                        motor.max_acceleration))
@@ -102,7 +138,7 @@ class KosCommands:
     # ------------------------------------------------------------ device settings
     def led_status(self) -> tuple[int, int]:
         """(Get)LEDStatus: (master, slave), each a LedState (0 off, 1 on, 2/3 blink)."""
-        reply = self.request(GetLedStatus())
+        reply = self._link.request(GetLedStatus())
         assert isinstance(reply, LedStatus)
         return reply.master_status, reply.slave_status
 
@@ -118,7 +154,7 @@ class KosCommands:
 
     def software_id(self) -> int:
         """(Get)SoftwareID: the platform id of the last client that used the device."""
-        reply = self.request(GetSoftwareId())
+        reply = self._link.request(GetSoftwareId())
         assert isinstance(reply, SoftwareId)
         return reply.device_type
 
@@ -136,9 +172,9 @@ class KosCommands:
         self._checked(MarkBeginPosition(address), f'MarkBeginPosition motor {address}')
 
     def _await_calibrated(self, address: int, seq0: int, timeout: float, what: str) -> None:
-        key = -2000 - address
-        if not self.wait_for(lambda: self._seq.get(key, 0) > seq0, timeout):
-            errors = [e for e in self.errors if e.motor_address == address]
+        state = self._state
+        if not state.wait_for(lambda: state.count(calibrated_key(address)) > seq0, timeout):
+            errors = [e for e in state.errors if e.motor_address == address]
             reason = f' (device error {errors[-1].code}: {errors[-1].description})' \
                 if errors else ''
             raise DeviceTimeout(f'{what}: no MotorCalibrated notification for motor '
@@ -147,49 +183,50 @@ class KosCommands:
     def mark_end(self, address: int, timeout: float | None = None) -> tuple[float, float]:
         """MarkEndPosition; returns (begin, end) from the MotorCalibrated notification."""
         self.motor(address)
-        with self._lock:
-            seq0 = self._seq.get(-2000 - address, 0)
-        marker = self.error_total
+        state = self._state
+        seq0 = state.count(calibrated_key(address))
+        marker = state.error_total
         self.send(MarkEndPosition(address))
-        self.barrier()
-        failed = [e for e in self._errors_since(marker) if e.code == ErrorCode.CALIBRATION]
+        self._link.barrier()
+        failed = [e for e in state.errors_since(marker) if e.code == ErrorCode.CALIBRATION]
         if failed:
             raise CommandRejected(f'motor {address}: calibration failed (error 14: the end '
                                   'mark must differ from the begin mark); the axis was reset')
-        self._await_calibrated(address, seq0, timeout or self.reply_timeout, 'MarkEndPosition')
-        motor = self.motors[address]
+        self._await_calibrated(address, seq0, timeout or self._link.reply_timeout,
+                               'MarkEndPosition')
+        motor = state.motors[address]
         return motor.begin_position, motor.end_position
 
     def reset_axis(self, address: int, timeout: float | None = None) -> None:
         """Clear calibration (address 0: every axis, no notification expected)."""
         if address != ALL_MOTORS:
             self.motor(address)
-        with self._lock:
-            seq0 = self._seq.get(-2000 - address, 0)
+        seq0 = self._state.count(calibrated_key(address))
         self.send(ResetAxis(address))
         if address == ALL_MOTORS:
-            self.barrier()
-            self.refresh_motors()
+            self._link.barrier()
+            self._link.refresh_motors()
             return
-        self._await_calibrated(address, seq0, timeout or self.reply_timeout, 'ResetAxis')
+        self._await_calibrated(address, seq0, timeout or self._link.reply_timeout, 'ResetAxis')
 
     # ---------------------------------------------------------------- playback
     def load_trajectory(self, trajectory: Trajectory) -> None:
         """Validate against the motors' calibration and maxima, send, and confirm."""
-        self.refresh_motors()
-        limits = {a: m.limits() for a, m in self.motors.items() if m.online}
+        state = self._state
+        self._link.refresh_motors()
+        limits = {a: m.limits() for a, m in state.motors.items() if m.online}
         try:
             validate(trajectory, limits)
         except ProtocolError as exc:
             raise CommandRejected(f'trajectory refused before sending: {exc}') from exc
-        with self._lock:
-            self.playback.loaded = False
-            self.playback.set_up = False
-            self.playback.history = []
-        marker = self.error_total
+        with state.lock:
+            state.playback.loaded = False
+            state.playback.set_up = False
+            state.playback.history = []
+        marker = state.error_total
         self.send(trajectory.to_message())
-        echo = self.request(GetTrajectoryData())   # barrier + confirmation
-        errors = self._errors_since(marker)
+        echo = self._link.request(GetTrajectoryData())   # barrier + confirmation
+        errors = state.errors_since(marker)
         if errors:
             raise CommandRejected(f'device rejected the trajectory: error {errors[0].code} '
                                   f'({errors[0].description})')
@@ -197,17 +234,17 @@ class KosCommands:
         if not isinstance(echo, TrajectoryData) or len(echo.blocks) != expected:
             raise CommandRejected('device did not store the trajectory (GetTrajectoryData '
                                   'returned a different move)')
-        with self._lock:
-            self.playback.loaded = True
+        with state.lock:
+            state.playback.loaded = True
 
     def setup_playback(self, delay_return: bool = False) -> None:
-        if not self.playback.loaded:
+        if not self._state.playback.loaded:
             raise CommandRejected('no trajectory loaded (a FullStop consumes the move; load '
                                   'it again)')
         self._checked(SetupPlayback(0, 0.0, delay_return), 'SetupPlayback')
 
     def start_playback(self) -> None:
-        if not self.playback.loaded:
+        if not self._state.playback.loaded:
             raise CommandRejected('no trajectory loaded (a FullStop consumes the move; load '
                                   'it again)')
         self._checked(StartPlayback(0, 0.0), 'StartPlayback')
@@ -216,10 +253,11 @@ class KosCommands:
         self.send(StopPlayback())
 
     def rapid_to_first_key_frame(self) -> None:
-        if not self.playback.loaded:
+        if not self._state.playback.loaded:
             raise CommandRejected('RapidToFirstKeyFrame needs a loaded trajectory')
         self._checked(RapidToFirstKeyFrame(), 'RapidToFirstKeyFrame')
 
     def wait_playback(self, status: int, timeout: float) -> bool:
         """Wait until a PlaybackStatus `status` has been seen since the last load."""
-        return self.wait_for(lambda: status in self.playback.history, timeout)
+        state = self._state
+        return state.wait_for(lambda: status in state.playback.history, timeout)

@@ -16,9 +16,10 @@ marks) and :class:`~.status.KosStatus` (ErrorStatus latch, lock state, per-motor
 diagnostics). kOS has no device
 presets and no device scans, so the controller's YAML presets and driver-side scans serve it.
 The playback, calibration, picture, LED and SoftwareID requests the node exposes as its own
-services are plain methods of :class:`KosDevice`, called through ``controller.call``: the
-playback ones from the :class:`~.playback.KosPlayback` mixin, the others from the
-:class:`~.device_functions.KosFunctions` mixin.
+services are the adapter's parts, called through ``controller.call``: the playback ones
+:attr:`KosDevice.playback` (:class:`~.playback.KosPlayback`), the others
+:attr:`KosDevice.functions` (:class:`~.device_functions.KosFunctions`); each is handed the
+client, the joint table and the adapter's public conversion and checks.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves, PostedWrite
-from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidRequest
+from gimbal_driver_common.errors import DeviceRefused, InvalidRequest
 from gimbal_driver_common.joint_command import JointLimits
 
 from .client import KosClient, MotorState, NotConnected
@@ -45,7 +46,7 @@ from .units import Conversion, JointUnits
 
 LOG = logging.getLogger('kessler_kos_driver.device')
 
-DEVICE_MODELS = {
+DEVICE_MODELS: dict[int, str] = {
     DeviceType.CINESHOOTER: 'Kessler CineShooter',
     DeviceType.SECOND_SHOOTER_PRO: 'Kessler Second Shooter Pro',
     DeviceType.SECOND_SHOOTER_PLUS: 'Kessler Second Shooter Plus',
@@ -68,7 +69,7 @@ class KosSettings:
     playback_timeout: float = 60.0     # s to wait for SetupCompleted / MotorsHome
 
 
-class KosDevice(KosPlayback, KosFunctions, Device):
+class KosDevice(Device):
     """One kOS device (TCP or USB HID) in SI units; callbacks run on the client's reader."""
 
     #: positions come from MotorInfo polls (every ``poll_period``) and notifications
@@ -88,22 +89,27 @@ class KosDevice(KosPlayback, KosFunctions, Device):
         super().__init__()
         self.client = client
         self.joints = {m.name: m for m in joints}
-        self.config = config
+        self._given_config = config
         self.settings = settings or KosSettings()
-        self.on_playback = on_playback or (lambda report: None)
         self.on_aux_inputs = on_aux_inputs or (lambda status: None)
-        #: LEDStatus / SoftwareID as last read (connect, ~/command), for diagnostics
-        self.device_settings: dict[str, str] = {}
+        self.playback = KosPlayback(client, self.joints, self.settings,
+                                    on_playback or (lambda report: None), adapter=self)
+        self.functions = KosFunctions(client, self.joints, adapter=self)
         self.status = KosStatus(self)
         self.capabilities.homing = KosHoming(self)
         self.capabilities.status = self.status
-        client.on_motor_update = self.notify_data
-        client.on_playback = self._playback_notified
-        client.on_aux_inputs = lambda status: self.on_aux_inputs(status)
-        client.on_error = self.status.latch
+        client.notifications.on_motor_update = self.notify_data
+        client.notifications.on_playback = self.playback.notified
+        client.notifications.on_aux_inputs = lambda status: self.on_aux_inputs(status)
+        client.notifications.on_error = self.status.latch
         #: end mark (rotations) per joint as last seen, to log a recalibration
         self._ends: dict[str, float] = {}
         self._ends_lock = threading.Lock()   # the device thread and services both look
+
+    @property
+    def motion_config(self) -> MotionConfig:
+        """The controller's live configuration once it attached one, else the one given."""
+        return self.config if self.config is not None else self._given_config
 
     # ------------------------------------------------------------ conversion
     def joint_of(self, address: int) -> str | None:
@@ -138,7 +144,7 @@ class KosDevice(KosPlayback, KosFunctions, Device):
         """s between MotorInfo polls (the client reads it on every poll tick)."""
         self.client.poll_period = period
 
-    def _note_calibration(self) -> None:
+    def note_calibration(self) -> None:
         """Log each change of a joint's end mark, and what the joint's units become."""
         for name, mapping in self.joints.items():
             motor = self.client.motors.get(mapping.address)
@@ -162,8 +168,8 @@ class KosDevice(KosPlayback, KosFunctions, Device):
             LOG.warning('joints without a connected motor: %s; device motors: %s', missing,
                         sorted(client.motors))
         self.status.locked_out = False
-        self._note_calibration()   # an end mark changed while the link was down is logged
-        self._read_device_settings()
+        self.note_calibration()   # an end mark changed while the link was down is logged
+        self.functions.read_device_settings()
         self.on_aux_inputs(client.aux_inputs)
         info = client.device_info
         model = (DEVICE_MODELS.get(info.device_type, f'kOS device type {info.device_type}')
@@ -201,7 +207,7 @@ class KosDevice(KosPlayback, KosFunctions, Device):
         positions: dict[str, float] = {}
         velocities: dict[str, float] = {}
         stamp = math.inf
-        self._note_calibration()
+        self.note_calibration()
         for name, mapping in self.joints.items():
             motor = client.motors.get(mapping.address)
             if motor is None or not motor.online or not motor.stamp:
@@ -267,7 +273,7 @@ class KosDevice(KosPlayback, KosFunctions, Device):
         for name, (target, speed) in moves.items():
             motor = self._motor(name)
             units = self.conversion(name)
-            wanted = speed if speed is not None else self.config.limits[name].velocity_max
+            wanted = speed if speed is not None else self.motion_config.limits[name].velocity_max
             speed_rot = abs(units.rate_to_rotations(wanted))
             if speed is None:
                 speed_rot = min(speed_rot, motor.max_setup_speed)
@@ -276,7 +282,7 @@ class KosDevice(KosPlayback, KosFunctions, Device):
             rotations = self._check_travel(name, units, motor, target)
             checked.append((motor.address, rotations, speed_rot, self._acceleration(motor)))
         for address, rotations, speed_rot, acceleration in checked:
-            client.move_to(address, rotations, speed_rot, acceleration)
+            client.commands.move_to(address, rotations, speed_rot, acceleration)
 
     @staticmethod
     def _check_travel(name: str, units: Conversion, motor: MotorState, target: float) -> float:
@@ -315,17 +321,17 @@ class KosDevice(KosPlayback, KosFunctions, Device):
             rotations[name] = units.rate_to_rotations(velocity)
         for name, velocity in rotations.items():
             motor = motors[name]
-            self.client.jog(motor.address, velocity, self._acceleration(motor))
+            self.client.commands.jog(motor.address, velocity, self._acceleration(motor))
 
     def stop(self, joints: Sequence[str] | None = None) -> None:
         client = self.client
         if joints is None:
-            client.stop_all()
+            client.commands.stop_all()
             return
         for name in joints:
             motor = client.motors.get(self.joints[name].address)
             if motor is not None and motor.online:
-                client.stop_motor(motor.address)
+                client.commands.stop_motor(motor.address)
 
     def reset_faults(self) -> str:
         """kOS has no fault-clear command: clear the latched errors and re-read MotorInfo."""
@@ -337,16 +343,6 @@ class KosDevice(KosPlayback, KosFunctions, Device):
         note = (f'; not calibrated (recalibrate with ~/calibrate): {uncalibrated}'
                 if uncalibrated else '')
         return f'cleared {count} latched device error(s){note}'
-
-    # ------------------------------------------------------------- settings
-    def _read_device_settings(self) -> None:
-        """LEDStatus and SoftwareID once per connection, for diagnostics."""
-        self.device_settings = {}
-        try:
-            self._remember_leds(*self.client.led_status())
-            self.software_id()
-        except GimbalError as exc:
-            LOG.warning('cannot read LEDStatus/SoftwareID: %s', exc)
 
 
 def joint_mappings(

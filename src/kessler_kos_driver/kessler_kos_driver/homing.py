@@ -52,7 +52,7 @@ class KosHoming(Homing):
         client = self.device.client
         report('returning to the first key frame')
         marker = len(client.playback.history)
-        client.rapid_to_first_key_frame()
+        client.commands.rapid_to_first_key_frame()
         if not client.wait_for(
                 lambda: PlaybackState.MOTORS_HOME in client.playback.history[marker:]
                 or cancelled.is_set(), self.device.settings.playback_timeout):
@@ -62,7 +62,7 @@ class KosHoming(Homing):
 
     def _wait_at_begin(self, joints: list[str], cancelled: threading.Event) -> None:
         """Until every joint reads within goal_tolerance of 0 (waits on MotorInfo updates)."""
-        device, config = self.device, self.device.config
+        device, config = self.device, self.device.motion_config
         tolerance = config.goal_tolerance
 
         def at_begin() -> bool:

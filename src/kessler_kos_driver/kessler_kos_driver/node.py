@@ -10,7 +10,7 @@ adapter :class:`~kessler_kos_driver.device.KosDevice` (built by
 (playback, ~/calibrate, ~/take_picture, ~/command for LEDStatus and SoftwareID) and topics
 (~/playback_status, ~/aux_inputs, ~/slave_controller_present); each service is one call of
 adapter methods through the controller's ``call()`` boundary, never the client. The service
-handlers are the :class:`~.ros_services.KosServices` mixin.
+handlers are the part :class:`~.ros_services.KosServices` (``kos_services``).
 
 The `password` parameter is redacted: rclpy publishes declared parameter values on
 /parameter_events and serves them on ~/get_parameters, so the real value is taken from the
@@ -57,7 +57,7 @@ TRANSPORTS = ('tcp', 'usb')
 UNIT_PARAMETERS = ('calibrated_spans', 'joint_offsets', 'joint_scales')
 
 
-class KosDriverNode(KosServices, GimbalDriverNode):
+class KosDriverNode(GimbalDriverNode):
     DEFAULT_JOINT_NAMES = ('slider', 'pan', 'tilt')
     # One example rig in SI, the same in urdf/kessler_kos_driver.urdf (the package's
     # test/test_description_files.py checks they agree): a slider of 1.5 m from its begin mark
@@ -69,20 +69,20 @@ class KosDriverNode(KosServices, GimbalDriverNode):
     SCAN_PATTERNS = ('sector',)
 
     def __init__(self, **kwargs: object) -> None:
-        self._delay_return = False     # from the last ~/load_trajectory, for ~/setup_playback
         super().__init__('kessler_kos_driver', **kwargs)
+        services = self.kos_services = KosServices(self)
         self._playback_pub = self.create_publisher(PlaybackStatusMsg, '~/playback_status', 10)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._aux_pub = self.create_publisher(Joy, '~/aux_inputs', latched)
         self._slave_pub = self.create_publisher(Bool, '~/slave_controller_present', latched)
         self.create_services([
-            (DeviceCommand, '~/command', self._on_command),
-            (LoadTrajectory, '~/load_trajectory', self._on_load_trajectory),
-            (Trigger, '~/setup_playback', self._on_setup_playback),
-            (Trigger, '~/start_playback', self._on_start_playback),
-            (Trigger, '~/stop_playback', self._on_stop_playback),
-            (Calibrate, '~/calibrate', self._on_calibrate),
-            (Trigger, '~/take_picture', self._on_take_picture),
+            (DeviceCommand, '~/command', services.on_command),
+            (LoadTrajectory, '~/load_trajectory', services.on_load_trajectory),
+            (Trigger, '~/setup_playback', services.on_setup_playback),
+            (Trigger, '~/start_playback', services.on_start_playback),
+            (Trigger, '~/stop_playback', services.on_stop_playback),
+            (Calibrate, '~/calibrate', services.on_calibrate),
+            (Trigger, '~/take_picture', services.on_take_picture),
         ])
 
     # ------------------------------------------------------------ parameters
@@ -267,6 +267,14 @@ class KosDriverNode(KosServices, GimbalDriverNode):
         self.runtime_parameter('poll_period', set_poll_period)
 
     # ---------------------------------------------------------------- device
+    def serve_device(self, response: object, request: Callable[[KosDevice], str],
+                     joints: Sequence[str] | None = None) -> object:
+        """A request to the adapter through the controller's ``call()`` boundary (refused
+        while inactive, disconnected or, with ``joints``, while they cannot move; errors
+        answer success=false)."""
+        return self.serve_request(
+            response, lambda: self.controller.call(lambda: request(self.device), joints))
+
     def make_device(self) -> KosDevice:
         """The client for the configured link (TCP or USB HID) wrapped in the SI adapter."""
         client = KosClient(

@@ -1,8 +1,10 @@
 """kOS trajectory playback in SI (no ROS): load a move from key frames or Bezier segments,
-set it up, start and stop it, and the PlaybackStatus notifications in SI. A mixin of
-:class:`~.device.KosDevice`, kept apart so the adapter's core (conversion, link, motion,
-refusals) reads in one sitting; the node's playback services call these through
-``controller.call``.
+set it up, start and stop it, and the PlaybackStatus notifications in SI. A part of
+:class:`~.device.KosDevice` (its ``playback`` attribute), kept apart so the adapter's core
+(conversion, link, motion, refusals) reads in one sitting; the node's playback services
+call these through ``controller.call``. It is handed the client, the joint table, the
+settings, the callback for the reports and the adapter's SI conversion and idle check
+(:class:`JointSide`).
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout
 
@@ -30,6 +32,7 @@ from .protocol import (
     Trajectory,
     playback_state_name,
 )
+from .units import Conversion
 
 if TYPE_CHECKING:
     from .device import KosSettings
@@ -50,15 +53,33 @@ def _finite_or(value: float, default: float) -> float:
     return value if math.isfinite(value) else default
 
 
-class KosPlayback:
-    """The trajectory playback of :class:`~.device.KosDevice` (a mixin: the device provides
-    ``client``, ``joints``, ``settings``, ``on_playback``, the SI conversion and
-    ``require_idle``)."""
+class JointSide(Protocol):
+    """What the playback uses of the adapter (:class:`~.device.KosDevice`)."""
 
-    client: KosClient
-    joints: dict[str, JointMapping]
-    settings: KosSettings
-    on_playback: Callable[[PlaybackReport], None]
+    def conversion(self, joint: str) -> Conversion:
+        """The joint's SI conversion at the calibration the device last reported."""
+
+    def to_si(self, joint: str, rotations: float) -> float:
+        """A position in rotations as SI."""
+
+    def joint_of(self, address: int) -> str | None:
+        """The joint a motor address drives."""
+
+    def require_idle(self) -> None:
+        """Refuse while a move plays."""
+
+
+class KosPlayback:
+    """The trajectory playback of :class:`~.device.KosDevice`."""
+
+    def __init__(self, client: KosClient, joints: dict[str, JointMapping],
+                 settings: KosSettings, on_playback: Callable[[PlaybackReport], None],
+                 adapter: JointSide) -> None:
+        self.client = client
+        self.joints = joints  # the adapter's table (it changes units in place)
+        self.settings = settings
+        self.on_playback = on_playback
+        self.adapter = adapter
 
     # ------------------------------------------------------------- playback
     def _ranges(self) -> dict[int, AxisRange]:
@@ -67,7 +88,7 @@ class KosPlayback:
 
     def load_keyframes(self, frames: list[Keyframe], settings: PlaybackSettings) -> Trajectory:
         """Fit SI key frames to the calibrated ranges, load and confirm the move."""
-        self.require_idle()
+        self.adapter.require_idle()
         self.client.refresh_motors()
         return self._load(lambda: from_keyframes(frames, self.joints, self._ranges(), settings))
 
@@ -75,7 +96,7 @@ class KosPlayback:
         self, segments: dict[str, list[tuple[float, ...]]], settings: PlaybackSettings
     ) -> Trajectory:
         """Load explicit normalised Bezier segments per joint."""
-        self.require_idle()
+        self.adapter.require_idle()
         self.client.refresh_motors()
         return self._load(lambda: from_segments(segments, self.joints, settings))
 
@@ -83,7 +104,7 @@ class KosPlayback:
         """Build and load; a refusal names the joints behind the device's motor numbers."""
         try:
             trajectory = build()
-            self.client.load_trajectory(trajectory)
+            self.client.commands.load_trajectory(trajectory)
         except (ProtocolError, KosError) as exc:
             raise DeviceRefused(f'trajectory not loaded: {exc}; {self._rotations_legend()}'
                                 ) from exc
@@ -93,17 +114,17 @@ class KosPlayback:
         """What a device figure in rotations means for each joint (refusals quote them)."""
         parts = []
         for name, mapping in self.joints.items():
-            units = self.conversion(name)
+            units = self.adapter.conversion(name)
             parts.append(f'motor {mapping.address} is joint {name!r}, 1 rotation = '
                          f'{abs(units.per_rotation):.6g} ({units.describe()})')
         return '; '.join(parts)
 
     def setup_playback(self, delay_return: bool) -> None:
         """SetupPlayback, answered once SetupCompleted arrives."""
-        self.require_idle()
+        self.adapter.require_idle()
         client = self.client
         marker = len(client.playback.history)
-        client.setup_playback(delay_return=delay_return)
+        client.commands.setup_playback(delay_return=delay_return)
         timeout = self.settings.playback_timeout
         if not client.wait_for(
                 lambda: PlaybackState.SETUP_COMPLETED in client.playback.history[marker:],
@@ -111,13 +132,14 @@ class KosPlayback:
             raise DeviceTimeout(f'no SetupCompleted notification within {timeout:g} s')
 
     def start_playback(self) -> None:
-        self.require_idle()
-        self.client.start_playback()
+        self.adapter.require_idle()
+        self.client.commands.start_playback()
 
     def stop_playback(self) -> None:
-        self.client.stop_playback()
+        self.client.commands.stop_playback()
 
-    def _playback_notified(self, note: PlaybackStatus) -> None:
+    def notified(self, note: PlaybackStatus) -> None:
+        """A PlaybackStatus notification (reader thread), reported in SI by joint."""
         photos = note.photo_count
         report = PlaybackReport(
             status=int(note.status), status_name=playback_state_name(note.status),
@@ -125,7 +147,7 @@ class KosPlayback:
             photo_count=(min(round(photos), 2**32 - 1)
                          if math.isfinite(photos) and photos >= 0 else 0))
         for address, position in sorted(note.positions.items()):
-            name = self.joint_of(address)
+            name = self.adapter.joint_of(address)
             if name is not None:
-                report.positions[name] = self.to_si(name, float(position))
+                report.positions[name] = self.adapter.to_si(name, float(position))
         self.on_playback(report)

@@ -87,7 +87,7 @@ class KosStatus(StatusReport):
             ('aux_inputs', ' '.join(f'{n}={aux >> b & 1}'
                                     for b, n in enumerate(AUX_INPUT_BUTTONS))),
             ('slave_controller_present', str(bool(aux >> AUX_SLAVE_PRESENT_BIT & 1))),
-            *sorted(device.device_settings.items()),
+            *sorted(device.functions.device_settings.items()),
             *[(f'unanswered.{name}', why) for name, why in client.unanswered.items()],
             *[(f'error_{e.code}', f'{e.description} (motor {e.motor_address})')
               for e in device_errors],

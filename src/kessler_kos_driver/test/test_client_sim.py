@@ -201,28 +201,28 @@ def test_uncalibrated_jog_stop_and_calibration(make_sim, make_client):
     sim = make_sim()
     client = make_client(sim)
     client.connect()
-    client.jog(2, 20.0)
+    client.commands.jog(2, 20.0)
     assert wait_until(lambda: client.motors[2].position > 5.0)
-    client.stop_motor(2)
+    client.commands.stop_motor(2)
     assert wait_until(lambda: not sim.device.motors[2].moving)
-    client.move_to(2, 5.0, 50.0)
+    client.commands.move_to(2, 5.0, 50.0)
     assert wait_until(lambda: abs(client.motors[2].position - 5.0) < 1e-3)
-    client.mark_begin(2)
-    client.move_to(2, 25.0, 50.0)
+    client.commands.mark_begin(2)
+    client.commands.move_to(2, 25.0, 50.0)
     assert wait_until(lambda: abs(client.motors[2].position - 25.0) < 1e-3)
-    begin, end = client.mark_end(2)
+    begin, end = client.commands.mark_end(2)
     assert (begin, end) == (0.0, pytest.approx(20.0, abs=1e-3))
     assert client.motors[2].calibrated
     # the calibrated range and MaxMaxSetupSpeed are the adapter's checks, in SI
     # (test_device.py::test_refusal_reasons_in_si_and_nothing_sent); the client sends as given
     assert client.motors[2].travel() == (0.0, pytest.approx(20.0, abs=1e-3))
-    client.move_to(2, 10.0, 50.0)
+    client.commands.move_to(2, 10.0, 50.0)
     assert wait_until(lambda: abs(client.motors[2].position - 10.0) < 1e-3)
-    client.bump(2, 2.5, 50.0)
+    client.commands.bump(2, 2.5, 50.0)
     assert wait_until(lambda: abs(client.motors[2].position - 12.5) < 1e-3)
     with pytest.raises(CommandRejected, match='outside'):
-        client.bump(2, 50.0, 50.0)
-    client.reset_axis(2)
+        client.commands.bump(2, 50.0, 50.0)
+    client.commands.reset_axis(2)
     assert not client.motors[2].calibrated and client.motors[2].position == 0.0
 
 
@@ -230,23 +230,23 @@ def test_calibration_error_when_end_equals_begin(make_sim, make_client):
     sim = make_sim()
     client = make_client(sim)
     client.connect()
-    client.mark_begin(1)
+    client.commands.mark_begin(1)
     with pytest.raises(CommandRejected, match='calibration failed'):
-        client.mark_end(1)
+        client.commands.mark_end(1)
 
 
 def test_live_motion_full_sequence(calibrated):
     _sim, client = calibrated
     traj = from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
                           PlaybackSettings(duration=4.0))
-    client.load_trajectory(traj)
-    client.setup_playback()
-    assert client.wait_playback(S.SETUP_COMPLETED, 10)
+    client.commands.load_trajectory(traj)
+    client.commands.setup_playback()
+    assert client.commands.wait_playback(S.SETUP_COMPLETED, 10)
     assert client.playback.history == [S.MOTORS_HOME, S.SETUP_COMPLETED]
     # at the first key frame after the setup
     assert client.motors[2].position == pytest.approx(10.0 / TWO_PI, abs=1e-3)
-    client.start_playback()
-    assert client.wait_playback(S.FULL_STOP, 10)
+    client.commands.start_playback()
+    assert client.commands.wait_playback(S.FULL_STOP, 10)
     assert client.playback.history == [S.MOTORS_HOME, S.SETUP_COMPLETED, S.START_FORWARD,
                                        S.END_OF_MOVE, S.FULL_STOP]
     assert not client.playback.loaded      # FullStop consumes the move
@@ -255,16 +255,16 @@ def test_live_motion_full_sequence(calibrated):
         assert client.playback.positions[mapping.address] * TWO_PI == pytest.approx(
             last[name], abs=1e-3)
     with pytest.raises(CommandRejected, match='no trajectory loaded'):
-        client.start_playback()
+        client.commands.start_playback()
 
 
 def test_live_motion_with_delay_and_reverse_loop(calibrated):
     _sim, client = calibrated
     settings = PlaybackSettings(loop_count=1, start_delay=0.5)
-    client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
+    client.commands.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
                                           settings))
-    client.start_playback()      # no SetupPlayback: no SetupCompleted
-    assert client.wait_playback(S.FULL_STOP, 10)
+    client.commands.start_playback()      # no SetupPlayback: no SetupCompleted
+    assert client.commands.wait_playback(S.FULL_STOP, 10)
     assert client.playback.history == [
         S.MOTORS_HOME, S.DELAY_TIMER_STARTED, S.START_FORWARD, S.END_OF_MOVE,
         S.START_REVERSE, S.END_OF_MOVE, S.START_FORWARD, S.END_OF_MOVE, S.FULL_STOP]
@@ -275,18 +275,18 @@ def test_delay_until_date_and_delay_return(calibrated):
     _sim, client = calibrated
     start_at = math.ceil(time.time()) + 2
     settings = PlaybackSettings(start_time=start_at)
-    client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
+    client.commands.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
                                           settings))
     before = client.motors[2].position
-    client.setup_playback(delay_return=True)
-    assert client.wait_playback(S.SETUP_COMPLETED, 10)
+    client.commands.setup_playback(delay_return=True)
+    assert client.commands.wait_playback(S.SETUP_COMPLETED, 10)
     assert client.playback.history == [S.SETUP_COMPLETED]     # no MotorsHome: no return yet
     assert client.motors[2].position == before
-    client.start_playback()
-    assert client.wait_playback(S.DELAY_TIMER_STARTED, 10)
-    assert client.wait_playback(S.START_FORWARD, 20)
+    client.commands.start_playback()
+    assert client.commands.wait_playback(S.DELAY_TIMER_STARTED, 10)
+    assert client.commands.wait_playback(S.START_FORWARD, 20)
     assert time.time() >= start_at              # 20x time scale does not shorten a date
-    assert client.wait_playback(S.FULL_STOP, 20)
+    assert client.commands.wait_playback(S.FULL_STOP, 20)
     assert client.playback.history[:3] == [S.SETUP_COMPLETED, S.MOTORS_HOME,
                                            S.DELAY_TIMER_STARTED]
 
@@ -294,15 +294,15 @@ def test_delay_until_date_and_delay_return(calibrated):
 def test_rapid_reverse_loop_forever_until_stop(calibrated):
     sim, client = calibrated
     settings = PlaybackSettings(loop_count=255, rapid_reverse=True)
-    client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
+    client.commands.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
                                           settings))
-    client.setup_playback(delay_return=True)
-    assert client.wait_playback(S.SETUP_COMPLETED, 10)
+    client.commands.setup_playback(delay_return=True)
+    assert client.commands.wait_playback(S.SETUP_COMPLETED, 10)
     assert S.MOTORS_HOME not in client.playback.history    # DelayReturn
-    client.start_playback()
+    client.commands.start_playback()
     assert client.wait_for(lambda: client.playback.history.count(S.START_REVERSE) >= 2, 10)
-    client.stop_playback()
-    assert client.wait_playback(S.FULL_STOP, 5)
+    client.commands.stop_playback()
+    assert client.commands.wait_playback(S.FULL_STOP, 5)
     assert wait_until(lambda: not any(m.moving for m in sim.device.motors.values()))
 
 
@@ -311,12 +311,12 @@ def test_time_lapse_continuous_sequence_and_photo_count(calibrated):
     settings = PlaybackSettings(mode=PlaybackMode.TIMELAPSE_CONTINUOUS, interval=0.5,
                                 exposure=0.1, move_photos=10, pre_move_photos=2,
                                 post_move_photos=3)
-    client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
+    client.commands.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
                                           settings))
-    client.setup_playback()
-    assert client.wait_playback(S.SETUP_COMPLETED, 10)
-    client.start_playback()
-    assert client.wait_playback(S.FULL_STOP, 10)
+    client.commands.setup_playback()
+    assert client.commands.wait_playback(S.SETUP_COMPLETED, 10)
+    client.commands.start_playback()
+    assert client.commands.wait_playback(S.FULL_STOP, 10)
     assert client.playback.history == [
         S.MOTORS_HOME, S.SETUP_COMPLETED, S.PRE_MOVE_PHOTOS_STARTED, S.START_FORWARD,
         S.END_OF_MOVE, S.POST_MOVE_PHOTOS_COMPLETED, S.FULL_STOP]
@@ -327,12 +327,12 @@ def test_time_lapse_sms_sequence(calibrated):
     _sim, client = calibrated
     settings = PlaybackSettings(mode=PlaybackMode.TIMELAPSE_SMS, interval=0.05, exposure=0.02,
                                 move_photos=3)
-    client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
+    client.commands.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
                                           settings))
-    client.setup_playback()
-    assert client.wait_playback(S.SETUP_COMPLETED, 10)
-    client.start_playback()
-    assert client.wait_playback(S.FULL_STOP, 20)
+    client.commands.setup_playback()
+    assert client.commands.wait_playback(S.SETUP_COMPLETED, 10)
+    client.commands.start_playback()
+    assert client.commands.wait_playback(S.FULL_STOP, 20)
     frames = [S.START_FRAME, S.SMS_MOTORS_STOPPED] * 3
     assert client.playback.history == [
         S.MOTORS_HOME, S.SETUP_COMPLETED, S.PRE_MOVE_PHOTOS_STARTED, S.START_FORWARD, *frames,
@@ -347,7 +347,7 @@ def test_time_lapse_refuses_loops_before_sending(calibrated):
     traj = from_keyframes(three_axis_keyframes(), JOINTS, ranges(client), settings)
     frames_before = sim.device.frames_received
     with pytest.raises(CommandRejected, match='time lapse'):
-        client.load_trajectory(traj)
+        client.commands.load_trajectory(traj)
     client.barrier()
     # only the MotorInfo refresh and the barrier reached the device, no TrajectoryData
     assert sim.device.playback.trajectory is None
@@ -359,15 +359,16 @@ def test_too_fast_move_is_refused(calibrated):
     keyframes = [Keyframe(0.0, {'tilt': 0.0}), Keyframe(0.1, {'tilt': -250.0})]
     traj = from_keyframes(keyframes, JOINTS, ranges(client), PlaybackSettings())
     with pytest.raises(CommandRejected, match='MaxMaxMoveSpeed'):
-        client.load_trajectory(traj)
+        client.commands.load_trajectory(traj)
 
 
 def test_explicit_segments(calibrated):
     _sim, client = calibrated
     segments = {'pan': [(0, 0, 1 / 3, 0, 2 / 3, 1, 1, 1)]}
-    client.load_trajectory(from_segments(segments, JOINTS, PlaybackSettings(duration=10.0)))
-    client.start_playback()
-    assert client.wait_playback(S.FULL_STOP, 10)
+    client.commands.load_trajectory(
+        from_segments(segments, JOINTS, PlaybackSettings(duration=10.0)))
+    client.commands.start_playback()
+    assert client.commands.wait_playback(S.FULL_STOP, 10)
     assert client.motors[2].position == pytest.approx(100.0, abs=1e-3)
 
 
@@ -380,7 +381,7 @@ def test_device_rejects_bad_trajectory_with_error_3(calibrated):
     marker = client.error_total
     client.send(message)
     client.barrier()
-    assert [e.code for e in client._errors_since(marker)] == [ErrorCode.TRAJECTORY_DATA]
+    assert [e.code for e in client.state.errors_since(marker)] == [ErrorCode.TRAJECTORY_DATA]
     echo = client.request(GetTrajectoryData())     # must answer even with no move stored
     assert isinstance(echo, TrajectoryData) and echo.blocks == []
 
@@ -420,10 +421,10 @@ def test_take_picture(make_sim, make_client):
     sim = make_sim()
     client = make_client(sim)
     client.connect()
-    client.take_picture(0.1)
+    client.commands.take_picture(0.1)
     assert sim.device.photos_taken == 1
     with pytest.raises(CommandRejected):
-        client.take_picture(-1.0)
+        client.commands.take_picture(-1.0)
 
 
 def test_garbage_is_skipped(calibrated):
@@ -441,24 +442,24 @@ def test_motor_offline_and_online(calibrated):
     assert sim.command('offline 2') == 'ok'
     assert wait_until(lambda: not client.motors[2].online)
     with pytest.raises(CommandRejected, match='offline'):
-        client.move_to(2, 1.0, 10.0)
+        client.commands.move_to(2, 1.0, 10.0)
     traj = from_keyframes(three_axis_keyframes(), JOINTS, ranges(client), PlaybackSettings())
     with pytest.raises(CommandRejected, match='not connected'):
-        client.load_trajectory(traj)
+        client.commands.load_trajectory(traj)
     sim.command('online 2')
     assert wait_until(lambda: client.motors[2].online)
-    client.move_to(2, 1.0, 10.0)
+    client.commands.move_to(2, 1.0, 10.0)
 
 
 def test_axis_fault_during_playback(calibrated):
     sim, client = calibrated
     traj = from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
                           PlaybackSettings(duration=30.0))
-    client.load_trajectory(traj)
-    client.start_playback()
-    assert client.wait_playback(S.START_FORWARD, 10)
+    client.commands.load_trajectory(traj)
+    client.commands.start_playback()
+    assert client.commands.wait_playback(S.START_FORWARD, 10)
     assert sim.command('fault axis 3') == 'ok'
-    assert client.wait_playback(S.FULL_STOP, 5)
+    assert client.commands.wait_playback(S.FULL_STOP, 5)
     assert wait_until(lambda: any(e.code == ErrorCode.AXIS_FAULT and e.motor_address == 3
                                   for e in client.errors))
     assert wait_until(lambda: not client.motors[3].calibrated)
@@ -509,18 +510,18 @@ def test_motor_calibrated_notification_updates_state(calibrated):
 
 def test_rapid_to_first_key_frame(calibrated):
     _sim, client = calibrated
-    client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
+    client.commands.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
                                           PlaybackSettings()))
-    client.rapid_to_first_key_frame()
-    assert client.wait_playback(S.MOTORS_HOME, 10)
+    client.commands.rapid_to_first_key_frame()
+    assert client.commands.wait_playback(S.MOTORS_HOME, 10)
     assert client.motors[3].position == pytest.approx(-10.0 / TWO_PI, abs=1e-3)
 
 
 def test_device_refuses_to_play_on_an_axis_that_lost_calibration(calibrated):
     _sim, client = calibrated
-    client.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
+    client.commands.load_trajectory(from_keyframes(three_axis_keyframes(), JOINTS, ranges(client),
                                           PlaybackSettings()))
     client.send(ResetAxis(1))           # behind the client's back: slider uncalibrated
     assert wait_until(lambda: not client.motors[1].calibrated)
     with pytest.raises(CommandRejected, match='error 2'):
-        client.start_playback()
+        client.commands.start_playback()

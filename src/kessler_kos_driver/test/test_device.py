@@ -197,9 +197,9 @@ def test_calibrated_axes_report_si_and_an_axis_without_a_span_motor_radians(rig)
     # every motor starts at its begin mark: the offsets
     assert rig.controller.positions() == pytest.approx(
         {'slider': 0.0, 'pan': -math.pi, 'tilt': -math.pi / 2}, abs=1e-6)
-    rig.client.move_to(ADDRESS['pan'], 75.0, 50.0)       # 3/4 of the range: +pi/2
-    rig.client.move_to(ADDRESS['tilt'], -10.0, 20.0)     # 1/4 of 0..-40: -pi/4
-    rig.client.move_to(ADDRESS['slider'], 2.0, 50.0)     # two motor turns: 4 pi
+    rig.client.commands.move_to(ADDRESS['pan'], 75.0, 50.0)       # 3/4 of the range: +pi/2
+    rig.client.commands.move_to(ADDRESS['tilt'], -10.0, 20.0)     # 1/4 of 0..-40: -pi/4
+    rig.client.commands.move_to(ADDRESS['slider'], 2.0, 50.0)     # two motor turns: 4 pi
     wait_for(lambda: rig.position_reads('pan', math.pi / 2)
              and rig.position_reads('tilt', -math.pi / 4)
              and rig.position_reads('slider', 4 * math.pi), TIMEOUT, 'the SI positions')
@@ -310,15 +310,15 @@ def test_refusal_reasons_in_si_and_nothing_sent(rig):
 def test_keyframe_playback_in_si(rig):
     frames = [Keyframe(0.0, {'pan': -1.0, 'tilt': -0.5}),
               Keyframe(2.0, {'pan': 1.0, 'tilt': 0.5})]
-    trajectory = rig.device.load_keyframes(frames, PlaybackSettings())
+    trajectory = rig.device.playback.load_keyframes(frames, PlaybackSettings())
     # normalised on the device: pan (SI + pi) / 2pi, tilt (SI + pi/2) / pi
     pan = trajectory.axes[ADDRESS['pan']]
     tilt = trajectory.axes[ADDRESS['tilt']]
     assert pan[0].p0_position == pytest.approx((-1.0 + math.pi) / TWO_PI, abs=1e-6)
     assert pan[-1].p3_position == pytest.approx((1.0 + math.pi) / TWO_PI, abs=1e-6)
     assert tilt[-1].p3_position == pytest.approx((0.5 + math.pi / 2) / math.pi, abs=1e-6)
-    rig.device.setup_playback(delay_return=False)
-    rig.device.start_playback()
+    rig.device.playback.setup_playback(delay_return=False)
+    rig.device.playback.start_playback()
     wait_for(lambda: PlaybackState.FULL_STOP in rig.client.playback.history, TIMEOUT,
              'FullStop')
     report = next(r for r in rig.playback if r.status == PlaybackState.FULL_STOP)
@@ -331,8 +331,8 @@ def test_keyframe_playback_in_si(rig):
              TIMEOUT, 'joint positions at the last key frame')
     # outside the calibrated range in SI: refused with the SI range, nothing loaded
     with pytest.raises(DeviceRefused, match=r"'tilt'.*calibrated range \[-1.5708, 1.5708\]"):
-        rig.device.load_keyframes([Keyframe(0.0, {'tilt': 0.0}), Keyframe(1.0, {'tilt': 1.6})],
-                                  PlaybackSettings())
+        rig.device.playback.load_keyframes(
+            [Keyframe(0.0, {'tilt': 0.0}), Keyframe(1.0, {'tilt': 1.6})], PlaybackSettings())
     assert not rig.client.playback.loaded    # FullStop consumed the move; nothing new sent
 
 
@@ -340,13 +340,13 @@ def test_a_recalibration_changes_the_conversion(rig, caplog):
     """A new end mark: the pan's span (-pi..pi) now lies over the new range, at once."""
     outcome = rig.motion.wait_move(rig.motion.start_move(['pan'], [-2.0]))
     assert outcome.success, outcome.message
-    rig.device.mark_begin('pan')
+    rig.device.functions.mark_begin('pan')
     begin = rig.motor_position('pan')
-    rig.client.move_to(ADDRESS['pan'], begin + 50.0, 50.0)  # on the device, in rotations
+    rig.client.commands.move_to(ADDRESS['pan'], begin + 50.0, 50.0)  # on the device, in rotations
     wait_for(lambda: abs(rig.motor_position('pan') - (begin + 50.0)) < 1e-3, TIMEOUT,
              'pan 50 rotations on')
     with caplog.at_level(logging.INFO, logger='kessler_kos_driver.device'):
-        assert rig.device.mark_end('pan') == pytest.approx((-math.pi, math.pi), abs=1e-5)
+        assert rig.device.functions.mark_end('pan') == pytest.approx((-math.pi, math.pi), abs=1e-5)
     assert "joint 'pan': end mark now 50 rotations (was 100)" in caplog.text
     # the device says: begin 0, end 50, position 50 = the end mark = +pi
     wait_for(lambda: rig.position_reads('pan', math.pi), TIMEOUT, 'pan at +pi')
@@ -377,8 +377,8 @@ def test_playback_owns_the_motors(rig):
     ctl = rig.controller
     frames = [Keyframe(0.0, {'pan': -2.0, 'tilt': 0.2}),
               Keyframe(4.0, {'pan': 2.0, 'tilt': 1.0})]
-    rig.device.load_keyframes(frames, PlaybackSettings(loop_count=255, rapid_reverse=True))
-    rig.device.start_playback()
+    rig.device.playback.load_keyframes(frames, PlaybackSettings(loop_count=255, rapid_reverse=True))
+    rig.device.playback.start_playback()
     wait_for(lambda: rig.client.playback_running, TIMEOUT, 'playback running')
     assert 'a move is playing' in ctl.refusal(['pan'])
     with pytest.raises(DeviceRefused, match='a move is playing'):

@@ -233,7 +233,7 @@ def test_client_over_usb_initialises_without_password(usb_rig):
 def test_client_moves_and_plays_a_multi_report_trajectory_over_usb(usb_rig):
     device, hid_device, client = usb_rig
     client.connect()
-    client.move_to(2, 20.0, 50.0)
+    client.commands.move_to(2, 20.0, 50.0)
     assert wait_until(lambda: abs(client.motors[2].position - 20.0) < 1e-3)
     ranges = {a: AxisRange(m.begin_position, m.end_position) for a, m in client.motors.items()}
     joints = {n: JointMapping(n, a, JointUnits(scale=TWO_PI))
@@ -242,12 +242,12 @@ def test_client_moves_and_plays_a_multi_report_trajectory_over_usb(usb_rig):
                  Keyframe(2.0, {'slider': 60.0, 'pan': 150.0, 'tilt': -100.0})]
     trajectory = from_keyframes(keyframes, joints, ranges, PlaybackSettings(duration=2.0))
     assert len(trajectory.to_message().encode()) > 63     # spans several reports both ways
-    client.load_trajectory(trajectory)                    # confirmed by GetTrajectoryData
+    client.commands.load_trajectory(trajectory)                    # confirmed by GetTrajectoryData
     assert device.playback.trajectory is not None
-    client.setup_playback()
-    assert client.wait_playback(PlaybackState.SETUP_COMPLETED, 20)
-    client.start_playback()
-    assert client.wait_playback(PlaybackState.FULL_STOP, 20)
+    client.commands.setup_playback()
+    assert client.commands.wait_playback(PlaybackState.SETUP_COMPLETED, 20)
+    client.commands.start_playback()
+    assert client.commands.wait_playback(PlaybackState.FULL_STOP, 20)
     assert hid_device.session.malformed == 0 and client.malformed_frames == 0
     hid_device.inject_report(b'\x02' + bytes(63))                # another report ID
     assert wait_until(lambda: client.usb_dropped_reports == 1)
@@ -256,17 +256,17 @@ def test_client_moves_and_plays_a_multi_report_trajectory_over_usb(usb_rig):
 def test_aux_inputs_leds_and_software_id_over_usb(usb_rig):
     device, _hid, client = usb_rig
     seen = []
-    client.on_aux_inputs = seen.append
+    client.notifications.on_aux_inputs = seen.append
     client.connect()
     with device.lock:
         device.aux_input = 0b10001
         device.broadcast(AuxInputStatus(0b10001))
     assert wait_until(lambda: seen == [0b10001]) and client.aux_inputs == 0b10001
-    assert client.set_led_status(2, 3) == (2, 3) and device.led == (2, 3)
+    assert client.commands.set_led_status(2, 3) == (2, 3) and device.led == (2, 3)
     with pytest.raises(CommandRejected, match='master LED status 7'):
-        client.set_led_status(7, 0)
+        client.commands.set_led_status(7, 0)
     assert device.led == (2, 3)                            # nothing sent
-    assert client.set_software_id(42) == 42 and device.software_id == 42
+    assert client.commands.set_software_id(42) == 42 and device.software_id == 42
 
 
 def test_unplugged_usb_device_is_a_lost_link_and_reconnects(usb_rig):
