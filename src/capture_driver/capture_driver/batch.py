@@ -11,12 +11,10 @@ import logging
 from collections.abc import Sequence
 from typing import Any
 
-from gimbal_driver_common.transport import TransportError
-
 from .device_requests import Polls, request_key
-from .errors import DeviceTimeout, NotConnected, NotSupported, WrongReply
+from .errors import DeviceTimeout, NotSupported, WrongReply
 from .link import CaptureLink
-from .protocol import Frame, ProtocolError, ReplyByte, command
+from .protocol import Frame, ProtocolError, command
 
 LOG = logging.getLogger('capture_driver.batch')
 
@@ -68,13 +66,14 @@ class BatchedReads:
                 raise ProtocolError(f'{name} is not a getter: only getters are batched')
             frames.append((cmd, axis, cmd.frame(axis, None, self._link.group)))
         link = self._link
-        with link.lock:
+        with contextlib.nullcontext() if link.overlap else link.lock:
             values: list[Any] = [None] * len(frames)
             asked = [i for i, (cmd, axis, _) in enumerate(frames)
                      if not (optional and self._left_out(cmd.name, axis))]
             replies: list[Frame | None] = [None] * len(asked)
             if self.batching and len(asked) >= 2:
-                replies = self._transact_batch([frames[i][2] for i in asked])
+                replies = self._transact_batch([(frames[i][0].name, frames[i][2])
+                                                for i in asked])
             for i, reply in zip(asked, replies, strict=True):
                 cmd, axis, frame = frames[i]
                 if reply is not None:
@@ -96,43 +95,20 @@ class BatchedReads:
         return (name in self._link.unsupported
                 or self._link.unanswered.waiting(request_key(name, axis)) is not None)
 
-    def _transact_batch(self, frames: list[Frame]) -> list[Frame | None]:
+    def _transact_batch(self, frames: list[tuple[str, Frame]]) -> list[Frame | None]:
         """Write ``frames`` in one go; the reply to each, or None for those that got no
-        data reply within :attr:`timeout` (a NACK or an ACK ends the wait for one of them:
-        which one, the reply byte does not say)."""
+        data reply within :attr:`timeout` (a NACK or an ACK went to one of them: which
+        one, the reply byte does not say, so it is asked alone)."""
         link = self._link
-        stream = link.stream
-        if stream is None:
-            raise NotConnected(f'batched read: not connected ({link.last_error})')
-        link.stats['requests'] += len(frames)
-        replies: list[Frame | None] = [None] * len(frames)
-        waiting = len(frames)
-        try:
-            link.send(stream, b''.join(frame.encode() for frame in frames))
-            for item in link.input_until(stream, link.last_activity + link.timeout):
-                if isinstance(item, ReplyByte):
-                    if not item.is_ack:
-                        link.stats['nacks'] += 1
-                    waiting -= 1  # one of the reads answered without data
-                elif isinstance(item, Frame):
-                    slot = next((i for i, frame in enumerate(frames) if replies[i] is None
-                                 and (frame.opcode, frame.axis) == (item.opcode, item.axis)),
-                                None)
-                    if slot is None:
-                        link.stats['stale'] += 1
-                    else:
-                        replies[slot] = item
-                        waiting -= 1
-                if not waiting:
-                    break
-        except TransportError as exc:
-            link.link_lost(f'batched read: {exc}')
-            raise NotConnected(f'batched read: link lost ({exc})') from exc
-        if waiting == len(frames):  # not one answer: a timeout, as for a single request
+        waitings = link.write([(name, frame, True) for name, frame in frames]) or []
+        deadline = link.last_activity + link.timeout
+        answers = [link.answer(waiting, deadline) for waiting in waitings]
+        replies = [answer if isinstance(answer, Frame) else None for answer in answers]
+        if all(answer is None for answer in answers):  # not one answer: a timeout
             link.count_timeout('batched read')
-        # each read answered (a NACK or ACK too): nothing late can come, and the controller
-        # handles queued requests (those reads are named alone)
-        self.count_batch(complete=not waiting)
+        # each read answered (a NACK or ACK too): the controller handles queued requests
+        # (those reads are named alone)
+        self.count_batch(complete=all(answer is not None for answer in answers))
         return replies
 
     def count_batch(self, complete: bool) -> None:
@@ -143,9 +119,10 @@ class BatchedReads:
             self._link.settled()
             self._failures = 0
             return
-        self._link.stats['incomplete_batches'] += 1
+        self._link.count('incomplete_batches')
         self._failures += 1
         if self._failures >= BATCH_FAILURES:
             self.batching = False
+            self._link.overlap = False  # nor do requests overlap: one at a time
             LOG.info('%d batches in a row came back incomplete: one request at a time on '
                      'this connection', self._failures)

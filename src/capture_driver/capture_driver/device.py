@@ -20,7 +20,7 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -56,6 +56,9 @@ LOG = logging.getLogger('capture_driver.device')
 
 #: what ``hardware_id``, diagnostics and ~/status say for an identity the device did not give
 UNKNOWN = 'unknown'
+#: how often the sensors thread checks whether the registers are due (``status_period``,
+#: or at once after :meth:`CaptureDevice.expire_status`)
+STATUS_TICK_S = 0.05
 
 
 @dataclass
@@ -225,8 +228,18 @@ class CaptureDevice(Device):
         return self.settings.link_description()
 
     # ------------------------------------------------------------ poll
+    def background_reads(self) -> list[tuple[float, Callable[[], None]]]:
+        """The registers, on the controller's sensors thread (not in the joint poll: a
+        register the device answers late or never does not hold up joint_states): every
+        ``status_period``, and at once after :meth:`expire_status`."""
+        return [(STATUS_TICK_S, self._refresh_status_when_due)]
+
+    def _refresh_status_when_due(self) -> None:
+        if time.monotonic() >= self._next_status:
+            self.refresh_status()
+
     def read(self) -> JointSample | None:
-        """Load position and speed of every axis; registers every ``status_period``.
+        """Load position and speed of every axis (the registers are a background read).
 
         ``moving`` stays empty: the speed read every cycle is the freshest motion signal
         (the SRL motion-complete bit is read only every ``status_period``), so the
@@ -246,8 +259,6 @@ class CaptureDevice(Device):
         velocities = {joint: self.from_device(joint, values[2 * i + 1])
                       for i, joint in enumerate(joints)}
         stamp = time.time()
-        if time.monotonic() >= self._next_status:
-            self.refresh_status()
         with self._status_lock:
             currents = self._status.get('current', {})
         return JointSample(
@@ -287,7 +298,8 @@ class CaptureDevice(Device):
             return self._status
 
     def expire_status(self) -> None:
-        """Read the registers on the next poll (after a command that changes them)."""
+        """Read the registers at once (after a command that changes them): on the sensors
+        thread's next tick (:data:`STATUS_TICK_S`)."""
         self._next_status = 0.0
 
     # ---------------------------------------------------------- motion

@@ -1,34 +1,40 @@
-"""Capture pedestal session: handshake, request/reply, keep-alive, resync and reconnect.
+"""Capture pedestal link: one reader thread, handshake, requests, resync and reconnect.
 
-One request is in flight at a time: every exchange holds the device's link lock
+The link has one owner of its input: the reader thread ``capture-reader`` (the session
+base, :class:`gimbal_driver_common.session.Session`, as every streaming client has). It
+decodes everything the controller sends and gives each reply to the request it answers
+(:class:`~.answers.AnswerBook`): a data packet to the getter with its opcode and axis, a
+reply byte to the setter in flight. Callers write their requests and wait for their own
+answers; nobody reads the link but the reader. So requests that the protocol can tell
+apart overlap: the joint poll's getters go out while a sensor or register read waits for
+an answer that is slow or never comes, and a stop goes out at once (see the overlap rules
+in :mod:`.answers`). Setters go one sequence at a time: they hold the device's link lock
 (:class:`~gimbal_driver_common.link_lock.LinkLock`, which the adapter passes in; a client
-made alone makes its own), and so does the core's command path for its sends. A stream
+made alone makes its own), and so does the core's command path for its sends; a stream
 move posted without waiting (:meth:`MotionRequests.post_moves`) is settled by that lock
-before the link's next exchange. A request
-writes one packet and reads until its reply: a data packet with the same opcode and axis
-for getters, a single ACK byte for everything else, or a NACK byte, which raises
+before the next setter. A controller that drops what it queues (batched reads that come
+back incomplete, see :mod:`.batch`) is driven one request at a time instead: then every
+request holds the lock (:attr:`CaptureLink.overlap` off).
+
+A getter is answered by its data packet, a setter by a single ACK byte; a NACK byte raises
 :class:`DeviceNack` carrying the spec's meaning and advice. A reply of the other kind (an
 ACK to a getter, data to a setter) raises :class:`WrongReply`: the device answered, so it
 is a protocol error of that request, never silence; only no answer at all is a
-:class:`DeviceTimeout`, and only timeouts in a row close the link ("device silent").
-Garbage and corrupted or truncated packets are skipped by
+:class:`DeviceTimeout`, and only timeouts in a row of the requests the driver needs close
+the link ("device silent"). Garbage and corrupted or truncated packets are skipped by
 :class:`~.protocol.StreamDecoder`; if a started packet stalls for ``resync_gap`` the
-decoder gives it up and rescans, so a lost byte costs at most one request.
+reader gives it up and rescans, so a lost byte costs at most one request.
 
 Requests the host makes on its own (identity, probes, the status registers, the sensor
-polls: :meth:`CaptureClient.optional` and :meth:`CaptureClient.poll`) stop being sent once
-the device answered one with 0xA6 or with the wrong kind of reply (:attr:`unsupported`);
-so does the one advisory step of a move, MOT_SetTum (4.2.14, 7.1 "as needed").
+polls: :class:`~.device_requests.Polls`) stop being sent once the device answered one
+with 0xA6 or with the wrong kind of reply (:attr:`unsupported`), and are asked again
+after a growing back-off when unanswered (:attr:`unanswered`); so does the one advisory
+step of a move, MOT_SetTum (4.2.14, 7.1 "as needed").
 
 Handshake (section 6.1): over TCP the controller sends a COM_Connect packet as soon as the
 connection opens; the client answers with a COM_Connect packet carrying the opcode the
 controller used (so a wrong reconstruction of that opcode cannot break the handshake) and
 waits for the ACK. On a serial line there is no greeting; the client sends COM_Connect.
-
-Keep-alive (4.6.5): with ``keepalive_period`` > 0 the client configures the controller's
-supervision (COM_setKeepAliveTimeout/Count, COM_StartKeepAlive) so a dead host makes the
-pedestal stop, and a background thread (:meth:`CaptureClient.start`) sends COM_IsKeepAliveOn
-whenever the link has been idle for ``keepalive_period``.
 
 A lost link raises :class:`NotConnected` and stays closed: reopening it is the job of the
 one connection supervisor, :class:`gimbal_driver_common.controller.GimbalController`, which
@@ -40,18 +46,21 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Sequence
 from typing import Any
 
+from gimbal_driver_common.errors import LinkError
 from gimbal_driver_common.link_lock import LinkLock
+from gimbal_driver_common.session import Protocol, Session, StreamLink
 from gimbal_driver_common.transport import ByteStream, TransportError
 from gimbal_driver_common.unanswered import Unanswered
 
+from .answers import AnswerBook, Request, Waiting, is_greeting
 from .errors import CaptureError, DeviceNack, DeviceTimeout, NotConnected, WrongReply
 from .protocol import (
     Frame,
-    Garbage,
     ProtocolError,
     ReplyByte,
     ReplyCode,
@@ -81,10 +90,11 @@ class AxisSetups:
             self.known.clear()
 
 
-class CaptureLink:
-    """Thread-safe request/reply session with one Capture controller over any
+class CaptureLink(Protocol):
+    """Thread-safe request/reply link with one Capture controller over any
     :class:`ByteStream`: what the client's parts (:mod:`.batch`, :mod:`.motion`,
-    :mod:`.device_requests`) are handed; they use only its public names."""
+    :mod:`.device_requests`) are handed; they use only its public names. It is the
+    session's protocol: the reader thread calls :meth:`data_received` and :meth:`tick`."""
 
     def __init__(
         self,
@@ -108,26 +118,32 @@ class CaptureLink:
         self.keepalive_count = keepalive_count
         self.resync_gap = resync_gap
         self.max_timeouts = max_timeouts
-        # the device's one link lock (fair: a command stream must not starve the joint poll)
+        # the device's one link lock: setters hold it (fair, and a stop goes first)
         self._lock: LinkLock = link_lock if link_lock is not None else LinkLock()
         self._stream: ByteStream | None = None
+        self._session: Session | None = None
         self._decoder = StreamDecoder()
+        self._last_input = 0.0
+        self.answers = AnswerBook()
+        self._greeting: Frame | None = None
+        self._greeted = threading.Event()
         self._connected = False
         self._connect_opcode = command('COM_Connect').opcode
-        #: when the last request (or batch) was written: a reply deadline counts from it
+        #: when the last request (or batch) was written
         self.last_activity = 0.0
         self._consecutive_timeouts = 0
+        #: requests may overlap (see :mod:`.answers`); off for a controller that drops what
+        #: it queues (the batched reads' way back): then every request holds the lock
+        self.overlap = True
         # forgotten on connect and on any other command that changes something
         self.setups = AxisSetups()
-        #: input may hold a reply to an earlier request (see :meth:`_drain`)
-        self._stale_possible = True
         #: run under the lock on every new connection, before the handshake (the parts'
         #: per-connection state: batching)
         self.connect_hooks: list[Callable[[], None]] = []
         self.last_error = 'not connected'
         self.connects = 0
-        self.stats = {'requests': 0, 'timeouts': 0, 'nacks': 0, 'wrong_replies': 0,
-                      'stale': 0, 'incomplete_batches': 0, 'posted_moves': 0}
+        self._stats = {'requests': 0, 'timeouts': 0, 'wrong_replies': 0,
+                       'incomplete_batches': 0, 'posted_moves': 0}
         # Commands the host sends on its own that the device answered with 0xA6 or with the
         # wrong kind of reply (name -> its answer); never sent again on this connection.
         self.unsupported: dict[str, str] = {}
@@ -141,7 +157,7 @@ class CaptureLink:
     # ---------------------------------------------------------------- link
     @property
     def lock(self) -> LinkLock:
-        """The device's one link lock: every exchange holds it."""
+        """The device's one link lock: every setter sequence holds it."""
         return self._lock
 
     @property
@@ -150,13 +166,24 @@ class CaptureLink:
         return self._stream
 
     @property
+    def stats(self) -> dict[str, int]:
+        """Link counters for diagnostics (the reader's included)."""
+        return {**self._stats, 'nacks': self.answers.nacks, 'stale': self.answers.stale}
+
+    def count(self, name: str, by: int = 1) -> None:
+        """Add to one of the link's own counters (:attr:`stats`)."""
+        self._stats[name] += by
+
+    @property
     def keepalive_on(self) -> bool:
         """The controller's keep-alive supervision was switched on at connect."""
         return self._keepalive_on
 
     @property
     def connected(self) -> bool:
-        return self._connected
+        """Handshake done and the reader still up (it may have just found the link gone)."""
+        session = self._session
+        return self._connected and session is not None and session.alive
 
     @property
     def description(self) -> str:
@@ -179,20 +206,25 @@ class CaptureLink:
                 raise NotConnected(str(exc)) from exc
             self._stream = stream
             self._decoder.reset()
-            self._stale_possible = True
+            self.answers.reset(NotConnected('a new connection was made'))
+            self.overlap = True
             for hook in self.connect_hooks:
                 hook()
             self.unsupported = {}  # a new connection may be a different controller
             self.wrong_replies = {}
             self.unanswered.clear()
             self._keepalive_on = False
+            self._greeting = None
+            self._greeted.clear()
+            self._session = Session(StreamLink(stream), self, 'capture', read_timeout=0.02,
+                                    link_error=NotConnected).start()
             try:
                 self._handshake()
                 self._connected = True
                 self._consecutive_timeouts = 0
                 if self.keepalive_period > 0:
                     self._configure_keepalive()
-            except (CaptureError, TransportError) as exc:
+            except (CaptureError, TransportError, LinkError) as exc:
                 self.last_error = f'handshake with {stream.description} failed: {exc}'
                 self._close_locked()
                 raise NotConnected(self.last_error) from exc
@@ -201,21 +233,12 @@ class CaptureLink:
         LOG.info('connected to %s', self.description)
 
     def _handshake(self) -> None:
-        if self.expect_greeting:
-            greeting = self._wait_greeting(self.greeting_timeout)
+        if self.expect_greeting and self._greeted.wait(self.greeting_timeout):
+            greeting = self._greeting
             if greeting is not None:
                 self._connect_opcode = greeting.opcode
         frame = Frame(self.group, 0, self._connect_opcode)
         self._transact('COM_Connect', frame, expect_data=False, timeout=self.timeout)
-
-    def _wait_greeting(self, timeout: float) -> Frame | None:
-        assert self._stream is not None
-        deadline = time.monotonic() + timeout
-        while (remaining := deadline - time.monotonic()) > 0:
-            for item in self._decoder.feed(self._stream.read(256, remaining)):
-                if isinstance(item, Frame) and not item.data and 0x0700 <= item.opcode <= 0x07FF:
-                    return item
-        return None
 
     def _configure_keepalive(self) -> None:
         timeout_ms = max(int(self.keepalive_period * 1000), 100)
@@ -247,40 +270,88 @@ class CaptureLink:
     def _close_locked(self) -> None:
         self._connected = False
         self.setups.known.clear()
-        stream, self._stream = self._stream, None
-        if stream is not None:
-            stream.close()
+        session, self._session = self._session, None
+        self._stream = None
+        if session is not None:
+            session.close()  # the reader closes the stream as it ends
+        self.answers.fail_all(NotConnected(f'link closed ({self.last_error or "closed"})'))
 
     def link_lost(self, why: str) -> None:
+        """Give the link up (from a caller's thread): the supervisor reconnects."""
         self.last_error = why
         if self._connected:
             LOG.warning('link lost: %s', why)
-        self._close_locked()
+        self._connected = False
+        session = self._session
+        if session is not None:
+            session.lose(NotConnected(why))
+
+    # ------------------------------------------------- the reader (Protocol)
+    def data_received(self, data: bytes) -> None:
+        self._last_input = time.monotonic()
+        self._take(self._decoder.feed(data))
+
+    def tick(self, now: float) -> float | None:
+        """Give up a packet left partial for ``resync_gap`` (the decoder rescans)."""
+        if not self._decoder.has_partial:
+            return None
+        if now - self._last_input >= self.resync_gap:
+            self._take(self._decoder.flush_partial())
+            return None
+        return self._last_input + self.resync_gap
+
+    def connection_lost(self, error: LinkError | None) -> None:
+        if error is None:
+            return
+        if self._connected:
+            LOG.warning('link lost: %s', error)
+            self.last_error = str(error)
+        self._connected = False
+        self.answers.fail_all(NotConnected(f'link lost ({error})'))
+
+    def _take(self, items: Sequence[object]) -> None:
+        for item in items:
+            if not isinstance(item, Frame | ReplyByte):
+                continue  # garbage: counted by the decoder
+            if isinstance(item, Frame) and is_greeting(item):
+                if not self._greeted.is_set():
+                    self._greeting = item
+                    self._greeted.set()
+                else:
+                    LOG.info('controller re-sent its greeting (0x%04X)', item.opcode)
+                continue
+            if self.answers.deliver(item):
+                self._consecutive_timeouts = 0  # the device answers: it is not silent
 
     # ------------------------------------------------------------- requests
     def request(self, name: str, axis: int | None = None, value: Any = None,
                 timeout: float | None = None, optional: bool = False) -> Any:
         """Send one table command and return its decoded reply (None for ACK-only commands).
 
-        ``optional``: a getter the host asks on its own (a sensor, a register): asked
-        once, not retried after a timeout, and its timeout does not count toward calling
-        the device silent (a device that answers the rest is not silent).
+        A getter goes out at once, beside others in flight (:attr:`overlap`); a setter
+        holds the link lock. ``optional``: a getter the host asks on its own (a sensor, a
+        register): asked once, not retried after a timeout, and its timeout does not count
+        toward calling the device silent (a device that answers the rest is not silent).
 
         Raises :class:`ProtocolError` for bad arguments (nothing is sent),
         :class:`DeviceNack`, :class:`WrongReply`, :class:`DeviceTimeout` or
         :class:`NotConnected`.
         """
         cmd = command(name)
+        if cmd.replies_with_data and self.overlap:
+            return self.request_locked(cmd.name, axis, value, timeout, optional=optional)
         with self._lock:
             return self.request_locked(cmd.name, axis, value, timeout, optional=optional)
 
     def request_locked(self, name: str, axis: int | None, value: Any,
-                        timeout: float | None = None, group: int | None = None,
-                        optional: bool = False) -> Any:
+                       timeout: float | None = None, group: int | None = None,
+                       optional: bool = False) -> Any:
+        """:meth:`request` for a caller that holds the link lock where one is needed (a
+        setter, or any request while :attr:`overlap` is off)."""
         cmd = command(name)
         # validates before anything is sent
         frame = cmd.frame(axis, value, self.group if group is None else group)
-        if self._stream is None:
+        if self._session is None:
             raise NotConnected(f'{name}: not connected ({self.last_error})')
         if not cmd.replies_with_data:
             self.setups.commanded()  # anything may have changed an axis' mode or profile
@@ -299,7 +370,7 @@ class CaptureLink:
                 # A getter changes nothing, so it is retried once (a reply of the wrong kind
                 # is named only when the device gives it twice: noise can look like an ACK
                 # byte); a setter is not, nor an optional getter that got no answer (it
-                # would hold the link twice as long for what the device does not serve).
+                # would hold its caller twice as long for what the device does not serve).
                 retry = not (optional and isinstance(exc, DeviceTimeout))
                 if cmd.replies_with_data and attempt == 1 and retry:
                     continue
@@ -311,121 +382,71 @@ class CaptureLink:
         try:
             return command(name).decode_reply(reply)
         except ProtocolError as exc:
-            raise self._wrong_reply(name, frame, f'{len(reply.data)} data bytes ({exc})',
-                                    'data') from None
+            raise self.wrong_reply(name, frame, f'{len(reply.data)} data bytes ({exc})',
+                                   'data') from None
+
+    def write(self, requests: Sequence[Request], block: bool = True) -> list[Waiting] | None:
+        """Write ``requests`` in one write, registered for their answers (see
+        :class:`~.answers.AnswerBook` for when they may go out); None when ``block`` is
+        False and they may not go out now. A stop (the link lock held urgently) goes out
+        at once."""
+        session = self._session
+        if session is None or not session.alive:
+            raise NotConnected(f'not connected ({self.last_error})')
+        try:
+            waitings = self.answers.write(
+                requests, session.write, urgent=self._lock.held_urgently(), block=block,
+                timeout=2 * self.timeout + 1.0)
+        except LinkError as exc:
+            raise NotConnected(f'{requests[0][0]}: link lost ({exc})') from exc
+        if waitings is None:
+            if block:
+                raise DeviceTimeout(f'{requests[0][0]}: the link stayed busy')
+            return None
+        self._stats['requests'] += len(requests)
+        self.last_activity = time.monotonic()
+        return waitings
+
+    def answer(self, waiting: Waiting, deadline: float) -> Frame | ReplyByte | None:
+        """The answer to a written request by ``deadline``, None if none came."""
+        try:
+            return self.answers.wait(waiting, deadline)
+        except LinkError as exc:
+            raise NotConnected(f'{waiting.name}: link lost ({exc})') from exc
 
     def _transact(self, name: str, frame: Frame, expect_data: bool, timeout: float,
                   optional: bool = False) -> Frame:
-        stream = self._stream
-        if stream is None:
-            raise NotConnected(f'{name}: not connected ({self.last_error})')
-        self.stats['requests'] += 1
-        try:
-            late_possible = self.send(stream, frame.encode())
-            reply = self._await_reply(stream, name, frame, expect_data, timeout, late_possible,
-                                      optional)
-        except TransportError as exc:
-            self.link_lost(f'{name}: {exc}')
-            raise NotConnected(f'{name}: link lost ({exc})') from exc
-        except WrongReply:
-            self._consecutive_timeouts = 0  # the device answered: it is not silent
-            raise
+        [waiting] = self.write([(name, frame, expect_data)]) or []
+        answer = self.answer(waiting, waiting.written_at + timeout)
+        if isinstance(answer, ReplyByte):
+            if not answer.is_ack:
+                raise DeviceNack(self.label(name, frame), answer.code)
+            if expect_data:
+                raise self.wrong_reply(name, frame, 'ACK', 'data')
+        elif isinstance(answer, Frame):
+            if not expect_data:
+                raise self.wrong_reply(name, frame, 'data', 'ACK')
+        elif waiting.unexpected:
+            raise self.wrong_reply(name, frame, waiting.unexpected,
+                                   'data' if expect_data else 'ACK')
+        else:
+            if optional:
+                self._stats['timeouts'] += 1  # the device may answer the rest: not silence
+            else:
+                self.count_timeout(name)
+            raise DeviceTimeout(f'{self.label(name, frame)}: no reply within {timeout:g} s')
         self.settled()
-        return reply
+        return answer if isinstance(answer, Frame) else frame
 
     def settled(self) -> None:
-        """Every request written so far is answered: nothing late can come, and the device
-        is not silent."""
-        self._stale_possible = False
+        """A request (or a batch) got its answer: the device is not silent, and when nothing
+        else is in flight no late reply can come any more."""
         self._consecutive_timeouts = 0
+        self.answers.settled()
 
-    def send(self, stream: ByteStream, data: bytes) -> bool:
-        """Write one request (or a batch), after draining stale input if there can be any;
-        until its reply is in, input may hold a stale reply again. Returns True when a late
-        reply to an earlier request may still arrive (one was left unanswered)."""
-        late_possible = self._stale_possible
-        if late_possible:
-            self._drain(stream)
-        stream.write(data)
-        self.last_activity = time.monotonic()
-        self._stale_possible = True
-        return late_possible
-
-    def input_until(self, stream: ByteStream,
-                    deadline: float) -> Iterator[Frame | ReplyByte | Garbage]:
-        """Decoded input as it arrives, until ``deadline``; a packet left partial for
-        ``resync_gap`` is given up (the decoder resynchronises). The caller stops iterating
-        once it has its answer: what else came in the same read was not asked for."""
-        while (remaining := deadline - time.monotonic()) > 0:
-            wait = min(remaining, self.resync_gap) if self._decoder.has_partial else remaining
-            data = stream.read(4096, wait)
-            yield from self._decoder.feed(data) if data else self._decoder.flush_partial()
-
-    def _drain(self, stream: ByteStream) -> None:
-        """Discard stale input before a new request.
-
-        Only a request whose reply never came (a timeout, a NACK-triggered resend, a
-        connection just made) can leave a reply behind that would answer the next
-        request; everything else is skipped by :meth:`_await_reply` as it reads. So the
-        drain runs only then: on loopback its poll() cost 10-18 us on every transaction,
-        three times before a position command reaches MOT_Update.
-        """
-        self._stale_possible = False
-        while True:
-            data = stream.read(4096, 0.0)
-            if not data:
-                break
-            for item in self._decoder.feed(data):
-                self.stats['stale'] += 1
-                if isinstance(item, Frame) and 0x0700 <= item.opcode <= 0x07FF and not item.data:
-                    LOG.info('controller re-sent its greeting (0x%04X)', item.opcode)
-
-    def _await_reply(self, stream: ByteStream, name: str, frame: Frame, expect_data: bool,
-                     timeout: float, late_possible: bool, optional: bool = False) -> Frame:
-        """The reply to ``frame``: its data packet (getters) or the ACK (the rest).
-
-        The other kind of reply is this request's protocol error (:class:`WrongReply`) when
-        nothing else can have sent it: an ACK to a getter while no earlier request is left
-        unanswered, a data packet with this request's opcode and axis to a setter. Anything
-        that may be a late reply to an earlier request (a data packet of another opcode, an
-        ACK after a timeout) is skipped while the real reply can still come; if nothing else
-        comes, the request is named with what it got at the deadline. Only a device that
-        answers nothing at all times out.
-        """
-        unexpected = ''  # the first answer of the wrong kind that may have been stale
-        for item in self.input_until(stream, time.monotonic() + timeout):
-            if isinstance(item, ReplyByte):
-                if not item.is_ack:
-                    self.stats['nacks'] += 1
-                    raise DeviceNack(self.label(name, frame), item.code)
-                if not expect_data:
-                    return frame
-                if not late_possible:
-                    self._stale_possible = False
-                    raise self._wrong_reply(name, frame, 'ACK', 'data')
-                unexpected = unexpected or 'ACK'
-                self.stats['stale'] += 1
-            elif isinstance(item, Frame):
-                if (item.opcode, item.axis) == (frame.opcode, frame.axis):
-                    if expect_data:
-                        return item
-                    self._stale_possible = False
-                    raise self._wrong_reply(name, frame, 'data', 'ACK')
-                self.stats['stale'] += 1
-                if not (0x0700 <= item.opcode <= 0x07FF and not item.data):  # greeting
-                    unexpected = unexpected or (
-                        f'data of opcode 0x{item.opcode:04X} (axis {item.axis})')
-        if unexpected:
-            raise self._wrong_reply(name, frame, unexpected, 'data' if expect_data else 'ACK')
-        if optional:
-            self.stats['timeouts'] += 1  # the device may answer the rest: not silence
-        else:
-            self.count_timeout(name)
-        raise DeviceTimeout(f'{self.label(name, frame)}: no reply within {timeout:g} s')
-
-    def _wrong_reply(self, name: str, frame: Frame, answer: str, expected: str) -> WrongReply:
+    def wrong_reply(self, name: str, frame: Frame, answer: str, expected: str) -> WrongReply:
         """Count a reply of the wrong kind for ``name`` (diagnostics, per command)."""
-        self.stats['wrong_replies'] += 1
+        self._stats['wrong_replies'] += 1
         count, _ = self.wrong_replies.get(name, (0, ''))
         error = WrongReply(self.label(name, frame), answer, expected)
         self.wrong_replies[name] = (count + 1, f'0x{frame.opcode:04X} answered {answer}, '
@@ -435,7 +456,7 @@ class CaptureLink:
     def count_timeout(self, what: str) -> None:
         """One more unanswered request; after ``max_timeouts`` in a row the link is closed
         for the supervisor to reopen (raises :class:`NotConnected`)."""
-        self.stats['timeouts'] += 1
+        self._stats['timeouts'] += 1
         self._consecutive_timeouts += 1
         if self._consecutive_timeouts >= self.max_timeouts:
             self.link_lost(f'device silent: {self._consecutive_timeouts} requests unanswered')
@@ -447,5 +468,5 @@ class CaptureLink:
 
     def exclusive(self) -> LinkLock:
         """The link lock, for a caller that sends a whole motion set-up (several axes)
-        without the poll thread's requests in between: ``with client.exclusive(): ...``."""
+        without another setter in between: ``with client.exclusive(): ...``."""
         return self._lock

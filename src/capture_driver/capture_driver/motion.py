@@ -11,8 +11,9 @@ import logging
 from dataclasses import dataclass
 from typing import Any
 
-from gimbal_driver_common.transport import ByteStream, TransportError
+from gimbal_driver_common.transport import ByteStream
 
+from .answers import Waiting
 from .batch import BatchedReads
 from .device_requests import Polls
 from .errors import (
@@ -40,12 +41,13 @@ ADVISORY_STEPS = frozenset({'MOT_SetTum'})
 @dataclass
 class PostedMoves:
     """A stream move written by :meth:`MotionRequests.post_moves`: per axis
-    ``(position_deg, speed_deg_s, acceleration)``, the frames in order (one ACK each) and
-    the stream they went out on. The core carries it (``PostedWrite.expected``) until
-    :meth:`MotionRequests.settle_posted` reads the ACKs."""
+    ``(position_deg, speed_deg_s, acceleration)``, the frames in order (one ACK each,
+    waiting for it in the link's answer book) and the stream they went out on. The core
+    carries it (``PostedWrite.expected``) until :meth:`MotionRequests.settle_posted` takes
+    the ACKs."""
 
     moves: dict[int, tuple[float, float, float]]
-    frames: list[tuple[str, Frame]]
+    waitings: list[Waiting]
     stream: ByteStream
 
 
@@ -143,37 +145,36 @@ class MotionRequests:
                    for axis, (_, speed, acceleration) in moves.items()):
                 return None
             try:
-                frames = [(name, command(name).frame(axis, value, self._link.group))
+                frames = [(name, command(name).frame(axis, value, self._link.group), False)
                           for axis, (position, _, _) in moves.items()
                           for name, value in (('MOT_SendPosition', position),
                                               ('MOT_Update', None))]
             except ProtocolError:
                 return None  # move_absolute raises it, with nothing sent
+            # the caller never waits: when a read the device may answer with a byte is in
+            # flight, the command thread sends the move instead
+            waitings = self._link.write(frames, block=False)
+            if waitings is None:
+                return None
             for axis, (_, speed, acceleration) in moves.items():
                 self._setups.known[axis] = ('absolute', acceleration, abs(speed), False)
-            self._link.stats['requests'] += len(frames)
-            try:
-                self._link.send(stream, b''.join(frame.encode() for _, frame in frames))
-            except TransportError as exc:
-                self._link.link_lost(f'stream move: {exc}')
-                raise NotConnected(f'stream move: link lost ({exc})') from exc
-            self._link.stats['posted_moves'] += 1
-            return PostedMoves(dict(moves), frames, stream)
+            self._link.count('posted_moves')
+            return PostedMoves(dict(moves), waitings, stream)
 
     def settle_posted(self, posted: PostedMoves) -> bool:
-        """Read the ACKs of a :meth:`post_moves`, in order, and arm the next TUM; raises the
+        """Take the ACKs of a :meth:`post_moves`, in order, and arm the next TUM; raises the
         device's refusal, or :class:`NotConnected` when the link closed before they came.
         False: an ACK was lost (or a NACK says the packet was not executed, 0xF6), so the
         caller sends the moves again with :meth:`move_absolute` (the axes' set-up is
         forgotten: the whole 7.1 sequence goes out). Run under the link lock before its
-        next exchange, so no other setter went out since the post."""
+        next setter."""
         with self._link.lock:
             if self._link.stream is not posted.stream:
                 for axis in posted.moves:
                     self._setups.known.pop(axis, None)
                 raise NotConnected(f'stream move: link closed before its ACKs came '
                                    f'({self._link.last_error})')
-            error, resend = self._read_posted_answers(posted)
+            error, resend = self._posted_answers(posted)
             if error is not None or resend:
                 for axis in posted.moves:
                     self._setups.known.pop(axis, None)
@@ -184,38 +185,32 @@ class MotionRequests:
             for axis, (_, speed, acceleration) in posted.moves.items():
                 if self._setups.known.get(axis) == ('absolute', acceleration, abs(speed), False):
                     self._setups.known[axis] = ('absolute', acceleration, abs(speed),
-                                          self._arm_tum(axis))
+                                                self._arm_tum(axis))
             return True
 
-    def _read_posted_answers(self, posted: PostedMoves) -> tuple[CaptureError | None, bool]:
-        """The ACK of each posted frame, in order (under the lock): the first refusal (or
-        the link lost) and whether to send the moves again (an ACK missing, or 0xF6)."""
-        answers: list[ReplyByte] = []
+    def _posted_answers(self, posted: PostedMoves) -> tuple[CaptureError | None, bool]:
+        """The ACK of each posted frame, in order: the first refusal (or the link lost) and
+        whether to send the moves again (an ACK missing, or 0xF6)."""
         link = self._link
+        deadline = posted.waitings[0].written_at + link.timeout
         try:
-            for item in link.input_until(posted.stream, link.last_activity + link.timeout):
-                if not isinstance(item, ReplyByte):
-                    self._link.stats['stale'] += 1
-                    continue
-                answers.append(item)
-                if len(answers) == len(posted.frames):
-                    break
-        except TransportError as exc:
-            self._link.link_lost(f'stream move: {exc}')
-            return NotConnected(f'stream move: link lost ({exc})'), False
+            answers = [link.answer(waiting, deadline) for waiting in posted.waitings]
+        except NotConnected as exc:
+            return exc, False
         error: CaptureError | None = None
         resend = False
-        for (name, frame), answer in zip(posted.frames, answers, strict=False):
-            if not answer.is_ack:
-                self._link.stats['nacks'] += 1
-                if error is None:
-                    error = DeviceNack(self._link.label(name, frame), answer.code)
-                    resend = answer.code == ReplyCode.WRONG_CHECKSUM
-        self._batch.count_batch(complete=len(answers) == len(posted.frames))
-        if len(answers) == len(posted.frames):
+        for waiting, answer in zip(posted.waitings, answers, strict=True):
+            if isinstance(answer, ReplyByte) and not answer.is_ack and error is None:
+                error = DeviceNack(link.label(waiting.name, waiting.frame), answer.code)
+                resend = answer.code == ReplyCode.WRONG_CHECKSUM
+            elif isinstance(answer, Frame) and error is None:  # data where an ACK belongs
+                error = link.wrong_reply(waiting.name, waiting.frame, 'data', 'ACK')
+        complete = all(answer is not None for answer in answers)
+        self._batch.count_batch(complete=complete)
+        if complete:
             return error, resend
-        if not answers:
-            self._link.count_timeout('stream move')
+        if all(answer is None for answer in answers):
+            link.count_timeout('stream move')
         return error, True
 
     def jog(self, axis: int, velocity_deg_s: float, acceleration: float) -> None:

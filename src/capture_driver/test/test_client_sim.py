@@ -782,7 +782,7 @@ def test_a_stream_move_goes_out_in_one_write_once_the_axis_is_set_up(sim, link, 
     start, before = len(sim.model.requests), writes.writes
     posted = client.post_moves({1: (9.0, SPEED, ACCELERATION)})
     assert posted is not None and writes.writes == before + 1
-    assert [name for name, _ in posted.frames] == ['MOT_SendPosition', 'MOT_Update']
+    assert [w.name for w in posted.waitings] == ['MOT_SendPosition', 'MOT_Update']
     assert client.settle_posted(posted)  # reads both ACKs, arms the next session's TUM
     assert requests_since(sim, start) == [('MOT_SendPosition', 1), ('MOT_Update', 1),
                                           ('MOT_SetTum', 1)]
@@ -794,10 +794,11 @@ def test_a_stream_move_goes_out_in_one_write_once_the_axis_is_set_up(sim, link, 
     assert client.stats['nacks'] == client.stats['timeouts'] == client.stats['stale'] == 0
 
 
-def test_the_link_lock_settles_a_post_before_the_poll_reads(sim):
-    """Every exchange of the client holds the link lock it was given; the lock's
-    ``before_use`` (the core's command path in a node) reads a posted move's ACKs before
-    the poll writes, so the poll gets its own answers."""
+def test_the_poll_reads_beside_a_post_and_the_next_setter_settles_it_first(sim):
+    """Setters hold the link lock they were given; the lock's ``before_use`` (the core's
+    command path in a node) takes a posted move's ACKs before the next setter writes. The
+    poll's getters hold no lock: they go out beside the post, and the reader gives each
+    answer to its own request (data packets by opcode and axis, the ACKs to the post)."""
     lock, posts, settled = LinkLock(), [], []
     client = CaptureClient(lambda: TcpStream('127.0.0.1', sim.tcp.port), timeout=0.3,
                            link_lock=lock)
@@ -818,11 +819,12 @@ def test_the_link_lock_settles_a_post_before_the_poll_reads(sim):
         finally:
             lock.release()
         assert posts[0] is not None and settled == []
-        assert len(client.read_many(POLL)) == 4  # the lock settles the post first
+        assert len(client.read_many(POLL)) == 4  # beside the post: nothing settled
+        assert settled == [] and client.stats['stale'] == 0
+        client.request('COM_setKeepAliveCount', None, 3)  # a setter: the lock settles first
         assert settled == [True] and client.stats['stale'] == 0
         settle(client, 1, 4.0)
         settle(client, 2, -4.0)
-        assert client.post_moves({1: (5.0, SPEED, ACCELERATION)}) is not None  # TUMs armed
     finally:
         client.stop()
 

@@ -412,7 +412,29 @@ def test_a_stop_goes_out_while_a_sensor_read_waits_for_an_answer_that_never_come
              'the joint poll going on beside the waiting read')
     stops = tcp_rig.sent('SCN_StopScan')
     assert ctl.stop().startswith('all axes stopped')
-    assert tcp_rig.sent('SCN_StopScan') == stops + 1
+    assert tcp_rig.sent('SCN_StopScan') > stops
     assert reader.is_alive()  # the read still waits for its answer
     sim.model.request_faults.clear()
     reader.join(10.0)
+
+
+def test_a_register_that_never_answers_holds_up_neither_the_poll_nor_a_jog(tcp_rig):
+    """Issue 39 item 1, over TCP: the registers are read on the sensors thread and a read
+    waits for its own answer, so with ERR_OperationRegister muted (and a long timeout, so
+    the read is still waiting throughout) joint samples keep coming and a jog goes out."""
+    ctl, sim = tcp_rig.controller, tcp_rig.sim
+    device = tcp_rig.device
+    wait_for(lambda: device.status_snapshot(), 10.0, 'a first register poll')
+    device.client.timeout = 5.0
+    sim.model.request_faults.mute('ERR_OperationRegister')
+    asked = tcp_rig.sent('ERR_OperationRegister')
+    device.expire_status()
+    wait_for(lambda: tcp_rig.sent('ERR_OperationRegister') > asked, 5.0, 'the muted read sent')
+    polls = tcp_rig.sent('MOT_GetLoadPosition')
+    wait_for(lambda: tcp_rig.sent('MOT_GetLoadPosition') >= polls + 6, 5.0,
+             'joint polls while the register read waits')
+    ctl.command(['pan'], [], [0.3])
+    wait_for(lambda: tcp_rig.sim_axis(1).velocity != 0.0, 5.0, 'the jog on the axis')
+    assert 'ERR_OperationRegister' in device.client.answers.in_flight()  # still waiting
+    ctl.stop()
+    sim.model.request_faults.clear()

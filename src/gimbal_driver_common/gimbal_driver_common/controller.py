@@ -119,6 +119,8 @@ class GimbalController:
         self._wake = threading.Event()
         self._threads: list[threading.Thread] = []
         self._warned: dict[str, float] = {}
+        #: the device's background reads as the sensors thread runs them
+        self._background: list[tuple[float, Callable[[], None]]] = []
 
     @property
     def connected(self) -> bool:
@@ -126,8 +128,13 @@ class GimbalController:
 
     # ----------------------------------------------------------- lifecycle
     def open(self) -> None:
-        """Open the link and start the device and command threads (lifecycle configure)."""
+        """Open the link and start the device and command threads (lifecycle configure),
+        and the device's background reads on the sensors thread."""
         self._connect()
+        self._background = [(period, self._background_job(job))
+                            for period, job in self.device.background_reads()]
+        for period, job in self._background:
+            self.sensors.add(period, job)
         self._stopping.clear()
         self.commands.reopen()
         self._threads = [
@@ -159,6 +166,9 @@ class GimbalController:
         self._close_device()
         self.link_state = LinkState.NOT_CONFIGURED
         self.periodic.remove(self.watchdog.check)
+        for _, job in self._background:
+            self.sensors.remove(job)
+        self._background = []
 
     def shutdown(self, why: str = 'shutting down') -> None:
         """Stop what this driver was moving, then close."""
@@ -388,6 +398,24 @@ class GimbalController:
         if woken and not self._stopping.is_set():
             self._wake.clear()
         return woken
+
+    def _background_job(self, job: Callable[[], None]) -> Callable[[], None]:
+        """``job`` run only while connected; a device error is logged (at most every 10 s
+        per kind), a lost link is the device thread's to notice."""
+
+        def run() -> None:
+            if not self.connected:
+                return
+            try:
+                with device_boundary():
+                    job()
+            except LinkError:
+                return
+            except GimbalError as exc:
+                if self._throttle(f'background {type(exc).__name__}', 10.0):
+                    self.log.warning(f'background read: {exc}')
+
+        return run
 
     def _connect(self) -> None:
         try:

@@ -317,6 +317,14 @@ class Device(abc.ABC):
         Raise :class:`~gimbal_driver_common.errors.LinkError` when the link is lost.
         """
 
+    def background_reads(self) -> list[tuple[float, Callable[[], None]]]:
+        """Reads besides the joint sample that may wait for the device (registers, a
+        status the driver keeps): ``(period s, job)``. The controller runs them on its
+        ``sensors`` thread while the link is up, never in the joint poll, so one slow or
+        silent answer does not hold up joint_states. Each job handles its own device
+        errors; a lost link ends it (the controller skips it until reconnected)."""
+        return []
+
     @abc.abstractmethod
     def move(self, moves: Moves) -> None:
         """Absolute position moves (targets already checked against the limits)."""

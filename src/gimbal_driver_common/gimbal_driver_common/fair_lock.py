@@ -28,6 +28,8 @@ class FairRLock:
         self._count = 0
         self._waiters: deque[tuple[int, threading.Lock]] = deque()
         self._urgent: deque[tuple[int, threading.Lock]] = deque()
+        #: the holder took it urgently (it went ahead of the queue: a stop)
+        self._held_urgently = False
 
     def acquire(self, blocking: bool = True, urgent: bool = False) -> bool:
         """Take the lock; ``blocking=False`` returns False at once when another thread
@@ -40,6 +42,7 @@ class FairRLock:
                 return True
             if self._owner is None:
                 self._owner, self._count = me, 1
+                self._held_urgently = urgent
                 return True
             if not blocking:
                 return False
@@ -48,6 +51,11 @@ class FairRLock:
             (self._urgent if urgent else self._waiters).append((me, gate))
         gate.acquire()  # released by the holder that hands the lock to this thread
         return True
+
+    def held_urgently(self) -> bool:
+        """Whether the calling thread holds the lock and took it urgently."""
+        with self._mutex:
+            return self._owner == threading.get_ident() and self._held_urgently
 
     def waiting(self, urgent: bool = False) -> int:
         """How many threads wait for the lock (``urgent``: the urgent ones only)."""
@@ -63,11 +71,12 @@ class FairRLock:
                 return
             queue = self._urgent or self._waiters
             if queue:
+                self._held_urgently = queue is self._urgent
                 self._owner, gate = queue.popleft()
                 self._count = 1
                 gate.release()
             else:
-                self._owner = None
+                self._owner, self._held_urgently = None, False
 
     def __enter__(self) -> FairRLock:
         self.acquire()

@@ -67,6 +67,11 @@ class LinkLock:
         finally:
             self._lock.release()
 
+    def held_urgently(self) -> bool:
+        """Whether the calling thread holds the lock for a stop (:meth:`urgent`): a
+        request/reply client lets such a request out while reads wait for answers."""
+        return self._lock.held_urgently()
+
     def waiting(self, urgent: bool = False) -> int:
         """How many exchanges wait for the link (``urgent``: the stops only)."""
         return self._lock.waiting(urgent)
