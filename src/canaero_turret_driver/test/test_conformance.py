@@ -9,6 +9,8 @@ import pytest
 pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (make build)")
 
 from gimbal_driver_common.testing.conformance import DriverConformance
+from gimbal_driver_common.testing.silent_request_conformance import SilentRequest
+from gimbal_msgs.srv import DeviceCommand
 
 
 class TestCanaeroTurretConformance(DriverConformance):
@@ -24,3 +26,11 @@ class TestCanaeroTurretConformance(DriverConformance):
     home_refusal = "no homing routine"
     scan = dict(pattern="sector", pan_min=-0.2, pan_max=0.2, speed=0.5)
     scan_joint = "yaw"
+    # the kinds of request a turret may leave unanswered (the simulator's mute/delay): the
+    # joint data is broadcast, so only node services are requests
+    silent_requests = (
+        SilentRequest("identity read", "IDS", at_connect=True),
+        SilentRequest("service request", "IDS", timeout_parameter="service_timeout",
+                      service=(DeviceCommand, "device_command",
+                               lambda: DeviceCommand.Request(command="identify"))),
+    )

@@ -9,6 +9,8 @@ import pytest
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 
 from gimbal_driver_common.testing.conformance import DriverConformance
+from gimbal_driver_common.testing.silent_request_conformance import SilentRequest
+from gimbal_msgs.srv import DeviceCommand
 
 
 class TestKesslerKosConformance(DriverConformance):
@@ -23,3 +25,12 @@ class TestKesslerKosConformance(DriverConformance):
     tolerance = 0.011
     preset_index = 4
     scan = dict(pattern='sector', pan_min=-0.5, pan_max=0.5, speed=0.5)
+    # the kinds of request a device may leave unanswered (the simulator's mute/delay)
+    silent_requests = (
+        SilentRequest('identity read', 'GetDeviceGuid', at_connect=True),
+        SilentRequest('service request', 'GetLedStatus', timeout_parameter='reply_timeout',
+                      service=(DeviceCommand, 'command',
+                               lambda: DeviceCommand.Request(command='GetLEDStatus'))),
+    )
+    required_request = ('GetDeviceInfo', 'GetDeviceInfo')
+    handshake_request = 'GetDeviceInfo'

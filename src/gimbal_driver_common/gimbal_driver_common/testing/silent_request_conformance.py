@@ -126,8 +126,9 @@ class RequestLog:
 
 
 def named(logged: str, name: str) -> bool:
-    """Whether a receive-log entry is the request ``name`` (entries may carry arguments)."""
-    return logged == name or logged.split()[0] == name
+    """Whether a receive-log entry is the request ``name``: entries are words, the request
+    one of them ("IMU_GetRoll", "service IDS", "MOVE pan 0.1 0.5")."""
+    return name in logged.split()
 
 
 def wait_until(condition: Callable[[], bool], timeout: float) -> bool:
