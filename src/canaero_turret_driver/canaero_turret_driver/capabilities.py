@@ -105,7 +105,7 @@ class TurretGeolocation(Geolocation):
             missing["position"] = why
         else:
             latitude, longitude, altitude = samples
-            accuracy = self.device.fresh("position_accuracy")
+            accuracy = self.device.readings.fresh("position_accuracy")
             position = PositionFix(
                 GeoPoint(si(latitude), si(longitude), si(altitude) + geoid_height), "base GNSS",
                 stamp=min(s.stamp for s in samples),
@@ -116,7 +116,7 @@ class TurretGeolocation(Geolocation):
             missing["orientation"] = why
         else:
             heading, roll, pitch = samples
-            accuracy = self.device.fresh("rover_heading_accuracy")
+            accuracy = self.device.readings.fresh("rover_heading_accuracy")
             orientation = OrientationFix(
                 Attitude.from_heading(si(heading), si(roll), -si(pitch)),
                 "rover GNSS heading + inclinometer", stamp=min(s.stamp for s in samples),

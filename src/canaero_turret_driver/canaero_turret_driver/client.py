@@ -5,7 +5,9 @@ virtual here) as the link of a :class:`gimbal_driver_common.session.Session` (re
 thread ``canaero-reader``) whose protocol the client is: each frame is decoded, the latest
 value of each data identifier kept with its arrival time, message-code sequences tracked
 per identifier, EED events collected, and node-service responses handed to the pending
-request (``client_services.py``). Interface errors (bus-off error frames, a vanished
+request of its part :attr:`TurretClient.services` (``client_services.py``
+:class:`~.client_services.NodeServices`, handed the client's side of the bus and the
+transmission :attr:`TurretClient.intervals`). Interface errors (bus-off error frames, a vanished
 adapter, a failing send) end the session; `connected` turns False and whoever supervises
 the link (the controller of gimbal_driver_common, through `TurretDevice`) closes and
 reopens it.
@@ -36,7 +38,7 @@ from gimbal_driver_common import errors
 from gimbal_driver_common.session import Pending, Protocol, Session
 
 from .can_link import CanLink, Garbled
-from .client_services import NodeServices
+from .client_services import Intervals, NodeServices
 from .client_types import (
     ClientConfig,
     CommandError,
@@ -97,7 +99,7 @@ def _default_bus_factory(config: ClientConfig) -> can.BusABC:
     return open_bus(config.interface, config.channel, **kwargs)
 
 
-class TurretClient(NodeServices, Protocol):
+class TurretClient(Protocol):
     """A CANaerospace master talking to the turret and its companion nodes."""
 
     def __init__(self, config: ClientConfig | None = None,
@@ -106,14 +108,14 @@ class TurretClient(NodeServices, Protocol):
         self._bus_factory = bus_factory or _default_bus_factory
         self._table = identifier_table(self.config.zoom_position_id)
         self._session: Session | None = None
-        self._service_lock = threading.Lock()
         self._cache_lock = threading.Lock()
         self._cache: dict[str, Sample] = {}
         self._node_seen: dict[int, float] = {}
         self._frames_at_seen: dict[int, int] = {}  # counters.frames when the node last spoke
-        self._intervals_ms: dict[str, int] = {}  # TIS intervals the nodes accepted
-        self.refused_intervals: dict[str, str] = {}  # key -> why TIS was refused
-        self._observed_interval: dict[str, float] = {}
+        #: TIS intervals accepted or refused, and as observed on the bus
+        self.intervals = Intervals()
+        #: IDS, TIS, NIS, FPS, DDS, DUS (a part handed this client and the intervals)
+        self.services = NodeServices(self, self.intervals)
         self._codes = MessageCodeCounter()
         self.sequences = MessageCodeTracker()
         self.counters = Counters()
@@ -225,7 +227,8 @@ class TurretClient(NodeServices, Protocol):
         self.counters.last_malformed = text
         LOG.debug("malformed: %s", text)
 
-    def _expected_node(self, ident: Identifier) -> int:
+    def expected_node(self, ident: Identifier) -> int:
+        """The node-id that sends ``ident`` (the configured one)."""
         mapping = {
             TURRET_NODE_ID: self.config.turret_node_id,
             COVER_NODE_ID: self.config.cover_node_id,
@@ -272,7 +275,7 @@ class TurretClient(NodeServices, Protocol):
         if ident is None or ident.direction is not Direction.DATA:
             self.counters.unknown += 1
             return
-        if message.node_id != self._expected_node(ident):
+        if message.node_id != self.expected_node(ident):
             self.counters.foreign_node += 1
             return
         self._seen(message.node_id, now)
@@ -281,12 +284,12 @@ class TurretClient(NodeServices, Protocol):
             self._malformed(f"id {message.can_id} ({ident.key}) carries {message.type_name}, "
                             f"the ICD says {ident.data_type.name}")
             return
-        event, missed = self.sequences.update((message.node_id, message.can_id),
+        order, missed = self.sequences.update((message.node_id, message.can_id),
                                               message.message_code)
-        if event not in (SequenceEvent.FIRST, SequenceEvent.IN_ORDER) \
+        if order not in (SequenceEvent.FIRST, SequenceEvent.IN_ORDER) \
                 and self.on_sequence is not None:
-            self.on_sequence(ident.key, event, missed)
-        if not event.accepted:
+            self.on_sequence(ident.key, order, missed)
+        if not order.accepted:
             return  # an old or duplicate value must not replace the newer one
         value = message.value
         sample = Sample(ident.key, value, time.time(), now, message.message_code,
@@ -295,12 +298,12 @@ class TurretClient(NodeServices, Protocol):
             previous = self._cache.get(ident.key)
             self._cache[ident.key] = sample
         if previous is not None:
-            self._learn_interval(ident.key, now - previous.received)
+            self.intervals.learn(ident.key, now - previous.received)
         if self.on_sample is not None:
             self.on_sample(sample)
 
     @contextlib.contextmanager
-    def _expect(self, request: CanAerospaceMessage) -> Iterator[Pending]:
+    def expect(self, request: CanAerospaceMessage) -> Iterator[Pending]:
         """The session's pending request for the node's responses to ``request``."""
         session = self._session
         if session is None:
@@ -325,25 +328,13 @@ class TurretClient(NodeServices, Protocol):
         with self._cache_lock:
             return dict(self._cache)
 
-    def _learn_interval(self, key: str, gap: float) -> None:
-        """Track how often an identifier arrives (the ICD leaves intervals to the device).
-
-        A smoothed inter-arrival time; gaps longer than 4x the estimate (an outage, a
-        silence) do not inflate it.
-        """
-        estimate = self._observed_interval.get(key)
-        if estimate is None:
-            self._observed_interval[key] = gap
-        elif gap <= 4.0 * estimate:
-            self._observed_interval[key] = 0.8 * estimate + 0.2 * gap
-
     def stale_timeout_for(self, key: str) -> float:
         """`stale_timeout`, or 3 transmission intervals for slower identifiers.
 
         The interval is the one the node accepted by TIS; without one (never requested,
         or refused) it is the interval observed on the bus.
         """
-        interval = self.interval_of(key)
+        interval = self.intervals.interval_of(key)
         if interval is None:
             return self.config.stale_timeout
         return max(self.config.stale_timeout, 3.0 * interval)
@@ -356,7 +347,7 @@ class TurretClient(NodeServices, Protocol):
 
     def is_stale(self, key: str, now: float | None = None) -> bool:
         """No value yet, or older than the staleness timeout (an interval of 0 = disabled)."""
-        if self._intervals_ms.get(key) == 0:
+        if self.intervals.disabled(key):
             return False
         age = self.age(key, now)
         return age is None or age > self.stale_timeout_for(key)
@@ -481,5 +472,12 @@ class TurretClient(NodeServices, Protocol):
         """The data identifiers this client decodes (with the configured zoom id)."""
         return [i for i in self._table.values() if i.direction is Direction.DATA]
 
+    def data_identifier(self, key: str) -> Identifier:
+        """The data identifier ``key`` names (CommandError for any other)."""
+        for ident in self._table.values():
+            if ident.key == key and ident.direction is Direction.DATA:
+                return ident
+        raise CommandError(f"{key!r} is not a data identifier of this driver")
+
     def data_type_of(self, key: str) -> DataType:
-        return self._data_ident(key).data_type
+        return self.data_identifier(key).data_type

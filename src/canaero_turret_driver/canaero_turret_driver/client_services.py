@@ -1,19 +1,25 @@
 """CANaerospace node services of the turret client: IDS, TIS, NIS, FPS and the DDS/DUS
 memory transfers (no ROS).
 
-A mixin of :class:`~.client.TurretClient`, which gives it the session (``send``,
-``_expect``: a pending request that collects the node's responses, in order) and the
-configuration and identifier table. One service exchange at a time (``_service_lock``).
+A part of :class:`~.client.TurretClient` (its ``services`` attribute), handed the client's
+side of the bus (:class:`ServiceLink`: ``send``, ``expect``, a pending request that collects
+the node's responses in order, the configuration and the identifier lookups) and the
+transmission intervals (:class:`Intervals`, which the client's receive path learns from and
+its staleness checks read). One service exchange at a time (its own lock).
 """
 
 from __future__ import annotations
 
+import threading
 import time
+from contextlib import AbstractContextManager
+from typing import Protocol
 
 from gimbal_driver_common import errors
 from gimbal_driver_common.session import Pending
 
 from .client_types import (
+    ClientConfig,
     CommandError,
     LinkError,
     NotAllowedError,
@@ -24,15 +30,92 @@ from .client_types import (
 from .protocol import nodeservice as ns
 from .protocol.datatypes import DataType
 from .protocol.errors import CodecError
-from .protocol.identifiers import (
-    Direction,
-    Identifier,
-)
+from .protocol.identifiers import Identifier
 from .protocol.message import CanAerospaceMessage
+
+
+class ServiceLink(Protocol):
+    """What the node services use of the client (:class:`~.client.TurretClient`)."""
+
+    config: ClientConfig
+
+    @property
+    def connected(self) -> bool:
+        """The interface is open."""
+
+    @property
+    def description(self) -> str:
+        """The interface, for messages."""
+
+    @property
+    def last_link_error(self) -> str:
+        """Why the interface is not open."""
+
+    def send(self, message: CanAerospaceMessage) -> None:
+        """Send one message (LinkError when the interface is closed)."""
+
+    def expect(self, request: CanAerospaceMessage) -> AbstractContextManager[Pending]:
+        """The session's pending request for the node's responses to ``request``."""
+
+    def data_identifier(self, key: str) -> Identifier:
+        """The data identifier ``key`` names (CommandError for any other)."""
+
+    def expected_node(self, ident: Identifier) -> int:
+        """The node-id that sends ``ident`` (the configured one)."""
+
+
+class Intervals:
+    """How often each data identifier arrives: the TIS interval a node accepted, the
+    refusals, and the interval observed on the bus (the ICD leaves intervals to the
+    device). The services write the first two, the client's receive path the third."""
+
+    def __init__(self) -> None:
+        self.accepted_ms: dict[str, int] = {}   # TIS intervals the nodes accepted
+        self.refused: dict[str, str] = {}       # key -> why TIS was refused
+        self.observed: dict[str, float] = {}
+
+    def learn(self, key: str, gap: float) -> None:
+        """A smoothed inter-arrival time; gaps longer than 4x the estimate (an outage, a
+        silence) do not inflate it."""
+        estimate = self.observed.get(key)
+        if estimate is None:
+            self.observed[key] = gap
+        elif gap <= 4.0 * estimate:
+            self.observed[key] = 0.8 * estimate + 0.2 * gap
+
+    def interval_of(self, key: str) -> float | None:
+        """Seconds between two frames of `key`: the accepted TIS interval, else as observed."""
+        interval_ms = self.accepted_ms.get(key)
+        if interval_ms:
+            return interval_ms / 1000.0
+        return self.observed.get(key)
+
+    def accepted_interval_ms(self, key: str) -> int | None:
+        """The interval (ms) a node accepted by TIS for `key`, None when never set."""
+        return self.accepted_ms.get(key)
+
+    def disabled(self, key: str) -> bool:
+        """A node accepted interval 0 for `key`: it is not sent at all."""
+        return self.accepted_ms.get(key) == 0
 
 
 class NodeServices:
     """Node-service requests on the client's service channel."""
+
+    def __init__(self, link: ServiceLink, intervals: Intervals) -> None:
+        self._link = link
+        self.intervals = intervals
+        self._service_lock = threading.Lock()
+
+    @property
+    def config(self) -> ClientConfig:
+        return self._link.config
+
+    def send(self, message: CanAerospaceMessage) -> None:
+        self._link.send(message)
+
+    def _expect(self, request: CanAerospaceMessage) -> AbstractContextManager[Pending]:
+        return self._link.expect(request)
 
     def request(self, message: CanAerospaceMessage) -> CanAerospaceMessage:
         """Send a node-service request and wait for its response (ICD: within 100 ms)."""
@@ -45,13 +128,13 @@ class NodeServices:
                     response = self._next(exchange, self.config.service_timeout)
                 if response is not None:
                     return response
-                if not self.connected:
-                    raise LinkError(f"CAN interface {self.description} lost during {service}"
-                                    f": {self.last_link_error}")
+                if not self._link.connected:
+                    raise LinkError(f"CAN interface {self._link.description} lost during "
+                                    f"{service}: {self._link.last_link_error}")
         raise ServiceTimeout(
             f"no {service} response from node {message.node_id} within "
             f"{self.config.service_timeout * 1000:.0f} ms ({attempts} attempts) on "
-            f"{self.description}")
+            f"{self._link.description}")
 
     @staticmethod
     def _next(pending: Pending, timeout: float) -> CanAerospaceMessage | None:
@@ -173,10 +256,11 @@ class NodeServices:
                                        "data messages, then silence")
                 if reply.data_type == DataType.CHKSUM:
                     break
-                if reply.data_type == DataType.LONG:
-                    raise ServiceRefused(f"node {node} aborted the upload: "
-                                       f"{ns.status_text(ns.ServiceCode.DUS, int(reply.value))}")
                 value = reply.value
+                if reply.data_type == DataType.LONG:
+                    assert isinstance(value, int)  # the codec decodes a LONG to an int
+                    raise ServiceRefused(f"node {node} aborted the upload: "
+                                         f"{ns.status_text(ns.ServiceCode.DUS, value)}")
                 received[reply.message_code] = bytes(value if isinstance(value, tuple)
                                                      else (value,))
         numbers = ns.data_numbers(count, self.config.transfer_first_number)
@@ -204,8 +288,8 @@ class NodeServices:
 
     def set_transmission_interval(self, key: str, interval_ms: int) -> None:
         """TIS for one data identifier (0 stops it; the node decides the valid range)."""
-        ident = self._data_ident(key)
-        node = self._expected_node(ident)
+        ident = self._link.data_identifier(key)
+        node = self._link.expected_node(ident)
         try:
             request = ns.tis_request(node, ident.can_id, int(interval_ms),
                                      self.config.service_channel)
@@ -215,8 +299,8 @@ class NodeServices:
         if status != ns.ServiceStatus.OK:
             raise ServiceRefused(f"node {node} refused TIS {key} (id {ident.can_id}) = "
                                f"{interval_ms} ms: {ns.status_text(ns.ServiceCode.TIS, status)}")
-        self._intervals_ms[key] = int(interval_ms)
-        self._observed_interval.pop(key, None)
+        self.intervals.accepted_ms[key] = int(interval_ms)
+        self.intervals.observed.pop(key, None)
 
     def request_intervals(self, intervals: dict[str, int]) -> dict[str, str]:
         """TIS for several identifiers; returns {key: reason} for those that were refused.
@@ -230,29 +314,12 @@ class NodeServices:
             try:
                 self.set_transmission_interval(key, interval_ms)
             except ServiceError as exc:
-                if not self.connected:
+                if not self._link.connected:
                     raise LinkError(str(exc)) from exc
                 refused[key] = str(exc)
-                self._intervals_ms.pop(key, None)
-        self.refused_intervals = refused
+                self.intervals.accepted_ms.pop(key, None)
+        self.intervals.refused = refused
         return refused
-
-    def interval_of(self, key: str) -> float | None:
-        """Seconds between two frames of `key`: the accepted TIS interval, else as observed."""
-        interval_ms = self._intervals_ms.get(key)
-        if interval_ms:
-            return interval_ms / 1000.0
-        return self._observed_interval.get(key)
-
-    def accepted_interval_ms(self, key: str) -> int | None:
-        """The interval (ms) a node accepted by TIS for `key`, None when never set."""
-        return self._intervals_ms.get(key)
-
-    def _data_ident(self, key: str) -> Identifier:
-        for ident in self._table.values():
-            if ident.key == key and ident.direction is Direction.DATA:
-                return ident
-        raise CommandError(f"{key!r} is not a data identifier of this driver")
 
     def set_node_id(self, new_node_id: int, node_id: int | None = None) -> None:
         """NIS: only when `allow_node_id_change` is set (changes the device's identity)."""

@@ -5,8 +5,9 @@ reconnect every `reconnect_period`, link state); this adapter maps the turret's 
 the configured joints, applies each axis' installation direction (`yaw_direction`,
 `pitch_direction`: +1 or -1 between the device's count and REP-103), reads joint samples
 from the client's broadcast cache and offers the turret's extras (actuator modes,
-periphery switches, node services (node_services.py), GNSS/heading/inclination/zoom
-readings (readings.py)) as methods the node calls through `controller.call`.
+periphery switches) as methods the node calls through `controller.call`, and two parts
+handed the client: `node_services` (node_services.py `TurretNodeServices`) and `readings`
+(readings.py `TurretReadings`: GNSS, heading, inclination, zoom).
 
 Capabilities (capabilities.py): preset slot 0 is the turret's own remember/restore
 position (`TurretPresets.handles(0)`; the core's Motion keeps every other slot in the YAML
@@ -73,7 +74,7 @@ class TurretSettings:
     geoid_height: float | None = None
 
 
-class TurretDevice(TurretReadings, TurretNodeServices, Device):
+class TurretDevice(Device):
     """One turret (and its cover, GNSS and zoom nodes) on one CAN interface."""
 
     #: positions arrive as NOD broadcasts: joint_states follow each broadcast cycle
@@ -106,7 +107,9 @@ class TurretDevice(TurretReadings, TurretNodeServices, Device):
         self._tis_refusal_logged = False
         #: best-effort connect requests the turret left unanswered (service -> why)
         self.unanswered: dict[str, str] = {}
-        self._published: dict[str, float] = {}  # reading -> arrival of the last one handed out
+        self.readings = TurretReadings(client)
+        self.node_services = TurretNodeServices(
+            client, lambda: settings.allow_data_download, lambda text: self.log.warning(text))
         self.presets = TurretPresets(self)
         self.capabilities.presets = self.presets
         self.capabilities.status = TurretStatus(self)
@@ -148,7 +151,7 @@ class TurretDevice(TurretReadings, TurretNodeServices, Device):
         self._cycle.clear()
         client.open()
         info = self._identify()
-        refused = client.request_intervals(self.interval_requests())
+        refused = client.services.request_intervals(self.interval_requests())
         if refused and not self._tis_refusal_logged:
             self._tis_refusal_logged = True
             self.log.warning(
@@ -170,7 +173,7 @@ class TurretDevice(TurretReadings, TurretNodeServices, Device):
         client = self.client
         self.unanswered.pop("IDS", None)
         try:
-            return client.identify()
+            return client.services.identify()
         except ServiceTimeout as exc:
             node = client.config.turret_node_id
             if client.node_silent():
@@ -358,7 +361,7 @@ class TurretDevice(TurretReadings, TurretNodeServices, Device):
         Taken from the interval the turret accepted by TIS or, when it refused, the one
         observed on the bus; until that is known, publish_rate.
         """
-        intervals = [self.client.interval_of(key) for key in sorted(POSITION_KEYS)]
+        intervals = [self.client.intervals.interval_of(key) for key in sorted(POSITION_KEYS)]
         if any(interval is None or interval <= 0 for interval in intervals):
             return publish_rate
         return min(publish_rate, 1.0 / max(intervals))  # type: ignore[type-var]
@@ -366,7 +369,7 @@ class TurretDevice(TurretReadings, TurretNodeServices, Device):
     def set_intervals(self, intervals: dict[str, int]) -> None:
         """TIS now for each entry (a node's refusal raises with its reply)."""
         for key, interval in intervals.items():
-            self.client.set_transmission_interval(key, interval)
+            self.client.services.set_transmission_interval(key, interval)
 
     # ------------------------------------------------------------------ extras
     def apply_actuator_mode(self, wait: float = MODE_REPORT_WAIT_S) -> str:

@@ -301,15 +301,16 @@ class CanaeroTurretNode(GimbalDriverNode):
         return callback
 
     def _on_device_command(self, request, response):
-        """See `TurretDevice.device_command`; NIS also moves this node to the new node-id."""
+        """See `TurretNodeServices.device_command`; NIS also moves this node to the new
+        node-id."""
         results: list[str] = []
 
         def action() -> str:
-            device = self.device
+            services = self.device.node_services
             message, out = self.controller.call(
-                lambda: device.device_command(request.command, list(request.arguments)))
+                lambda: services.device_command(request.command, list(request.arguments)))
             results.extend(out)
-            self.node_ids.update(device.node_ids())  # a reconfigure keeps a new node-id
+            self.node_ids.update(services.node_ids())  # a reconfigure keeps a new node-id
             return message
 
         response = self.serve_request(response, action)
@@ -325,7 +326,7 @@ class CanaeroTurretNode(GimbalDriverNode):
         device = self.device
         if device is None or not self.active or not self.connected:
             return
-        fix = device.new_fix() if self._fix_pub.get_subscription_count() else None
+        fix = device.readings.new_fix() if self._fix_pub.get_subscription_count() else None
         if fix is not None:
             msg = NavSatFix()
             msg.header.stamp = self._stamp(fix.stamp)
@@ -345,23 +346,23 @@ class CanaeroTurretNode(GimbalDriverNode):
         for key, publisher in (("rover_heading", self._heading_pub),
                                ("global_yaw", self._global_yaw_pub)):
             if publisher.get_subscription_count():
-                self._publish_heading(device.new_heading(key), publisher)
-        utc = device.new_utc() if self._time_pub.get_subscription_count() else None
+                self._publish_heading(device.readings.new_heading(key), publisher)
+        utc = device.readings.new_utc() if self._time_pub.get_subscription_count() else None
         if utc is not None:
             reference = TimeReference()
             reference.header.stamp = self._stamp(utc[0])
             reference.time_ref = self._stamp(utc[1])
             reference.source = "base_gnss"
             self._time_pub.publish(reference)
-        inclination = (device.inclination() if self._inclination_pub.get_subscription_count()
-                       else None)
+        inclination = (device.readings.inclination()
+                       if self._inclination_pub.get_subscription_count() else None)
         if inclination is not None:
             msg = Vector3Stamped()
             msg.header.stamp = self._stamp(inclination.stamp)
             msg.header.frame_id = self.inclination_frame_id
             msg.vector.x, msg.vector.y = inclination.roll, inclination.pitch
             self._inclination_pub.publish(msg)
-        zoom = device.zoom() if self._zoom_pub.get_subscription_count() else None
+        zoom = device.readings.zoom() if self._zoom_pub.get_subscription_count() else None
         if zoom is not None:
             self._zoom_pub.publish(Float64(data=zoom))
 

@@ -88,7 +88,7 @@ def identify(link: ProbeLink) -> Found:
     client = TurretClient(config, bus_factory=lambda _config: bus)
     try:
         client.open()
-        info = client.identify(node)
+        info = client.services.identify(node)
     except TurretError as exc:
         heard_text = (f'turret data from node(s) {sorted(heard)}' if heard else
                       f'{frames} frame(s), none a turret data frame')

@@ -1,6 +1,7 @@
 """The turret's sensor readings (no ROS): base GNSS fix, headings, inclination, UTC and
-zoom from the client's broadcast cache, each handed out once per arrival. A mixin of
-:class:`~.device.TurretDevice`, apart so the adapter's core reads in one sitting.
+zoom from the client's broadcast cache, each handed out once per arrival. A part of
+:class:`~.device.TurretDevice` (its ``readings`` attribute), handed the client, apart so
+the adapter's core reads in one sitting.
 """
 
 from __future__ import annotations
@@ -61,11 +62,11 @@ class Inclination:
 
 
 class TurretReadings:
-    """The sensor readings of :class:`~.device.TurretDevice` (a mixin: it provides
-    ``client`` and ``_published``)."""
+    """The sensor readings of :class:`~.device.TurretDevice`."""
 
-    client: TurretClient
-    _published: dict[str, float]
+    def __init__(self, client: TurretClient) -> None:
+        self.client = client
+        self._published: dict[str, float] = {}  # reading -> arrival of the last handed out
 
     def fresh(self, key: str) -> Sample | None:
         """The latest `key` sample if it is numeric and not stale, else None (the device's
@@ -92,10 +93,11 @@ class TurretReadings:
             return None
         altitude = client.latest("altitude_msl")
         accuracy = client.latest("position_accuracy")
+        lat, lon, alt = si(latitude), si(longitude), si(altitude)
+        assert lat is not None and lon is not None  # checked above
         return GnssFix(
-            stamp=latitude.stamp, latitude=si(latitude), longitude=si(longitude),
-            altitude=si(altitude) if si(altitude) is not None else math.nan,
-            accuracy=si(accuracy),
+            stamp=latitude.stamp, latitude=lat, longitude=lon,
+            altitude=alt if alt is not None else math.nan, accuracy=si(accuracy),
             fresh=not (client.is_stale("latitude") or client.is_stale("longitude")))
 
     def new_heading(self, key: str) -> Heading | None:
@@ -104,8 +106,10 @@ class TurretReadings:
         sample = self.fresh(key)
         if sample is None or not self._unseen(key, sample):
             return None
+        heading = si(sample)
+        assert heading is not None  # fresh() hands out numeric samples only
         accuracy = self.fresh("rover_heading_accuracy")
-        return Heading(sample.stamp, si(sample), si_magnitude(accuracy))
+        return Heading(sample.stamp, heading, si_magnitude(accuracy))
 
     def new_utc(self) -> tuple[float, float] | None:
         """(arrival, UTC seconds) of a fresh base-GNSS time not handed out before."""
@@ -113,13 +117,19 @@ class TurretReadings:
         if sample is None or self.client.is_stale("utc_time") \
                 or not self._unseen("utc_time", sample):
             return None
-        return sample.stamp, float(sample.value)
+        value = sample.value
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            return None  # the ICD's utc_time is a number; anything else is no time
+        return sample.stamp, float(value)
 
     def inclination(self) -> Inclination | None:
         pitch, roll = self.client.latest("global_pitch"), self.client.latest("global_roll")
         if pitch is None or roll is None or self.client.is_stale("global_pitch"):
             return None
-        return Inclination(pitch.stamp, si(roll), si(pitch))
+        roll_si, pitch_si = si(roll), si(pitch)
+        if roll_si is None or pitch_si is None:
+            return None
+        return Inclination(pitch.stamp, roll_si, pitch_si)
 
     def zoom(self) -> float | None:
         """Camera0 zoom position (counts) while fresh."""

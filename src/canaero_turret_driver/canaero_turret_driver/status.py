@@ -73,8 +73,8 @@ class TurretStatus(StatusReport):
         """
         values = []
         for key in sorted(self.device.interval_requests()):
-            accepted = client.accepted_interval_ms(key)
-            observed = client.interval_of(key)
+            accepted = client.intervals.accepted_interval_ms(key)
+            observed = client.intervals.interval_of(key)
             if accepted is not None:
                 values.append((key, f"{accepted} ms (accepted)"))
             elif observed is not None:
@@ -84,7 +84,7 @@ class TurretStatus(StatusReport):
         publish_rate = self.device.publish_rate()
         values.append(("expected_joint_states_hz",
                        f"{self.device.expected_rate(publish_rate):.2f}"))
-        refused = client.refused_intervals
+        refused = client.intervals.refused
         if refused:
             for key, reason in sorted(refused.items()):
                 values.append((f"refused_{key}", reason))

@@ -45,7 +45,7 @@ def _target(client, key):
 
 
 def test_identify_and_data_arrive(client):
-    info = client.identify()
+    info = client.services.identify()
     assert (info.hardware_revision, info.software_revision) == (2, 7)
     assert info.identifier_distribution == 0 and info.header_type == 0
     for key in ("yaw_position", "pitch_position", "cover_state", "latitude", "global_yaw",
@@ -54,7 +54,7 @@ def test_identify_and_data_arrive(client):
     assert not client.node_silent()
     assert si(client.latest("latitude")) == pytest.approx(48.1372)
     assert si(client.latest("altitude_msl")) == pytest.approx(519.0)
-    assert client.identify(node_id=6).hardware_revision == 2  # base GNSS node answers too
+    assert client.services.identify(node_id=6).hardware_revision == 2  # base GNSS node answers too
 
 
 def test_absolute_move_reaches_target(client, simulator):
@@ -133,15 +133,15 @@ def test_periphery_commands(client):
 
 
 def test_transmission_interval_service(client, simulator):
-    client.set_transmission_interval("case_temperature", 50)
+    client.services.set_transmission_interval("case_temperature", 50)
     assert simulator.state()["intervals_ms"]["case_temperature"] == 50
-    client.set_transmission_interval("cover_state", 0)
+    client.services.set_transmission_interval("cover_state", 0)
     assert simulator.state()["intervals_ms"]["cover_state"] == 0
     assert not client.is_stale("cover_state")  # disabled on purpose: not stale
     with pytest.raises(ServiceError, match="out of range"):
-        client.set_transmission_interval("yaw_position", 5)
+        client.services.set_transmission_interval("yaw_position", 5)
     with pytest.raises(CommandError):
-        client.set_transmission_interval("yaw_position_setpoint", 50)
+        client.services.set_transmission_interval("yaw_position_setpoint", 50)
 
 
 def test_zoom_position_is_a_long_count_on_id_1342(client):
@@ -155,12 +155,12 @@ def test_zoom_position_is_a_long_count_on_id_1342(client):
 def test_accepted_intervals_drive_staleness(client, simulator):
     # the simulator, like the turret, sends positions every 100 ms until asked otherwise
     assert simulator.state()["intervals_ms"]["yaw_position"] == 100
-    refused = client.request_intervals({"yaw_position": 20, "pitch_position": 20,
+    refused = client.services.request_intervals({"yaw_position": 20, "pitch_position": 20,
                                         "case_temperature": 2000})
-    assert refused == {} and client.refused_intervals == {}
+    assert refused == {} and client.intervals.refused == {}
     assert simulator.state()["intervals_ms"]["yaw_position"] == 20
-    assert client.interval_of("yaw_position") == pytest.approx(0.02)
-    assert client.accepted_interval_ms("case_temperature") == 2000
+    assert client.intervals.interval_of("yaw_position") == pytest.approx(0.02)
+    assert client.intervals.accepted_interval_ms("case_temperature") == 2000
     assert client.stale_timeout_for("case_temperature") == pytest.approx(6.0)
     assert client.stale_timeout_for("yaw_position") == client.config.stale_timeout
 
@@ -181,14 +181,14 @@ def refusing_client(channel_name):
 
 def test_refused_intervals_fall_back_to_the_observed_rate(refusing_client):
     client, sim = refusing_client
-    refused = client.request_intervals({"yaw_position": 20, "pitch_position": 20})
+    refused = client.services.request_intervals({"yaw_position": 20, "pitch_position": 20})
     assert set(refused) == {"yaw_position", "pitch_position"}
     assert "out of range" in refused["yaw_position"]
     assert sim.state()["intervals_ms"]["yaw_position"] == 100
-    assert client.accepted_interval_ms("yaw_position") is None
+    assert client.intervals.accepted_interval_ms("yaw_position") is None
     # learned from the frames: about 100 ms, so staleness allows 3 x that
-    assert wait_for(lambda: client.interval_of("yaw_position") is not None
-                    and client.interval_of("yaw_position") > 0.05)
+    assert wait_for(lambda: client.intervals.interval_of("yaw_position") is not None
+                    and client.intervals.interval_of("yaw_position") > 0.05)
     assert client.stale_timeout_for("yaw_position") > 0.15
     assert wait_for(lambda: not client.is_stale("yaw_position"))
 
@@ -196,9 +196,9 @@ def test_refused_intervals_fall_back_to_the_observed_rate(refusing_client):
 def test_node_id_and_flash_services_need_opt_in(client, simulator):
     before = simulator.state()["commands_received"]
     with pytest.raises(NotAllowedError):
-        client.set_node_id(9)
+        client.services.set_node_id(9)
     with pytest.raises(NotAllowedError):
-        client.store_configuration(0x5A)
+        client.services.store_configuration(0x5A)
     assert simulator.state()["node_ids"]["turret"] == 1
     assert simulator.state()["commands_received"] == before
 
@@ -210,15 +210,15 @@ def test_node_id_and_flash_services_when_enabled(simulator, channel_name):
     turret.open()
     try:
         with pytest.raises(ServiceError, match="invalid security code"):
-            turret.store_configuration(0x11)
-        turret.store_configuration(0x5A)
+            turret.services.store_configuration(0x11)
+        turret.services.store_configuration(0x5A)
         assert simulator.state()["stored_configuration"]
         with pytest.raises(CommandError):
-            turret.set_node_id(200)
-        turret.set_node_id(9)
+            turret.services.set_node_id(200)
+        turret.services.set_node_id(9)
         assert simulator.state()["node_ids"]["turret"] == 9
         assert turret.config.turret_node_id == 9
-        assert turret.identify().software_revision == 7
+        assert turret.services.identify().software_revision == 7
         assert wait_for(lambda: turret.latest("yaw_position") is not None
                         and turret.latest("yaw_position").node_id == 9)
     finally:
@@ -246,10 +246,10 @@ def test_silence_goes_stale_and_recovers(client, simulator):
     assert wait_for(lambda: client.node_silent() and client.is_stale("yaw_position"))
     assert not client.node_silent(2)  # cover keeps talking
     with pytest.raises(ServiceError, match="no IDS response"):
-        client.identify()
+        client.services.identify()
     simulator.set_silent("turret", 0)
     assert wait_for(lambda: not client.node_silent() and not client.is_stale("yaw_position"))
-    assert client.identify().hardware_revision == 2
+    assert client.services.identify().hardware_revision == 2
 
 
 def test_lost_repeated_frames_and_malformed_frames_are_counted(client, simulator):
@@ -331,7 +331,7 @@ def test_interface_errors_drop_the_bus_and_open_reopens_it(simulator, channel_na
         assert turret.counters.reconnects == 2
         assert turret.counters.bus_errors >= 1
         assert wait_for(lambda: turret.latest("yaw_position") is not None)
-        assert turret.identify().software_revision == 7
+        assert turret.services.identify().software_revision == 7
         assert turret.connected
     finally:
         turret.close()
@@ -357,30 +357,30 @@ def test_staleness_follows_each_identifiers_own_rate():
     turret = TurretClient(ClientConfig(stale_timeout=0.5))
     assert turret.stale_timeout_for("case_temperature") == 0.5
     for gap in (1.0, 1.0, 1.0):
-        turret._learn_interval("case_temperature", gap)
+        turret.intervals.learn("case_temperature", gap)
     assert turret.stale_timeout_for("case_temperature") == pytest.approx(3.0)
-    turret._learn_interval("case_temperature", 60.0)  # an outage does not inflate it
+    turret.intervals.learn("case_temperature", 60.0)  # an outage does not inflate it
     assert turret.stale_timeout_for("case_temperature") == pytest.approx(3.0)
-    turret._learn_interval("yaw_position", 0.02)
+    turret.intervals.learn("yaw_position", 0.02)
     assert turret.stale_timeout_for("yaw_position") == 0.5
 
 
 def test_data_download_and_upload(client, simulator):
-    text = client.upload(16, 26)
+    text = client.services.upload(16, 26)
     assert text == b"CANAERO-TURRET-SIM hw2 sw7"
     block = bytes(range(1, 42))  # 41 bytes: 11 data messages, the last with one byte
-    assert client.download(1, block) == sum(block)
+    assert client.services.download(1, block) == sum(block)
     assert bytes(simulator.memories[1].data[:41]) == block
-    assert client.upload(1, 41) == block
+    assert client.services.upload(1, 41) == block
     with pytest.raises(ServiceError, match="INVALID"):
-        client.download(16, b"read-only")
+        client.services.download(16, b"read-only")
     with pytest.raises(ServiceError, match="ABORT"):
-        client.upload(99, 4)
+        client.services.upload(99, 4)
     with pytest.raises(CommandError):
-        client.download(1, b"")
+        client.services.download(1, b"")
     with pytest.raises(CommandError):
-        client.upload(1, 2000)
-    assert client.identify().software_revision == 7  # the service channel is free again
+        client.services.upload(1, 2000)
+    assert client.services.identify().software_revision == 7  # the service channel is free again
 
 
 @pytest.fixture
@@ -416,9 +416,9 @@ def test_transfers_in_either_numbering(numbered_rig):
     client, _, spy = numbered_rig
     first = client.config.transfer_first_number
     block = bytes(range(1, 10))  # 9 bytes: 3 data messages
-    assert client.download(1, block) == sum(block)
+    assert client.services.download(1, block) == sum(block)
     assert _transfer_numbers(spy, 128) == [first, first + 1, first + 2]
-    assert client.upload(1, 9) == block
+    assert client.services.upload(1, 9) == block
     assert _transfer_numbers(spy, 129) == [first, first + 1, first + 2]
 
 
@@ -427,10 +427,10 @@ def test_transfers_in_either_numbering(numbered_rig):
 def test_transfer_numbering_mismatch_is_named(numbered_rig, channel_name):
     client, sim, _ = numbered_rig
     with pytest.raises(ServiceError, match="transfer_first_number"):
-        client.download(1, b"abcdefgh")
+        client.services.download(1, b"abcdefgh")
     assert bytes(sim.memories[1].data[:8]) == bytes(8)  # nothing was written
     with pytest.raises(ServiceError, match="transfer_first_number"):
-        client.upload(16, 8)
+        client.services.upload(16, 8)
 
 
 def test_device_restart_of_message_codes_is_followed(client, simulator):

@@ -72,7 +72,7 @@ def remote_client(sim_process):
 
 def test_identify_move_and_data_across_processes(sim_process, remote_client):
     _, control = sim_process
-    assert remote_client.identify().software_revision == 7
+    assert remote_client.services.identify().software_revision == 7
     assert wait_for(lambda: remote_client.latest("yaw_position") is not None)
     remote_client.move_to("yaw", math.degrees(0.35))
     assert wait_for(lambda: abs(si(remote_client.latest("yaw_position")) - 0.35) < 1e-3)
@@ -86,7 +86,7 @@ def test_silence_and_recovery_across_processes(sim_process, remote_client):
     assert control.command("node_silence turret") == "ok"
     assert wait_for(lambda: remote_client.node_silent())
     with pytest.raises(ServiceError):
-        remote_client.identify()
+        remote_client.services.identify()
     assert control.command("node_silence all off") == "ok"
     assert wait_for(lambda: not remote_client.node_silent()
                     and not remote_client.is_stale("yaw_position"))
@@ -148,7 +148,7 @@ def test_link_drop_is_reopened_by_the_supervisor(sim_process, remote_client, sup
         assert wait_for(lambda: not remote_client.is_stale("yaw_position"), timeout=10.0)
         assert remote_client.counters.reconnects >= 1
         assert controller.reconnects >= 1
-        assert remote_client.identify().hardware_revision == 2
+        assert remote_client.services.identify().hardware_revision == 2
 
 
 @pytest.fixture
@@ -173,7 +173,7 @@ def test_socketcand_bridge_is_a_shared_bus(socketcand_sim, supervised):
     first, second = _socketcand_client(endpoint), _socketcand_client(endpoint)
     try:
         with supervised(first) as controller:
-            assert first.identify().software_revision == 7
+            assert first.services.identify().software_revision == 7
             first.move_to("pitch", math.degrees(0.3))
             assert wait_for(lambda: second.latest("pitch_position") is not None
                             and abs(si(second.latest("pitch_position")) - 0.3) < 1e-3)
@@ -187,7 +187,7 @@ def test_socketcand_bridge_is_a_shared_bus(socketcand_sim, supervised):
             assert wait_for(lambda: False in links)
             assert wait_for(lambda: _reconnected(controller, links), timeout=30.0)
             assert wait_for(lambda: not first.is_stale("yaw_position"), timeout=10.0)
-            assert first.identify().hardware_revision == 2
+            assert first.services.identify().hardware_revision == 2
     finally:
         first.close()
         second.close()

@@ -262,16 +262,17 @@ def test_extras_modes_switches_and_node_services(rig):
     assert call(lambda: rig.device.switch("set_cover", True)) == "cover opening"
     assert call(lambda: rig.device.switch("set_fan", True)) == "fan on"
     wait_for(lambda: rig.simulator.state()["cover_state"] == 1, 30, "the cover to open")
-    message, results = call(lambda: rig.device.device_command("identify", []))
+    message, results = call(lambda: rig.device.node_services.device_command("identify", []))
     assert message == "IDS answered" and "software_revision=7" in results
     with pytest.raises(DeviceRefused, match="allow_node_id_change"):
-        call(lambda: rig.device.device_command("set_node_id", ["9"]))
+        call(lambda: rig.device.node_services.device_command("set_node_id", ["9"]))
     with pytest.raises(DeviceRefused, match="allow_data_download"):
-        call(lambda: rig.device.device_command("download", ["1", "0102"]))
+        call(lambda: rig.device.node_services.device_command("download", ["1", "0102"]))
     with pytest.raises(DeviceRefused, match="out of range"):  # the node's TIS refusal
-        call(lambda: rig.device.device_command("set_interval", ["case_temperature", "5"]))
+        call(lambda: rig.device.node_services.device_command("set_interval",
+                                                             ["case_temperature", "5"]))
     with pytest.raises(InvalidRequest, match="unknown command"):
-        call(lambda: rig.device.device_command("format_disk", []))
+        call(lambda: rig.device.node_services.device_command("format_disk", []))
     assert rig.simulator.state()["node_ids"]["turret"] == 1
 
 
@@ -302,24 +303,25 @@ def test_configured_actuator_mode_goes_only_to_an_axis_not_reporting_it(tmp_path
 
 def test_readings_are_handed_out_once_per_frame(rig):
     fixes = []
-    wait_for(lambda: fixes.append(rig.device.new_fix()) or fixes[-1] is not None, 30, "a fix")
+    readings = rig.device.readings
+    wait_for(lambda: fixes.append(readings.new_fix()) or fixes[-1] is not None, 30, "a fix")
     assert fixes[-1].latitude == pytest.approx(48.1372) and fixes[-1].fresh
-    assert rig.device.new_fix() is None  # same frame: not again
-    wait_for(lambda: rig.device.new_heading("rover_heading") is not None, 30, "a heading")
+    assert rig.device.readings.new_fix() is None  # same frame: not again
+    wait_for(lambda: rig.device.readings.new_heading("rover_heading") is not None, 30, "a heading")
     heading = None
 
     def next_heading():
         nonlocal heading
-        heading = rig.device.new_heading("global_yaw")
+        heading = rig.device.readings.new_heading("global_yaw")
         return heading
 
     wait_for(lambda: next_heading() is not None and heading.accuracy is not None, 30,
              "a global yaw with its accuracy")
     assert heading.heading == pytest.approx(math.radians(123.45678), abs=1e-6)
     assert heading.accuracy == pytest.approx(math.radians(0.25))
-    assert rig.device.new_heading("global_yaw") is None  # same frame: not again
-    assert rig.device.zoom() == 2500.0
-    inclination = rig.device.inclination()
+    assert rig.device.readings.new_heading("global_yaw") is None  # same frame: not again
+    assert rig.device.readings.zoom() == 2500.0
+    inclination = rig.device.readings.inclination()
     assert inclination.roll == pytest.approx(math.radians(-0.8), abs=1e-4)
 
 
@@ -356,7 +358,7 @@ def test_bus_errors_drop_the_link_and_the_controller_reopens_it(channel_name, si
         assert any("bus-off" in why for up, why in links if not up)
         assert any("adapter unplugged" in why for up, why in links if not up)
         wait_for(lambda: not client.is_stale("yaw_position"), 30, "data after reopening")
-        assert client.identify().software_revision == 7
+        assert client.services.identify().software_revision == 7
 
 
 def test_an_unanswered_ids_never_keeps_the_turret_from_connecting(tmp_path, controller_config,
