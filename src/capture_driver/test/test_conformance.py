@@ -14,13 +14,6 @@ from gimbal_driver_common.testing.conformance import DriverConformance
 from gimbal_driver_common.testing.silent_request_conformance import SilentRequest
 from gimbal_msgs.srv import DeviceCommand
 
-#: what the Capture client lacks for the silent-request figures (measured: joint_states at
-#: 0-38 Hz of 50, ~/stop and jogs at the simulator only as the silent request's wait ended)
-ONE_LINK_LOCK = ('every thread of the node (joint poll, sensors, status, services, '
-                 'commands) takes the one link lock for a whole request/reply exchange, so '
-                 'a silent or late request holds the link for its whole wait; needs one '
-                 'owner thread per link')
-
 
 class TestCaptureConformance(DriverConformance):
     __test__ = True
@@ -47,12 +40,4 @@ class TestCaptureConformance(DriverConformance):
                                lambda: DeviceCommand.Request(command='COM_GetFw'))),
     )
     required_request = ('COM_Connect', 'COM_Connect')
-    silent_request_gaps = {
-        ('cost', '*'): 'joint_states fall below 90 % of their rate: the joint poll waits '
-                       'behind the silent request; ' + ONE_LINK_LOCK,
-        ('stop', '*'): '~/stop goes next after the exchange in flight (LinkLock.urgent), not '
-                       'while a read waits for its answer (data replies carry their opcode, '
-                       'so it could); ' + ONE_LINK_LOCK,
-        ('jog', '*'): 'a jog waits behind the silent request; ' + ONE_LINK_LOCK,
-    }
     handshake_request = 'COM_Connect'
