@@ -231,15 +231,25 @@ class Session:
     def expect(self, match: Match) -> Iterator[Pending[Any]]:
         """Register a pending request for the block: what ``match`` accepts from now on
         is queued for it (register before writing, so no answer is missed)."""
+        pending = self.register(match)
+        try:
+            yield pending
+        finally:
+            self.unregister(pending)
+
+    def register(self, match: Match) -> Pending[Any]:
+        """A pending request that outlives one call (a write whose answers are taken
+        later): what ``match`` accepts is queued for it until :meth:`unregister`."""
         pending: Pending[Any] = Pending(match)
         with self._lock:
             if self._stop.is_set():
                 raise self._down()
             self._pending.append(pending)
-        try:
-            yield pending
-        finally:
-            with self._lock:
+        return pending
+
+    def unregister(self, pending: Pending[Any]) -> None:
+        with self._lock:
+            if pending in self._pending:
                 self._pending.remove(pending)
 
     def request(self, data: Any, match: Match, timeout: float, what: str = 'answer') -> Any:

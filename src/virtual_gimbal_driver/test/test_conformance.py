@@ -12,12 +12,6 @@ from std_srvs.srv import Trigger
 from gimbal_driver_common.testing.conformance import DriverConformance
 from gimbal_driver_common.testing.silent_request_conformance import SilentRequest
 
-#: what the virtual gimbal's client lacks for the silent-request figures
-ONE_LINK_LOCK = ('the client holds the one link lock for the whole wait of a request (reply '
-                 'lines carry no request name, so nothing else may go out meanwhile); needs '
-                 'one owner thread per link that puts a stop or a jog ahead of a waiting '
-                 'request')
-
 
 class TestVirtualGimbalConformance(DriverConformance):
     __test__ = True
@@ -36,8 +30,3 @@ class TestVirtualGimbalConformance(DriverConformance):
     )
     required_request = ('GET', 'no reply to GET')
     handshake_request = 'ID'
-    silent_request_gaps = {
-        ('cost', 'RESET'): 'joint_states stop while RESET waits: ' + ONE_LINK_LOCK,
-        ('stop', 'RESET'): ONE_LINK_LOCK,
-        ('jog', 'RESET'): ONE_LINK_LOCK,
-    }

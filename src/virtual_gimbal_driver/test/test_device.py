@@ -15,13 +15,12 @@ import threading
 import pytest
 
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
-from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout
+from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, LinkError
 from gimbal_driver_common.joint_command import JointLimits
-from gimbal_driver_common.link_lock import LinkLock
 from gimbal_driver_common.testing import wait_for
 from virtual_gimbal_driver.client import VirtualGimbalClient
 from virtual_gimbal_driver.device import VirtualGimbalDevice
-from virtual_gimbal_driver.protocol import move_request, parse_position
+from virtual_gimbal_driver.protocol import move_request, parse_position, split_tag, tagged
 from virtual_gimbal_driver.sim import make_server
 
 LOG = logging.getLogger('test_device')
@@ -119,40 +118,52 @@ def test_a_dropped_link_is_reported_and_reopened(rig):
              'a command after the reconnect')
 
 
-def test_the_link_lock_settles_posted_requests_before_the_next_request():
-    """post() writes and returns; the link lock's ``before_use`` (the core's command path
-    in a node) reads the posted replies before the next request writes, and settle()
-    raises the device's ERR to one of them."""
+def test_posted_replies_are_taken_by_tag_with_requests_in_between():
+    """post() writes and returns; requests go on meanwhile and each gets the reply with its
+    own tag; settle() then takes the posted replies and raises the device's ERR to one of
+    them."""
     server, sim = make_server()
-    lock = LinkLock()
-    client = VirtualGimbalClient('127.0.0.1', server.port, link_lock=lock)
-    posts: list = []
-    outcomes: list[str] = []
-
-    def settle_posted() -> None:  # what the command path's settle does, in short
-        while posts:
-            try:
-                client.settle(posts.pop())
-                outcomes.append('ok')
-            except DeviceRefused as exc:
-                outcomes.append(str(exc))
-
-    lock.before_use = settle_posted
+    client = VirtualGimbalClient('127.0.0.1', server.port)
     try:
         client.open()
-        assert lock.try_hold()  # as the joint_command callback does: no settle
-        try:
-            posts.append(client.post([move_request('pan', 0.2, 0.5), 'BOGUS']))
-        finally:
-            lock.release()
-        assert outcomes == []
+        posted = client.post([move_request('pan', 0.2, 0.5), 'BOGUS'])
         assert parse_position(client.request('GET')).positions['pan'] < 0.2  # its own reply
-        assert len(outcomes) == 1 and 'unknown command BOGUS' in outcomes[0]
+        with pytest.raises(DeviceRefused, match='unknown command BOGUS'):
+            client.settle(posted)
         assert sim.state()['axes']['pan']['target'] == pytest.approx(0.2)
-        posts.append(client.post([move_request('tilt', -0.1, 0.5)]))
+        posted = client.post([move_request('tilt', -0.1, 0.5)])
         client.request('GET')
-        assert outcomes[1:] == ['ok']
+        client.settle(posted)
         assert sim.state()['axes']['tilt']['target'] == pytest.approx(-0.1)
+    finally:
+        client.close()
+        server.stop()
+
+
+def test_a_reply_comes_to_its_request_while_a_slow_one_waits():
+    """Tags let replies come out of order: with HOME's reply held back (the simulator's
+    ``delay``), a GET and a STOP sent meanwhile are answered at once."""
+    server, sim = make_server()
+    client = VirtualGimbalClient('127.0.0.1', server.port, timeout=10.0)
+    sim.request_faults.delay('HOME', 5.0)
+    homed: list[str] = []
+    try:
+        client.open()
+        client.request(move_request('pan', 0.3, 0.0))
+        wait_for(lambda: sim.state()['axes']['pan']['position'] == pytest.approx(0.3), 5.0,
+                 'pan at 0.3')
+        def home() -> None:
+            with contextlib.suppress(LinkError):  # the client closes before HOME's reply
+                homed.append(client.request('HOME'))
+
+        homing = threading.Thread(target=home, daemon=True)
+        homing.start()
+        wait_for(lambda: sim.state()['axes']['pan']['position'] < 0.29, 5.0,
+                 'HOME acted on (its reply held back)')
+        assert client.request('STOP') == 'OK'
+        assert client.request('GET').startswith('POS')
+        assert homed == []  # HOME's reply is still held
+        sim.request_faults.clear()
     finally:
         client.close()
         server.stop()
@@ -211,19 +222,23 @@ def test_bytes_no_request_asked_for_are_discarded_with_a_warning(caplog) -> None
     def answer() -> None:
         with contextlib.suppress(OSError):
             for line in device.makefile('rb'):
-                device.sendall(b'ID model serial 1.0\n' if line.startswith(b'ID') else b'OK\n')
+                text, tag = split_tag(line.decode())
+                reply = 'ID model serial 1.0' if text.startswith('ID') else 'OK'
+                device.sendall((tagged(reply, tag) + '\n').encode())
 
     threading.Thread(target=answer, daemon=True).start()
     try:
         assert client.request('ID') == 'ID model serial 1.0'
-        device.sendall(b'NOISE\nOK\n')  # on loopback: in the client's buffer on return
         with caplog.at_level(logging.WARNING, logger='virtual_gimbal_driver.client'):
+            device.sendall(b'NOISE\nOK #999\n')  # no request has these tags
             assert client.request('ID') == 'ID model serial 1.0'
             assert client.request('STOP') == 'OK'
+            wait_for(lambda: len([r for r in caplog.records
+                                  if r.name == 'virtual_gimbal_driver.client']) == 2, 5.0,
+                     'both lines discarded')
         records = [r for r in caplog.records if r.name == 'virtual_gimbal_driver.client']
-        assert len(records) == 1 and records[0].levelno == logging.WARNING
-        assert "discarded 9 bytes" in records[0].getMessage()
-        assert "NOISE" in records[0].getMessage()
+        assert all(r.levelno == logging.WARNING for r in records)
+        assert "NOISE" in records[0].getMessage() and "OK #999" in records[1].getMessage()
     finally:
         client.close()
         device.close()

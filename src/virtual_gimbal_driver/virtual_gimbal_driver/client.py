@@ -1,5 +1,13 @@
-"""The virtual gimbal's session: request lines answered one reply line each, in order
-(no ROS).
+"""The virtual gimbal's session: tagged request lines, each answered by the reply line with
+its tag, on one reader thread (no ROS).
+
+The link has one owner of its input, the reader thread ``vgimbal-reader`` (the core's
+session base, :class:`gimbal_driver_common.session.Session`, as every driver has): it
+splits what arrives into lines and gives each reply to the request whose tag it carries.
+Callers write their request and wait for their own answer, so requests overlap: a slow or
+silent one (a HOME the device takes long to acknowledge) holds up nothing else, and a
+stop goes out at once. :meth:`VirtualGimbalClient.post` writes requests whose replies
+:meth:`VirtualGimbalClient.settle` takes later (the core's command path).
 
 It logs through :mod:`logging` (``virtual_gimbal_driver.client``), as every driver's
 library code does; the node's log bridge (``gimbal_driver_common.ros.log_bridge``) takes
@@ -8,98 +16,171 @@ the lines to the node's ROS logger and /rosout.
 
 from __future__ import annotations
 
+import itertools
 import logging
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
-from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, LinkError
-from gimbal_driver_common.link_lock import LinkLock
+from gimbal_driver_common.errors import DeviceRefused, LinkError
+from gimbal_driver_common.session import Pending, Protocol, Session, StreamLink
 from gimbal_driver_common.transport import TcpStream
 
-from .protocol import Refused, check_reply, verb
+from .protocol import MAX_TAG, Refused, check_reply, split_tag, tagged, verb
 
 LOG = logging.getLogger(__name__)
-#: how many discarded bytes a warning shows
+#: how many characters of a discarded line a warning shows
 SHOWN_BYTES = 40
+#: a line longer than this without a newline is noise: dropped
+MAX_LINE = 4096
 
 
-class VirtualGimbalClient:
-    """Request/reply client (thread-safe). Every exchange holds the device's link lock
-    (``link_lock``: the adapter passes ``Device.link_lock``; alone, the client makes its
-    own). :meth:`post` writes requests whose replies :meth:`settle` reads later; the
-    core's link lock runs that before the link's next exchange (replies come in the
-    order of the requests)."""
+@dataclass(frozen=True)
+class Reply:
+    """One reply line and the tag it carries."""
 
-    def __init__(self, host: str, port: int, timeout: float = 1.0,
-                 link_lock: LinkLock | None = None) -> None:
+    text: str
+    tag: int
+
+
+def answers(tag: int) -> Callable[[Reply], bool]:
+    """The match of the request with ``tag``: its reply names it."""
+    return lambda reply: reply.tag == tag
+
+
+@dataclass
+class Posted:
+    """Requests written by :meth:`VirtualGimbalClient.post`, waiting for their replies."""
+
+    lines: list[str]
+    tags: list[int]
+    pendings: list[Pending[Reply]]
+    session: Session
+    written_at: float
+
+
+class VirtualGimbalClient(Protocol):
+    """Request/reply client (thread-safe): every request carries a tag, and the reader
+    gives each reply to the request it names."""
+
+    def __init__(self, host: str, port: int, timeout: float = 1.0) -> None:
         self.stream = TcpStream(host, port)
         self.timeout = timeout
-        self._lock = link_lock if link_lock is not None else LinkLock()
+        self._session: Session | None = None
         self._buffer = b''
-        self._opened = 0  # connections made: a post outlives none
+        self._tags = itertools.cycle(range(1, MAX_TAG + 1))
+        self._lock = threading.Lock()
+        #: tags written and not answered yet (a reply naming another is discarded)
+        self._waiting: set[int] = set()
 
     def open(self) -> None:
+        self.close()
+        self.stream.open()
+        self._buffer = b''
         with self._lock:
-            self.stream.open()
-            self._buffer = b''
-            self._opened += 1
+            self._waiting.clear()
+        self._session = Session(StreamLink(self.stream), self, 'vgimbal',
+                                read_timeout=0.05).start()
 
     def close(self) -> None:
-        self.stream.close()
+        session, self._session = self._session, None
+        if session is not None:
+            session.close()  # the reader closes the stream as it ends
+        else:
+            self.stream.close()
 
     def request(self, line: str) -> str:
         """Send ``line``; the reply line, DeviceRefused for ERR, DeviceTimeout for none."""
-        with self._lock:
-            self._discard_unsolicited()
-            self.stream.write(line.encode() + b'\n')
-            reply = self._reply_to(line)
+        session = self._live()
+        tag = self._tag()
         try:
-            return check_reply(line, reply)
-        except Refused as exc:
-            raise DeviceRefused(str(exc)) from None
+            with session.expect(answers(tag)) as pending:
+                session.write((tagged(line, tag) + '\n').encode())
+                reply = pending.next(self.timeout, f'reply to {verb(line)}')
+        finally:
+            self._done([tag])
+        return self._checked(line, reply)
 
-    def post(self, lines: Sequence[str]) -> tuple[int, list[str]]:
-        """Write ``lines`` in one write without waiting for their replies (the caller, the
-        core's command path, holds the link lock); returns what :meth:`settle` takes."""
-        with self._lock:  # reentrant: the caller's hold
-            self._discard_unsolicited()
-            self.stream.write(b''.join(line.encode() + b'\n' for line in lines))
-            return self._opened, list(lines)
+    def post(self, lines: Sequence[str]) -> Posted:
+        """Write ``lines`` in one write without waiting for their replies; returns what
+        :meth:`settle` takes."""
+        session = self._live()
+        tags = [self._tag() for _ in lines]
+        pendings = [session.register(answers(tag)) for tag in tags]
+        try:
+            session.write(b''.join((tagged(line, tag) + '\n').encode()
+                                   for line, tag in zip(lines, tags, strict=True)))
+        except BaseException:
+            self._forget(session, pendings, tags)
+            raise
+        return Posted(list(lines), tags, pendings, session, time.monotonic())
 
-    def settle(self, posted: tuple[int, list[str]]) -> None:
-        """Read the replies of a :meth:`post`, in order; raise the first ERR among them
+    def settle(self, posted: Posted) -> None:
+        """Take the replies of a :meth:`post`; raise the first ERR among them
         (DeviceRefused), or the timeout or lost link that cut them off."""
-        opened, lines = posted
-        with self._lock:
-            if opened != self._opened:
-                raise LinkError(f'link lost before the reply to {verb(lines[0])}')
-            refused: DeviceRefused | None = None
-            for line in lines:
+        if posted.session is not self._session:
+            raise LinkError(f'link lost before the reply to {verb(posted.lines[0])}')
+        refused: DeviceRefused | None = None
+        try:
+            for line, pending in zip(posted.lines, posted.pendings, strict=True):
+                remaining = posted.written_at + self.timeout - time.monotonic()
+                reply = pending.next(remaining, f'reply to {verb(line)}')
                 try:
-                    check_reply(line, self._reply_to(line))
-                except Refused as exc:
-                    refused = refused or DeviceRefused(str(exc))
+                    self._checked(line, reply)
+                except DeviceRefused as exc:
+                    refused = refused or exc
+        finally:
+            self._forget(posted.session, posted.pendings, posted.tags)
         if refused is not None:
             raise refused
 
-    def _reply_to(self, line: str) -> str:
-        """The next reply line (caller holds the lock); DeviceTimeout when none comes."""
-        deadline = time.monotonic() + self.timeout
-        while b'\n' not in self._buffer:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise DeviceTimeout(f'no reply to {verb(line)} within {self.timeout} s')
-            self._buffer += self.stream.read(4096, remaining)
-        reply, self._buffer = self._buffer.split(b'\n', 1)
-        return reply.decode('ascii', 'replace')
+    # ------------------------------------------------- the reader (Protocol)
+    def data_received(self, data: bytes) -> None:
+        self._buffer += data
+        while b'\n' in self._buffer:
+            raw, self._buffer = self._buffer.split(b'\n', 1)
+            text, tag = split_tag(raw.decode('ascii', 'replace'))
+            with self._lock:
+                asked = tag is not None and tag in self._waiting
+            if not asked:
+                LOG.warning('discarded a line that no request asked for (noise, or a reply '
+                            'after its timeout): %r', raw[:SHOWN_BYTES])
+                continue
+            session = self._session
+            if session is not None and tag is not None:
+                session.dispatch(Reply(text, tag))
+        if len(self._buffer) > MAX_LINE:
+            LOG.warning('discarded %d bytes without a newline', len(self._buffer))
+            self._buffer = b''
 
-    def _discard_unsolicited(self) -> None:
-        """Drop what arrived while no request was out (caller holds the lock, every posted
-        reply settled): noise, or a reply that came after its request timed out, which the
-        next request would otherwise take for its own reply."""
-        stale, self._buffer = self._buffer, b''
-        while data := self.stream.read(4096, 0.0):
-            stale += data
-        if stale:
-            LOG.warning('discarded %d bytes that no request asked for (noise, or a reply '
-                        'after its timeout): %r', len(stale), stale[:SHOWN_BYTES])
+    # ------------------------------------------------------------- helpers
+    def _live(self) -> Session:
+        session = self._session
+        if session is None or not session.alive:
+            raise LinkError(f'{self.stream.description}: not connected'
+                            + (f' ({session.error})' if session and session.error else ''))
+        return session
+
+    def _tag(self) -> int:
+        with self._lock:
+            tag = next(self._tags)
+            self._waiting.add(tag)
+            return tag
+
+    def _done(self, tags: Sequence[int]) -> None:
+        with self._lock:
+            self._waiting.difference_update(tags)
+
+    def _forget(self, session: Session, pendings: list[Pending[Reply]],
+                tags: Sequence[int]) -> None:
+        for pending in pendings:
+            session.unregister(pending)
+        self._done(tags)
+
+    @staticmethod
+    def _checked(line: str, reply: Reply) -> str:
+        try:
+            return check_reply(line, reply.text)
+        except Refused as exc:
+            raise DeviceRefused(str(exc)) from None

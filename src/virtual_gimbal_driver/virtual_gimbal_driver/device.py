@@ -45,8 +45,7 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
     def __init__(self, host: str, port: int, home_timeout: float = 60.0,
                  request_timeout: float = 1.0) -> None:
         super().__init__()
-        self.client = VirtualGimbalClient(host, port, timeout=request_timeout,
-                                          link_lock=self.link_lock)
+        self.client = VirtualGimbalClient(host, port, timeout=request_timeout)
         #: best-effort connect requests the device left unanswered (verb -> why)
         self.unanswered: dict[str, str] = {}
         self.home_timeout = home_timeout
@@ -91,9 +90,9 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
             self.client.request(move_request(joint, position, speed))
 
     def post(self, moves: Moves, jogs: dict[str, float]) -> PostedWrite | None:
-        """A stream move's MOVE lines written at once, one OK each, read by :meth:`settle`
-        before the link's next exchange: the joint_command callback never waits for a
-        reply."""
+        """A stream move's MOVE lines written at once, one OK each, taken by :meth:`settle`
+        (the command thread, or the next send that holds the link lock): the joint_command
+        callback never waits for a reply."""
         lines = [move_request(joint, position, speed)
                  for joint, (position, speed) in moves.items()]
         if jogs or not lines:

@@ -20,7 +20,7 @@ from gimbal_driver_common.sim_motion import AxisMotion
 from gimbal_driver_common.sim_requests import LateReplies, RequestFaults
 from gimbal_driver_common.sim_server import TcpSimServer
 
-from .protocol import FAULT_NAMES, JOINTS, format_position, verb
+from .protocol import FAULT_NAMES, JOINTS, format_position, split_tag, tagged, verb
 
 DEFAULT_SPEED = 0.8  # rad/s
 #: rad/s^2, accelerating and braking: DEFAULT_SPEED in 0.1 s, so moves keep nearly the
@@ -160,11 +160,11 @@ class _LineSession:
         out = []
         while b'\n' in self.buffer:
             line, self.buffer = self.buffer.split(b'\n', 1)
-            text = line.decode('ascii', 'replace')
+            text, tag = split_tag(line.decode('ascii', 'replace'))
             reply = self.device.handle(text)
             if reply is None:
                 continue
-            encoded = (reply + '\n').encode()
+            encoded = ((reply if tag is None else tagged(reply, tag)) + '\n').encode()
             seconds = self.device.request_faults.delay_of(verb(text))
             if seconds:
                 self.late.hold([encoded], seconds)

@@ -11,6 +11,12 @@ One request line -> one reply line (ASCII, ``\\n``-terminated, SI units)::
     RESET                  -> OK          (clears fault bits)
     anything else          -> ERR <reason>
 
+A request may end with a tag, `` #<n>`` (n = 1..65535, chosen by the host); its reply then
+ends with the same tag. The device answers a tagged request whenever it is done with it,
+so replies may come out of order: a slow request does not hold up the others, and a reply
+that comes after its request gave up names itself. An untagged request gets an untagged
+reply, in order.
+
 An invented device (no vendor document): it exists so the shared base node is tested
 through a real transport without a vendor protocol, and so a new driver has a short,
 complete example of the layers (protocol, client, device, node, simulator).
@@ -62,6 +68,25 @@ def verb(line: str) -> str:
     """The request verb of a line, upper case ('' for an empty line)."""
     words = line.split()
     return words[0].upper() if words else ''
+
+
+#: the largest request tag (then the host starts at 1 again)
+MAX_TAG = 65535
+
+
+def tagged(line: str, tag: int) -> str:
+    """``line`` with its request tag."""
+    return f'{line} #{tag}'
+
+
+def split_tag(line: str) -> tuple[str, int | None]:
+    """A request or reply line without its tag, and the tag (None: untagged)."""
+    head, _, last = line.rstrip().rpartition(' ')
+    if head and last.startswith('#') and last[1:].isdigit():
+        tag = int(last[1:])
+        if 1 <= tag <= MAX_TAG:
+            return head, tag
+    return line.rstrip(), None
 
 
 def move_request(joint: str, position: float, speed: float | None) -> str:
