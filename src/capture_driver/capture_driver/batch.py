@@ -66,7 +66,7 @@ class BatchedReads:
                 raise ProtocolError(f'{name} is not a getter: only getters are batched')
             frames.append((cmd, axis, cmd.frame(axis, None, self._link.group)))
         link = self._link
-        with contextlib.nullcontext() if link.overlap else link.lock:
+        with contextlib.nullcontext() if link.overlap else link.link_lock:
             values: list[Any] = [None] * len(frames)
             asked = [i for i, (cmd, axis, _) in enumerate(frames)
                      if not (optional and self._left_out(cmd.name, axis))]

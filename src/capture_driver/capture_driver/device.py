@@ -306,7 +306,7 @@ class CaptureDevice(Device):
     def move(self, moves: Moves) -> None:
         """Absolute moves; the whole set-up of every axis under one hold of the link
         lock, so the poll does not interleave its reads."""
-        with self.client.exclusive():
+        with self.client.link_lock:
             self.programs.leave()
             for axis, (position, speed, acceleration) in self._axis_moves(moves).items():
                 self.client.move_absolute(axis, position, speed, acceleration)
@@ -337,7 +337,7 @@ class CaptureDevice(Device):
         return self.client.settle_posted(posted.expected)
 
     def jog(self, velocities: dict[str, float]) -> None:
-        with self.client.exclusive():
+        with self.client.link_lock:
             self.programs.leave()
             for joint, velocity in velocities.items():
                 if velocity == 0.0:
@@ -349,7 +349,7 @@ class CaptureDevice(Device):
     def stop(self, joints: Sequence[str] | None = None) -> None:
         """None: scans, loops and every axis (SCN_StopScan, PRST_StopPresetLooping,
         GPS_StopTargetLooping, then speed 0 per axis); else those axes."""
-        with self.client.exclusive():
+        with self.client.link_lock:
             if joints is None:
                 problems = self.client.stop_all([self.axis(j) for j in self.joint_names])
                 self.programs.clear()

@@ -156,8 +156,10 @@ class CaptureLink(Protocol):
 
     # ---------------------------------------------------------------- link
     @property
-    def lock(self) -> LinkLock:
-        """The device's one link lock: every setter sequence holds it."""
+    def link_lock(self) -> LinkLock:
+        """The device's one link lock (``Device.link_lock``): every setter sequence holds
+        it; a caller that sends a whole motion set-up (several axes) without another setter
+        in between holds it around them: ``with client.link_lock: ...``."""
         return self._lock
 
     @property
@@ -465,8 +467,3 @@ class CaptureLink(Protocol):
     @staticmethod
     def label(name: str, frame: Frame) -> str:
         return f'{name} (axis {frame.axis})' if frame.axis else name
-
-    def exclusive(self) -> LinkLock:
-        """The link lock, for a caller that sends a whole motion set-up (several axes)
-        without another setter in between: ``with client.exclusive(): ...``."""
-        return self._lock

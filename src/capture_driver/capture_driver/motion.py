@@ -81,7 +81,7 @@ class MotionRequests:
         commanded on the link forgets the armed TUM, and the next move sends it first again.
         """
         speed = abs(speed_deg_s)
-        with self._link.lock:
+        with self._link.link_lock:
             known = self._setups.known.pop(axis, None)
             if known is not None and known[0] != 'absolute':
                 known = None  # another mode: the whole set-up goes out
@@ -137,7 +137,7 @@ class MotionRequests:
         and arms the next TUM. A NACK to SendPosition leaves the MOT_Update that follows it
         to re-run the previous profile: the target the axis already has.
         """
-        with self._link.lock:  # reentrant: the caller's hold
+        with self._link.link_lock:  # reentrant: the caller's hold
             stream = self._link.stream
             if stream is None or not self._batch.batching:
                 return None
@@ -168,7 +168,7 @@ class MotionRequests:
         caller sends the moves again with :meth:`move_absolute` (the axes' set-up is
         forgotten: the whole 7.1 sequence goes out). Run under the link lock before its
         next setter."""
-        with self._link.lock:
+        with self._link.link_lock:
             if self._link.stream is not posted.stream:
                 for axis in posted.moves:
                     self._setups.known.pop(axis, None)
@@ -220,7 +220,7 @@ class MotionRequests:
         set-up of the axis left it in speed mode (a jog or a stop) and nothing else was
         commanded since: a stream of jog commands costs 2 round trips each, not 4.
         """
-        with self._link.lock:
+        with self._link.link_lock:
             known = self._setups.known.pop(axis, None)
             if known is not None and known[0] != 'speed':
                 known = None  # another mode: the whole set-up goes out
@@ -236,7 +236,7 @@ class MotionRequests:
     def stop_axis(self, axis: int) -> None:
         """Decelerate to rest: speed mode with speed 0 (works from position or speed mode).
         Always the full sequence: a stop never relies on what the client remembers."""
-        with self._link.lock:
+        with self._link.link_lock:
             known = self._setups.known.pop(axis, None)
             self._run_setup(axis, [('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
                                    ('MOT_Update', None)])

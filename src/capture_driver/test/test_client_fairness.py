@@ -28,7 +28,7 @@ def test_a_poll_waits_for_the_command_in_progress_only() -> None:
 
     def stream() -> None:  # two-axis moves back to back, like CaptureDevice.move
         while not stop.is_set():
-            with client.exclusive():
+            with client.link_lock:
                 for axis in (1, 2):
                     client.move_absolute(axis, 0.01 * (sent[0] % 100), 30.0, 300.0)
             sent[0] += 1

@@ -10,7 +10,7 @@ lost unless a stop or a newer move for the joint went out since, and sends the q
 with ``Device.move`` and ``Device.jog``. Any other send (move_to, a stop) settles a
 posted write first, so a stop goes after the send in flight and nothing stale follows
 it. The caller never waits for a device answer nor behind another send: the one
-non-blocking try is here, on the device's link lock (:attr:`CommandPath.lock`, the
+non-blocking try is here, on the device's link lock (:attr:`CommandPath.link_lock`, the
 :class:`~gimbal_driver_common.link_lock.LinkLock` the ``Device`` base owns). A
 request/reply client takes that same lock around each exchange (its poll, sensors and
 services too), and the lock settles a posted write before anyone else uses the link
@@ -71,8 +71,8 @@ class CommandPath:
         self._refusal = refusal
         #: the device's link lock: one exchange on the link at a time, shared with the
         #: device's own requests; its first hold settles what the caller posted
-        self.lock = device.link_lock
-        self.lock.before_use = self._settle_posted
+        self.link_lock = device.link_lock
+        self.link_lock.before_use = self._settle_posted
         self._queue_lock = threading.Lock()
         self._pending: Pending = {}
         #: a write whose answers nobody has read yet (None: none); a joint leaves its
@@ -90,11 +90,11 @@ class CommandPath:
                 self._pending[joint] = ('move', target, speed)
             for joint, velocity in jogs.items():
                 self._pending[joint] = ('jog', velocity, None)
-        if self.lock.try_hold():
+        if self.link_lock.try_hold():
             try:
                 posted = self._post_pending()
             finally:
-                self.lock.release()
+                self.link_lock.release()
             if posted is not None:
                 if posted.replies:
                     self.ready.set()  # the command thread settles the answers
@@ -142,7 +142,7 @@ class CommandPath:
         them. ``urgent`` (a stop): next on the link after the exchange in flight, ahead of
         every queued read. The caller's own refusals raise (device_boundary)."""
         self.drop(joints)  # before the lock's settle, which would send them again
-        with self.lock.urgent() if urgent else self.lock:
+        with self.link_lock.urgent() if urgent else self.link_lock:
             self.drop(joints)  # and what the caller queued meanwhile
             with device_boundary():
                 request()
@@ -166,7 +166,7 @@ class CommandPath:
         while not self._stopping.is_set():
             self.ready.wait()
             self.ready.clear()
-            with self.lock:  # settles a posted write first (before_use)
+            with self.link_lock:  # settles a posted write first (before_use)
                 self._flush_pending()
 
     def close(self) -> None:

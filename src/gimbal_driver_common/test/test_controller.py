@@ -340,7 +340,7 @@ def link_held(controller: GimbalController):
     taken, done = threading.Event(), threading.Event()
 
     def hold() -> None:
-        with controller.commands.lock:
+        with controller.commands.link_lock:
             taken.set()
             done.wait(10.0)
 
@@ -960,7 +960,7 @@ def test_a_stop_goes_ahead_of_the_reads_queued_for_the_link(controller, device, 
         if stop == '~/stop':
             stopper = threading.Thread(target=controller.stop, daemon=True)
             stopper.start()
-        wait_for(lambda: controller.commands.lock.waiting(urgent=True) == 1, 5.0,
+        wait_for(lambda: controller.commands.link_lock.waiting(urgent=True) == 1, 5.0,
                  'the stop queued')
     for reader in readers:
         reader.join(5.0)
