@@ -83,9 +83,9 @@ class CaptureDriverNode(GimbalDriverNode):
         self.create_subscription(NavSatFix, '~/goto_lla', self._on_goto_lla, 1,
                                  callback_group=self.service_group)
         # guarded device procedures: the core's policy runs them (gimbal_driver_common.guarded)
-        self.create_procedure_action(
+        self.motion_actions.create_procedure_action(
             '~/level', lambda device, joints: device.functions.levelling(joints))
-        self.create_procedure_action(
+        self.motion_actions.create_procedure_action(
             '~/compensate_gyro_drift',
             lambda device, joints: device.functions.gyro_drift_measurement(
                 joints, self.gyro_drift_time))

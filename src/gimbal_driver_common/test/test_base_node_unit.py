@@ -86,7 +86,7 @@ def look_at_refusal(context, **overrides) -> str:
     node = make(context, **overrides)
     try:
         with pytest.raises(LookAtRefused) as refused:
-            node.plan_look_at(LookAt.Goal())
+            node.look_at_server.plan_look_at(LookAt.Goal())
         return str(refused.value)
     finally:
         node.destroy_node()

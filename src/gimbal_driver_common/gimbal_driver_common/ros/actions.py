@@ -1,20 +1,23 @@
 """The MoveTo and Home actions on the policies, the guarded device procedures as Home
-actions, and a lifecycle guard; mixed into the node."""
+actions, and a lifecycle guard. :class:`MotionActions` is a part of the node (its
+``motion_actions`` attribute), handed the node's public side (:class:`ActionNode`)."""
 
 from __future__ import annotations
 
 import math
 import threading
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Protocol
 
 from lifecycle_msgs.srv import ChangeState
 from rclpy.action import ActionServer, GoalResponse
 from rclpy.lifecycle import LifecycleNode
 
+from gimbal_driver_common.controller import GimbalController
 from gimbal_driver_common.device import Device, DeviceProcedure
 from gimbal_driver_common.errors import DeviceRefused, GimbalError
-from gimbal_driver_common.policies import HomingSuperseded
+from gimbal_driver_common.guarded import GuardedProcedures
+from gimbal_driver_common.policies import HomingSuperseded, Motion
 from gimbal_msgs.action import Home, MoveTo
 
 #: builds a device procedure from the adapter and the goal's joint names
@@ -96,28 +99,65 @@ def state_reporter(goal_handle) -> Callable[[str], None]:
     return report
 
 
-class MotionActions:
-    """``~/move_to``, ``~/home`` and the guarded procedures' execute callbacks (the node
-    provides controller, motion and procedures)."""
+class ActionNode(Protocol):
+    """What the motion actions use of the node (:class:`~.base_node.GimbalDriverNode`):
+    what configure built (None before), its joints and refusals, its action servers."""
 
-    def _execute_move(self, goal_handle):
+    @property
+    def controller(self) -> GimbalController | None: ...
+
+    @property
+    def motion(self) -> Motion | None: ...
+
+    @property
+    def procedures(self) -> GuardedProcedures | None: ...
+
+    @property
+    def joint_names(self) -> Sequence[str]: ...
+
+    def command_refusal(self) -> str | None:
+        """Why commands cannot be served now (inactive, disconnected), or None."""
+
+    def current_positions(self) -> dict[str, float]:
+        """The latest joint positions (empty before configure)."""
+
+    def create_accepting_action_server(self, action_type: type, name: str,
+                                       execute: Callable[..., Any],
+                                       on_cancel: Callable[[], None] = ...,
+                                       ) -> ActionServer:
+        """An action server that accepts every goal; ``execute`` refuses by aborting."""
+
+
+class MotionActions:
+    """``~/move_to``, ``~/home`` and the guarded procedures' execute callbacks."""
+
+    def __init__(self, node: ActionNode) -> None:
+        self._node = node
+
+    def _motion(self) -> Motion:
+        """The node's motion policies; refused (the node's reason) before configure."""
+        motion = self._node.motion
+        if motion is None:
+            raise DeviceRefused(self._node.command_refusal())
+        return motion
+
+    def execute_move(self, goal_handle):
+        """The ``~/move_to`` execute callback (also ``~/look_at``'s move path)."""
         goal = goal_handle.request
         result = MoveTo.Result()
         try:
-            if self.motion is None:
-                raise DeviceRefused(self.command_refusal())
-            targets = self.motion.start_move(goal.joint_names, goal.positions, goal.velocities,
-                                             goal.relative)
+            targets = self._motion().start_move(goal.joint_names, goal.positions,
+                                                goal.velocities, goal.relative)
         except GimbalError as exc:
             goal_handle.abort()
             result.success, result.message = False, f'move refused, nothing sent: {exc}'
-            current = self.current_positions()
+            current = self._node.current_positions()
             result.positions = [current.get(n, math.nan) for n in goal.joint_names]
             return result
-        return self._finish_move(goal_handle, targets, goal.tolerance)
+        return self.finish_move(goal_handle, targets, goal.tolerance)
 
-    def _finish_move(self, goal_handle, targets: dict[str, float],
-                     tolerance: float) -> MoveTo.Result:
+    def finish_move(self, goal_handle, targets: dict[str, float],
+                    tolerance: float) -> MoveTo.Result:
         """Wait for a started move (ours or one the device runs itself, e.g. its own
         target pointing): feedback, then reached / cancelled / stopped / timeout."""
         result = MoveTo.Result()
@@ -127,31 +167,33 @@ class MotionActions:
             feedback.positions = positions
             goal_handle.publish_feedback(feedback)
 
-        outcome = self.motion.wait_move(
+        outcome = self._motion().wait_move(
             targets, tolerance, lambda: goal_handle.is_cancel_requested, publish)
         result.positions, result.success, result.message = (
             outcome.positions, outcome.success, outcome.message)
         return end_goal(goal_handle, result, cancelled=outcome.state == 'cancelled')
 
-    def _execute_home(self, goal_handle):
-        joints = list(goal_handle.request.joint_names) or list(self.joint_names)
+    def execute_home(self, goal_handle):
+        """The ``~/home`` execute callback."""
+        joints = list(goal_handle.request.joint_names) or list(self._node.joint_names)
         result = Home.Result()
         report = state_reporter(goal_handle)
         superseded = False
+        controller = self._node.controller
         try:
-            if self.motion is None:
-                raise DeviceRefused(self.command_refusal())
-            self.controller.require()
-            result.message = self.motion.home(joints, report,
-                                              lambda: goal_handle.is_cancel_requested)
+            motion = self._motion()
+            assert controller is not None  # configure builds both
+            controller.require()
+            result.message = motion.home(joints, report,
+                                         lambda: goal_handle.is_cancel_requested)
             result.success = True
         except HomingSuperseded as exc:
             superseded, result.success, result.message = True, False, str(exc)
         except GimbalError as exc:
             result.success, result.message = False, str(exc)
         cancelled = goal_handle.is_cancel_requested and not superseded
-        if cancelled:
-            self.controller.stop_joints(joints)
+        if cancelled and controller is not None:
+            controller.stop_joints(joints)
             result.message = 'homing cancelled'
         return end_goal(goal_handle, result, cancelled)
 
@@ -159,21 +201,25 @@ class MotionActions:
         """A Home action that runs ``make(device, goal joint names)`` through the guarded
         procedure policy (``guarded.GuardedProcedures``); a cancel request wakes its wait."""
         def wake() -> None:
-            if self.procedures is not None:
-                self.procedures.wake()
+            procedures = self._node.procedures
+            if procedures is not None:
+                procedures.wake()
 
-        return self.create_accepting_action_server(
+        return self._node.create_accepting_action_server(
             Home, name, lambda goal_handle: self._execute_procedure(goal_handle, make),
             on_cancel=wake)
 
     def _execute_procedure(self, goal_handle, make: ProcedureFactory) -> Home.Result:
         result = Home.Result()
         joints = list(goal_handle.request.joint_names)
+        node = self._node
         try:
-            if self.procedures is None:
-                raise DeviceRefused(self.command_refusal())
-            result.message = self.procedures.run(
-                lambda: make(self.controller.device, joints), state_reporter(goal_handle),
+            procedures, controller = node.procedures, node.controller
+            if procedures is None or controller is None:
+                raise DeviceRefused(node.command_refusal())
+            device = controller.device
+            result.message = procedures.run(
+                lambda: make(device, joints), state_reporter(goal_handle),
                 lambda: goal_handle.is_cancel_requested)
             result.success = True
         except GimbalError as exc:

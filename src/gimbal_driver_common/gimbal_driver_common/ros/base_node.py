@@ -50,8 +50,8 @@ from gimbal_driver_common.ros.actions import (
 )
 from gimbal_driver_common.ros.common_parameters import declare_common_parameters, limits_from
 from gimbal_driver_common.ros.log_bridge import install_log_bridge
-from gimbal_driver_common.ros.look_at import LookAtMixin
-from gimbal_driver_common.ros.look_at_geo import LookAtGeoMixin
+from gimbal_driver_common.ros.look_at import LookAtServer
+from gimbal_driver_common.ros.look_at_geo import LookAtGeoServer
 from gimbal_driver_common.ros.parameters import ParameterRegistry, declare
 from gimbal_driver_common.ros.run import run_driver
 from gimbal_driver_common.scan import ScanRequest
@@ -62,8 +62,13 @@ from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, Sta
 __all__ = ['GimbalDriverNode', 'run_driver']
 
 
-class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode):
-    """Common ROS interface of the pan-tilt drivers; a driver adds :meth:`make_device`."""
+class GimbalDriverNode(LifecycleNode):
+    """Common ROS interface of the pan-tilt drivers; a driver adds :meth:`make_device`.
+
+    Its action parts, each handed this node (its public side, typed in the part's module):
+    :attr:`motion_actions` (``~/move_to``, ``~/home``, guarded procedures),
+    :attr:`look_at_server` (``~/look_at``) and :attr:`look_at_geo_server`
+    (``~/look_at_geo``)."""
 
     #: joint names when the ``joint_names`` parameter is not set
     DEFAULT_JOINT_NAMES: Sequence[str] = ('pan', 'tilt')
@@ -80,6 +85,10 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
     #: Python loggers bridged to this node's ROS logger besides ``gimbal_driver_common`` and
     #: the driver's own package (ros/log_bridge.py)
     LIBRARY_LOGGERS: Sequence[str] = ()
+    #: ~/look_at's default description: share/<package>/urdf/<this>; None: <package>.urdf
+    DESCRIPTION_NAME: str | None = None
+    #: the ``joint_names`` parameter (``declare_common_parameters`` sets it)
+    joint_names: list[str]
 
     def __init__(self, node_name: str, **kwargs: object) -> None:
         super().__init__(node_name, **kwargs)
@@ -159,7 +168,7 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
         self, name: str, apply: Callable[[object], None] | str,
         send: Callable[[object], None] | None = None,
         busy: Callable[[], str | None] | None = None,
-        check: Callable[[object], None] | None = None,
+        check: Callable[[object], object] | None = None,
     ) -> None:
         """Let ``ros2 param set`` change ``name`` while the node runs (see ParameterRegistry).
 
@@ -316,10 +325,13 @@ class GimbalDriverNode(MotionActions, LookAtMixin, LookAtGeoMixin, LifecycleNode
             (Trigger, '~/stop_scan', self._on_stop_scan),
         ]
         self.create_services(services)
-        self.create_accepting_action_server(MoveTo, '~/move_to', self._execute_move)
-        self.create_accepting_action_server(Home, '~/home', self._execute_home)
-        self._setup_look_at()  # ~/look_at (ros/look_at.py) runs through _execute_move
-        self._setup_look_at_geo()  # ~/look_at_geo (ros/look_at_geo.py), the same path
+        self.motion_actions = actions = MotionActions(self)
+        self.create_accepting_action_server(MoveTo, '~/move_to', actions.execute_move)
+        self.create_accepting_action_server(Home, '~/home', actions.execute_home)
+        # ~/look_at (ros/look_at.py) runs through execute_move; ~/look_at_geo the same path
+        self.look_at_server = LookAtServer(self, actions, type(self).__module__.split('.')[0],
+                                           self.DESCRIPTION_NAME)
+        self.look_at_geo_server = LookAtGeoServer(self, self.look_at_server, actions)
         self.periodic.add(self.diagnostics_period, self._publish_diagnostics)
         self.periodic.add(self._status_period(), self._publish_status)
 

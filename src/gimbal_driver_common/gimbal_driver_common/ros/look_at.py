@@ -1,6 +1,9 @@
 """``~/look_at``: point the device's camera/tool frame at a geometry_msgs/PointStamped.
 
-A mixin of the base node. Pan and tilt come from the device's URDF chain
+A part of the base node (its ``look_at_server`` attribute, :class:`LookAtServer`), handed
+the node's public side (:class:`AimNode`), the node's motion actions (whose move path it
+runs) and where the default description lives; it owns the aiming chain and its two
+parameters. Pan and tilt come from the device's URDF chain
 (:mod:`gimbal_driver_common.kinematics`, offsets included); the limits and the motion
 refusal are checked before anything is sent, and the move then runs through the base
 node's own ``~/move_to`` execution path (feedback, goal tolerance, move timeout, cancel),
@@ -11,17 +14,22 @@ drivers' sign conversions (Capture joint_directions, U-Camera pan) stay in the d
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any, Protocol
 
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+from rclpy.action import ActionServer
 from rclpy.action.server import ServerGoalHandle
 
+from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.kinematics import (
     DEFAULT_AIM_FRAME,
     AimingChain,
     KinematicsError,
     nearest_in_limits,
 )
+from gimbal_driver_common.ros.actions import MotionActions
 from gimbal_msgs.action import LookAt, MoveTo
 
 
@@ -56,22 +64,53 @@ class MoveGoalView:
         self._handle.canceled()
 
 
-class LookAtMixin:
+class AimNode(Protocol):
+    """What the aiming actions use of the node (:class:`~.base_node.GimbalDriverNode`)."""
+
+    @property
+    def joint_names(self) -> Sequence[str]: ...
+
+    @property
+    def limits(self) -> dict[str, JointLimits]: ...
+
+    def get_logger(self) -> Any:
+        """The node's logger."""
+
+    def declare_param(self, name: str, default: object, description: str,
+                      **kwargs: Any) -> Any:
+        """Declare a parameter with a descriptor; its value."""
+
+    def motion_refusal(self, joints: Sequence[str]) -> str | None:
+        """Why these joints cannot move now, or None."""
+
+    def current_positions(self) -> dict[str, float]:
+        """The latest joint positions (empty before configure)."""
+
+    def create_accepting_action_server(self, action_type: type, name: str,
+                                       execute: Callable[..., Any],
+                                       on_cancel: Callable[[], None] = ...,
+                                       ) -> ActionServer:
+        """An action server that accepts every goal; ``execute`` refuses by aborting."""
+
+
+class LookAtServer:
     """Declares ``description_file``/``look_at_frame``, loads the chain, serves ~/look_at.
 
-    The default description is ``share/<package>/urdf/<DESCRIPTION_NAME>`` of the
-    package the node class lives in (``<package>.urdf`` unless the class names another).
+    The default description is ``share/<package>/urdf/<description_name>`` of the
+    driver's package (``<package>.urdf`` unless the node class names another).
     """
 
-    #: file name under share/<package>/urdf/; None: <package>.urdf
-    DESCRIPTION_NAME: str | None = None
-
-    def _setup_look_at(self) -> None:
-        self.description_file: str = self.declare_param(
+    def __init__(self, node: AimNode, actions: MotionActions, package: str,
+                 description_name: str | None = None) -> None:
+        self._node = node
+        self._actions = actions
+        self.package = package
+        self.description_name = description_name
+        self.description_file: str = node.declare_param(
             'description_file', '',
             'URDF used by ~/look_at ("" = the package\'s installed urdf/ description)',
         )
-        self.look_at_frame: str = self.declare_param(
+        self.look_at_frame: str = node.declare_param(
             'look_at_frame', DEFAULT_AIM_FRAME,
             'link of the description whose +x axis ~/look_at points at the target',
         )
@@ -79,23 +118,22 @@ class LookAtMixin:
         self.aiming_error = ''
         try:
             self.aiming_chain = self._load_aiming_chain()
-            self.get_logger().info(
+            node.get_logger().info(
                 f'~/look_at: {self.aiming_chain.base_frame} -> {self.look_at_frame} from '
                 f'{self.description_path()} (pan {self.aiming_chain.pan_joint!r}, '
                 f'tilt {self.aiming_chain.tilt_joint!r})'
             )
         except KinematicsError as exc:
             self.aiming_error = str(exc)
-            self.get_logger().warning(f'~/look_at unavailable: {exc}')
-        self._look_at_server = self.create_accepting_action_server(
-            LookAt, '~/look_at', self._execute_look_at)
+            node.get_logger().warning(f'~/look_at unavailable: {exc}')
+        node.create_accepting_action_server(LookAt, '~/look_at', self._execute_look_at)
 
     def description_path(self) -> str:
         """The URDF file look_at uses: the parameter, else the package's installed one."""
         if self.description_file:
             return self.description_file
-        package = type(self).__module__.split('.')[0]
-        name = self.DESCRIPTION_NAME or f'{package}.urdf'
+        package = self.package
+        name = self.description_name or f'{package}.urdf'
         try:
             share = get_package_share_directory(package)
         except PackageNotFoundError as exc:
@@ -108,10 +146,10 @@ class LookAtMixin:
     def _load_aiming_chain(self) -> AimingChain:
         chain = AimingChain.from_file(self.description_path(), self.look_at_frame)
         for joint in (chain.pan_joint, chain.tilt_joint):
-            if joint not in self.joint_names:
+            if joint not in self._node.joint_names:
                 raise KinematicsError(
                     f'the description\'s joint {joint!r} is not one of the node\'s joints '
-                    f'{list(self.joint_names)}; give a description_file that names them'
+                    f'{list(self._node.joint_names)}; give a description_file that names them'
                 )
         return chain
 
@@ -138,16 +176,17 @@ class LookAtMixin:
         if chain is None:
             raise LookAtRefused(f'{action} is unavailable: {self.aiming_error}')
         joints = [chain.pan_joint, chain.tilt_joint]
-        refusal = self.motion_refusal(joints)
+        refusal = self._node.motion_refusal(joints)
         if refusal:
             raise LookAtRefused(refusal)
         if not math.isfinite(speed) or speed < 0:
             raise LookAtRefused(f'speed {speed} must be >= 0 rad/s (0 = default)')
+        limits = self._node.limits
         for joint in joints:
-            if speed > self.limits[joint].velocity_max:
+            if speed > limits[joint].velocity_max:
                 raise LookAtRefused(
                     f'speed {speed:.4f} rad/s exceeds velocity_max '
-                    f'{self.limits[joint].velocity_max:.4f} of joint {joint!r}'
+                    f'{limits[joint].velocity_max:.4f} of joint {joint!r}'
                 )
         return chain
 
@@ -157,8 +196,11 @@ class LookAtMixin:
         frame, m), inside the limits; LookAtRefused names ``what``, the joint and the limit.
         """
         chain = self.aiming_chain
+        if chain is None:
+            raise LookAtRefused(f'aiming is unavailable: {self.aiming_error}')
         joints = [chain.pan_joint, chain.tilt_joint]
-        current = self.current_positions()
+        all_limits = self._node.limits
+        current = self._node.current_positions()
         if not current:
             raise LookAtRefused('no joint position received yet')
         try:
@@ -167,15 +209,15 @@ class LookAtMixin:
             raise LookAtRefused(str(exc)) from exc
         # Pan: the turn of the solution inside the limits nearest to where pan is now (a
         # pan range wider than one turn has several); tilt has one solution.
-        pan_limits = self.limits[chain.pan_joint]
-        reachable = {
+        pan_limits = all_limits[chain.pan_joint]
+        reachable: dict[str, float | None] = {
             chain.pan_joint: nearest_in_limits(
                 angles[chain.pan_joint], pan_limits.position_min, pan_limits.position_max,
                 current.get(chain.pan_joint, 0.0)),
             chain.tilt_joint: angles[chain.tilt_joint],
         }
         for joint, position in reachable.items():
-            limits = self.limits[joint]
+            limits = all_limits[joint]
             if position is None or not (
                     limits.position_min - 1e-9 <= position <= limits.position_max + 1e-9):
                 raise LookAtRefused(
@@ -184,10 +226,12 @@ class LookAtMixin:
                     f'outside position_min {limits.position_min:.4f} .. position_max '
                     f'{limits.position_max:.4f}'
                 )
-        positions = [
-            min(max(reachable[j], self.limits[j].position_min), self.limits[j].position_max)
-            for j in joints
-        ]
+        positions = []
+        for joint in joints:
+            position = reachable[joint]
+            assert position is not None  # refused above
+            limits = all_limits[joint]
+            positions.append(min(max(position, limits.position_min), limits.position_max))
         return joints, positions
 
     def _execute_look_at(self, goal_handle: ServerGoalHandle) -> LookAt.Result:
@@ -198,27 +242,27 @@ class LookAtMixin:
             return self.refuse_aim(goal_handle, result, 'look_at', exc)
         return self.move_aim(goal_handle, result, joints, positions, LookAt.Feedback)
 
-    def refuse_aim(self, goal_handle: ServerGoalHandle, result: object, action: str,
-                   reason: Exception) -> object:
+    def refuse_aim(self, goal_handle: ServerGoalHandle, result: Any, action: str,
+                   reason: Exception) -> Any:
         """Abort an aiming goal that sent nothing: the result names the joints, where they
         are and why."""
         goal_handle.abort()
         chain = self.aiming_chain
         result.joint_names = [chain.pan_joint, chain.tilt_joint] if chain else []
-        current = self.current_positions()
+        current = self._node.current_positions()
         result.positions = [current.get(j, math.nan) for j in result.joint_names]
         result.success, result.message = False, f'{action} refused, nothing sent: {reason}'
         return result
 
-    def move_aim(self, goal_handle: ServerGoalHandle, result: object, joints: list[str],
-                 positions: list[float], feedback_type: type) -> object:
+    def move_aim(self, goal_handle: ServerGoalHandle, result: Any, joints: list[str],
+                 positions: list[float], feedback_type: type) -> Any:
         """Run a planned aim exactly like ~/move_to (feedback, tolerance, timeout, cancel)."""
         speed = goal_handle.request.speed
         move = MoveTo.Goal(
             joint_names=joints, positions=positions,
             velocities=[speed] * len(joints) if speed > 0 else [], relative=False,
         )
-        moved = self._execute_move(MoveGoalView(goal_handle, move, feedback_type))
+        moved = self._actions.execute_move(MoveGoalView(goal_handle, move, feedback_type))
         result.success = moved.success
         result.message = moved.message
         result.positions = list(moved.positions)

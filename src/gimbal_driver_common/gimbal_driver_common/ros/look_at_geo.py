@@ -1,6 +1,9 @@
 """``~/look_at_geo``: point the device's camera/tool frame at a place on Earth.
 
-A mixin of the base node, beside ``~/look_at`` (:mod:`.look_at`). The target (WGS84
+A part of the base node (its ``look_at_geo_server`` attribute, :class:`LookAtGeoServer`),
+beside ``~/look_at`` (:mod:`.look_at`), handed the node's public side (:class:`GeoAimNode`),
+the look_at part (the URDF solver and checks) and the motion actions (the move path); it
+owns the site and pose-quality parameters. The target (WGS84
 latitude, longitude, altitude above the ellipsoid) goes to the base frame through
 :mod:`gimbal_driver_common.geodesy` (WGS84 -> ECEF -> ENU at the device -> base frame by
 its attitude), from the pose the device reports (its ``Geolocation`` capability) with the
@@ -15,12 +18,15 @@ the limits.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any, Protocol
 
+from rclpy.action import ActionServer
 from rclpy.action.server import ServerGoalHandle
 
-from gimbal_driver_common.device import TargetPointing
+from gimbal_driver_common.controller import GimbalController
+from gimbal_driver_common.device import Device, TargetPointing
 from gimbal_driver_common.errors import GimbalError, InvalidRequest
 from gimbal_driver_common.geodesy import (
     Attitude,
@@ -31,7 +37,9 @@ from gimbal_driver_common.geodesy import (
     describe_target,
     resolve_pose,
 )
-from gimbal_driver_common.ros.look_at import LookAtRefused, MoveGoalView
+from gimbal_driver_common.policies import Motion
+from gimbal_driver_common.ros.actions import MotionActions
+from gimbal_driver_common.ros.look_at import LookAtRefused, LookAtServer, MoveGoalView
 from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_msgs.action import LookAtGeo, MoveTo
 
@@ -40,7 +48,7 @@ ORIENTATION_RANGES = (('roll', -math.pi, math.pi), ('pitch', -math.pi / 2, math.
                       ('yaw', -2.0 * math.pi, 2.0 * math.pi))
 
 
-def site_position_from(value: Sequence[float]) -> GeoPoint | None:
+def site_position_from(value: Any) -> GeoPoint | None:
     """The ``site_position`` parameter as a point (None when empty); ParameterError else."""
     values = list(value)
     if not values:
@@ -55,7 +63,7 @@ def site_position_from(value: Sequence[float]) -> GeoPoint | None:
         raise ParameterError(str(exc)) from exc
 
 
-def site_orientation_from(value: Sequence[float]) -> Attitude | None:
+def site_orientation_from(value: Any) -> Attitude | None:
     """The ``site_orientation`` parameter as an attitude (None when empty); ParameterError
     else."""
     values = list(value)
@@ -84,30 +92,69 @@ class GeoAim:
     pointing: TargetPointing | None = None  # the device points itself; None: our move
 
 
-class LookAtGeoMixin:
+class GeoAimNode(Protocol):
+    """What ~/look_at_geo uses of the node (:class:`~.base_node.GimbalDriverNode`)."""
+
+    @property
+    def controller(self) -> GimbalController | None: ...
+
+    @property
+    def motion(self) -> Motion | None: ...
+
+    @property
+    def device(self) -> Device | None: ...
+
+    def get_logger(self) -> Any:
+        """The node's logger."""
+
+    def declare_param(self, name: str, default: object, description: str,
+                      **kwargs: Any) -> Any:
+        """Declare a parameter with a descriptor; its value."""
+
+    def runtime_parameter(self, name: str, apply: Callable[[object], None] | str,
+                          send: Callable[[object], None] | None = None,
+                          busy: Callable[[], str | None] | None = None,
+                          check: Callable[[object], object] | None = None) -> None:
+        """Let ``ros2 param set`` change ``name`` while the node runs."""
+
+    def current_positions(self) -> dict[str, float]:
+        """The latest joint positions (empty before configure)."""
+
+    def create_accepting_action_server(self, action_type: type, name: str,
+                                       execute: Callable[..., Any],
+                                       on_cancel: Callable[[], None] = ...,
+                                       ) -> ActionServer:
+        """An action server that accepts every goal; ``execute`` refuses by aborting."""
+
+
+class LookAtGeoServer:
     """Declares the site and pose-quality parameters and serves ~/look_at_geo."""
 
-    def _setup_look_at_geo(self) -> None:
-        self.site_position: GeoPoint | None = site_position_from(self.declare_param(
+    def __init__(self, node: GeoAimNode, look_at: LookAtServer,
+                 actions: MotionActions) -> None:
+        self._node = node
+        self._look_at = look_at
+        self._actions = actions
+        self.site_position: GeoPoint | None = site_position_from(node.declare_param(
             'site_position', [],
             'where the device stands: [latitude deg, longitude deg, altitude m above the '
             'WGS84 ellipsoid]; overrides the device\'s own position; [] = unknown',
             element_type=float))
-        self.site_orientation: Attitude | None = site_orientation_from(self.declare_param(
+        self.site_orientation: Attitude | None = site_orientation_from(node.declare_param(
             'site_orientation', [],
             'orientation of the base frame in ENU: [roll, pitch, yaw] rad (REP-103, yaw '
             'counter-clockwise from east = pi/2 - compass heading); overrides the device\'s '
             'own; [] = unknown', element_type=float))
         self.pose_limits = PoseLimits(
-            max_age=self.declare_param(
+            max_age=node.declare_param(
                 'pose_max_age', PoseLimits.max_age,
                 's: a device position or heading older than this is refused by ~/look_at_geo',
                 value_range=(0.05, 3600.0)),
-            max_position_error=self.declare_param(
+            max_position_error=node.declare_param(
                 'pose_max_position_error', PoseLimits.max_position_error,
                 'm: a device position whose reported accuracy (1 sigma) is worse is refused',
                 value_range=(0.01, 100000.0)),
-            max_heading_error=self.declare_param(
+            max_heading_error=node.declare_param(
                 'pose_max_heading_error', PoseLimits.max_heading_error,
                 'rad: a device heading whose reported accuracy (1 sigma) is worse is refused',
                 value_range=(1e-5, math.pi)))
@@ -118,33 +165,35 @@ class LookAtGeoMixin:
         def set_site_orientation(value: object) -> None:
             self.site_orientation = site_orientation_from(value)
 
-        def set_limit(field_name: str):
+        def set_limit(field_name: str) -> Callable[[object], None]:
             def apply(value: object) -> None:
+                assert isinstance(value, float | int)  # declared as a float parameter
                 self.pose_limits = replace(self.pose_limits, **{field_name: float(value)})
             return apply
 
-        self.runtime_parameter('site_position', set_site_position, check=site_position_from)
-        self.runtime_parameter('site_orientation', set_site_orientation,
+        node.runtime_parameter('site_position', set_site_position, check=site_position_from)
+        node.runtime_parameter('site_orientation', set_site_orientation,
                                check=site_orientation_from)
         for name, field_name in (('pose_max_age', 'max_age'),
                                  ('pose_max_position_error', 'max_position_error'),
                                  ('pose_max_heading_error', 'max_heading_error')):
-            self.runtime_parameter(name, set_limit(field_name))
-        self.create_accepting_action_server(LookAtGeo, '~/look_at_geo',
+            node.runtime_parameter(name, set_limit(field_name))
+        node.create_accepting_action_server(LookAtGeo, '~/look_at_geo',
                                             self._execute_look_at_geo)
 
     def device_pose(self) -> GeoPose:
         """The pose to aim from (the device's, overridden by the site parameters); raises
         GimbalError (PoseUnavailable naming what is missing, too old or too poor)."""
-        device = self.device
+        device, controller = self._node.device, self._node.controller
         geolocation = device.capabilities.geolocation if device is not None else None
-        reported = self.controller.call(geolocation.pose) if geolocation is not None else None
+        reported = (controller.call(geolocation.pose)
+                    if geolocation is not None and controller is not None else None)
         return resolve_pose(reported, self.site_position, self.site_orientation,
                             self.pose_limits)
 
     def plan_look_at_geo(self, goal: LookAtGeo.Goal) -> GeoAim:
         """Check everything before anything is sent; raises LookAtRefused with the reason."""
-        self.aim_checks('look_at_geo', goal.speed)
+        self._look_at.aim_checks('look_at_geo', goal.speed)
         try:
             target = GeoPoint(goal.latitude, goal.longitude, goal.altitude).checked('target')
             pose = self.device_pose()
@@ -152,9 +201,10 @@ class LookAtGeoMixin:
             raise LookAtRefused(str(exc)) from exc
         what = describe_target(target, pose)
         point = base_frame_point(target, pose)
-        joints, positions = self.plan_aim((float(point[0]), float(point[1]), float(point[2])),
-                                          what)
-        pointing = self.device.capabilities.target_pointing
+        joints, positions = self._look_at.plan_aim(
+            (float(point[0]), float(point[1]), float(point[2])), what)
+        device = self._node.device
+        pointing = device.capabilities.target_pointing if device is not None else None
         if pointing is not None and (not pose.from_device or pointing.refusal(pose, goal.speed)):
             pointing = None
         return GeoAim(target, pose, joints, positions, what, pointing)
@@ -164,29 +214,33 @@ class LookAtGeoMixin:
         try:
             aim = self.plan_look_at_geo(goal_handle.request)
         except LookAtRefused as exc:
-            return self.refuse_aim(goal_handle, result, 'look_at_geo', exc)
+            return self._look_at.refuse_aim(goal_handle, result, 'look_at_geo', exc)
         path = ("the device's own target pointing" if aim.pointing is not None
                 else 'a driver move')
-        self.get_logger().info(
+        self._node.get_logger().info(
             f'look_at_geo: {aim.what}, seen {aim.pose}: ' + ', '.join(
                 f'{j} {p:+.4f} rad' for j, p in zip(aim.joints, aim.positions, strict=True))
             + f' by {path}')
         if aim.pointing is None:
-            self.move_aim(goal_handle, result, aim.joints, aim.positions, LookAtGeo.Feedback)
+            self._look_at.move_aim(goal_handle, result, aim.joints, aim.positions,
+                                   LookAtGeo.Feedback)
         else:
             targets = dict(zip(aim.joints, aim.positions, strict=True))
             try:
-                self.motion.point_at(aim.pointing, aim.target, targets)
-            except GimbalError as exc:
+                motion = self._node.motion
+                if motion is None:
+                    raise LookAtRefused('the node is not configured')
+                motion.point_at(aim.pointing, aim.target, targets)
+            except (GimbalError, LookAtRefused) as exc:
                 goal_handle.abort()
-                current = self.current_positions()
+                current = self._node.current_positions()
                 result.joint_names = aim.joints
                 result.positions = [current.get(j, math.nan) for j in aim.joints]
                 result.success = False
                 result.message = f'look_at_geo: the device refused its target pointing: {exc}'
                 return result
             view = MoveGoalView(goal_handle, MoveTo.Goal(), LookAtGeo.Feedback)
-            moved = self._finish_move(view, targets, 0.0)
+            moved = self._actions.finish_move(view, targets, 0.0)
             result.success, result.message = moved.success, moved.message
             result.positions, result.joint_names = list(moved.positions), aim.joints
         result.message = f'{result.message}: {aim.what}, by {path}'

@@ -155,7 +155,7 @@ def send_all_or_nothing(changes: Sequence[DeviceChange]) -> str | None:
 @dataclass
 class _GroupCheck:
     names: frozenset[str]
-    check: Callable[[ValueOf], None]
+    check: Callable[[ValueOf], object]
 
 
 @dataclass
@@ -178,7 +178,7 @@ class ParameterRegistry:
         self, name: str, apply: Callable[[Any], None],
         send: Callable[[Any], None] | None = None,
         busy: Callable[[], str | None] | None = None,
-        check: Callable[[Any], None] | None = None,
+        check: Callable[[Any], object] | None = None,
     ) -> None:
         """Mark a declared parameter as applicable at run time.
 
@@ -192,7 +192,7 @@ class ParameterRegistry:
         if check is not None:
             self.add_check([name], lambda value_of: check(value_of(name)))
 
-    def add_check(self, names: Iterable[str], check: Callable[[ValueOf], None]) -> None:
+    def add_check(self, names: Iterable[str], check: Callable[[ValueOf], object]) -> None:
         """A check over several parameters, run at start-up and whenever one of them is set."""
         self.checks.append(_GroupCheck(frozenset(names), check))
 
