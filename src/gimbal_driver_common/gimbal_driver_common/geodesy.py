@@ -176,7 +176,7 @@ def resolve_pose(device: DevicePose | None, site_position: GeoPoint | None = Non
     device = device or DevicePose(missing={
         'position': 'the device cannot know where it stands',
         'orientation': 'the device cannot know which way it faces'})
-    problems: list[str] = []
+    problems: list[str | None] = []  # None: a part that passed its check
     position = (PositionFix(site_position, SITE_POSITION) if site_position is not None
                 else device.position)
     if position is None:

@@ -15,7 +15,7 @@ assumption about axis directions or mounting rotations beyond what the URDF says
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -82,7 +82,7 @@ def rotation_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
     )
 
 
-def _origin(xyz: object, rpy: object) -> np.ndarray:
+def _origin(xyz: Sequence[float] | None, rpy: Sequence[float] | None) -> np.ndarray:
     """URDF <origin>: translation, then fixed-axis roll, pitch, yaw (R = Rz Ry Rx)."""
     matrix = np.eye(4)
     matrix[:3, :3] = rotation_rpy(*(rpy or (0.0, 0.0, 0.0)))

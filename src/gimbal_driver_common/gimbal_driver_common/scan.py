@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 from gimbal_driver_common.errors import InvalidRequest
 from gimbal_driver_common.joint_command import JointLimits
@@ -20,6 +21,20 @@ MAX_WAYPOINTS = 10000
 
 class ScanError(InvalidRequest):
     """The scan request cannot be run; the message says which value and why."""
+
+
+class ScanFields(Protocol):
+    """The fields of a gimbal_msgs/srv/StartScan request that a scan reads (no ROS import
+    here: the request message, or anything with the same fields)."""
+
+    pattern: str
+    pan_min: float
+    pan_max: float
+    tilt_min: float
+    tilt_max: float
+    speed: float
+    tilt_step: float
+    dwell: float
 
 
 @dataclass(frozen=True)
@@ -34,7 +49,7 @@ class ScanRequest:
     dwell: float
 
     @classmethod
-    def from_msg(cls, msg: object) -> ScanRequest:
+    def from_msg(cls, msg: ScanFields) -> ScanRequest:
         """Copy the fields of a gimbal_msgs/srv/StartScan request (duck-typed, no ROS import)."""
         return cls(
             pattern=str(msg.pattern).strip().lower(),
