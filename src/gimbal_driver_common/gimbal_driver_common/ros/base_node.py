@@ -21,11 +21,11 @@ import math
 import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.action import ActionServer, CancelResponse
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -53,13 +53,24 @@ from gimbal_driver_common.ros.log_bridge import install_log_bridge
 from gimbal_driver_common.ros.look_at import LookAtServer
 from gimbal_driver_common.ros.look_at_geo import LookAtGeoServer
 from gimbal_driver_common.ros.parameters import ParameterRegistry, declare
-from gimbal_driver_common.ros.run import run_driver
+from gimbal_driver_common.ros.run import InlineCallbackGroup, run_driver
 from gimbal_driver_common.scan import ScanRequest
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import GimbalStatus, Preset
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
 
 __all__ = ['GimbalDriverNode', 'run_driver']
+
+
+class Answer(Protocol):
+    """A service response with std_srvs/Trigger's ``success`` and ``message`` (Trigger,
+    SetPreset, a driver's own services ...)."""
+
+    success: bool
+    message: str
+
+
+AnswerT = TypeVar('AnswerT', bound=Answer)
 
 
 class GimbalDriverNode(LifecycleNode):
@@ -89,8 +100,18 @@ class GimbalDriverNode(LifecycleNode):
     DESCRIPTION_NAME: str | None = None
     #: the ``joint_names`` parameter (``declare_common_parameters`` sets it)
     joint_names: list[str]
+    #: the other common parameters of docs/interface.md, set the same way
+    publish_rate: float
+    diagnostics_period: float
+    command_timeout: float
+    reconnect_period: float
+    presets_file: str
+    goal_tolerance: float
+    move_timeout: float
+    motion_start_timeout: float
+    autostart: bool
 
-    def __init__(self, node_name: str, **kwargs: object) -> None:
+    def __init__(self, node_name: str, **kwargs: Any) -> None:  # rclpy Node's keywords
         super().__init__(node_name, **kwargs)
         self.parameter_registry = ParameterRegistry(self)
         self.config = declare_common_parameters(self)
@@ -165,16 +186,17 @@ class GimbalDriverNode(LifecycleNode):
         return declare(self, name, default, description, **kwargs)
 
     def runtime_parameter(
-        self, name: str, apply: Callable[[object], None] | str,
-        send: Callable[[object], None] | None = None,
+        self, name: str, apply: Callable[[Any], None] | str,
+        send: Callable[[Any], None] | None = None,
         busy: Callable[[], str | None] | None = None,
-        check: Callable[[object], object] | None = None,
+        check: Callable[[Any], object] | None = None,
     ) -> None:
         """Let ``ros2 param set`` change ``name`` while the node runs (see ParameterRegistry).
 
         ``apply`` stores the value (a string: the attribute to assign); ``send``
         pushes it to the device while connected; ``busy`` says why it cannot
-        change now; ``check`` is the start-up value check.
+        change now; ``check`` is the start-up value check. The value is of the
+        parameter's declared type (float, list[str] ...), hence ``Any`` here.
         """
         if isinstance(apply, str):
             attribute = apply
@@ -215,7 +237,7 @@ class GimbalDriverNode(LifecycleNode):
             return self.command_refusal()
         return self.controller.refusal(list(joints))
 
-    def serve_request(self, response: object, action: Callable[[], str]) -> object:
+    def serve_request(self, response: AnswerT, action: Callable[[], str]) -> AnswerT:
         """Answer a service with ``success``/``message`` from ``action()``.
 
         Refused while inactive or disconnected; a GimbalError becomes
@@ -228,7 +250,7 @@ class GimbalDriverNode(LifecycleNode):
             return response
         return self._answer(response, action)
 
-    def _answer(self, response: object, action: Callable[[], str]) -> object:
+    def _answer(self, response: AnswerT, action: Callable[[], str]) -> AnswerT:
         try:
             response.message = action() or 'done'
             response.success = True
@@ -310,8 +332,7 @@ class GimbalDriverNode(LifecycleNode):
         self._status_pub = self.create_publisher(GimbalStatus, '~/status', 10)
         # keep-last 1 (docs/interface.md): newest wins; the callback never waits on the device,
         # so run_driver's executor runs it inline (ros/run.py InlineGroupExecutor)
-        command_group = MutuallyExclusiveCallbackGroup()
-        command_group.inline = True
+        command_group = InlineCallbackGroup()
         self.create_subscription(JointState, 'joint_command', self._on_joint_command, 1,
                                  callback_group=command_group)
         services = [
@@ -438,8 +459,16 @@ class GimbalDriverNode(LifecycleNode):
             return response
         return self._answer(response, self.controller.stop)
 
+    def _configured(self) -> tuple[GimbalController, Motion]:
+        """What configure built; refused (the node's reason) before it. A service reaches
+        this through :meth:`serve_request`, which refuses first."""
+        controller, motion = self.controller, self.motion
+        if controller is None or motion is None:
+            raise DeviceRefused(self.command_refusal())
+        return controller, motion
+
     def _on_reset_faults(self, request: Trigger.Request, response: Trigger.Response):
-        return self.serve_request(response, lambda: self.controller.reset_faults())
+        return self.serve_request(response, lambda: self._configured()[0].reset_faults())
 
     def _on_set_preset(self, request: SetPreset.Request, response: SetPreset.Response):
         def action() -> str:
@@ -449,37 +478,41 @@ class GimbalDriverNode(LifecycleNode):
                     raise InvalidRequest(f'{len(request.joint_names)} joint names but '
                                          f'{len(request.positions)} positions')
                 positions = dict(zip(request.joint_names, request.positions, strict=True))
-            return self.motion.set_preset(request.index, request.name, positions)
+            return self._configured()[1].set_preset(request.index, request.name, positions)
 
         return self.serve_request(response, action)
 
     def _on_goto_preset(self, request: GotoPreset.Request, response: GotoPreset.Response):
         return self.serve_request(
-            response, lambda: self.motion.goto_preset(request.index, request.speed))
+            response, lambda: self._configured()[1].goto_preset(request.index, request.speed))
 
     def _on_list_presets(self, request: ListPresets.Request, response: ListPresets.Response):
+        motion = self.motion
+        if motion is None:
+            return self.serve_request(response, lambda: '')
+
         def action() -> str:
-            presets = self.motion.list_presets()
+            presets = motion.list_presets()
             response.presets = [Preset(index=p.index, name=p.name,
                                        joint_names=list(p.positions),
                                        positions=list(p.positions.values())) for p in presets]
             return f'{len(presets)} preset(s)'
 
-        return self._answer(response, action) if self.motion else self.serve_request(
-            response, lambda: '')
+        return self._answer(response, action)
 
     def _on_clear_preset(self, request: ClearPreset.Request, response: ClearPreset.Response):
-        if self.motion is None:
+        motion = self.motion
+        if motion is None:
             return self.serve_request(response, lambda: '')
         index = None if request.all else request.index
-        return self._answer(response, lambda: self.motion.clear_preset(index))
+        return self._answer(response, lambda: motion.clear_preset(index))
 
     def _on_start_scan(self, request: StartScan.Request, response: StartScan.Response):
         return self.serve_request(
-            response, lambda: self.motion.start_scan(ScanRequest.from_msg(request)))
+            response, lambda: self._configured()[1].start_scan(ScanRequest.from_msg(request)))
 
     def _on_stop_scan(self, request: Trigger.Request, response: Trigger.Response):
-        return self.serve_request(response, lambda: self.motion.stop_scan())
+        return self.serve_request(response, lambda: self._configured()[1].stop_scan())
 
     def _limits_from(self, value_of: Callable[[str], object]) -> dict[str, JointLimits]:
         return limits_from(self.joint_names, value_of)

@@ -28,8 +28,8 @@ def heading_imu(heading_rad: float, accuracy_rad: float | None) -> Imu:
     msg = Imu()
     msg.orientation.z = math.sin(yaw / 2.0)
     msg.orientation.w = math.cos(yaw / 2.0)
-    known = accuracy_rad is not None and accuracy_rad > 0.0
-    yaw_variance = accuracy_rad ** 2 if known else UNMEASURED_ANGLE_VARIANCE
+    yaw_variance = (accuracy_rad ** 2 if accuracy_rad is not None and accuracy_rad > 0.0
+                    else UNMEASURED_ANGLE_VARIANCE)
     msg.orientation_covariance = [UNMEASURED_ANGLE_VARIANCE, 0.0, 0.0,
                                   0.0, UNMEASURED_ANGLE_VARIANCE, 0.0,
                                   0.0, 0.0, yaw_variance]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import SupportsInt
 
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
@@ -102,6 +103,13 @@ def diagnostic_array(
     return array
 
 
+def _state_code(value: object) -> int:
+    """An ``axis_details`` state (an AxisStateCode) as AxisState's integer code."""
+    if not isinstance(value, SupportsInt):
+        raise TypeError(f'axis state {value!r} is not an AxisStateCode')
+    return int(value)
+
+
 def gimbal_status(ctl: GimbalController | None, joint_names: list[str]) -> GimbalStatus:
     """~/status: link, identity, mode, errors and one AxisState per joint."""
     msg = GimbalStatus()
@@ -144,7 +152,7 @@ def gimbal_status(ctl: GimbalController | None, joint_names: list[str]) -> Gimba
             axis.state = AxisState.STATE_IDLE
         try:
             for key, value in (report.axis_details(name) if report else {}).items():
-                setattr(axis, key, int(value) if key == 'state' else value)  # AxisStateCode
+                setattr(axis, key, _state_code(value) if key == 'state' else value)
         except Exception as exc:  # noqa: BLE001
             axis.active_errors = [f'status unavailable: {exc}']
         msg.axes.append(axis)

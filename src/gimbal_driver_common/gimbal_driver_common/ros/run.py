@@ -8,9 +8,11 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import rclpy
+from lifecycle_msgs.msg import State
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.context import Context
 from rclpy.executors import (
     ConditionReachedException,
@@ -18,8 +20,9 @@ from rclpy.executors import (
     ExternalShutdownException,
     ShutdownException,
     TimeoutException,
+    TimeoutObject,
 )
-from rclpy.lifecycle import TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future, Task
 
@@ -36,7 +39,22 @@ GOAL_ANSWER_S = 3.0
 POOL_THREAD_PREFIX = 'executor-pool'
 
 
-def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = None) -> int:
+class NodeClass(Protocol):
+    """A driver's node class: constructed with no arguments (its name is its own)."""
+
+    __name__: str
+
+    def __call__(self) -> GimbalDriverNode: ...
+
+
+class InlineCallbackGroup(MutuallyExclusiveCallbackGroup):
+    """A callback group whose callbacks :class:`InlineGroupExecutor` runs in its spinning
+    thread (they never wait for a device reply)."""
+
+    inline = True
+
+
+def run_driver(node_class: NodeClass, args: Sequence[str] | None = None) -> int:
     """Entry point body for a driver executable: construct, autostart, spin, stop cleanly.
 
     rclpy's own SIGINT handler would shut the context down before ``on_shutdown`` runs,
@@ -44,7 +62,8 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
     executor spins in a worker thread and the main thread waits on an Event, which (unlike
     a blocking rcl_wait) lets the Python signal handler run at once.
     """
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(args=None if args is None else list(args),
+               signal_handler_options=SignalHandlerOptions.NO)
     # The device thread must not wait the default 5 ms for the GIL while a receive thread
     # (e.g. python-can's byte-wise slcan reader) is busy: that showed as joint_states latency.
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
@@ -70,7 +89,8 @@ def run_driver(node_class: type[GimbalDriverNode], args: Sequence[str] | None = 
         threading.Thread(target=_autostart, args=(node,), name='autostart', daemon=True).start()
     while not stop.wait(1.0):
         pass
-    node.on_shutdown(None)
+    # the shutdown transition's callback, run here by hand (it does not read its state)
+    node.on_shutdown(LifecycleState('shuttingdown', State.TRANSITION_STATE_SHUTTINGDOWN))
     answer_open_goals(node, executor)
     # The executor stops before the node is destroyed: destroying it under a spinning
     # executor raced the wait-set build (InvalidHandle from an event handler's
@@ -167,14 +187,15 @@ class InlineGroupExecutor(Executor):
     def spin_once(self, timeout_sec: float | None = None) -> None:
         self.run_one(timeout_sec)
 
-    def spin_once_until_future_complete(self, future: Future,
-                                        timeout_sec: float | None = None) -> None:
+    def spin_once_until_future_complete(
+            self, future: Future, timeout_sec: float | TimeoutObject | None = None) -> None:
         future.add_done_callback(lambda _: self.wake())
         self.run_one(timeout_sec, future.done)
 
-    def run_one(self, timeout_sec: float | None = None,
+    def run_one(self, timeout_sec: float | TimeoutObject | None = None,
                 wait_condition: Callable[[], bool] = lambda: False) -> None:
         """Wait for one ready callback and run it inline or hand it to the pool."""
+        entity: object  # a subscription, service, timer ... (rclpy types it as a TypeVar)
         try:
             handler, entity, _ = self.wait_for_ready_callbacks(timeout_sec, None, wait_condition)
         except (ExternalShutdownException, ShutdownException, TimeoutException,
