@@ -12,7 +12,6 @@ from gimbal_driver_common.device import DevicePresets, Geolocation
 from gimbal_driver_common.errors import InvalidRequest
 from gimbal_driver_common.geodesy import Attitude, DevicePose, GeoPoint, OrientationFix, PositionFix
 
-from .client import Sample
 from .readings import si, si_magnitude
 
 if TYPE_CHECKING:
@@ -78,47 +77,49 @@ class TurretGeolocation(Geolocation):
     def __init__(self, device: TurretDevice) -> None:
         self.device = device
 
-    def _readings(self, keys: Sequence[str], what: str) -> tuple[list[Sample], str | None]:
-        """The samples of ``keys``, or why they cannot be used (never received, stale)."""
+    def _readings(self, keys: Sequence[str], what: str) -> tuple[list[float], float] | str:
+        """The SI values of ``keys`` and the oldest one's stamp, or why they cannot be used
+        (never received, stale)."""
         client = self.device.client
         samples = [client.latest(key) for key in keys]
-        absent = [k for k, s in zip(keys, samples, strict=True) if si(s) is None]
+        values = [si(s) for s in samples]
+        absent = [k for k, v in zip(keys, values, strict=True) if v is None]
         if absent:
-            return [], f"no {what} received ({', '.join(absent)})"
+            return f"no {what} received ({', '.join(absent)})"
         stale = [k for k in keys if client.is_stale(k)]
         if stale:
             age = max(client.age(k) or 0.0 for k in stale)
-            return [], (f"{what} stale: no {', '.join(stale)} for {age:.1f} s "
-                        f"(stale after {client.stale_timeout_for(stale[0]):g} s)")
-        return samples, None
+            return (f"{what} stale: no {', '.join(stale)} for {age:.1f} s "
+                    f"(stale after {client.stale_timeout_for(stale[0]):g} s)")
+        return ([v for v in values if v is not None],
+                min(s.stamp for s in samples if s is not None))
 
     def pose(self) -> DevicePose:
         missing: dict[str, str] = {}
         position = orientation = None
-        samples, why = self._readings(self.POSITION_KEYS, "base GNSS position")
+        read = self._readings(self.POSITION_KEYS, "base GNSS position")
         geoid_height = self.device.settings.geoid_height
-        if why is None and geoid_height is None:
-            why = ("the base GNSS gives the altitude above mean sea level (ICD 7.4.3): set "
-                   "geoid_height (the geoid height N at the site, m) to make it a height above "
-                   "the WGS84 ellipsoid")
-        if why is not None:
-            missing["position"] = why
+        if isinstance(read, str):
+            missing["position"] = read
+        elif geoid_height is None:
+            missing["position"] = (
+                "the base GNSS gives the altitude above mean sea level (ICD 7.4.3): set "
+                "geoid_height (the geoid height N at the site, m) to make it a height above "
+                "the WGS84 ellipsoid")
         else:
-            latitude, longitude, altitude = samples
+            (latitude, longitude, altitude), stamp = read
             accuracy = self.device.readings.fresh("position_accuracy")
             position = PositionFix(
-                GeoPoint(si(latitude), si(longitude), si(altitude) + geoid_height), "base GNSS",
-                stamp=min(s.stamp for s in samples),
-                error=si_magnitude(accuracy))
-        samples, why = self._readings(self.ORIENTATION_KEYS,
-                                      "rover GNSS heading and inclinometer")
-        if why is not None:
-            missing["orientation"] = why
+                GeoPoint(latitude, longitude, altitude + geoid_height), "base GNSS",
+                stamp=stamp, error=si_magnitude(accuracy))
+        read = self._readings(self.ORIENTATION_KEYS, "rover GNSS heading and inclinometer")
+        if isinstance(read, str):
+            missing["orientation"] = read
         else:
-            heading, roll, pitch = samples
+            (heading, roll, pitch), stamp = read
             accuracy = self.device.readings.fresh("rover_heading_accuracy")
             orientation = OrientationFix(
-                Attitude.from_heading(si(heading), si(roll), -si(pitch)),
-                "rover GNSS heading + inclinometer", stamp=min(s.stamp for s in samples),
+                Attitude.from_heading(heading, roll, -pitch),
+                "rover GNSS heading + inclinometer", stamp=stamp,
                 heading_error=si_magnitude(accuracy))
         return DevicePose(position, orientation, missing)

@@ -117,7 +117,8 @@ class TurretClient(Protocol):
         #: IDS, TIS, NIS, FPS, DDS, DUS (a part handed this client and the intervals)
         self.services = NodeServices(self, self.intervals)
         self._codes = MessageCodeCounter()
-        self.sequences = MessageCodeTracker()
+        #: message-code bookkeeping per (node-id, CAN id)
+        self.sequences: MessageCodeTracker[tuple[int, int]] = MessageCodeTracker()
         self.counters = Counters()
         self.events: deque[EmergencyEvent] = deque(maxlen=50)
         self._link_error = ""

@@ -87,6 +87,16 @@ class Sample:
     message_code: int
     node_id: int
 
+    @property
+    def integer(self) -> int:
+        """The value of an integer identifier (a status byte, a mode, flags). The client
+        caches a value only when its data type is the identifier's in the ICD, so anything
+        else here is a wrong key, not a device fault."""
+        value = self.value
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise TypeError(f"{self.key} carries {type(value).__name__}, not an integer")
+        return value
+
 
 @dataclass
 class Counters:

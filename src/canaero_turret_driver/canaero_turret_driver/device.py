@@ -250,12 +250,12 @@ class TurretDevice(Device):
             stamp = max(stamp, sample.stamp)
             velocity = self._joint_value(axis, "velocity")
             velocities[joint] = math.nan if velocity is None else velocity
-            current = client.latest(f"{axis}_current")
-            if si(current) is not None:
-                efforts[joint] = si(current)
+            current = si(client.latest(f"{axis}_current"))
+            if current is not None:
+                efforts[joint] = current
             status = client.latest(f"{axis}_status")
             if status is not None:
-                moving[joint] = AxisStatus.decode(status.value).target != TargetState.REACHED
+                moving[joint] = AxisStatus.decode(status.integer).target != TargetState.REACHED
         if len(efforts) != len(positions):
             efforts = {}
         self._latest = JointSample(positions, velocities, efforts, stamp, moving)
@@ -314,7 +314,7 @@ class TurretDevice(Device):
             sample = client.latest(f"{axis}_status") if axis is not None else None
             if sample is None or client.is_stale(f"{axis}_status"):
                 continue
-            status = AxisStatus.decode(sample.value)
+            status = AxisStatus.decode(sample.integer)
             if status.enabled:
                 continue
             why = ("drive in free run (not driven)" if status.actuator_mode ==
@@ -361,10 +361,12 @@ class TurretDevice(Device):
         Taken from the interval the turret accepted by TIS or, when it refused, the one
         observed on the bus; until that is known, publish_rate.
         """
-        intervals = [self.client.intervals.interval_of(key) for key in sorted(POSITION_KEYS)]
-        if any(interval is None or interval <= 0 for interval in intervals):
+        known = self.client.intervals
+        intervals = [known.interval_of(key) for key in sorted(POSITION_KEYS)]
+        positive = [interval for interval in intervals if interval is not None and interval > 0]
+        if len(positive) != len(intervals):
             return publish_rate
-        return min(publish_rate, 1.0 / max(intervals))  # type: ignore[type-var]
+        return min(publish_rate, 1.0 / max(positive))
 
     def set_intervals(self, intervals: dict[str, int]) -> None:
         """TIS now for each entry (a node's refusal raises with its reply)."""
@@ -406,8 +408,8 @@ class TurretDevice(Device):
             sample = self.client.latest(key)
             if sample is None or self.client.is_stale(key):
                 continue
-            value = sample.value if key.endswith("_state") else \
-                AxisStatus.decode(sample.value).actuator_mode
+            value = sample.integer if key.endswith("_state") else \
+                AxisStatus.decode(sample.integer).actuator_mode
             if value in tuple(ActuatorMode):
                 return ActuatorMode(value)
         return None

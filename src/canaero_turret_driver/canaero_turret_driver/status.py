@@ -128,7 +128,7 @@ class TurretStatus(StatusReport):
             if sample is None or key == "actuator_mode_state":
                 continue
             if key == "status":
-                status = AxisStatus.decode(sample.value)
+                status = AxisStatus.decode(sample.integer)
                 values += [("status_byte", f"0x{status.raw:02X}"),
                            ("target", status.target_name), ("actuator_mode", status.mode_name),
                            ("enabled", str(status.enabled))]
@@ -159,8 +159,8 @@ class TurretStatus(StatusReport):
         level, problems = Level.OK, []
         sample = client.latest("periphery_status")
         if sample is not None:
-            values.append(("periphery_status", f"0x{sample.value:08X}"))
-            for key, is_set in decode_periphery(int(sample.value)).items():
+            values.append(("periphery_status", f"0x{sample.integer:08X}"))
+            for key, is_set in decode_periphery(sample.integer).items():
                 values.append((key, str(is_set)))
                 if key == "case_temperature_sensor_fault" and is_set:
                     level = Level.WARN
@@ -168,7 +168,7 @@ class TurretStatus(StatusReport):
         cover = client.latest("cover_state")
         if cover is not None:
             try:
-                values.append(("cover", CoverState(cover.value).name.lower()))
+                values.append(("cover", CoverState(cover.integer).name.lower()))
             except ValueError:
                 values.append(("cover", f"undefined({cover.value})"))
         for key in ("case_temperature", "charging_current", "charging_state", "fan_state",
@@ -244,7 +244,7 @@ class TurretStatus(StatusReport):
             sample = self.client.latest(f"{axis}_actuator_mode_state")
             if sample is not None:
                 try:
-                    name = ActuatorMode(sample.value).name.lower()
+                    name = ActuatorMode(sample.integer).name.lower()
                 except ValueError:
                     name = f"undefined({sample.value})"
                 modes.append(f"{self.device.joint_of[axis]}={name}")
@@ -254,7 +254,7 @@ class TurretStatus(StatusReport):
         sample = self.client.latest(f"{self.device.axis_of[joint]}_status")
         if sample is None:
             return {}
-        status = AxisStatus.decode(sample.value)
+        status = AxisStatus.decode(sample.integer)
         details: dict[str, object] = {"calibrated": True}
         if not status.enabled:
             fault = status.actuator_mode != ActuatorMode.FREE_RUN
@@ -268,11 +268,11 @@ class TurretStatus(StatusReport):
         for axis in AXES:
             sample = client.latest(f"{axis}_status")
             if sample is not None:
-                status = AxisStatus.decode(sample.value)
+                status = AxisStatus.decode(sample.integer)
                 if not status.enabled and status.actuator_mode != ActuatorMode.FREE_RUN:
                     errors.append(f"{self.device.joint_of[axis]}_drive_disabled")
         periphery = client.latest("periphery_status")
-        if periphery is not None and decode_periphery(int(periphery.value))[
+        if periphery is not None and decode_periphery(periphery.integer)[
                 "case_temperature_sensor_fault"]:
             errors.append("case_temperature_sensor_fault")
         if self._event_recent(client) and client.events:

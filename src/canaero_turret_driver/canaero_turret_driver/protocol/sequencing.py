@@ -24,6 +24,10 @@ from __future__ import annotations
 from collections.abc import Hashable
 from dataclasses import dataclass
 from enum import Enum
+from typing import Generic, TypeVar
+
+#: what a tracker is keyed by (the client: (node-id, CAN id))
+K = TypeVar("K", bound=Hashable)
 
 
 class SequenceEvent(Enum):
@@ -59,7 +63,7 @@ class SequenceStats:
         return self.lost + self.repeated + self.late
 
 
-class MessageCodeTracker:
+class MessageCodeTracker(Generic[K]):
     """Per-key (normally (node-id, CAN id)) message-code bookkeeping."""
 
     def __init__(self, lost_window: int = 128, streak: int = 3) -> None:
@@ -67,9 +71,9 @@ class MessageCodeTracker:
             raise ValueError("lost_window must be 1..255")
         self._lost_window = lost_window
         self._streak = streak
-        self._stats: dict[Hashable, SequenceStats] = {}
+        self._stats: dict[K, SequenceStats] = {}
 
-    def update(self, key: Hashable, code: int) -> tuple[SequenceEvent, int]:
+    def update(self, key: K, code: int) -> tuple[SequenceEvent, int]:
         """Account for one received code; returns (event, number of messages missed)."""
         if not 0 <= code <= 255:
             raise ValueError(f"message code {code} is not 0..255")
@@ -107,17 +111,17 @@ class MessageCodeTracker:
         stats.late += 1
         return SequenceEvent.LATE, 0
 
-    def reset(self, key: Hashable | None = None) -> None:
+    def reset(self, key: K | None = None) -> None:
         """Forget one key (e.g. after the node went silent) or all keys."""
         if key is None:
             self._stats.clear()
         else:
             self._stats.pop(key, None)
 
-    def stats(self, key: Hashable) -> SequenceStats:
+    def stats(self, key: K) -> SequenceStats:
         return self._stats.get(key, SequenceStats())
 
-    def all_stats(self) -> dict[Hashable, SequenceStats]:
+    def all_stats(self) -> dict[K, SequenceStats]:
         return dict(self._stats)
 
 
