@@ -46,7 +46,7 @@ KNOWN_SETS: dict[str, tuple[str, ...]] = {
 def command_names(names: Iterable[str]) -> list[str]:
     """Table command names, with the names of :data:`KNOWN_SETS` expanded; a name that is
     neither raises KeyError naming it."""
-    expanded = []
+    expanded: list[str] = []
     for name in names:
         if name in KNOWN_SETS:
             expanded += KNOWN_SETS[name]

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import threading
 from typing import TYPE_CHECKING
 
 from ..protocol import Frame, GeoPoint, ReplyCode
 from ..protocol import registers as reg
 from ..protocol.geometry import aim_at
-from .axis import DRIFT_MEASURE_TIME, RequestRejected, ScanState
+from .axis import DRIFT_MEASURE_TIME, AxisModel, RequestRejected, ScanState
 
 if TYPE_CHECKING:
     from .model import PedestalModel
@@ -20,6 +21,64 @@ def _error_text(model: PedestalModel, bit: int, text: str) -> str:
 class CommandHandlers:
     """The handlers of :data:`~.table.HANDLERS` longer than one row; a base of
     :class:`~.model.PedestalModel`, whose state they read and change."""
+
+    # The model's state the handlers use (PedestalModel.__init__ sets each).
+    lock: threading.RLock
+    axes: dict[int, AxisModel]
+    emergency_stop: bool
+    gear_ratio: float
+    gps_present: bool
+    scan: ScanState | None
+    scan_params: dict[str, float]
+    preset_looping: list[int] | None
+    target_looping: list[int] | None
+    gps_position: GeoPoint
+    gps_heading: float
+    gps_fix: bool
+    inserted_position: GeoPoint
+    inserted_heading: float
+    override_gps: bool
+    tracker_present: bool
+    tracker_mode: dict[int, int]
+    detected_targets: dict[int, list[tuple[int, int]]]
+    gyro_drift: dict[int, float]
+
+    def _motion_allowed(self, axis: AxisModel | None = None) -> None:
+        if self.emergency_stop:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Emergency stop flag is set')
+        if axis is not None and axis.faulted:
+            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Axis in fault: reset faults')
+        if axis is not None and axis.homing:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Command not valid while homing')
+
+    def _scan_waypoints(self, pattern: str) -> list[tuple[float, float]]:
+        p = self.scan_params
+        y0, y1, p0 = p['yaw_min'], p['yaw_max'], p['pitch_min']
+        steps, height = max(int(p['steps']), 0), p['step_height']
+        points = [(y0, p0)]
+        if pattern == 'zigzag':
+            # 4.3: diagonal runs to (YawMax, +StepHeight), back to YawMin, NumSteps times.
+            for i in range(1, steps + 1):
+                points.append((y1 if i % 2 else y0, p0 + i * height))
+            if steps == 0:
+                points.append((y1, p0))
+        elif pattern == 'snake':
+            for i in range(steps + 1):
+                row = p0 + i * height
+                if i:
+                    points.append((points[-1][0], row))
+                points.append((y1 if i % 2 == 0 else y0, row))
+        else:  # square: rectangles shrinking inward by StepHeight
+            top = p0 + max(steps, 1) * height
+            lo_y, hi_y, lo_p, hi_p = y0, y1, p0, top
+            points = []
+            while lo_y <= hi_y and lo_p <= hi_p and len(points) < 400:
+                points += [(lo_y, lo_p), (hi_y, lo_p), (hi_y, hi_p), (lo_y, hi_p)]
+                lo_y, hi_y, lo_p, hi_p = lo_y + height, hi_y - height, lo_p + height, hi_p - height
+                if height <= 0:
+                    break
+        # scan limits are motor positions (4.3.1 remark); the model keeps load degrees
+        return [(y / self.gear_ratio, q / self.gear_ratio) for y, q in points]
 
     def _tracking_active(self, camera: int) -> bool:
         """4.11.1: manual and automatic tracking run only while a target is detected."""

@@ -192,35 +192,6 @@ class PedestalModel(CommandHandlers):
                 axis.axis_on = False
 
     # ---------------------------------------------------------------- scans
-    def _scan_waypoints(self, pattern: str) -> list[tuple[float, float]]:
-        p = self.scan_params
-        y0, y1, p0 = p['yaw_min'], p['yaw_max'], p['pitch_min']
-        steps, height = max(int(p['steps']), 0), p['step_height']
-        points = [(y0, p0)]
-        if pattern == 'zigzag':
-            # 4.3: diagonal runs to (YawMax, +StepHeight), back to YawMin, NumSteps times.
-            for i in range(1, steps + 1):
-                points.append((y1 if i % 2 else y0, p0 + i * height))
-            if steps == 0:
-                points.append((y1, p0))
-        elif pattern == 'snake':
-            for i in range(steps + 1):
-                row = p0 + i * height
-                if i:
-                    points.append((points[-1][0], row))
-                points.append((y1 if i % 2 == 0 else y0, row))
-        else:  # square: rectangles shrinking inward by StepHeight
-            top = p0 + max(steps, 1) * height
-            lo_y, hi_y, lo_p, hi_p = y0, y1, p0, top
-            points = []
-            while lo_y <= hi_y and lo_p <= hi_p and len(points) < 400:
-                points += [(lo_y, lo_p), (hi_y, lo_p), (hi_y, hi_p), (lo_y, hi_p)]
-                lo_y, hi_y, lo_p, hi_p = lo_y + height, hi_y - height, lo_p + height, hi_p - height
-                if height <= 0:
-                    break
-        # scan limits are motor positions (4.3.1 remark); the model keeps load degrees
-        return [(y / self.gear_ratio, q / self.gear_ratio) for y, q in points]
-
     def _advance_scan(self) -> None:
         scan = self.scan
         if scan is None:
@@ -384,14 +355,6 @@ class PedestalModel(CommandHandlers):
                                   'Axis not exist in the system' if frame.axis else
                                   'Invalid Axis 0 in motor command')
         return axis
-
-    def _motion_allowed(self, axis: AxisModel | None = None) -> None:
-        if self.emergency_stop:
-            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Emergency stop flag is set')
-        if axis is not None and axis.faulted:
-            raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Axis in fault: reset faults')
-        if axis is not None and axis.homing:
-            raise RequestRejected(ReplyCode.INVALID_COMMAND, 'Command not valid while homing')
 
     def knows(self, opcode: int) -> bool:
         """The device knows this opcode (table, ``unknown_commands``, ``known_commands``)."""

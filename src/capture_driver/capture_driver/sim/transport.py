@@ -162,7 +162,7 @@ class CaptureSimulator:
             return None
         opcode = None if word == '*' else COMMANDS[word].opcode
         count = int(args[1]) if len(args) > 1 else 1
-        code = int(args[2], 16) if len(args) > 2 else ReplyCode.EXECUTION_ERROR
+        code = ReplyCode(int(args[2], 16)) if len(args) > 2 else ReplyCode.EXECUTION_ERROR
         model.nack_next(code, opcode, count)
         return None
 
