@@ -847,8 +847,10 @@ _TABLE: list[tuple[Any, ...]] = [
 COMMANDS: dict[str, Command] = {}
 BY_OPCODE: dict[int, Command] = {}
 for _row in _TABLE:
-    _cmd = Command(*_row[:3], arg=_row[3], arg_unit=_row[4], ret=_row[5], ret_unit=_row[6],
-                   confidence=_row[7], evidence=_row[8], safety=_row[9], summary=_row[10])
+    _name, _opcode, _axis = _row[:3]
+    _cmd = Command(_name, _opcode, _axis, arg=_row[3], arg_unit=_row[4], ret=_row[5],
+                   ret_unit=_row[6], confidence=_row[7], evidence=_row[8], safety=_row[9],
+                   summary=_row[10])
     if _cmd.name in COMMANDS or _cmd.opcode in BY_OPCODE:
         raise RuntimeError(f'duplicate command table entry {_cmd.name} 0x{_cmd.opcode:04X}')
     COMMANDS[_cmd.name] = _cmd

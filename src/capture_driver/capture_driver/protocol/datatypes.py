@@ -198,7 +198,7 @@ def _preset_from(value: Any, what: str) -> PresetRecord:
         raise ProtocolError(f'{what} needs (name, [6 angles]), got {value!r}') from exc
     if len(angles) != 6 or not isinstance(name, str):
         raise ProtocolError(f'{what} needs a name and 6 angles, got {value!r}')
-    return PresetRecord(name, angles)  # type: ignore[arg-type]
+    return PresetRecord(name, angles)
 
 
 def decode_value(dtype: DataType, data: bytes, what: str = 'reply') -> Any:
@@ -232,7 +232,7 @@ def decode_value(dtype: DataType, data: bytes, what: str = 'reply') -> Any:
     if dtype is DataType.PRESET:
         raw_name, *angles = _PRESET.unpack(data)
         name = raw_name.split(b'\0', 1)[0].decode('ascii', errors='replace')
-        return PresetRecord(name, tuple(angles))  # type: ignore[arg-type]
+        return PresetRecord(name, tuple(angles))
     if dtype is DataType.TARGETS:
         values = _TARGETS.unpack(data)
         return tuple(zip(values[0::2], values[1::2], strict=True))
