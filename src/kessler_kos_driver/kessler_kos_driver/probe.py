@@ -66,7 +66,8 @@ def identify(host: str, port: int, password: str, timeout: float) -> Found:
                 'firmware': info.firmware}
     if client.guid:
         identity['GUID'] = client.guid
-    ids = {'device address': info.device_addr, 'network id': info.network_id}
+    ids: dict[str, int | list[int]] = {'device address': info.device_addr,
+                                       'network id': info.network_id}
     parameters: dict = {'host': host, 'port': port}
     if motors:
         ids['motor addresses'] = motors

@@ -61,7 +61,7 @@ def split_frame(frame: bytes) -> tuple[Header, bytes]:
     return header, bytes(frame[HEADER_SIZE:])
 
 
-def plausible_header(data: bytes, max_frame: int = DEFAULT_MAX_FRAME) -> bool:
+def plausible_header(data: bytes | bytearray, max_frame: int = DEFAULT_MAX_FRAME) -> bool:
     version, length, message_id, message_type = _HEADER.unpack_from(data, 0)
     return (
         version == PROTOCOL_VERSION

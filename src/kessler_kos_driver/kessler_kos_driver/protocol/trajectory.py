@@ -175,7 +175,8 @@ class RawBlock:
 
 
 Block = PlaybackBlock | TimeLapseBlock | AxisBlock | SegmentBlock | RawBlock
-_BLOCK_TYPES: dict[int, tuple[type, int]] = {
+_BLOCK_TYPES: dict[int, tuple[type[PlaybackBlock] | type[TimeLapseBlock] | type[AxisBlock]
+                               | type[SegmentBlock], int]] = {
     BlockId.PLAYBACK: (PlaybackBlock, PLAYBACK_BLOCK_SIZE),
     BlockId.TIMELAPSE: (TimeLapseBlock, TIMELAPSE_BLOCK_SIZE),
     BlockId.AXIS: (AxisBlock, AXIS_BLOCK_SIZE),
