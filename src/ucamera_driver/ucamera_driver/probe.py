@@ -9,6 +9,7 @@ comes from the telemetry it streams by itself.
 from __future__ import annotations
 
 import time
+from functools import partial
 
 from gimbal_driver_common.probe import (
     Attempt,
@@ -32,7 +33,7 @@ def probe(link: ProbeLink) -> list[Attempt]:
         return []
     return [Attempt(f'UCSP Request Gimbal Version at {baud} baud 8N1',
                     f'serial {link.serial_port}',
-                    lambda baud=baud: identify(link.serial_port, baud, link.timeout))
+                    partial(identify, link.serial_port, baud, link.timeout))
             for baud in BAUD_RATES]
 
 

@@ -302,7 +302,7 @@ class SetTelemetryRate(Packet):
     rate_hz: int = 50
 
     def raw_fields(self) -> tuple[int, ...]:
-        if isinstance(self.rate_hz, float) and not self.rate_hz.is_integer():
+        if not float(self.rate_hz).is_integer():  # a caller may pass a float
             raise RangeError(f"telemetry rate must be a whole number of Hz, got {self.rate_hz}")
         _check("telemetry rate", self.rate_hz, TELEMETRY_RATE_MIN_HZ, TELEMETRY_RATE_MAX_HZ, "Hz")
         return (int(self.rate_hz),)
@@ -705,7 +705,7 @@ class SetIrPalette(Packet):
     palette: int = 0
 
     def raw_fields(self) -> tuple[int, ...]:
-        if isinstance(self.palette, float) and not self.palette.is_integer():
+        if not float(self.palette).is_integer():  # a caller may pass a float
             raise RangeError(f"IR palette must be a whole number, got {self.palette}")
         _check("IR palette", self.palette, *_UINT16, "")
         return (int(self.palette),)
