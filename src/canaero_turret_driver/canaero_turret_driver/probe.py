@@ -81,7 +81,7 @@ def identify(link: ProbeLink) -> Found:
     except Exception:
         bus.shutdown()
         raise
-    node = max(heard, key=heard.get) if heard else TURRET_NODE_ID
+    node = max(heard, key=lambda n: heard[n]) if heard else TURRET_NODE_ID
     config = ClientConfig(interface=link.can_interface, channel=link.can_channel,
                           bitrate=link.can_bitrate or None, turret_node_id=node,
                           service_timeout=min(0.1, link.timeout / 6.0), service_attempts=3)

@@ -42,7 +42,11 @@ def decode_eed(message: CanAerospaceMessage) -> EmergencyEvent:
         raise CodecError(f"CAN id {message.can_id} is not in the EED range 0..127")
     if message.data_type != DataType.ERROR:
         raise CodecError(f"EED frame with data type {message.type_name}, expected ERROR")
-    error_code, operation_id, location_id = message.value  # type: ignore[misc]
+    value = message.value
+    if not (isinstance(value, tuple) and len(value) == 3
+            and all(isinstance(v, int) for v in value)):
+        raise CodecError(f"EED frame carries {value!r}, not (error, operation, location)")
+    error_code, operation_id, location_id = value
     return EmergencyEvent(message.node_id, message.can_id, error_code, operation_id,
                           location_id, message.service_code, message.message_code)
 

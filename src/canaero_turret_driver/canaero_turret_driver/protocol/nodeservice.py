@@ -133,7 +133,10 @@ def _response(node_id: int, service: ServiceCode, data_type: DataType, value: ob
 def response_status(response: CanAerospaceMessage) -> int:
     """The result of a TIS/FPS/NIS/DDS/DUS response (see module notes)."""
     if response.data_type == DataType.LONG:
-        return int(response.value)  # type: ignore[arg-type]
+        value = response.value
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise CodecError(f"LONG response carries {value!r}, not an integer")
+        return value
     code = response.message_code
     return code - 256 if code >= 128 else code
 
