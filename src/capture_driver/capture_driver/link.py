@@ -307,7 +307,7 @@ class CaptureLink(Protocol):
             return
         if self._connected:
             LOG.warning('link lost: %s', error)
-            self.last_error = str(error)
+        self.last_error = str(error)
         self._connected = False
         self.answers.fail_all(NotConnected(f'link lost ({error})'))
 
@@ -394,7 +394,9 @@ class CaptureLink(Protocol):
         at once."""
         session = self._session
         if session is None or not session.alive:
-            raise NotConnected(f'not connected ({self.last_error})')
+            lost = session.error if session is not None else None
+            raise NotConnected(f'{requests[0][0]}: link lost ({lost})' if lost is not None
+                               else f'{requests[0][0]}: not connected ({self.last_error})')
         try:
             waitings = self.answers.write(
                 requests, session.write, urgent=self._lock.held_urgently(), block=block,
