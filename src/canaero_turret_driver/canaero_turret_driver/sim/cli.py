@@ -9,6 +9,7 @@ import os
 import can
 
 from gimbal_driver_common.sim_control import run_simulator
+from gimbal_driver_common.sim_server import PtySimServer, TcpSimServer
 
 from ..protocol import nodeservice as ns
 from ..protocol.identifiers import DEFAULT_ZOOM_POSITION_ID, TURRET_NODE_ID
@@ -63,23 +64,22 @@ def main(argv: list[str] | None = None) -> int:
                        refuse_tis=args.refuse_tis,
                        transfer_first_number=args.transfer_first_number)
     simulator = TurretSimulator(config)
-    link = None
+    link: PtySimServer | TcpSimServer | None = None
     runner = None
     bus = None
+    endpoint: dict[str, object]
     if args.transport == "slcan-pty":
-        from gimbal_driver_common.sim_server import PtySimServer
-
-        link = PtySimServer(lambda: SlcanSession(simulator), link_path=args.link).start()
-        endpoint = {"interface": "slcan", "channel": link.port_name, "pty": link.port_name}
+        pty = PtySimServer(lambda: SlcanSession(simulator), link_path=args.link).start()
+        link = pty
+        endpoint = {"interface": "slcan", "channel": pty.port_name, "pty": pty.port_name}
     elif args.transport == "socketcand":
-        from gimbal_driver_common.sim_server import TcpSimServer
-
         hub = f"canaero-sim-hub-{os.getpid()}"
         bus = can.Bus(interface="virtual", channel=hub)
         runner = BusSimRunner(simulator, bus).start()
-        link = TcpSimServer(lambda: SocketcandSession(hub), port=args.port).start()
-        endpoint = {"interface": "socketcand", "channel": "can0", "host": link.host,
-                    "port": link.port}
+        tcp = TcpSimServer(lambda: SocketcandSession(hub), port=args.port).start()
+        link = tcp
+        endpoint = {"interface": "socketcand", "channel": "can0", "host": tcp.host,
+                    "port": tcp.port}
     else:
         bus = open_bus(args.interface, args.channel)
         runner = BusSimRunner(simulator, bus).start()

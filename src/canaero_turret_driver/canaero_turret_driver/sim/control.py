@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from gimbal_driver_common.sim_control import ControlError, SimControl
+from gimbal_driver_common.sim_control import ControlError, Link, SimControl
 
 from .axis import YAW
 from .model import REQUESTS, TurretSimulator
@@ -12,7 +12,7 @@ from .model import REQUESTS, TurretSimulator
 FAULT_NAMES = ("drive", "case_sensor")
 
 
-def make_control(simulator: TurretSimulator, link: object | None = None) -> SimControl:
+def make_control(simulator: TurretSimulator, link: Link | None = None) -> SimControl:
     """The shared control verbs for the turret plus its own (``link``: the PtySimServer or
     TcpSimServer the simulator is reached through; None on a python-can bus).
 
@@ -63,8 +63,11 @@ def make_control(simulator: TurretSimulator, link: object | None = None) -> SimC
             simulator.inclination_deg = (float(args[0]), float(args[1]))
 
     def eed(args: list[str]) -> None:
-        numbers = [int(a, 0) for a in args[:3]]
-        simulator.emit_eed(*numbers, node=args[3] if len(args) > 3 else "turret")
+        if not args:
+            raise ControlError("eed CODE [OPERATION] [LOCATION] [NODE]")
+        code, operation, location = ([int(a, 0) for a in args[:3]] + [0, 0])[:3]
+        simulator.emit_eed(code, operation, location,
+                           node=args[3] if len(args) > 3 else "turret")
 
     control = SimControl(
         "canaero_turret_sim", simulator.state, links=[link] if link is not None else [],

@@ -5,10 +5,17 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Iterable
+from typing import SupportsInt
 
 from ..protocol import nodeservice as ns
 from ..protocol.datatypes import DataType
-from ..protocol.identifiers import STOP_PITCH_BIT, STOP_YAW_BIT, ActuatorMode, CoverState
+from ..protocol.identifiers import (
+    STOP_PITCH_BIT,
+    STOP_YAW_BIT,
+    ActuatorMode,
+    CoverState,
+    Identifier,
+)
 from ..protocol.message import CanAerospaceMessage
 from .axis import (
     LOCATION,
@@ -20,14 +27,46 @@ from .axis import (
     YAW,
     AxisModel,
     EedCode,
+    Memory,
     Operation,
+    SimConfig,
     _Download,
 )
+
+
+def _integer(value: object) -> int:
+    """A decoded integer value (its data type was checked against the command's or the
+    service's); anything else raises TypeError, as ``int()`` of it did."""
+    if not isinstance(value, SupportsInt):
+        raise TypeError(f"an integer value expected, got {value!r}")
+    return int(value)
 
 
 class CommandHandlers:
     """Commands and node services of :class:`~.model.TurretSimulator`, a base of it whose
     state they read and change."""
+
+    # The model's state and helpers the handlers use (TurretSimulator defines each).
+    config: SimConfig
+    axes: dict[str, AxisModel]
+    node_ids: dict[str, int]
+    cover_state: CoverState
+    saved_position: tuple[float, float] | None
+    stored_configuration: dict[str, object] | None
+    received_commands: list[tuple[str, object]]
+    memories: dict[int, Memory]
+    _table: dict[int, Identifier]
+    _handlers: dict[str, Callable[[object], None]]
+    _intervals: dict[int, int]
+    _next_due: dict[int, float]
+    _cover_target: int | None
+    _cover_arrival: float
+    _download: _Download | None
+    _clock: Callable[[], float]
+    _eed: Callable[[int, int, int], None]
+    _is_silent: Callable[[int, float], bool]
+    _node_of: Callable[[int], int]
+    _next_slot: Callable[[int], float]
 
     def _command(self, key: str, message: CanAerospaceMessage) -> None:
         ident = self._table[message.can_id]
@@ -77,12 +116,12 @@ class CommandHandlers:
         if value not in tuple(ActuatorMode):
             self._eed(EedCode.SETPOINT_OUT_OF_RANGE, Operation.MODE, LOCATION[axis_name])
             return
-        axis.actuator_mode = int(value)  # type: ignore[arg-type]
+        axis.actuator_mode = _integer(value)
         axis.fault = False  # a mode command re-initialises the drive
         axis.stop()
 
     def _stop_actuators(self, value: object) -> None:
-        bits = int(value)  # type: ignore[arg-type]
+        bits = _integer(value)
         for axis_name, bit in ((YAW, STOP_YAW_BIT), (PITCH, STOP_PITCH_BIT)):
             if bits & bit:
                 self.axes[axis_name].stop()
@@ -147,7 +186,7 @@ class CommandHandlers:
         """DDS (write) and DUS (read) of the simulated memories (see `MEMORIES`)."""
         service = ns.ServiceCode(request.service_code)
         if request.data_type == DataType.MEMID:
-            memory_id, count = int(request.value), request.message_code  # type: ignore[arg-type]
+            memory_id, count = _integer(request.value), request.message_code
             memory = (self.memories.get(memory_id)
                       if node_id == self.config.turret_node_id else None)
             if service == ns.ServiceCode.DDS:
@@ -178,7 +217,7 @@ class CommandHandlers:
         if service != ns.ServiceCode.DDS or download is None or download.node_id != node_id:
             return []
         value = request.value
-        chunk = bytes(value if isinstance(value, tuple) else (value,))  # type: ignore[arg-type]
+        chunk = bytes(value if isinstance(value, tuple) else (value,))
         if request.message_code != download.numbers[download.received] or \
                 request.data_type not in (DataType.UCHAR, DataType.UCHAR2, DataType.UCHAR3,
                                           DataType.UCHAR4):
@@ -205,7 +244,10 @@ class CommandHandlers:
         if service == ns.ServiceCode.TIS:
             status = ns.ServiceStatus.OUT_OF_RANGE
             if request.data_type == DataType.SHORT2:
-                can_id, interval = request.value  # type: ignore[misc]
+                value = request.value
+                if not isinstance(value, tuple):  # SHORT2 decodes to (short, short)
+                    raise TypeError(f"TIS carries {value!r}, not (identifier, interval)")
+                can_id, interval = value
                 valid_interval = interval == 0 or MIN_INTERVAL_MS <= interval <= MAX_INTERVAL_MS
                 if can_id in self._ids_of_node(node_id) and valid_interval \
                         and not self.config.refuse_tis:
