@@ -176,7 +176,12 @@ def parse_ids_response(response: CanAerospaceMessage) -> IdentificationInfo:
         raise CodecError(f"not an IDS response (service code {response.service_code})")
     if response.data_type != DataType.UCHAR4:
         raise CodecError(f"IDS response must be UCHAR4, got {response.type_name}")
-    return IdentificationInfo(*response.value)  # type: ignore[misc]
+    value = response.value
+    if not (isinstance(value, tuple) and len(value) == 4
+            and all(isinstance(v, int) for v in value)):
+        raise CodecError(f"IDS response carries {value!r}, not four bytes")
+    hardware, software, distribution, header = value
+    return IdentificationInfo(hardware, software, distribution, header)
 
 
 # --- TIS ------------------------------------------------------------------------------
