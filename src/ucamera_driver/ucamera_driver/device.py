@@ -127,7 +127,8 @@ class UCameraDevice(Device):
     # ---------------------------------------------------------------- frames
     @property
     def joint_names(self) -> tuple[str, str]:
-        return tuple(self.settings.joint_names)  # type: ignore[return-value]
+        pan, tilt = self.settings.joint_names
+        return pan, tilt
 
     def _signs(self) -> tuple[float, float]:
         return (-1.0 if self.settings.invert_pan else 1.0,
