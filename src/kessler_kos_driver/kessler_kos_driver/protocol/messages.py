@@ -195,7 +195,7 @@ class MotorInfo(Message):
     more_follows: bool = False
 
     @property
-    def message_type(self) -> int:  # type: ignore[override]
+    def message_type(self) -> int:  # type: ignore[override]  # a field on Message, computed here
         return MessageType.RESPONSE_MORE if self.more_follows else MessageType.RESPONSE
 
     def payload(self) -> bytes:

@@ -187,7 +187,7 @@ class SimulatedRig(MessageHandlers):
         self._playback_note(PlaybackState.PRE_MOVE_PHOTOS_STARTED)
 
     def _frame_time(self) -> float:
-        tl = self.playback.trajectory.timelapse  # type: ignore[union-attr]
+        tl = self.playback.trajectory.timelapse  # type: ignore[union-attr]  # only while one plays
         return max(tl.delay + tl.exposure, 1e-3)
 
     def _start_pass(self, forward: bool, rapid: bool = False) -> None:
