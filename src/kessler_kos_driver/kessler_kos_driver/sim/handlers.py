@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
+
+from gimbal_driver_common.sim_requests import RequestFaults
 
 from ..protocol import (
     ALL_MOTORS,
     BumpPositionSpeedAcceleration,
     DeviceGuid,
+    DeviceInfo,
     DevicePassword,
     ErrorCode,
     ErrorStatus,
@@ -28,6 +32,7 @@ from ..protocol import (
     MotorCalibrated,
     MotorInfo,
     MotorInfoEntry,
+    NetworkInfo,
     PlaybackMode,
     PlaybackState,
     ProtocolError,
@@ -47,7 +52,7 @@ from ..protocol import (
     validate,
 )
 from ..protocol.trajectory import AxisLimits
-from .motor import ALLOWED_WHILE_LOCKED, SimMotor, _Playback
+from .motor import ALLOWED_WHILE_LOCKED, SimMotor, SimSettings, _Playback
 
 if TYPE_CHECKING:
     from .transport import KosSession
@@ -60,9 +65,36 @@ REQUESTS = tuple(message.__name__ for message in (
     GetTrajectoryData))
 
 
+class _StartHoming(Protocol):
+    """SimulatedRig._start_homing, which the handlers call with its keyword."""
+
+    def __call__(self, then_start: bool) -> None: ...
+
+
 class MessageHandlers:
     """The client messages of :class:`~.model.SimulatedRig`, a base of it whose state they
     read and change."""
+
+    # The rig's state and helpers the handlers use (SimulatedRig defines each).
+    settings: SimSettings
+    password: str
+    motors: dict[int, SimMotor]
+    playback: _Playback
+    playback_mode: int
+    led: tuple[int, int]
+    software_id: int
+    frames_received: int
+    photos_taken: int
+    reboot_requested: bool
+    request_faults: RequestFaults
+    device_info: Callable[[], DeviceInfo]
+    network_info: Callable[[], NetworkInfo]
+    error: Callable[[int, int, KosSession | None], None]
+    broadcast: Callable[[Message], None]
+    stop_playback: Callable[[], None]
+    _playback_note: Callable[[int], None]
+    _start_homing: _StartHoming
+    _begin_after_setup: Callable[[], None]
 
     # ------------------------------------------------------------------ handlers
     def handle(self, message: Message, frame: bytes, session: KosSession) -> None:
