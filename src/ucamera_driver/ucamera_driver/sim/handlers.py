@@ -3,6 +3,12 @@
 from __future__ import annotations
 
 import logging
+import threading
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from gimbal_driver_common.sim_motion import AxisMotion
+from gimbal_driver_common.sim_requests import RequestFaults
 
 from ..protocol import (
     AntennaPositionReport,
@@ -31,6 +37,9 @@ from ..protocol import (
     mode_name,
 )
 
+if TYPE_CHECKING:
+    from .model import SimConfig
+
 LOG = logging.getLogger("ucamera_sim")
 
 #: the UCSP requests the gimbal answers (``mute``/``delay`` take these packet names)
@@ -41,6 +50,34 @@ REQUESTS = tuple(packet.__name__ for packet in (
 class CommandHandlers:
     """The commands of :class:`~.model.UCameraModel`, a base of it whose state they read
     and change."""
+
+    # The model's state the handlers use (UCameraModel.__init__ sets each).
+    config: SimConfig
+    lock: threading.RLock
+    _clock: Callable[[], float]
+    pan: AxisMotion
+    tilt: AxisMotion
+    mode: GimbalMode
+    mode_since: float
+    angles_target: tuple[float, float]
+    commanded_angles: tuple[float, float]
+    commanded_rates: tuple[float, float]
+    zoom_target: float
+    telemetry_rate: int
+    ir_palette: int
+    gps_feed: GpsFeed
+    antenna: tuple[float, float, float]
+    external_position: tuple[float, float, float] | None
+    external_velocity: tuple[float, float, float] | None
+    vehicle_angles: tuple[float, float, float] | None
+    vehicle_rates: tuple[float, float, float] | None
+    busy_until: float
+    nv_saves: int
+    ffc_saves: int
+    nv: dict[str, object]
+    received: dict[str, int]
+    ignored: dict[str, int]
+    request_faults: RequestFaults
 
     # --- commands --------------------------------------------------------
     def handle(self, packet: Packet) -> list[Packet]:

@@ -6,6 +6,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from gimbal_driver_common.sim_motion import AxisMotion
@@ -63,7 +64,8 @@ class SimConfig:
 class UCameraModel(CommandHandlers):
     """Device state and behaviour, independent of the link (survives link drops)."""
 
-    def __init__(self, config: SimConfig | None = None, clock=time.monotonic) -> None:
+    def __init__(self, config: SimConfig | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.config = config or SimConfig()
         self._clock = clock
         self.lock = threading.RLock()

@@ -200,8 +200,9 @@ class UCameraSim:
     def _set_gnss(self, args: list[str]) -> None:
         if len(args) != 3:
             raise ControlError("gnss LAT LON ALT")
+        latitude, longitude, altitude = (float(a) for a in args)
         with self.model.lock:
-            self.model.internal_position = tuple(float(a) for a in args)
+            self.model.internal_position = (latitude, longitude, altitude)
 
     def command(self, line: str) -> str:
         """Run one control request (``help`` lists the verbs); return the answer line."""
