@@ -187,7 +187,9 @@ class SimulatedRig(MessageHandlers):
         self._playback_note(PlaybackState.PRE_MOVE_PHOTOS_STARTED)
 
     def _frame_time(self) -> float:
-        tl = self.playback.trajectory.timelapse  # type: ignore[union-attr]  # only while one plays
+        traj = self.playback.trajectory
+        assert traj is not None  # a time-lapse frame is timed only while one plays
+        tl = traj.timelapse
         return max(tl.delay + tl.exposure, 1e-3)
 
     def _start_pass(self, forward: bool, rapid: bool = False) -> None:
