@@ -3,18 +3,15 @@
 from __future__ import annotations
 
 import threading
-from typing import TYPE_CHECKING
+from typing import SupportsFloat
 
-from ..protocol import Frame, GeoPoint, ReplyCode
+from ..protocol import Frame, GeoPoint, PresetRecord, ReplyCode
 from ..protocol import registers as reg
 from ..protocol.geometry import aim_at
 from .axis import DRIFT_MEASURE_TIME, AxisModel, RequestRejected, ScanState
 
-if TYPE_CHECKING:
-    from .model import PedestalModel
 
-
-def _error_text(model: PedestalModel, bit: int, text: str) -> str:
+def _error_text(model: CommandHandlers, bit: int, text: str) -> str:
     return text if model._system_register() & (1 << bit) else ''
 
 
@@ -42,6 +39,35 @@ class CommandHandlers:
     tracker_mode: dict[int, int]
     detected_targets: dict[int, list[tuple[int, int]]]
     gyro_drift: dict[int, float]
+    drift_measuring: dict[int, float]
+    stabilization: bool
+    imu_present: bool
+    digital_io_present: bool
+    presets: dict[int, PresetRecord]
+    targets: dict[int, GeoPoint]
+    stored: dict[tuple[str, int], object]
+    csr_latched: int
+    protocol_error: str
+    _loop_wait_until: float
+
+    def _axis(self, frame: Frame) -> AxisModel:
+        axis = self.axes.get(frame.axis)
+        if axis is None:
+            raise RequestRejected(ReplyCode.INVALID_COMMAND,
+                                  'Axis not exist in the system' if frame.axis else
+                                  'Invalid Axis 0 in motor command')
+        return axis
+
+    def _goto_preset(self, index: int) -> None:
+        record = self.presets.get(index, PresetRecord(''))
+        for number, axis in self.axes.items():
+            self._move_to(axis, record.angles[number - 1], axis.general_speed)
+
+    def _move_to(self, axis: AxisModel, target: float, speed: float) -> None:
+        axis.speed_mode = False
+        axis.jog_velocity = 0.0
+        axis.speed = speed
+        axis.target = target
 
     def _motion_allowed(self, axis: AxisModel | None = None) -> None:
         if self.emergency_stop:
@@ -345,7 +371,10 @@ class CommandHandlers:
         self._motion_allowed(axis)
         if not axis.axis_on:
             raise RequestRejected(ReplyCode.EXECUTION_ERROR, 'Axis is off')
-        level = float(self.stored.get(('IMU_levelingvalue', frame.axis), 0.0))
+        stored = self.stored.get(('IMU_levelingvalue', frame.axis), 0.0)
+        if not isinstance(stored, SupportsFloat):  # IMU_SetLevelingValue stores a float
+            raise TypeError(f'levelling value {stored!r} is not a number')
+        level = float(stored)
         # 4.5.11: the axis turns until the IMU angle reads the levelling value; the sim's
         # IMU yaw is heading + axis 1, pitch is axis 2 and roll is axis 3
         target = level - self.gps_heading if frame.axis == 1 else level

@@ -262,17 +262,6 @@ class PedestalModel(CommandHandlers):
             if not detected and self.tracker_mode[camera] == 1:
                 self.tracker_mode[camera] = 0
 
-    def _goto_preset(self, index: int) -> None:
-        record = self.presets.get(index, PresetRecord(''))
-        for number, axis in self.axes.items():
-            self._move_to(axis, record.angles[number - 1], axis.general_speed)
-
-    def _move_to(self, axis: AxisModel, target: float, speed: float) -> None:
-        axis.speed_mode = False
-        axis.jog_velocity = 0.0
-        axis.speed = speed
-        axis.target = target
-
     # ------------------------------------------------------ fault injection
     def inject_fault(self, axis: int, fault: str) -> None:
         """Latch an axis fault (a name of :data:`FAULTS`); the axis stops at once."""
@@ -347,14 +336,6 @@ class PedestalModel(CommandHandlers):
                 self.drop_replies -= 1
                 return b''
             return reply
-
-    def _axis(self, frame: Frame) -> AxisModel:
-        axis = self.axes.get(frame.axis)
-        if axis is None:
-            raise RequestRejected(ReplyCode.INVALID_COMMAND,
-                                  'Axis not exist in the system' if frame.axis else
-                                  'Invalid Axis 0 in motor command')
-        return axis
 
     def knows(self, opcode: int) -> bool:
         """The device knows this opcode (table, ``unknown_commands``, ``known_commands``)."""
