@@ -14,7 +14,7 @@ from typing import Any
 from .device_requests import Polls, request_key
 from .errors import DeviceTimeout, NotSupported, WrongReply
 from .link import CaptureLink
-from .protocol import Frame, ProtocolError, command
+from .protocol import Frame, ProtocolError, ReplyByte, command
 
 LOG = logging.getLogger('capture_driver.batch')
 
@@ -70,16 +70,26 @@ class BatchedReads:
             values: list[Any] = [None] * len(frames)
             asked = [i for i, (cmd, axis, _) in enumerate(frames)
                      if not (optional and self._left_out(cmd.name, axis))]
-            replies: list[Frame | None] = [None] * len(asked)
-            if self.batching and len(asked) >= 2:
-                replies = self._transact_batch([(frames[i][0].name, frames[i][2])
+            answers: list[Frame | ReplyByte | None] = [None] * len(asked)
+            batched = self.batching and len(asked) >= 2
+            if batched:
+                answers = self._transact_batch([(frames[i][0].name, frames[i][2])
                                                 for i in asked])
-            for i, reply in zip(asked, replies, strict=True):
+            for i, answer in zip(asked, answers, strict=True):
                 cmd, axis, frame = frames[i]
-                if reply is not None:
+                if isinstance(answer, Frame):
                     with contextlib.suppress(WrongReply):  # undecodable: asked alone below
-                        values[i] = link.decode(cmd.name, frame, reply)
+                        values[i] = link.decode(cmd.name, frame, answer)
+                        if optional:
+                            self._polls.answered(cmd.name, axis)
                         continue
+                if optional and batched and answer is None and answers.count(None) == 1:
+                    # the one read of the batch with nothing at all while the device answered
+                    # the rest: silent, not ambiguous (a controller that drops what it queues
+                    # loses every read after the first); asked again after its back-off, not
+                    # at once alone
+                    self._polls.went_unanswered(cmd.name, axis)
+                    continue
                 # NACKed, answered without data or unanswered: once more, on its own
                 if not optional:
                     values[i] = link.request_locked(cmd.name, axis, None)
@@ -95,21 +105,20 @@ class BatchedReads:
         return (name in self._link.unsupported
                 or self._link.unanswered.waiting(request_key(name, axis)) is not None)
 
-    def _transact_batch(self, frames: list[tuple[str, Frame]]) -> list[Frame | None]:
-        """Write ``frames`` in one go; the reply to each, or None for those that got no
-        data reply within :attr:`timeout` (a NACK or an ACK went to one of them: which
-        one, the reply byte does not say, so it is asked alone)."""
+    def _transact_batch(self, frames: list[tuple[str, Frame]]
+                        ) -> list[Frame | ReplyByte | None]:
+        """Write ``frames`` in one go; the answer to each within :attr:`timeout`: its data,
+        a reply byte (a NACK or an ACK went to it: which read it belongs to, the byte does
+        not say, so a read that got one is asked alone), or None (nothing)."""
         link = self._link
         waitings = link.write([(name, frame, True) for name, frame in frames]) or []
         deadline = link.last_activity + link.timeout
         answers = [link.answer(waiting, deadline) for waiting in waitings]
-        replies = [answer if isinstance(answer, Frame) else None for answer in answers]
         if all(answer is None for answer in answers):  # not one answer: a timeout
             link.count_timeout('batched read')
         # each read answered (a NACK or ACK too): the controller handles queued requests
-        # (those reads are named alone)
         self.count_batch(complete=all(answer is not None for answer in answers))
-        return replies
+        return answers
 
     def count_batch(self, complete: bool) -> None:
         """One batch (the poll's getters, or a posted stream move) came back whole or not.

@@ -138,9 +138,7 @@ class Polls:
         try:
             value = self._link.request(name, axis, optional=True)
         except DeviceTimeout:
-            record = self._link.unanswered.timed_out(key)
-            if record.in_a_row == 1:
-                LOG.warning('%s went unanswered; asked again after a growing back-off', key)
+            self.went_unanswered(name, axis)
             raise
         except WrongReply as exc:
             self.not_supported(name, f'{opcode} answered {exc.answer}, expected {exc.expected}')
@@ -152,6 +150,17 @@ class Polls:
             raise NotSupported(name, self._link.unsupported[name]) from exc
         self._link.unanswered.answered(key)
         return value
+
+    def went_unanswered(self, name: str, axis: int | None = None) -> None:
+        """``name`` got no answer at all: asked again after its back-off (said once)."""
+        key = request_key(name, axis)
+        record = self._link.unanswered.timed_out(key)
+        if record.in_a_row == 1:
+            LOG.warning('%s went unanswered; asked again after a growing back-off', key)
+
+    def answered(self, name: str, axis: int | None = None) -> None:
+        """``name`` was answered (in a batch): asked as usual again."""
+        self._link.unanswered.answered(request_key(name, axis))
 
     def optional(self, name: str, axis: int | None = None) -> Any:
         """:meth:`poll`, with None for every answer that is not the value."""

@@ -20,10 +20,12 @@ A getter is answered by its data packet, a setter by a single ACK byte; a NACK b
 :class:`DeviceNack` carrying the spec's meaning and advice. A reply of the other kind (an
 ACK to a getter, data to a setter) raises :class:`WrongReply`: the device answered, so it
 is a protocol error of that request, never silence; only no answer at all is a
-:class:`DeviceTimeout`, and only timeouts in a row of the requests the driver needs close
-the link ("device silent"). Garbage and corrupted or truncated packets are skipped by
-:class:`~.protocol.StreamDecoder`; if a started packet stalls for ``resync_gap`` the
-reader gives it up and rescans, so a lost byte costs at most one request.
+:class:`DeviceTimeout`, and only a device that answers nothing at all for ``max_timeouts``
+request timeouts, while requests the driver needs wait, has its link closed ("device
+silent"; requests in flight together during one stall count once). Garbage and corrupted
+or truncated packets are skipped by :class:`~.protocol.StreamDecoder`; if a started
+packet stalls for ``resync_gap`` the reader gives it up and rescans, so a lost byte costs
+at most one request.
 
 Requests the host makes on its own (identity, probes, the status registers, the sensor
 polls: :class:`~.device_requests.Polls`) stop being sent once the device answered one
@@ -131,7 +133,8 @@ class CaptureLink(Protocol):
         self._connect_opcode = command('COM_Connect').opcode
         #: when the last request (or batch) was written
         self.last_activity = 0.0
-        self._consecutive_timeouts = 0
+        #: when the device last answered anything (the handshake, any request)
+        self._last_answer = 0.0
         #: requests may overlap (see :mod:`.answers`); off for a controller that drops what
         #: it queues (the batched reads' way back): then every request holds the lock
         self.overlap = True
@@ -218,12 +221,12 @@ class CaptureLink(Protocol):
             self._keepalive_on = False
             self._greeting = None
             self._greeted.clear()
+            self._last_answer = time.monotonic()
             self._session = Session(StreamLink(stream), self, 'capture', read_timeout=0.02,
                                     link_error=NotConnected).start()
             try:
                 self._handshake()
                 self._connected = True
-                self._consecutive_timeouts = 0
                 if self.keepalive_period > 0:
                     self._configure_keepalive()
             except (CaptureError, TransportError, LinkError) as exc:
@@ -323,7 +326,7 @@ class CaptureLink(Protocol):
                     LOG.info('controller re-sent its greeting (0x%04X)', item.opcode)
                 continue
             if self.answers.deliver(item):
-                self._consecutive_timeouts = 0  # the device answers: it is not silent
+                self._last_answer = time.monotonic()  # the device answers: not silent
 
     # ------------------------------------------------------------- requests
     def request(self, name: str, axis: int | None = None, value: Any = None,
@@ -443,9 +446,8 @@ class CaptureLink(Protocol):
         return answer if isinstance(answer, Frame) else frame
 
     def settled(self) -> None:
-        """A request (or a batch) got its answer: the device is not silent, and when nothing
-        else is in flight no late reply can come any more."""
-        self._consecutive_timeouts = 0
+        """A request (or a batch) got its answer: when nothing else is in flight no late
+        reply can come any more."""
         self.answers.settled()
 
     def wrong_reply(self, name: str, frame: Frame, answer: str, expected: str) -> WrongReply:
@@ -458,12 +460,16 @@ class CaptureLink(Protocol):
         return error
 
     def count_timeout(self, what: str) -> None:
-        """One more unanswered request; after ``max_timeouts`` in a row the link is closed
-        for the supervisor to reopen (raises :class:`NotConnected`)."""
+        """One more unanswered request the driver needs. When the device has answered
+        nothing at all for ``max_timeouts`` request timeouts (the time of that many
+        requests unanswered one after the other; requests in flight together during one
+        stall count once) the link is closed for the supervisor to reopen (raises
+        :class:`NotConnected`)."""
         self._stats['timeouts'] += 1
-        self._consecutive_timeouts += 1
-        if self._consecutive_timeouts >= self.max_timeouts:
-            self.link_lost(f'device silent: {self._consecutive_timeouts} requests unanswered')
+        silent_for = time.monotonic() - self._last_answer
+        if silent_for + 1e-3 >= self.max_timeouts * self.timeout:
+            self.link_lost(f'device silent: no answer for {silent_for:.1f} s '
+                           f'({self.max_timeouts} request timeouts)')
             raise NotConnected(f'{what}: device silent, link closed for reconnect')
 
     @staticmethod
