@@ -72,6 +72,9 @@ class Answer(Protocol):
 
 AnswerT = TypeVar('AnswerT', bound=Answer)
 
+#: command_refusal() before configure
+NOT_CONFIGURED = 'node is not active (lifecycle: not configured); configure and activate it first'
+
 
 class GimbalDriverNode(LifecycleNode):
     """Common ROS interface of the pan-tilt drivers; a driver adds :meth:`make_device`.
@@ -228,8 +231,15 @@ class GimbalDriverNode(LifecycleNode):
     def command_refusal(self) -> str | None:
         """Why commands cannot be served now (inactive, disconnected), or None."""
         if self.controller is None:
-            return 'node is not active (lifecycle: not configured); configure and activate it first'
+            return NOT_CONFIGURED
         return self.controller.refusal()
+
+    def configured(self) -> GimbalController:
+        """The controller configure built; before it (or after cleanup) a refusal that
+        says so, for a request path that needs the controller itself."""
+        if self.controller is None:
+            raise DeviceRefused(NOT_CONFIGURED)
+        return self.controller
 
     def motion_refusal(self, joints: Sequence[str]) -> str | None:
         """command_refusal() or the device's reason these joints cannot move."""
