@@ -30,7 +30,7 @@ from gimbal_driver_common.errors import (
     Unsupported,
 )
 from gimbal_driver_common.orientation import quaternion_from_euler
-from gimbal_driver_common.ros.base_node import GimbalDriverNode
+from gimbal_driver_common.ros.base_node import Answer, GimbalDriverNode
 from gimbal_driver_common.ros.heading import heading_imu
 from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_driver_common.ros.run import run_driver
@@ -84,10 +84,10 @@ class CaptureDriverNode(GimbalDriverNode):
                                  callback_group=self.service_group)
         # guarded device procedures: the core's policy runs them (gimbal_driver_common.guarded)
         self.motion_actions.create_procedure_action(
-            '~/level', lambda device, joints: device.functions.levelling(joints))
+            '~/level', lambda device, joints: functions_of(device).levelling(joints))
         self.motion_actions.create_procedure_action(
             '~/compensate_gyro_drift',
-            lambda device, joints: device.functions.gyro_drift_measurement(
+            lambda device, joints: functions_of(device).gyro_drift_measurement(
                 joints, self.gyro_drift_time))
 
     # ------------------------------------------------------------ parameters
@@ -256,10 +256,11 @@ class CaptureDriverNode(GimbalDriverNode):
         """One request to the device's functions (its part ``functions``) through the
         controller's ``call()`` boundary (refused while inactive, disconnected or, with
         ``joints``, while they cannot move)."""
-        return self.controller.call(lambda: request(self.controller.device.functions), joints)
+        controller = self.configured()
+        return controller.call(lambda: request(functions_of(controller.device)), joints)
 
-    def _device_service(self, response: object, request: Callable[[CaptureFunctions], str],
-                        joints: Sequence[str] | None = None) -> object:
+    def _device_service(self, response: Answer, request: Callable[[CaptureFunctions], str],
+                        joints: Sequence[str] | None = None) -> Answer:
         """Answer a service with one adapter call (refusals and errors: success=false)."""
         return self.serve_request(response, lambda: self._device_call(request, joints))
 
@@ -364,7 +365,7 @@ class CaptureDriverNode(GimbalDriverNode):
             return
         self._tracking_pub.publish(DiagnosticStatus(
             level=DiagnosticStatus.OK, name=f'{self.get_name()}: video tracker',
-            hardware_id=self.controller.device_info.hardware_id,
+            hardware_id=self.configured().device_info.hardware_id,
             message=(f'camera {state.camera}: mode {state.mode}, tracking '
                      f'{"active" if state.active else "inactive"}, target '
                      f'{"detected" if state.target_detected else "not detected"}'),
@@ -407,13 +408,13 @@ class CaptureDriverNode(GimbalDriverNode):
         return self._stop_program(response, lambda d: d.stop_target_loop(),
                                   'target looping stopped')
 
-    def _stop_program(self, response: object, stop: Callable[[CaptureFunctions], None],
-                      message: str) -> object:
+    def _stop_program(self, response: Answer, stop: Callable[[CaptureFunctions], None],
+                      message: str) -> Answer:
         """End a device program (loop), then stop every axis as ~/stop does: two calls to
         the controller, one after the other."""
         def run() -> str:
             self._device_call(stop)
-            self.controller.stop()
+            self.configured().stop()
             return message
 
         return self.serve_request(response, run)
@@ -456,7 +457,7 @@ class CaptureDriverNode(GimbalDriverNode):
                                         '~/reset_faults (it switches the drives on)')
             else:  # stop first (moves, jogs, scans, loops): MOT_AxisOff under motion coasts
                 try:
-                    self.controller.stop()
+                    self.configured().stop()
                 except GimbalError as exc:
                     raise DeviceRefused(f'stop before switching off failed: {exc}') from exc
             return self._device_call(lambda device: device.set_power(request.data))
@@ -485,6 +486,12 @@ class CaptureDriverNode(GimbalDriverNode):
         self.get_logger().info(
             f'aiming at lat {msg.latitude:.6f} lon {msg.longitude:.6f}: '
             + ', '.join(f'{j} {p:+.4f} rad' for j, p in pose.items()))
+
+
+def functions_of(device: Device) -> CaptureFunctions:
+    """The functions part of the adapter this node's make_device() built."""
+    assert isinstance(device, CaptureDevice)
+    return device.functions
 
 
 def main(args: Sequence[str] | None = None) -> int:
