@@ -31,7 +31,7 @@ from std_srvs.srv import Trigger
 
 from gimbal_driver_common.device import Device
 from gimbal_driver_common.errors import DeviceRefused, GimbalError
-from gimbal_driver_common.ros.base_node import GimbalDriverNode
+from gimbal_driver_common.ros.base_node import Answer, GimbalDriverNode
 from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_driver_common.ros.run import run_driver
 from gimbal_msgs.srv import SetMode
@@ -77,7 +77,8 @@ class UCameraDriverNode(GimbalDriverNode):
                 f"parameter joint_names: the U-Camera has two joints (pan, tilt), got "
                 f"{self.joint_names}"
             )
-        self.settings.joint_names = tuple(self.joint_names)
+        pan, tilt = self.joint_names
+        self.settings.joint_names = (pan, tilt)
         if self.settings.telemetry_rate and self.publish_rate > self.settings.telemetry_rate:
             self.get_logger().warning(
                 f"publish_rate {self.publish_rate:g} Hz > telemetry_rate "
@@ -178,12 +179,12 @@ class UCameraDriverNode(GimbalDriverNode):
 
         def send_telemetry_rate(rate: int) -> None:
             if self.device is not None:
-                self.device.functions.set_telemetry_rate(rate)
+                self._device_functions().set_telemetry_rate(rate)
 
         def set_refresh_rate(rate: float) -> None:
             self.settings.refresh_rate = rate
             if self.device is not None:
-                self.device.functions.set_refresh_rate(rate)
+                self._device_functions().set_refresh_rate(rate)
 
         def set_feed_rate(rate: float) -> None:
             self.external_feed_rate = rate
@@ -254,11 +255,18 @@ class UCameraDriverNode(GimbalDriverNode):
             self._fix_pub.publish(fix)
 
     # -------------------------------------------------------------- services
-    def _serve_device(self, response, request: Callable[[UCameraFunctions], str]):
+    def _device_functions(self) -> UCameraFunctions:
+        """The functions part of the adapter configure built (refused before)."""
+        device = self.configured().device
+        assert isinstance(device, UCameraDevice)
+        return device.functions
+
+    def _serve_device(self, response: Answer,
+                      request: Callable[[UCameraFunctions], str]) -> Answer:
         """A service answered by the device's functions: refused while inactive, errors as
         success=false."""
         return self.serve_request(
-            response, lambda: self.controller.call(lambda: request(self.device.functions)))
+            response, lambda: self.configured().call(lambda: request(self._device_functions())))
 
     def _on_set_mode(self, request: SetMode.Request, response: SetMode.Response):
         return self._serve_device(response, lambda device: device.set_mode(request.mode))
@@ -273,9 +281,7 @@ class UCameraDriverNode(GimbalDriverNode):
     def _forward(self, what: str, send: Callable[[UCameraFunctions], None]) -> None:
         """Hand a topic message to the device; a refusal or bad value is logged, never raised."""
         try:
-            if self.controller is None:
-                raise DeviceRefused(self.command_refusal())
-            self.controller.call(lambda: send(self.device.functions))
+            self.configured().call(lambda: send(self._device_functions()))
         except DeviceRefused as exc:
             self.get_logger().warning(f"{what} ignored: {exc}", throttle_duration_sec=2.0)
         except GimbalError as exc:
