@@ -225,7 +225,7 @@ class CanaeroTurretNode(GimbalDriverNode):
             device = self.device
             if device is None or not self.connected:
                 return  # applied when the link opens (TurretDevice.open)
-            self.controller.call(lambda: device.set_intervals(parse(items)))
+            self.configured().call(lambda: device.set_intervals(parse(items)))
 
         def set_intervals(items: Sequence[str]) -> None:
             settings.transmission_intervals = parse(items)
@@ -261,6 +261,19 @@ class CanaeroTurretNode(GimbalDriverNode):
         return TurretDevice(TurretClient(self._client_config()), self.settings,
                             lambda: self.config.publish_rate, self.get_logger())
 
+    @property
+    def device(self) -> TurretDevice | None:
+        """The adapter make_device() built (after configure)."""
+        device = super().device
+        assert device is None or isinstance(device, TurretDevice)
+        return device
+
+    def _turret(self) -> TurretDevice:
+        """The adapter, for a request path (refused before configure)."""
+        device = self.configured().device
+        assert isinstance(device, TurretDevice)
+        return device
+
     def device_ready(self, device: Device) -> None:
         self.sensor_jobs.remove(self._publish_sensors)  # once, also after a reconfigure
         self.sensor_jobs.add(SENSOR_PERIOD_S, self._publish_sensors)
@@ -270,7 +283,7 @@ class CanaeroTurretNode(GimbalDriverNode):
         device = self.device
         if self.settings.actuator_mode and device is not None and self.connected:
             try:
-                self.get_logger().info(self.controller.call(device.apply_actuator_mode))
+                self.get_logger().info(self.configured().call(device.apply_actuator_mode))
             except GimbalError as exc:  # activation goes on, the log says why
                 self.get_logger().error(f"setting actuator mode at activate failed: {exc}")
         return result
@@ -291,23 +304,25 @@ class CanaeroTurretNode(GimbalDriverNode):
 
     def _on_set_mode(self, request, response):
         return self.serve_request(
-            response, lambda: self.controller.call(lambda: self.device.set_mode(request.mode)))
+            response, lambda: self.configured().call(
+                lambda: self._turret().set_mode(request.mode)))
 
     def _switch_service(self, name: str):
         def callback(request, response):
-            return self.serve_request(response, lambda: self.controller.call(
-                lambda: self.device.switch(name, bool(request.data))))
+            return self.serve_request(response, lambda: self.configured().call(
+                lambda: self._turret().switch(name, bool(request.data))))
 
         return callback
 
-    def _on_device_command(self, request, response):
+    def _on_device_command(self, request: DeviceCommand.Request,
+                           response: DeviceCommand.Response) -> DeviceCommand.Response:
         """See `TurretNodeServices.device_command`; NIS also moves this node to the new
         node-id."""
         results: list[str] = []
 
         def action() -> str:
-            services = self.device.node_services
-            message, out = self.controller.call(
+            services = self._turret().node_services
+            message, out = self.configured().call(
                 lambda: services.device_command(request.command, list(request.arguments)))
             results.extend(out)
             self.node_ids.update(services.node_ids())  # a reconfigure keeps a new node-id
