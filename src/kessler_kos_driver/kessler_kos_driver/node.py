@@ -30,7 +30,8 @@ from sensor_msgs.msg import Joy
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.ros.base_node import GimbalDriverNode
+from gimbal_driver_common.device import Device
+from gimbal_driver_common.ros.base_node import Answer, GimbalDriverNode
 from gimbal_driver_common.ros.parameters import ParameterError, take_secret
 from gimbal_driver_common.ros.run import run_driver
 from gimbal_msgs.msg import PlaybackStatus as PlaybackStatusMsg
@@ -215,7 +216,8 @@ class KosDriverNode(GimbalDriverNode):
     def _joint_units(self, value_of: Callable[[str], object]) -> list[JointUnits]:
         """The unit parameters, checked (start-up and ``ros2 param set``)."""
         try:
-            return joint_units(len(self.joint_names), *(value_of(n) for n in UNIT_PARAMETERS))
+            spans, offsets, scales = (float_list(value_of(n)) for n in UNIT_PARAMETERS)
+            return joint_units(len(self.joint_names), spans, offsets, scales)
         except ValueError as exc:
             raise ParameterError(str(exc)) from None
 
@@ -231,7 +233,7 @@ class KosDriverNode(GimbalDriverNode):
             device = self.device
             if device is None:
                 return None
-            reason = device.playing() or self.controller.busy()
+            reason = device.playing() or self.configured().busy()
             return f'the axes must be idle ({reason})' if reason else None
 
         def set_units(name: str) -> Callable[[list[float]], None]:
@@ -241,7 +243,7 @@ class KosDriverNode(GimbalDriverNode):
                     len(self.joint_names), *(getattr(self, n) for n in UNIT_PARAMETERS))
                 if self.device is not None:
                     self.device.set_units(self.joint_units,
-                                          dict(self.controller.commanded_targets))
+                                          dict(self.configured().commanded_targets))
             return apply
 
         for name in UNIT_PARAMETERS:
@@ -267,13 +269,13 @@ class KosDriverNode(GimbalDriverNode):
         self.runtime_parameter('poll_period', set_poll_period)
 
     # ---------------------------------------------------------------- device
-    def serve_device(self, response: object, request: Callable[[KosDevice], str],
-                     joints: Sequence[str] | None = None) -> object:
+    def serve_device(self, response: Answer, request: Callable[[KosDevice], str],
+                     joints: Sequence[str] | None = None) -> Answer:
         """A request to the adapter through the controller's ``call()`` boundary (refused
         while inactive, disconnected or, with ``joints``, while they cannot move; errors
         answer success=false)."""
         return self.serve_request(
-            response, lambda: self.controller.call(lambda: request(self.device), joints))
+            response, lambda: self.configured().call(lambda: request(self._kos()), joints))
 
     def make_device(self) -> KosDevice:
         """The client for the configured link (TCP or USB HID) wrapped in the SI adapter."""
@@ -293,11 +295,20 @@ class KosDriverNode(GimbalDriverNode):
     @property
     def device(self) -> KosDevice | None:
         """The adapter (after configure)."""
-        return super().device
+        device = super().device
+        assert device is None or isinstance(device, KosDevice)
+        return device
 
-    def device_ready(self, device: KosDevice) -> None:
+    def _kos(self) -> KosDevice:
+        """The adapter, for a request path (refused before configure)."""
+        device = self.configured().device
+        assert isinstance(device, KosDevice)
+        return device
+
+    def device_ready(self, device: Device) -> None:
         """Units are never silent: what each joint reports, and a warning naming the
         parameters to set for each joint that reports motor radians."""
+        assert isinstance(device, KosDevice)
         report = device.units_report()
         self.get_logger().info('joint units: ' + ', '.join(f'{j} {u}' for j, u in report.items()))
         for joint, units in report.items():
@@ -329,6 +340,12 @@ class KosDriverNode(GimbalDriverNode):
         msg.buttons = [status >> bit & 1 for bit in range(len(AUX_INPUT_BUTTONS))]
         self._aux_pub.publish(msg)
         self._slave_pub.publish(Bool(data=bool(status >> AUX_SLAVE_PRESENT_BIT & 1)))
+
+
+def float_list(value: object) -> list[float]:
+    """A double-array parameter's value (declared as one: a sequence of numbers)."""
+    assert isinstance(value, Sequence)
+    return [float(v) for v in value]
 
 
 def main(args: Sequence[str] | None = None) -> int:

@@ -15,6 +15,7 @@ from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from gimbal_driver_common.joint_command import CommandError, JointLimits
+from gimbal_driver_common.ros.base_node import Answer
 from gimbal_msgs.srv import Calibrate
 
 from . import load_request
@@ -35,8 +36,8 @@ class ServiceNode(Protocol):
     def limits(self) -> dict[str, JointLimits]:
         """The joint limits in force."""
 
-    def serve_device(self, response: object, request: Callable[[KosDevice], str],
-                     joints: Sequence[str] | None = None) -> object:
+    def serve_device(self, response: Answer, request: Callable[[KosDevice], str],
+                     joints: Sequence[str] | None = None) -> Answer:
         """A request to the adapter through the controller's ``call()`` boundary: refused
         while inactive, disconnected or (with ``joints``) while those joints cannot move;
         errors become success=false."""
@@ -50,8 +51,8 @@ class KosServices:
         #: from the last ~/load_trajectory, for ~/setup_playback
         self.delay_return = False
 
-    def _serve_device(self, response: object, request: Callable[[KosDevice], str],
-                      joints: Sequence[str] | None = None) -> object:
+    def _serve_device(self, response: Answer, request: Callable[[KosDevice], str],
+                      joints: Sequence[str] | None = None) -> Answer:
         return self.node.serve_device(response, request, joints)
 
     # -------------------------------------------------------------- services
