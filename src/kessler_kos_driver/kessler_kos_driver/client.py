@@ -81,7 +81,6 @@ from .protocol import (
     MotorStatus,
     PlaybackStatus,
     ProtocolError,
-    TrajectoryData,
     UnknownMessage,
     UnsupportedMessage,
     UserPassword,
@@ -297,7 +296,7 @@ class KosClient(Protocol):
         self.state.wake()
 
     # ------------------------------------------------------------------- messaging
-    def send(self, message: Message | TrajectoryData) -> None:
+    def send(self, message: Message) -> None:
         """Encode (checks ranges) and send one message."""
         data = message.encode()
         session = self._session

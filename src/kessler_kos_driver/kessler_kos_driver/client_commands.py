@@ -46,7 +46,7 @@ class MessageLink(Protocol):
 
     reply_timeout: float
 
-    def send(self, message: Message | TrajectoryData) -> None:
+    def send(self, message: Message) -> None:
         """Encode (checks ranges) and send one message."""
 
     def request(self, message: Message, timeout: float | None = None) -> Message:
@@ -66,7 +66,7 @@ class KosCommands:
         self._link = link
         self._state = state
 
-    def send(self, message: Message | TrajectoryData) -> None:
+    def send(self, message: Message) -> None:
         self._link.send(message)
 
     def motor(self, address: int) -> MotorState:

@@ -50,7 +50,11 @@ class Message:
     """Base: subclasses set MESSAGE_ID and a message_type (class constant or field)."""
 
     MESSAGE_ID: ClassVar[int]
-    message_type: int
+
+    @property
+    def message_type(self) -> int:
+        """The header's MessageType: a class constant, a field or computed (subclasses)."""
+        raise NotImplementedError
 
     def payload(self) -> bytes:
         return b''
@@ -195,7 +199,7 @@ class MotorInfo(Message):
     more_follows: bool = False
 
     @property
-    def message_type(self) -> int:  # type: ignore[override]  # a field on Message, computed here
+    def message_type(self) -> int:
         return MessageType.RESPONSE_MORE if self.more_follows else MessageType.RESPONSE
 
     def payload(self) -> bytes:
@@ -215,8 +219,10 @@ class MotorInfo(Message):
         for _ in range(count):
             raw = reader.u8('MotorAddress')
             # the six Float32 fields in one unpack: the polled hot path (make bench)
-            values = _MOTOR_INFO_VALUES.unpack(reader.take(24, 'MotorInfo Float32 x 6'))
-            motors.append(MotorInfoEntry(raw & 0x7F, *values, is_fiz=bool(raw & FIZ_FLAG)))
+            position, begin, end, setup_speed, move_speed, acceleration = \
+                _MOTOR_INFO_VALUES.unpack(reader.take(24, 'MotorInfo Float32 x 6'))
+            motors.append(MotorInfoEntry(raw & 0x7F, position, begin, end, setup_speed,
+                                         move_speed, acceleration, bool(raw & FIZ_FLAG)))
         return cls(motors, message_type == MessageType.RESPONSE_MORE)
 
 
@@ -252,9 +258,13 @@ class DeviceInfo(Message):
 
     @classmethod
     def from_payload(cls, reader: Reader, message_type: int) -> DeviceInfo:
-        small = [reader.u8() for _ in range(10)]
-        return cls(*small, reader.string('DevicePassword'), reader.u8(), reader.f32(),
-                   reader.f32(), reader.u32())
+        (device_type, device_addr, playback_mode, playback_status, firmware_major,
+         firmware_minor, firmware_release, firmware_build, network_id,
+         hardware_id) = (reader.u8() for _ in range(10))
+        return cls(device_type, device_addr, playback_mode, playback_status, firmware_major,
+                   firmware_minor, firmware_release, firmware_build, network_id, hardware_id,
+                   reader.string('DevicePassword'), reader.u8(), reader.f32(), reader.f32(),
+                   reader.u32())
 
     @property
     def firmware(self) -> str:

@@ -35,6 +35,7 @@ from .constants import (
     PlaybackMode,
 )
 from .errors import DecodeError, EncodeError, TrajectoryError
+from .messages import Message
 from .wire import Reader, Writer
 
 PLAYBACK_BLOCK_SIZE = 37
@@ -189,7 +190,7 @@ def block_id(block: Block) -> int:
 
 
 @dataclass
-class TrajectoryData:
+class TrajectoryData(Message):
     """(Set)TrajectoryData or TrajectoryData(Response): a list of blocks."""
 
     MESSAGE_ID: ClassVar[int] = MessageId.TRAJECTORY_DATA
