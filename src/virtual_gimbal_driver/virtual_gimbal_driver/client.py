@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 from gimbal_driver_common.errors import DeviceRefused, LinkError
 from gimbal_driver_common.session import Pending, Protocol, Session, StreamLink
-from gimbal_driver_common.transport import TcpStream
+from gimbal_driver_common.transport import ByteStream, TcpStream
 
 from .protocol import MAX_TAG, Refused, check_reply, split_tag, tagged, verb
 
@@ -65,7 +65,9 @@ class VirtualGimbalClient(Protocol):
     gives each reply to the request it names."""
 
     def __init__(self, host: str, port: int, timeout: float = 1.0) -> None:
-        self.stream = TcpStream(host, port)
+        self.host, self.port = host, port
+        #: the link (a probe may wrap it to watch the bytes)
+        self.stream: ByteStream = TcpStream(host, port)
         self.timeout = timeout
         self._session: Session | None = None
         self._buffer = b''

@@ -23,7 +23,7 @@ from gimbal_driver_common.device import (
 from gimbal_driver_common.diagnostics import Level, RegisterFlag, StatusPart, decode_register
 from gimbal_driver_common.errors import DeviceTimeout
 
-from .client import VirtualGimbalClient
+from .client import Posted, VirtualGimbalClient
 from .protocol import (
     FAULT_OVERTEMP,
     JOINTS,
@@ -76,7 +76,7 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
         self.client.close()
 
     def description(self) -> str:
-        return f'tcp://{self.client.stream.host}:{self.client.stream.port}'
+        return f'tcp://{self.client.host}:{self.client.port}'
 
     def read(self) -> JointSample:
         reply = parse_position(self.client.request('GET'))
@@ -102,6 +102,7 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
 
     def settle(self, posted: PostedWrite) -> bool:
         """False when an OK never came (the command path sends the moves again)."""
+        assert isinstance(posted.expected, Posted)  # what post() wrote
         try:
             self.client.settle(posted.expected)
         except DeviceTimeout:
