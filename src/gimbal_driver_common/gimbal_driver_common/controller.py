@@ -417,7 +417,7 @@ class GimbalController:
 
         return run
 
-    def _connect(self) -> None:
+    def _connect(self, reconnect: bool = False) -> None:
         try:
             with device_boundary():
                 info = self.device.open()
@@ -426,6 +426,8 @@ class GimbalController:
             self.link_error = str(exc)
             raise
         self.device_info = info if isinstance(info, DeviceInfo) else DeviceInfo()
+        if reconnect:  # counted before the state says connected: the two are read together
+            self.reconnects += 1
         self.link_state, self.link_error = LinkState.CONNECTED, ''
         self.log.info(
             f'connected to {self.device_info.model or "device"} '
@@ -451,13 +453,12 @@ class GimbalController:
         if self._stopping.wait(self.config.reconnect_period):
             return
         try:
-            self._connect()
+            self._connect(reconnect=True)
         except GimbalError as exc:
             self.link_state, self.link_error = LinkState.RECONNECTING, f'reconnecting: {exc}'
             if self._throttle('reconnect', 10.0):
                 self.log.warning(f'reconnect failed: {exc}')
             return
-        self.reconnects += 1
         self.log.info(f'reconnected (reconnect #{self.reconnects})')
         self.on_link_change()
 

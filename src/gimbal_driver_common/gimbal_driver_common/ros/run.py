@@ -183,6 +183,10 @@ class InlineGroupExecutor(Executor):
         super().__init__(context=context)
         self.pool = ThreadPoolExecutor(num_threads, thread_name_prefix=POOL_THREAD_PREFIX)
         self.running: list[Task] = []
+        #: set by :meth:`shutdown`: a pool task that fails from then on failed because the
+        #: executor's guard condition went away under it (rclpy's task epilogue triggers
+        #: it), not because of its callback
+        self.closing = False
 
     def spin_once(self, timeout_sec: float | None = None) -> None:
         self.run_one(timeout_sec)
@@ -203,15 +207,18 @@ class InlineGroupExecutor(Executor):
             return
         if getattr(getattr(entity, 'callback_group', None), 'inline', False):
             handler()
-            handler.result()  # raise what the callback raised, as the pool path does
+            if not self.closing:
+                handler.result()  # raise what the callback raised, as the pool path does
             return
         self.pool.submit(handler)
         self.running.append(handler)
         for task in [task for task in self.running if task.done()]:
             self.running.remove(task)
-            task.result()
+            if not self.closing:
+                task.result()
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:
+        self.closing = True
         done = super().shutdown(timeout_sec)
         self.pool.shutdown(wait=False, cancel_futures=True)
         return done
