@@ -69,8 +69,11 @@ def main() -> int:
     node.create_timer(0.5 / rate_hz, tick)
     while rclpy.ok() and len(reference_times) < count:
         rclpy.spin_once(node, timeout_sec=0.1)
-    output.write_text(json.dumps({'rate_hz': rate_hz, 'publish_times': publish_times,
+    # written whole, then renamed: the bench reads it as soon as the name exists
+    partial = output.with_name(output.name + '.partial')
+    partial.write_text(json.dumps({'rate_hz': rate_hz, 'publish_times': publish_times,
                                   'reference_publish_times': reference_times}))
+    partial.replace(output)
     node.destroy_node()
     rclpy.try_shutdown()
     return 0

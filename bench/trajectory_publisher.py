@@ -98,9 +98,12 @@ def main() -> int:
         stand_in.run(duration + settle, commands)
         runs.append({'t0': began[0], 'start': start, 'goal': goal, 'duration': duration})
     late = stand_in.late[late_from:]  # how late the trajectory cycles ran
-    output.write_text(json.dumps({'runs': runs, 'states': states, 'seen': cycles, 'late': late,
+    # written whole, then renamed: the bench reads it as soon as the name exists
+    partial = output.with_name(output.name + '.partial')
+    partial.write_text(json.dumps({'runs': runs, 'states': states, 'seen': cycles, 'late': late,
                                   'cycles': stand_in.cycles,
                                   'published': len(stand_in.published)}))
+    partial.replace(output)
     executor.shutdown(timeout_sec=1.0)
     node.destroy_node()
     rclpy.try_shutdown()
