@@ -25,7 +25,7 @@ from capture_driver.sim import KNOWN_SETS, CaptureSimulator, PedestalModel
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
 from gimbal_driver_common.diagnostics import Level
 from gimbal_driver_common.joint_command import JointLimits
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_common.testing import ManualClock, wait_for
 from gimbal_driver_common.transport import TcpStream
 from gimbal_driver_common.unanswered import Unanswered
 
@@ -214,19 +214,11 @@ def test_sensor_polls_stop_once_not_answered_with_data(connect, model):
     assert sent(sim, 'IMU_GetPitch') == 0
 
 
-class FakeClock:
-    def __init__(self) -> None:
-        self.now = 1000.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
 def test_a_timeout_of_a_sensor_poll_backs_off_and_does_not_stop_it(connect):
     """An unanswered sensor getter is asked once (no retry), then not again until its
     back-off runs out (nothing sent meanwhile), then again: not "unsupported"."""
     sim, client = connect(timeout=0.1, max_timeouts=1)
-    client.unanswered = Unanswered(first=1.0, longest=4.0, clock=(clock := FakeClock()))
+    client.unanswered = Unanswered(first=1.0, longest=4.0, clock=(clock := ManualClock(1000.0)))
     sim.model.lose_replies(1)
     with pytest.raises(DeviceTimeout):
         client.gps_fix()
@@ -352,7 +344,7 @@ def test_a_register_the_device_never_answers_is_named_and_backs_off(drive):
     stays connected (not "silent"), the joints still move and report, and the device status
     is WARN naming the register; it is not asked back to back."""
     sim, device, controller = drive()
-    device.client.unanswered = Unanswered(clock=FakeClock())  # its back-off never runs out
+    device.client.unanswered = Unanswered(clock=ManualClock(1000.0))  # its back-off never runs out
     before = sent(sim, 'ERR_OperationRegister')
     sim.model.request_faults.mute('ERR_OperationRegister')
     device.expire_status()

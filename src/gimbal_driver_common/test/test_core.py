@@ -28,6 +28,7 @@ from gimbal_driver_common.joint_command import (
 )
 from gimbal_driver_common.presets import PresetError, PresetStore
 from gimbal_driver_common.scan import ScanError, ScanRequest, plan_scan
+from gimbal_driver_common.testing import ManualClock
 from gimbal_driver_common.watchdog import JogWatchdog
 
 LIMITS = {
@@ -36,17 +37,9 @@ LIMITS = {
 }
 
 
-class FakeClock:
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
 # ------------------------------------------------------------------ watchdog
 def test_watchdog_expires_only_unfed_joints() -> None:
-    clock = FakeClock()
+    clock = ManualClock()
     expired: list[list[str]] = []
     dog = JogWatchdog(0.5, expired.append, clock)
     dog.feed(['pan', 'tilt'])
@@ -63,7 +56,7 @@ def test_watchdog_expires_only_unfed_joints() -> None:
 
 
 def test_watchdog_cancel_and_disable() -> None:
-    clock = FakeClock()
+    clock = ManualClock()
     dog = JogWatchdog(0.5, None, clock)
     dog.feed(['pan'])
     dog.cancel(['pan'])

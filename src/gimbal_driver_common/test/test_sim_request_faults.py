@@ -11,6 +11,7 @@ import pytest
 
 from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.sim_requests import LateReplies, RequestFaults, resolve_request
+from gimbal_driver_common.testing import ManualClock
 
 NAMES = ('IMU_GetRoll', 'MOT_GetPosition', 'RESET')
 
@@ -112,16 +113,8 @@ def test_a_simulator_without_request_names_refuses_the_verbs() -> None:
     assert 'muted' not in state_of(control)
 
 
-class Clock:
-    def __init__(self) -> None:
-        self.now = 0.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
 def test_late_replies_come_out_when_due_in_order() -> None:
-    clock = Clock()  # binary fractions: the due times compare exactly
+    clock = ManualClock(0.0)  # binary fractions: the due times compare exactly
     late: LateReplies[bytes] = LateReplies(clock)
     late.hold([b'a1', b'a2'], 0.5)
     clock.now += 0.25

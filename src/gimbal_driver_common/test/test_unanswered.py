@@ -5,19 +5,12 @@ from __future__ import annotations
 import pytest
 
 from gimbal_driver_common.errors import DeviceTimeout
+from gimbal_driver_common.testing import ManualClock
 from gimbal_driver_common.unanswered import BackingOff, Unanswered
 
 
-class Clock:
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
-
-
 def test_the_back_off_doubles_with_every_timeout_in_a_row_up_to_the_longest() -> None:
-    clock = Clock()
+    clock = ManualClock()
     book = Unanswered(first=1.0, longest=5.0, clock=clock)
     book.check('IMU_GetRoll')  # never unanswered: ask now
     waits = []
@@ -34,7 +27,7 @@ def test_the_back_off_doubles_with_every_timeout_in_a_row_up_to_the_longest() ->
 
 
 def test_an_answer_clears_the_back_off_and_keeps_the_total() -> None:
-    clock = Clock()
+    clock = ManualClock()
     book = Unanswered(first=1.0, longest=8.0, clock=clock)
     book.timed_out('ERR_OperationRegister')
     book.timed_out('ERR_OperationRegister')
@@ -47,7 +40,7 @@ def test_an_answer_clears_the_back_off_and_keeps_the_total() -> None:
 
 
 def test_each_request_has_its_own_record_and_diagnostics_name_it() -> None:
-    clock = Clock()
+    clock = ManualClock()
     book = Unanswered(first=2.0, longest=8.0, clock=clock)
     book.timed_out('IMU_GetRoll')
     book.timed_out('IMU_GetRoll')

@@ -179,6 +179,17 @@ class ManagedProcess:
         self.stop()
 
 
+class ManualClock:
+    """A monotonic clock a test sets by hand (``clock.now += 1.0``): pass it where code
+    takes ``clock=time.monotonic``."""
+
+    def __init__(self, now: float = 100.0) -> None:
+        self.now = now
+
+    def __call__(self) -> float:
+        return self.now
+
+
 def wait_for(
     condition: Callable[[], T], timeout: float = 10.0, what: str = 'condition',
     interval: float = 0.02,
