@@ -154,13 +154,14 @@ class DescriptionSuite:
 
         data = yaml.safe_load(share(self.package, 'config',
                                     f'{self.package}_controllers.yaml').read_text())
-        manager = data['controller_manager']['ros__parameters']
+        # keyed /**/<node>: rcl applies them under any namespace (as the driver's own files)
+        manager = data['/**/controller_manager']['ros__parameters']
         assert manager['update_rate'] == 100
         assert manager['joint_state_broadcaster']['type'] == \
             'joint_state_broadcaster/JointStateBroadcaster'
         assert manager['joint_trajectory_controller']['type'] == \
             'joint_trajectory_controller/JointTrajectoryController'
-        jtc = data['joint_trajectory_controller']['ros__parameters']
+        jtc = data['/**/joint_trajectory_controller']['ros__parameters']
         assert set(jtc) <= JTC_PARAMETERS, set(jtc) - JTC_PARAMETERS
         config = TopicSystemConfig.from_xml(self.example())
         assert jtc['joints'] == config.joint_names == self.node_defaults()[0]
