@@ -35,9 +35,10 @@ class Slcan:
         self.broadcasts = 0
 
     def send(self, request: CanAerospaceMessage) -> float:
+        sent = time.monotonic()  # before the write: the device may act before it returns
         self.stream.write(encode_slcan(can.Message(
             arbitration_id=request.can_id, is_extended_id=False, data=request.to_bytes())))
-        return time.monotonic()
+        return sent
 
     def _take(self) -> None:
         self.buffer += self.stream.read(4096, 0.05)

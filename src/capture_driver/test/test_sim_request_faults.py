@@ -33,8 +33,9 @@ class Link:
         assert self.reply() == 'ACK'
 
     def send(self, name: str, axis: int | None = None, value: object = None) -> float:
+        sent = time.monotonic()  # before the write: the device may act before it returns
         self.stream.write(COMMANDS[name].encode(axis, value))
-        return time.monotonic()
+        return sent
 
     def reply(self, timeout: float = 10.0) -> str:
         """The next reply: a data packet's command name, ``ACK`` or ``NACK 0xNN``."""

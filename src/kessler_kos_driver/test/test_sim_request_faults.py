@@ -44,8 +44,9 @@ class Link:
         self.pending: list[Message] = []
 
     def send(self, message: Message) -> float:
+        sent = time.monotonic()  # before the write: the device may act before it returns
         self._write(message.encode())
-        return time.monotonic()
+        return sent
 
     def answer(self, timeout: float = 10.0) -> tuple[str, float]:
         def next_answer() -> Message | None:

@@ -43,8 +43,9 @@ class Link:
         self.reports = 0
 
     def send(self, packet: Packet) -> float:
+        sent = time.monotonic()  # before the write: the device may act before it returns
         self.stream.write(packet.encode())
-        return time.monotonic()
+        return sent
 
     def answer(self, timeout: float = 10.0) -> tuple[str, float]:
         def next_answer() -> Packet | None:

@@ -27,8 +27,9 @@ class Lines:
         self.buffer = b''
 
     def send(self, line: str) -> float:
+        sent = time.monotonic()  # before the write: the device may act before it returns
         self.stream.write(line.encode() + b'\n')
-        return time.monotonic()
+        return sent
 
     def reply(self, timeout: float = 10.0) -> tuple[str, float]:
         """The next reply line and when it arrived (TimeoutError if none within timeout)."""
