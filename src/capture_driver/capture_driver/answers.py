@@ -17,7 +17,9 @@ requests overlap only where that rule cannot give a byte to the wrong one:
   connection);
 - a stop (the link lock held urgently) waits for nothing: it goes out while any read
   waits for its answer. Should an untrusted getter's NACK come first, the stop takes it
-  and the getter times out: rare, and the stop is on the wire at once either way.
+  and the getter times out: rare, and the stop is on the wire at once either way. A stop
+  does wait for the link lock itself: when a setter sequence holds it and waits for an
+  untrusted getter (once per getter and connection), the stop comes after that wait.
 """
 
 from __future__ import annotations
