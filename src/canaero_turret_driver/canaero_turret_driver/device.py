@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from gimbal_driver_common.config import Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves, PostedWrite
 from gimbal_driver_common.errors import InvalidRequest, LinkError
+from gimbal_driver_common.unanswered import ConnectReads
 
 from .capabilities import TurretGeolocation, TurretPresets
 from .client import AXES, CommandError, Sample, TurretClient
@@ -105,8 +106,8 @@ class TurretDevice(Device):
         self._latest: JointSample | None = None
         self._speed_warned = False
         self._tis_refusal_logged = False
-        #: best-effort connect requests the turret left unanswered (service -> why)
-        self.unanswered: dict[str, str] = {}
+        #: best-effort connect requests the turret left unanswered (IDS)
+        self.unanswered = ConnectReads(lambda text: self.log.warning(text))
         self.readings = TurretReadings(client)
         self.node_services = TurretNodeServices(
             client, lambda: settings.allow_data_download, lambda text: self.log.warning(text))
@@ -171,7 +172,7 @@ class TurretDevice(Device):
         while they arrive, it is a WARN and a diagnostics key (:attr:`unanswered`) and
         connecting goes on; unanswered with the turret silent, the error names both."""
         client = self.client
-        self.unanswered.pop("IDS", None)
+        self.unanswered.clear()
         try:
             return client.services.identify()
         except ServiceTimeout as exc:
@@ -179,9 +180,7 @@ class TurretDevice(Device):
             if client.node_silent():
                 raise ServiceTimeout(f"{exc}; no broadcast from turret node {node} either"
                                      ) from exc
-            self.unanswered["IDS"] = str(exc)
-            self.log.warning(f"IDS unanswered while turret node {node} broadcasts, "
-                             f"connecting without its identification: {exc}")
+            self.unanswered.missed("IDS", f"{exc} (turret node {node} broadcasts)")
             return None
 
     def close(self) -> None:

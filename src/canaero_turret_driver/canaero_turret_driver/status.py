@@ -110,13 +110,13 @@ class TurretStatus(StatusReport):
             seen = client.node_last_seen(getattr(client.config, field_name))
             values.append((f"{group}_last_frame_age_s",
                            "never" if seen is None else f"{now - seen:.2f}"))
-        unanswered = dict(self.device.unanswered)
-        values += [(f"unanswered.{name}", why) for name, why in unanswered.items()]
+        unanswered = self.device.unanswered
+        values += unanswered.diagnostics()
         if client.node_silent():
             return StatusPart("turret node", Level.ERROR, "turret node silent", values)
         if unanswered:  # best effort at connect: the broadcasts are what the node needs
-            return StatusPart("turret node", Level.WARN, "turret node talking; unanswered "
-                              f"at connect: {', '.join(unanswered)}", values)
+            return StatusPart("turret node", Level.WARN,
+                              f"turret node talking; {unanswered.summary()}", values)
         return StatusPart("turret node", Level.OK, "turret node talking", values)
 
     def _axis_part(self, client: TurretClient, axis: str) -> StatusPart:

@@ -1,4 +1,5 @@
-"""Requests a device leaves unanswered, and when to ask them again (no ROS).
+"""Requests a device leaves unanswered, and when to ask them again (no ROS); and the reads
+at connect a node can work without (:class:`ConnectReads`).
 
 An optional subsystem that is not fitted, or firmware that drops what it cannot serve,
 leaves one kind of request unanswered while the device answers everything else. Asking
@@ -16,10 +17,14 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 from gimbal_driver_common.errors import DeviceTimeout
 
-__all__ = ['BackingOff', 'Unanswered', 'UnansweredRequest', 'backing_off_message']
+__all__ = ['BackingOff', 'ConnectReads', 'Unanswered', 'UnansweredRequest',
+           'backing_off_message']
+
+T = TypeVar('T')
 
 
 class BackingOff(DeviceTimeout):
@@ -107,3 +112,58 @@ class Unanswered:
         return [(f'unanswered.{r.name}',
                  f'{r.in_a_row} time(s) in a row ({r.total} in all); asked again in '
                  f'{max(0.0, r.retry_at - now):.1f} s') for r in self.silent()]
+
+
+class ConnectReads:
+    """Reads at connect the node can work without (an identity detail, a read-back): one
+    left unanswered is a WARN, a diagnostics key and a note in the status message, and
+    connecting goes on. Only what the node cannot work without is required; its failure
+    names it (the driver's own code, not this). Thread-safe; cleared at every connect."""
+
+    def __init__(self, log: Callable[[str], object]) -> None:
+        self._log = log
+        self._lock = threading.Lock()
+        self._missing: dict[str, str] = {}
+
+    def clear(self) -> None:
+        with self._lock:
+            self._missing.clear()
+
+    def read(self, name: str, read: Callable[[], T],
+             errors: tuple[type[BaseException], ...] = (DeviceTimeout,)) -> T | None:
+        """``read()``, or None (logged once, named in diagnostics) when it fails with one
+        of ``errors``: no answer, by default."""
+        try:
+            value = read()
+        except errors as exc:
+            self.missed(name, str(exc))
+            return None
+        with self._lock:
+            self._missing.pop(name, None)
+        return value
+
+    def missed(self, name: str, why: str) -> None:
+        """``name`` went unanswered at connect (for a read whose failure needs a check of
+        the driver's own first, such as the turret's IDS while its broadcasts arrive)."""
+        with self._lock:
+            self._missing[name] = why
+        self._log(f'{name} unanswered at connect, connecting without it: {why}')
+
+    def __contains__(self, name: object) -> bool:
+        with self._lock:
+            return name in self._missing
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._missing)
+
+    def diagnostics(self) -> list[tuple[str, str]]:
+        """Key/values for the device's status: ``unanswered.<read>`` and why."""
+        with self._lock:
+            return [(f'unanswered.{name}', why) for name, why in self._missing.items()]
+
+    def summary(self) -> str:
+        """``unanswered at connect: A, B`` for the status message ('' when none)."""
+        with self._lock:
+            names = list(self._missing)
+        return f'unanswered at connect: {", ".join(names)}' if names else ''

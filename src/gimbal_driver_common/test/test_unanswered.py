@@ -6,7 +6,7 @@ import pytest
 
 from gimbal_driver_common.errors import DeviceTimeout
 from gimbal_driver_common.testing import ManualClock
-from gimbal_driver_common.unanswered import BackingOff, Unanswered
+from gimbal_driver_common.unanswered import BackingOff, ConnectReads, Unanswered
 
 
 def test_the_back_off_doubles_with_every_timeout_in_a_row_up_to_the_longest() -> None:
@@ -60,3 +60,26 @@ def test_bad_back_off_settings_are_refused() -> None:
         Unanswered(first=0.0)
     with pytest.raises(ValueError):
         Unanswered(first=5.0, longest=1.0)
+
+
+def test_a_best_effort_read_at_connect_is_named_and_connecting_goes_on() -> None:
+    warned: list[str] = []
+    reads = ConnectReads(warned.append)
+
+    def silent() -> str:
+        raise DeviceTimeout('no reply to ID within 1 s')
+
+    assert reads.read('ID', silent) is None
+    assert reads.read('TelemetryRateRequest', lambda: 50.0) == 50.0
+    assert 'ID' in reads and 'TelemetryRateRequest' not in reads and len(reads) == 1
+    assert warned == ['ID unanswered at connect, connecting without it: '
+                      'no reply to ID within 1 s']
+    assert reads.diagnostics() == [('unanswered.ID', 'no reply to ID within 1 s')]
+    assert reads.summary() == 'unanswered at connect: ID'
+    with pytest.raises(ValueError):  # only the errors it is told about count as unanswered
+        reads.read('GUID', lambda: int('x'))
+    assert reads.read('ID', lambda: 'ID vg 1 2') == 'ID vg 1 2'  # answered: not named
+    reads.missed('IDS', 'no IDS response')
+    assert [key for key, _ in reads.diagnostics()] == ['unanswered.IDS']
+    reads.clear()
+    assert not reads and reads.summary() == ''

@@ -42,6 +42,7 @@ from gimbal_driver_common import errors
 from gimbal_driver_common.errors import LinkError
 from gimbal_driver_common.session import Protocol, Session, StreamLink
 from gimbal_driver_common.transport import ByteStream, TcpStream, TransportError
+from gimbal_driver_common.unanswered import ConnectReads
 
 from .client_commands import KosCommands
 from .client_notifications import KosNotifications
@@ -157,8 +158,8 @@ class KosClient(Protocol):
         self.connected = False
         self.device_info: DeviceInfo | None = None
         self.guid = ''
-        #: best-effort connect requests the device left unanswered (message name -> why)
-        self.unanswered: dict[str, str] = {}
+        #: best-effort connect requests the device left unanswered (the GUID)
+        self.unanswered = ConnectReads(LOG.warning)
         self.malformed_frames = 0
         self.last_error_text = ''      # why the link was lost (for the supervisor's reason)
 
@@ -271,17 +272,11 @@ class KosClient(Protocol):
     def _finish_initialisation(self, info: DeviceInfo) -> None:
         """The GUID is best effort (an identity detail): DeviceInfo, the password and the
         motors are what the node cannot work without, and their failures name them."""
-        self.unanswered = {}
-        try:
-            guid = self.request(GetDeviceGuid())
-        except (DeviceTimeout, MessageUnsupported) as exc:
-            self.guid = ''
-            self.unanswered['GetDeviceGuid'] = str(exc)
-            LOG.warning('GetDeviceGuid unanswered at connect, connecting without the GUID: '
-                        '%s', exc)
-        else:
-            assert isinstance(guid, DeviceGuid)
-            self.guid = guid.text
+        self.unanswered.clear()
+        guid = self.unanswered.read('GetDeviceGuid', lambda: self.request(GetDeviceGuid()),
+                                    (DeviceTimeout, MessageUnsupported))
+        assert guid is None or isinstance(guid, DeviceGuid)
+        self.guid = '' if guid is None else guid.text
         with self._lock:
             self.state.playback.status = info.playback_status
 

@@ -88,7 +88,7 @@ class KosStatus(StatusReport):
                                     for b, n in enumerate(AUX_INPUT_BUTTONS))),
             ('slave_controller_present', str(bool(aux >> AUX_SLAVE_PRESENT_BIT & 1))),
             *sorted(device.functions.device_settings.items()),
-            *[(f'unanswered.{name}', why) for name, why in client.unanswered.items()],
+            *client.unanswered.diagnostics(),
             *[(f'error_{e.code}', f'{e.description} (motor {e.motor_address})')
               for e in device_errors],
         ])
@@ -99,7 +99,7 @@ class KosStatus(StatusReport):
             part.message = f'error {device_errors[-1].code}: {device_errors[-1].description}'
         elif client.unanswered:  # best effort at connect: the node works without it
             part.level = Level.WARN
-            part.message = f'unanswered at connect: {", ".join(client.unanswered)}'
+            part.message = client.unanswered.summary()
         else:
             part.message = f'OK, playback {playback}'
         return [part] + [self._axis_part(name, errors) for name in device.joints]

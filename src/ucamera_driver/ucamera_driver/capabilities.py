@@ -117,10 +117,10 @@ class UCameraStatus(StatusReport):
         if new_errors:
             level = Level.WARN
             message += f"; {new_errors} checksum error(s) since last report"
-        unanswered = dict(device.unanswered)
-        if unanswered:  # best-effort connect-time reads: the node works without them
+        missing = device.unanswered.summary()
+        if missing:  # best-effort connect-time reads: the node works without them
             level = max(level, Level.WARN)
-            message += f"; unanswered at connect: {', '.join(unanswered)}"
+            message += f"; {missing}"
         pending = client.pending_automatic_mode
         antenna = device.antenna
         values = [
@@ -143,7 +143,8 @@ class UCameraStatus(StatusReport):
             ("antenna_position_m", "" if antenna is None
              else ", ".join(f"{v:.3f}" for v in antenna)),
             ("nv_write_allowed", str(settings.allow_nv_write)),
-        ] + [(f"unanswered.{name}", why) for name, why in unanswered.items()]
+            *device.unanswered.diagnostics(),
+        ]
         parts = [StatusPart("device", level, message, values)]
         positions = device.from_device(state.pan or 0.0, state.tilt or 0.0)
         rates = device.from_device(state.pan_rate or 0.0, state.tilt_rate or 0.0)

@@ -47,11 +47,11 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TypeVar
 
 from gimbal_driver_common.config import Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves, PostedWrite
-from gimbal_driver_common.errors import DeviceTimeout, Unsupported
+from gimbal_driver_common.errors import Unsupported
+from gimbal_driver_common.unanswered import ConnectReads
 
 from .capabilities import PilotHoming, UCameraGeolocation, UCameraStatus
 from .client import NotConnectedError, UCameraClient
@@ -59,7 +59,6 @@ from .device_functions import UCameraFunctions
 from .protocol import AnglesReport, GimbalMode, GimbalType, GpsFeed, Packet
 
 LOG = logging.getLogger(__name__)
-T = TypeVar("T")
 
 
 @dataclass
@@ -111,8 +110,9 @@ class UCameraDevice(Device):
             silence_timeout=settings.silence_timeout, request_timeout=settings.request_timeout,
             on_report=self._on_report)
         self.antenna: tuple[float, ...] | None = None
-        #: best-effort connect-time reads the gimbal left unanswered (packet name -> why)
-        self.unanswered: dict[str, str] = {}
+        #: best-effort connect-time reads the gimbal left unanswered (a read-back, an
+        #: identity detail); only the version answer and the angles reports are required
+        self.unanswered = ConnectReads(lambda text: self.log.warning(text))
         self._lock = threading.RLock()  # set-point, ramp and jog state (several threads)
         self._setpoint: dict[str, float] = {}
         self._ramp: dict[str, tuple[float, float]] = {}  # joint -> (target, speed)
@@ -183,7 +183,7 @@ class UCameraDevice(Device):
         if settings.telemetry_rate:
             client.commands.set_telemetry_rate(settings.telemetry_rate, verify=False)
             # the read-back is best effort: the angles reports are what the node needs
-            achieved = self._best_effort("TelemetryRateRequest", client.request_telemetry_rate)
+            achieved = self.unanswered.read("TelemetryRateRequest", client.request_telemetry_rate)
             if achieved is not None and achieved != settings.telemetry_rate:
                 self.log.warning(
                     f"telemetry_rate {settings.telemetry_rate} Hz requested, device reports "
@@ -195,21 +195,9 @@ class UCameraDevice(Device):
             client.commands.set_antenna_position(*settings.antenna_position)
         if settings.ir_palette >= 0:
             client.commands.set_ir_palette(settings.ir_palette)
-        self.antenna = self._best_effort("AntennaPositionRequest",
+        self.antenna = self.unanswered.read("AntennaPositionRequest",
                                          client.request_antenna_position)
 
-    def _best_effort(self, name: str, read: Callable[[], T]) -> T | None:
-        """A connect-time read the node can work without (a read-back, an identity detail):
-        unanswered, it is a WARN and a diagnostics key (:attr:`unanswered`), and connecting
-        goes on; only the version answer and the angles reports are required."""
-        try:
-            value = read()
-        except DeviceTimeout as exc:
-            self.unanswered[name] = str(exc)
-            self.log.warning(f"{name} unanswered at connect, connecting without it: {exc}")
-            return None
-        self.unanswered.pop(name, None)
-        return value
 
     def close(self) -> None:
         self.client.stop()

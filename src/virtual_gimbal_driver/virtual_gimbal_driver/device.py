@@ -22,6 +22,7 @@ from gimbal_driver_common.device import (
 )
 from gimbal_driver_common.diagnostics import Level, RegisterFlag, StatusPart, decode_register
 from gimbal_driver_common.errors import DeviceTimeout
+from gimbal_driver_common.unanswered import ConnectReads
 
 from .client import Posted, VirtualGimbalClient
 from .protocol import (
@@ -46,8 +47,8 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
                  request_timeout: float = 1.0) -> None:
         super().__init__()
         self.client = VirtualGimbalClient(host, port, timeout=request_timeout)
-        #: best-effort connect requests the device left unanswered (verb -> why)
-        self.unanswered: dict[str, str] = {}
+        #: best-effort connect requests the device left unanswered
+        self.unanswered = ConnectReads(LOG.warning)
         self.home_timeout = home_timeout
         self._faults = 0
         self._latest: JointSample | None = None
@@ -59,14 +60,12 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
         identity (ID) is best effort: unanswered, a WARN and a diagnostics key, and
         connecting goes on."""
         self.client.open()
-        self.unanswered.pop('ID', None)
-        try:
-            identity = parse_identity(self.client.request('ID'))
-        except DeviceTimeout as exc:
-            self.unanswered['ID'] = str(exc)
-            LOG.warning('ID unanswered at connect, connecting without the identity: %s', exc)
+        self.unanswered.clear()
+        reply = self.unanswered.read('ID', lambda: self.client.request('ID'))
+        if reply is None:
             info = DeviceInfo('virtual gimbal (ID unanswered)')
         else:
+            identity = parse_identity(reply)
             info = DeviceInfo(identity.model, identity.serial_number,
                               identity.firmware_version)
         self.read()  # the joint data: required
@@ -135,13 +134,12 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
 
     def parts(self) -> list[StatusPart]:
         active = decode_register(self._faults, FAULT_FLAGS, 'faults')
-        unanswered = dict(self.unanswered)
         part = StatusPart.from_flags('device', active, [
-            ('fault_bits', hex(self._faults)),
-            *[(f'unanswered.{name}', why) for name, why in unanswered.items()]])
-        if unanswered:  # best effort at connect: the node works without it
+            ('fault_bits', hex(self._faults)), *self.unanswered.diagnostics()])
+        missing = self.unanswered.summary()
+        if missing:  # best effort at connect: the node works without it
             part.level = max(part.level, Level.WARN)
-            part.message += f' | unanswered at connect: {", ".join(unanswered)}'
+            part.message += f' | {missing}'
         return [part]
 
     def errors(self) -> list[str]:
