@@ -16,7 +16,7 @@ from rclpy.context import Context  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
-from gimbal_driver_common.testing import DomainLease  # noqa: E402
+from gimbal_driver_common.testing import DomainLease, wait_for  # noqa: E402
 from gimbal_driver_common.testing import ros as ros_testing  # noqa: E402
 from gimbal_msgs.action import MoveTo  # noqa: E402
 
@@ -31,6 +31,7 @@ class SlowFirstAcceptServer:
         rclpy.init(context=self.context, domain_id=domain_id)
         self.node = rclpy.create_node('slow_accept_server', context=self.context)
         self.goals = 0
+        self.executed = 0  # goals whose execute callback has run
         self.reads = 0
         self.hold = hold
         self.first_answered = threading.Event()
@@ -70,7 +71,15 @@ class SlowFirstAcceptServer:
         with self._lock:
             order = self.goals
         goal_handle.succeed()
+        with self._lock:
+            self.executed += 1
         return MoveTo.Result(success=True, message=f'goal {order}')
+
+    def all_executed(self) -> bool:
+        """Every accepted goal has run: the server may go away without one still running
+        (rcl_action then logs that the feedback publisher is invalid)."""
+        with self._lock:
+            return self.executed == self.goals
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
@@ -89,6 +98,7 @@ def test_a_goal_not_accepted_in_time_is_sent_again(monkeypatch) -> None:
             assert server.goals >= 2
             assert result.success and result.message != 'goal 1', result.message
             assert server.first_answered.wait(10.0)  # before the server goes away
+            wait_for(server.all_executed, 10.0, 'the late-accepted first goal executed')
         finally:
             client.close()
             server.close()
