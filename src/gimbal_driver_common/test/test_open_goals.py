@@ -45,3 +45,18 @@ def test_after_close_new_goals_are_rejected_and_not_counted() -> None:
     goals.close()
     assert goals.admit(object()) == GoalResponse.REJECT
     assert goals.count == 1  # the goal accepted before still counts
+
+
+def test_a_result_request_is_due_for_a_second_after_the_last_acceptance() -> None:
+    now = [100.0]
+    goals = OpenGoals(clock=lambda: now[0])
+    assert goals.result_request_due() == 0.0  # nothing accepted: nothing to wait for
+    goals.admit(object())
+    now[0] += 0.25
+    assert goals.result_request_due() == pytest.approx(OpenGoals.RESULT_REQUEST_S - 0.25)
+    goals.admit(object())  # a later acceptance starts the wait again
+    assert goals.result_request_due() == pytest.approx(OpenGoals.RESULT_REQUEST_S)
+    goals.close()
+    goals.admit(object())  # rejected: its answer went out at once, nobody asks for a result
+    now[0] += OpenGoals.RESULT_REQUEST_S
+    assert goals.result_request_due() == 0.0

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
@@ -31,12 +32,23 @@ class OpenGoals:
     then still run until rclpy has run each execute callback to its end, so that every
     client hears how its goal ended instead of waiting for a server that is gone. A goal
     that comes once the node is going away is rejected: that answer goes out at once.
+
+    A client asks for a goal's result when it hears the goal accepted, one round trip
+    after the acceptance went out; a goal that the shutdown ends right after its acceptance
+    may have that request still on its way. :meth:`result_request_due` says how long to
+    keep answering for it.
     """
 
-    def __init__(self) -> None:
+    #: seconds after the last acceptance during which its client's result request may
+    #: still be on its way (a round trip through DDS on a loaded host, with room)
+    RESULT_REQUEST_S = 1.0
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         self._open = 0
         self._closed = False
         self._changed = threading.Condition()
+        self._clock = clock
+        self._last_admitted: float | None = None
 
     def admit(self, _goal: object) -> GoalResponse:
         """The ``goal_callback``: an accepted goal counts as open from here on (before
@@ -45,6 +57,7 @@ class OpenGoals:
             if self._closed:
                 return GoalResponse.REJECT
             self._open += 1
+            self._last_admitted = self._clock()
             return GoalResponse.ACCEPT
 
     def close(self) -> None:
@@ -68,6 +81,14 @@ class OpenGoals:
     def count(self) -> int:
         with self._changed:
             return self._open
+
+    def result_request_due(self) -> float:
+        """Seconds until no result request of an accepted goal can still be on its way (0:
+        none accepted, or the last long enough ago)."""
+        with self._changed:
+            if self._last_admitted is None:
+                return 0.0
+            return max(0.0, self._last_admitted + self.RESULT_REQUEST_S - self._clock())
 
     def wait_ended(self, timeout: float) -> bool:
         """True once no goal is open; False if some still are after ``timeout`` seconds."""

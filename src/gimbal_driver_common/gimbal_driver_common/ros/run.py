@@ -110,7 +110,9 @@ def answer_open_goals(node: GimbalDriverNode, executor: Executor,
     own, which the goal's task queues once the execute callback returned. So: wait for the
     execute callbacks, then for the pool tasks that ran them, then for the executor to
     take a task queued after the result sends (it takes tasks in the order they were made)
-    and for the pool to finish them. False, with a warning, after ``timeout`` seconds.
+    and for the pool to finish them; then, while the result request of a goal accepted
+    just before may still be on its way (:meth:`OpenGoals.result_request_due`), go on
+    spinning. False, with a warning, after ``timeout`` seconds.
     """
     deadline = time.monotonic() + timeout
 
@@ -137,7 +139,11 @@ def answer_open_goals(node: GimbalDriverNode, executor: Executor,
     if not until(marker.done):
         return False
     sends = pool_tasks()
-    return until(lambda: all(task.done() for task in sends))
+    if not until(lambda: all(task.done() for task in sends)):
+        return False
+    # A goal accepted just before the shutdown: its client's result request may still be
+    # on its way. The executor keeps spinning, and answers it from the stored result.
+    return until(lambda: node.open_goals.result_request_due() == 0.0)
 
 
 def _spin(executor: Executor, stop: threading.Event) -> None:
