@@ -286,10 +286,12 @@ class GimbalController:
         with self._targets_lock:
             self.commanded_targets.update(targets)
 
-    def bump_motion_generation(self) -> None:
-        """End a running move or scan (they compare :attr:`motion_generation`)."""
+    def bump_motion_generation(self) -> int:
+        """End a running move or scan (they compare :attr:`motion_generation`); returns the
+        new generation, the one a command that preempts with this bump runs in."""
         with self._generation_lock:
             self.motion_generation += 1
+            return self.motion_generation
 
     def send_moves(self, moves: Moves, offsets: dict[str, float] | None = None) -> None:
         """Send absolute moves now (move_to, presets, scans), after the queued commands."""

@@ -63,6 +63,17 @@ class Preset:
     positions: dict[str, float]
 
 
+class MoveTargets(dict[str, float]):
+    """A started move's absolute targets (joint -> position), and the motion generation
+    its command started: a stop, halt or newer command after it ends the move's wait
+    (:meth:`Motion.wait_move`), also one that came before the wait began (a shutdown
+    right after the move went out ends it "stopped", not "link lost")."""
+
+    def __init__(self, targets: dict[str, float], generation: int) -> None:
+        super().__init__(targets)
+        self.generation = generation
+
+
 class Motion:
     """The policies: every method answers or raises a GimbalError with the reason."""
 
@@ -85,7 +96,7 @@ class Motion:
     def start_move(
         self, names: Sequence[str], positions: Sequence[float],
         velocities: Sequence[float] = (), relative: bool = False,
-    ) -> dict[str, float]:
+    ) -> MoveTargets:
         """Check and send a MoveTo; returns the absolute targets. Nothing is sent on error."""
         ctl = self.controller
         names = list(names)
@@ -104,21 +115,24 @@ class Motion:
                     f'joint {name!r}: speed {speed:.4f} exceeds velocity_max '
                     f'{limits[name].velocity_max:.4f}')
             moves[name] = (targets[name], speed)
-        self.preempt()
+        generation = self.preempt()
         offsets = dict(zip(names, map(float, positions), strict=True)) if relative else None
         ctl.send_moves(moves, offsets)
-        return targets
+        return MoveTargets(targets, generation)
 
     def wait_move(
         self, targets: dict[str, float], tolerance: float = 0.0,
         cancelled: Callable[[], bool] = lambda: False,
         feedback: Callable[[list[float]], None] = lambda positions: None,
     ) -> MoveOutcome:
-        """Wait until every joint is within tolerance and settled, or the move ends otherwise."""
+        """Wait until every joint is within tolerance and settled, or the move ends otherwise:
+        stopped by a stop, halt or newer command since the move's command (``targets`` as
+        :meth:`start_move` or :meth:`point_at` gave them; plain targets: since this call)."""
         ctl = self.controller
         names = list(targets)
         tolerance = tolerance if tolerance > 0 else ctl.config.goal_tolerance
-        generation = ctl.motion_generation
+        generation = (targets.generation if isinstance(targets, MoveTargets)
+                      else ctl.motion_generation)
         deadline = time.monotonic() + ctl.config.move_timeout
         while True:
             time.sleep(MOVE_CHECK_S)
@@ -148,31 +162,33 @@ class Motion:
                     positions)
 
     def point_at(self, pointing: TargetPointing, target: GeoPoint,
-                 targets: dict[str, float]) -> str:
+                 targets: dict[str, float]) -> tuple[str, MoveTargets]:
         """Start the device's own pointing at ``target``; ``targets`` is where the
         driver's own solution puts the joints (already checked against the limits), which
-        ~/status shows and the caller waits for with :meth:`wait_move`."""
+        ~/status shows. Returns the device's answer and the targets to wait for with
+        :meth:`wait_move`."""
         ctl = self.controller
         ctl.require(list(targets))
-        self.preempt()
+        generation = self.preempt()
         ctl.watchdog.cancel(list(targets))
         message = ctl.call(lambda: pointing.point_at(target))
         ctl.record_targets(targets)
-        return message
+        return message, MoveTargets(targets, generation)
 
     def _scan_stop_current(self) -> None:
         self._scan_stop.set()
 
-    def preempt(self) -> None:
+    def preempt(self) -> int:
         """A new motion command ends a driver-side scan and supersedes a running move goal
         (which then ends "stopped"), so waiting goals never pile up; a device scan ends
         with the device's new move. The joint_commands still queued behind a busy link
         (and the moves of a posted write not yet settled) are dropped, every joint's: none
-        from before this command may reach the device after it."""
+        from before this command may reach the device after it. Returns the generation the
+        new command runs in."""
         self._scan_stop.set()
         self.controller.commands.drop(None)
         self.controller.motion_watch.withdraw()
-        self.controller.bump_motion_generation()
+        return self.controller.bump_motion_generation()
 
     # ---------------------------------------------------------------- homing
     def home(

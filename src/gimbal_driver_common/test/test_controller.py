@@ -675,6 +675,27 @@ def test_stop_ends_a_running_move(motion, controller, device) -> None:
     assert motion.wait_move(targets).state == 'stopped'
 
 
+def test_a_stop_between_the_move_and_its_wait_still_ends_it(motion, controller,
+                                                             device) -> None:
+    """The wait compares against the generation the move's command started, so a stop that
+    comes before the wait begins is not missed (it would wait out move_timeout)."""
+    device.step = 0.0001
+    targets = motion.start_move(['pan'], [0.9])
+    controller.stop()
+    assert motion.wait_move(targets).state == 'stopped'
+
+
+def test_a_shutdown_right_after_the_move_ends_it_stopped_not_link_lost(motion, controller,
+                                                                       device) -> None:
+    """A node that gets SIGINT just after a goal's move went out: the goal says why."""
+    device.step = 0.0001
+    targets = motion.start_move(['pan'], [0.9])
+    controller.shutdown()  # halts, then closes the link, before the goal's wait begins
+    outcome = motion.wait_move(targets)
+    assert (outcome.state, outcome.message) == ('stopped',
+                                                'stopped: the driver is shutting down')
+
+
 def test_move_refusals_send_nothing(motion, device) -> None:
     with pytest.raises(InvalidRequest, match='velocity_max'):
         motion.start_move(['pan'], [0.1], [5.0])

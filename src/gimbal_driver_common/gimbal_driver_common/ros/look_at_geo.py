@@ -230,7 +230,7 @@ class LookAtGeoServer:
                 motion = self._node.motion
                 if motion is None:
                     raise LookAtRefused('the node is not configured')
-                motion.point_at(aim.pointing, aim.target, targets)
+                _, targets = motion.point_at(aim.pointing, aim.target, targets)
             except (GimbalError, LookAtRefused) as exc:
                 goal_handle.abort()
                 current = self._node.current_positions()
