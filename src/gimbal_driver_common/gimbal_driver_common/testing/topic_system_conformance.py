@@ -103,14 +103,17 @@ class TopicInterfaceConformance(ConformanceHelpers):
 
         # velocity interfaces with threshold -1: every cycle is published, so the dead-man
         # watchdog (command_timeout 0.5 s) never stops the axis while the command stands.
-        # A phase in which either process stalled says nothing of that and runs again.
-        joint, velocity = self.jog
+        # A phase in which either process stalled says nothing of that and runs again, the
+        # other way: phases the same way add up toward the joint's limit, where it stops
+        # (the turret's pitch jogs 0.3 rad a phase from 0.2 rad: past 1.047 in the third).
+        joint, speed = self.jog
         stand_in.reconfigure(config.with_command_interfaces(('velocity',), -1.0))
         stalls = []
-        for _attempt in range(JOG_ATTEMPTS):
+        for attempt in range(JOG_ATTEMPTS):
             window, jogging = stand_in.mark(), len(rig.node.output())
+            velocity = speed if attempt % 2 == 0 else -speed
             stand_in.run(JOG_PHASE_S,
-                         lambda t: {j: velocity if j == joint else 0.0 for j in names})
+                         lambda t, v=velocity: {j: v if j == joint else 0.0 for j in names})
             moving, log = rig.sim.moving(joint), rig.node.output()[jogging:]
             stalls.append(stand_in.longest_gap(window))
             if stalls[-1] < STALL_S:
