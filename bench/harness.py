@@ -20,6 +20,7 @@ Latency definitions (wall clock, one machine):
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import socket
 import statistics
@@ -40,6 +41,20 @@ from gimbal_driver_common.testing import ManagedProcess, ros_env, wait_for
 from gimbal_driver_common.testing.ros import RosTestClient
 
 ROOT = Path(__file__).resolve().parent.parent
+
+
+def freeze_heap() -> None:
+    """Collect, then freeze what is alive, before a driver's runs.
+
+    The simulators run in this process, so a full garbage collection here stops the
+    simulated device with everything else: after two drivers' runs the heap held 60,000 to
+    95,000 objects, a collection took 25-50 ms, and one in Capture's tracking left the
+    node's joint_states without a new sample for 40 ms (the state age and the error of the
+    tracking figures). A device has no such pause; frozen objects are never traversed
+    again, and only what the driver's own runs make is collected.
+    """
+    gc.collect()
+    gc.freeze()
 
 
 def percentiles(samples: list[float]) -> dict[str, float]:

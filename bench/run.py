@@ -25,7 +25,13 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 from driver_bench import generic_run  # noqa: E402
-from harness import ROOT, git_revision, loopback_rtt_us, rclpy_reference  # noqa: E402
+from harness import (  # noqa: E402
+    ROOT,
+    freeze_heap,
+    git_revision,
+    loopback_rtt_us,
+    rclpy_reference,
+)
 from tracking import tracking_figures  # noqa: E402
 
 from gimbal_driver_common.registry import DriverSpec, drivers  # noqa: E402
@@ -69,6 +75,7 @@ def main() -> int:
         }
         for name in args.names or list(registered):
             print(f'bench: {name} ...', file=sys.stderr, flush=True)
+            freeze_heap()
             try:
                 results[name] = run_benchmark(registered[name], domain)
             except Exception as exc:  # noqa: BLE001 - one failing bench must not hide the others
@@ -76,6 +83,7 @@ def main() -> int:
                 results[name] = {'error': f'{type(exc).__name__}: {exc}'}
                 continue
             print(f'bench: {name} tracking ...', file=sys.stderr, flush=True)
+            freeze_heap()
             try:
                 results[name]['tracking'] = tracking_figures(registered[name], domain)
             except Exception as exc:  # noqa: BLE001

@@ -29,7 +29,7 @@ from pathlib import Path
 
 from ament_index_python.packages import get_package_share_directory
 from driver_bench import add_note, start_node
-from harness import ROOT
+from harness import ROOT, freeze_heap
 
 from gimbal_driver_common.registry import DriverSpec
 from gimbal_driver_common.testing import ManagedProcess, ros_env, wait_for
@@ -158,7 +158,10 @@ if __name__ == '__main__':  # python bench/tracking.py [driver ...]: tracking al
     from gimbal_driver_common.testing import DomainLease
 
     chosen = sys.argv[1:]
+    report = {}
     with DomainLease() as lease:
-        report = {spec.name: tracking_figures(spec, lease) for spec in drivers()
-                  if not chosen or spec.name in chosen}
+        for spec in drivers():
+            if not chosen or spec.name in chosen:
+                freeze_heap()
+                report[spec.name] = tracking_figures(spec, lease)
     print(json.dumps(report, indent=2))
