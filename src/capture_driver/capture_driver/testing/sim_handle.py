@@ -49,7 +49,8 @@ class CaptureSimHandle(SimHandle):
 
         def recorded(frame, session):
             known = BY_OPCODE.get(frame.opcode)
-            self.record(known.name if known is not None else f'0x{frame.opcode:04X}')
+            self.record(known.name if known is not None else f'0x{frame.opcode:04X}',
+                        f'axis {frame.axis}' if frame.axis else '')
             return handle(frame, session)
 
         self.sim.model.handle = recorded
@@ -70,13 +71,14 @@ class CaptureSimHandle(SimHandle):
     def changing(self, request: str) -> bool:
         from capture_driver.protocol import COMMANDS, DataType
 
-        command = COMMANDS.get(request)
+        name = request.split()[0]  # a log may carry the axis after the name
+        command = COMMANDS.get(name)
         reads = command is not None and command.arg is DataType.NONE \
             and command.ret is not DataType.NONE
-        return not (request == 'COM_Connect' or reads)
+        return not (name == 'COM_Connect' or reads)
 
     def motion(self, request: str) -> bool:
-        return request in MOTION_COMMANDS
+        return request.split()[0] in MOTION_COMMANDS
 
     def moving(self, joint: str) -> bool:
         model = self.sim.model
