@@ -120,7 +120,21 @@ def state_reporter(goal_handle) -> Callable[[str], None]:
     return report
 
 
-class ActionNode(Protocol):
+class ActionHost(Protocol):
+    """What every action part (motion, look_at, look_at_geo) uses of the node
+    (:class:`~.base_node.GimbalDriverNode`): its positions and its action servers."""
+
+    def current_positions(self) -> dict[str, float]:
+        """The latest joint positions (empty before configure)."""
+
+    def create_accepting_action_server(self, action_type: type, name: str,
+                                       execute: Callable[..., Any],
+                                       on_cancel: Callable[[], None] = ...,
+                                       ) -> ActionServer:
+        """An action server that accepts every goal; ``execute`` refuses by aborting."""
+
+
+class ActionNode(ActionHost, Protocol):
     """What the motion actions use of the node (:class:`~.base_node.GimbalDriverNode`):
     what configure built (None before), its joints and refusals, its action servers."""
 
@@ -138,15 +152,6 @@ class ActionNode(Protocol):
 
     def command_refusal(self) -> str | None:
         """Why commands cannot be served now (inactive, disconnected), or None."""
-
-    def current_positions(self) -> dict[str, float]:
-        """The latest joint positions (empty before configure)."""
-
-    def create_accepting_action_server(self, action_type: type, name: str,
-                                       execute: Callable[..., Any],
-                                       on_cancel: Callable[[], None] = ...,
-                                       ) -> ActionServer:
-        """An action server that accepts every goal; ``execute`` refuses by aborting."""
 
 
 class MotionActions:

@@ -14,12 +14,11 @@ drivers' sign conversions (Capture joint_directions, U-Camera pan) stay in the d
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
-from rclpy.action import ActionServer
 from rclpy.action.server import ServerGoalHandle
 
 from gimbal_driver_common.joint_command import JointLimits
@@ -29,7 +28,7 @@ from gimbal_driver_common.kinematics import (
     KinematicsError,
     nearest_in_limits,
 )
-from gimbal_driver_common.ros.actions import MotionActions
+from gimbal_driver_common.ros.actions import ActionHost, MotionActions
 from gimbal_msgs.action import LookAt, MoveTo
 
 
@@ -64,14 +63,8 @@ class MoveGoalView:
         self._handle.canceled()
 
 
-class AimNode(Protocol):
-    """What the aiming actions use of the node (:class:`~.base_node.GimbalDriverNode`)."""
-
-    @property
-    def joint_names(self) -> Sequence[str]: ...
-
-    @property
-    def limits(self) -> dict[str, JointLimits]: ...
+class ConfiguringHost(ActionHost, Protocol):
+    """An action host that declares its own parameters and logs: the aiming servers."""
 
     def get_logger(self) -> Any:
         """The node's logger."""
@@ -80,17 +73,18 @@ class AimNode(Protocol):
                       **kwargs: Any) -> Any:
         """Declare a parameter with a descriptor; its value."""
 
+
+class AimNode(ConfiguringHost, Protocol):
+    """What the aiming actions use of the node (:class:`~.base_node.GimbalDriverNode`)."""
+
+    @property
+    def joint_names(self) -> Sequence[str]: ...
+
+    @property
+    def limits(self) -> dict[str, JointLimits]: ...
+
     def motion_refusal(self, joints: Sequence[str]) -> str | None:
         """Why these joints cannot move now, or None."""
-
-    def current_positions(self) -> dict[str, float]:
-        """The latest joint positions (empty before configure)."""
-
-    def create_accepting_action_server(self, action_type: type, name: str,
-                                       execute: Callable[..., Any],
-                                       on_cancel: Callable[[], None] = ...,
-                                       ) -> ActionServer:
-        """An action server that accepts every goal; ``execute`` refuses by aborting."""
 
 
 class LookAtServer:

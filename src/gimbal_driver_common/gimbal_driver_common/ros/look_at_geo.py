@@ -22,7 +22,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
-from rclpy.action import ActionServer
 from rclpy.action.server import ServerGoalHandle
 
 from gimbal_driver_common.controller import GimbalController
@@ -39,7 +38,12 @@ from gimbal_driver_common.geodesy import (
 )
 from gimbal_driver_common.policies import Motion
 from gimbal_driver_common.ros.actions import MotionActions
-from gimbal_driver_common.ros.look_at import LookAtRefused, LookAtServer, MoveGoalView
+from gimbal_driver_common.ros.look_at import (
+    ConfiguringHost,
+    LookAtRefused,
+    LookAtServer,
+    MoveGoalView,
+)
 from gimbal_driver_common.ros.parameters import ParameterError
 from gimbal_msgs.action import LookAtGeo, MoveTo
 
@@ -92,7 +96,7 @@ class GeoAim:
     pointing: TargetPointing | None = None  # the device points itself; None: our move
 
 
-class GeoAimNode(Protocol):
+class GeoAimNode(ConfiguringHost, Protocol):
     """What ~/look_at_geo uses of the node (:class:`~.base_node.GimbalDriverNode`)."""
 
     @property
@@ -104,27 +108,11 @@ class GeoAimNode(Protocol):
     @property
     def device(self) -> Device | None: ...
 
-    def get_logger(self) -> Any:
-        """The node's logger."""
-
-    def declare_param(self, name: str, default: object, description: str,
-                      **kwargs: Any) -> Any:
-        """Declare a parameter with a descriptor; its value."""
-
     def runtime_parameter(self, name: str, apply: Callable[[object], None] | str,
                           send: Callable[[object], None] | None = None,
                           busy: Callable[[], str | None] | None = None,
                           check: Callable[[object], object] | None = None) -> None:
         """Let ``ros2 param set`` change ``name`` while the node runs."""
-
-    def current_positions(self) -> dict[str, float]:
-        """The latest joint positions (empty before configure)."""
-
-    def create_accepting_action_server(self, action_type: type, name: str,
-                                       execute: Callable[..., Any],
-                                       on_cancel: Callable[[], None] = ...,
-                                       ) -> ActionServer:
-        """An action server that accepts every goal; ``execute`` refuses by aborting."""
 
 
 class LookAtGeoServer:
