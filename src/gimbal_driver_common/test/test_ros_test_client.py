@@ -1,6 +1,7 @@
 """RosTestClient.run_action and call against real servers in another context: a goal whose
 acceptance, or an idempotent call whose reply, does not come within RESEND_S is sent
-again, and the newest is waited for; anything else is sent once."""
+again, and the newest is waited for; anything else is sent once, and the first such call on
+a client waits for discovery to settle."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import time
 import pytest
 
 rclpy = pytest.importorskip('rclpy')
+from rcl_interfaces.srv import ListParameters  # noqa: E402
 from rclpy.action import ActionServer, GoalResponse  # noqa: E402
 from rclpy.callback_groups import ReentrantCallbackGroup  # noqa: E402
 from rclpy.context import Context  # noqa: E402
@@ -132,6 +134,30 @@ def test_only_an_idempotent_call_is_sent_again(monkeypatch, idempotent: bool) ->
             else:
                 assert (server.reads, reply.message) == (1, 'read 1')
             assert server.first_read_answered.wait(10.0)  # before the server goes away
+        finally:
+            client.close()
+            server.close()
+
+
+@pytest.mark.ros
+def test_a_call_sent_once_first_lets_discovery_settle(monkeypatch) -> None:
+    """The answer of a request sent once is lost if the service has not yet matched the
+    client's reply reader: the first such call on a client waits, later ones do not, and a
+    read-only service is resent instead of waiting."""
+    settled: list[float] = []
+    monkeypatch.setattr(ros_testing, 'settle_discovery', lambda: settled.append(1.0))
+    with DomainLease() as domain:
+        server = SlowFirstAcceptServer(domain, hold=0.0)
+        client = ros_testing.RosTestClient(domain)
+        try:
+            names = client.call(ListParameters, '/slow_accept_server/list_parameters',
+                                ListParameters.Request(), timeout=20.0)
+            assert 'use_sim_time' in names.result.names
+            assert settled == []
+            assert client.call(Trigger, '/read', Trigger.Request(), timeout=20.0).success
+            assert len(settled) == 1
+            assert client.call(Trigger, '/read', Trigger.Request(), timeout=20.0).success
+            assert len(settled) == 1
         finally:
             client.close()
             server.close()

@@ -14,7 +14,13 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import SetParametersResult
-from rcl_interfaces.srv import GetParameters, SetParameters
+from rcl_interfaces.srv import (
+    DescribeParameters,
+    GetParameters,
+    GetParameterTypes,
+    ListParameters,
+    SetParameters,
+)
 from rclpy.action import ActionClient
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -23,6 +29,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments, wait_for
+from gimbal_msgs.srv import ListPresets
 
 
 def joint_positions(msg: JointState) -> dict[str, float]:
@@ -46,6 +53,26 @@ _TYPE_SUPPORT_LOCK = threading.Lock()
 # How long an idempotent service call waits for its reply, or an action client for its
 # goal to be accepted, before sending the request again.
 RESEND_S = 3.0
+
+# How long a new publisher, or a service client whose request is not resent, waits once it
+# sees the other side before it sends. Discovery is not symmetric: this side can match the
+# other's endpoint before the other has matched this side's, and what is sent then is lost:
+# a message on a volatile topic, or a service's answer (see :func:`newest_answered`; one
+# full CI run lost the answer of a ~/start_scan sent at once, and the node logged "failed to
+# send response (timeout): client will not receive response"). Neither side's view of the
+# other is observable from here, so this is a wait, not a condition.
+DISCOVERY_SETTLE_S = 0.5
+
+def settle_discovery() -> None:
+    """Give the other side :data:`DISCOVERY_SETTLE_S` to match this side's new endpoint."""
+    time.sleep(DISCOVERY_SETTLE_S)
+
+
+# Services that only read: their requests are always resent (``idempotent``).
+READ_ONLY_SERVICES: tuple[type, ...] = (
+    DescribeParameters, GetParameters, GetParameterTypes, ListParameters, GetState,
+    ListPresets,
+)
 
 
 def newest_answered(send: Callable[[], Any], timeout: float, what: str,
@@ -89,6 +116,8 @@ class RosTestClient:
         self._lock = threading.Lock()
         self._publishers: dict[str, Any] = {}
         self._clients: dict[tuple[type, str], Any] = {}
+        # clients that have had an answer: the service has matched their reply reader
+        self._answered_clients: set[tuple[type, str]] = set()
 
     def _spin(self) -> None:
         # Shutdown races end the spin thread with assorted errors; that is expected.
@@ -197,9 +226,7 @@ class RosTestClient:
             self._publishers[topic] = publisher
             wait_for(lambda: publisher.get_subscription_count() > 0, 10.0,
                      f'a subscriber on {topic}')
-            # Discovery is not symmetric: the publisher can see the subscriber before the
-            # subscriber has matched the publisher, and a message sent then is lost.
-            time.sleep(0.3)
+            settle_discovery()  # the subscriber may not have matched it yet
         publisher.publish(msg)
 
     # services
@@ -210,8 +237,10 @@ class RosTestClient:
         ``idempotent``: send the request again every :data:`RESEND_S` while no reply came
         (:func:`newest_answered`; for reads such as the parameter services: seen once in five
         full runs, list_parameters never answered). Only a request that may run twice is
-        resent.
+        resent; :data:`READ_ONLY_SERVICES` always are. The first request that is not, on a
+        client that has had no answer yet, waits :data:`DISCOVERY_SETTLE_S` first.
         """
+        idempotent = idempotent or issubclass(srv_type, READ_ONLY_SERVICES)
         # Clients are kept, not destroyed: destroying an entity while the executor
         # thread waits on it can end the spin.
         client = self._clients.get((srv_type, name))
@@ -221,8 +250,11 @@ class RosTestClient:
             self._clients[(srv_type, name)] = client
         if not client.wait_for_service(timeout_sec=timeout):
             raise TimeoutError(f'service {name} not available after {timeout:g} s')
+        if not idempotent and (srv_type, name) not in self._answered_clients:
+            settle_discovery()
         reply = newest_answered(lambda: client.call_async(request), timeout,
                                 f'the reply of {name}', resend=idempotent)
+        self._answered_clients.add((srv_type, name))
         return reply.result()
 
     # parameters (what `ros2 param set/get` do: the node's parameter services)
