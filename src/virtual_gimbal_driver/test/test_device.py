@@ -27,6 +27,15 @@ LOG = logging.getLogger('test_device')
 JOINTS = ['pan', 'tilt']
 
 
+def took(axis: dict, target: float) -> bool:
+    """The simulated axis took a move to ``target``: on its way there, or already arrived
+    (the model forgets a target it reached; a short move ends within one poll of a loaded
+    test machine)."""
+    if axis['target'] is None:
+        return axis['position'] == pytest.approx(target)
+    return axis['target'] == pytest.approx(target)
+
+
 class Rig:
     """The simulator's TCP server, the adapter and a started controller."""
 
@@ -50,6 +59,9 @@ class Rig:
     def axis(self, joint: str) -> dict:
         return self.sim.state()['axes'][joint]
 
+    def took(self, joint: str, target: float) -> bool:
+        return took(self.axis(joint), target)
+
     def close(self) -> None:
         self.controller.shutdown()
         self.server.stop()
@@ -71,7 +83,7 @@ def test_identity_and_samples_come_from_the_device(rig):
 
 def test_a_joint_command_reaches_the_device_and_the_samples(rig):
     rig.controller.command(['pan', 'tilt'], [0.3, -0.2], [])
-    wait_for(lambda: rig.axis('pan')['target'] == pytest.approx(0.3), 5.0, 'the pan target')
+    wait_for(lambda: rig.took('pan', 0.3), 5.0, 'the pan target')
     wait_for(lambda: abs(rig.controller.positions()['tilt'] + 0.2) < 1e-3, 10.0,
              'tilt at -0.2 in the samples')
     assert rig.controller.commanded_targets == {'pan': 0.3, 'tilt': -0.2}
@@ -98,7 +110,7 @@ def test_a_refused_request_is_counted_with_the_devices_answer(rig):
     wait_for(lambda: rig.controller.rejections.counts()['refused'].get(
         'failed on the device: refused by the device'), 5.0, 'the refusal counted')
     rig.controller.command(['pan'], [0.1], [])  # the next one is carried out
-    wait_for(lambda: rig.axis('pan')['target'] == pytest.approx(0.1), 5.0, 'the move')
+    wait_for(lambda: rig.took('pan', 0.1), 5.0, 'the move')
 
 
 def test_fault_bits_are_decoded_and_reset_clears_them(rig):
@@ -114,7 +126,7 @@ def test_a_dropped_link_is_reported_and_reopened(rig):
     wait_for(lambda: rig.controller.reconnects > connects and rig.controller.connected, 10.0,
              'the link reopened')
     rig.controller.command(['tilt'], [0.25], [])
-    wait_for(lambda: rig.axis('tilt')['target'] == pytest.approx(0.25), 5.0,
+    wait_for(lambda: rig.took('tilt', 0.25), 5.0,
              'a command after the reconnect')
 
 
@@ -130,11 +142,11 @@ def test_posted_replies_are_taken_by_tag_with_requests_in_between():
         assert parse_position(client.request('GET')).positions['pan'] < 0.2  # its own reply
         with pytest.raises(DeviceRefused, match='unknown command BOGUS'):
             client.settle(posted)
-        assert sim.state()['axes']['pan']['target'] == pytest.approx(0.2)
+        assert took(sim.state()['axes']['pan'], 0.2)
         posted = client.post([move_request('tilt', -0.1, 0.5)])
         client.request('GET')
         client.settle(posted)
-        assert sim.state()['axes']['tilt']['target'] == pytest.approx(-0.1)
+        assert took(sim.state()['axes']['tilt'], -0.1)
     finally:
         client.close()
         server.stop()
@@ -198,7 +210,7 @@ def test_a_command_stream_is_written_from_the_callback(rig):
     target = float(posted[0][0][0].split()[2])
     wait_for(lambda: rig.controller.commanded_targets.get('pan') == target, 5.0,
              'its OK read')
-    assert rig.axis('pan')['target'] == pytest.approx(target)
+    assert rig.took('pan', target)
     assert total_refused() == 0
     # a post goes out only while no other send runs, and the stream stops at the first
     # one: a refusal counted after it is the posted move's
@@ -256,7 +268,7 @@ def test_an_unanswered_id_never_keeps_the_device_from_connecting(caplog):
         [part] = rig.device.parts()
         assert part.level == 1 and 'unanswered.ID' in dict(part.values), part
         rig.controller.command(['pan'], [0.2], [])
-        wait_for(lambda: rig.axis('pan')['target'] == pytest.approx(0.2), 5.0, 'the pan target')
+        wait_for(lambda: rig.took('pan', 0.2), 5.0, 'the pan target')
     finally:
         rig.close()
 
