@@ -19,8 +19,14 @@ from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, LinkError
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.testing import wait_for
 from virtual_gimbal_driver.client import VirtualGimbalClient
-from virtual_gimbal_driver.device import VirtualGimbalDevice
-from virtual_gimbal_driver.protocol import move_request, parse_position, split_tag, tagged
+from virtual_gimbal_driver.device import MISSED_POLLS_LOST, VirtualGimbalDevice
+from virtual_gimbal_driver.protocol import (
+    move_request,
+    parse_position,
+    split_tag,
+    tagged,
+    verb,
+)
 from virtual_gimbal_driver.sim import make_server
 
 LOG = logging.getLogger('test_device')
@@ -41,8 +47,8 @@ class Rig:
 
     def __init__(self, muted: tuple[str, ...] = (), request_timeout: float = 1.0) -> None:
         self.server, self.sim = make_server()
-        for verb in muted:  # the simulator's mute VERB: received, never answered
-            self.sim.request_faults.mute(verb)
+        for name in muted:  # the simulator's mute VERB: received, never answered
+            self.sim.request_faults.mute(name)
         self.device = VirtualGimbalDevice('127.0.0.1', self.server.port,
                                           request_timeout=request_timeout)
         config = ControllerConfig(
@@ -284,3 +290,50 @@ def test_unanswered_joint_data_names_itself():
     finally:
         device.close()
         server.stop()
+
+
+def mute_one_get(rig: Rig) -> None:
+    """The simulator drops the next GET it receives and answers the ones after it (the
+    mute is lifted on the simulator's own thread, as that GET is dropped)."""
+    handle = rig.sim.handle
+
+    def handle_then_unmute(line: str) -> str | None:
+        reply = handle(line)
+        if reply is None and verb(line) == 'GET':
+            rig.sim.request_faults.mute('GET', False)
+        return reply
+
+    rig.sim.handle = handle_then_unmute  # type: ignore[method-assign]  # a test's spy
+    rig.sim.request_faults.mute('GET')
+
+
+def test_one_unanswered_poll_skips_a_sample_and_keeps_the_link(caplog):
+    """A GET answered late once (a loaded or paused machine) costs one sample and a WARN,
+    not the link: the next poll is answered and the controller never reconnects."""
+    rig = Rig(request_timeout=0.2)
+    try:
+        connects, sample = rig.controller.reconnects, rig.controller.latest
+        with caplog.at_level(logging.WARNING):
+            mute_one_get(rig)
+            wait_for(lambda: 'poll skipped: no reply to GET within 0.2 s' in caplog.text, 5.0,
+                     'the skipped poll named')
+        wait_for(lambda: rig.controller.latest is not sample and not rig.sim.request_faults
+                 .muted('GET'), 5.0, 'samples again')
+        newer = rig.controller.latest
+        wait_for(lambda: rig.controller.latest is not newer, 5.0, 'a sample after it')
+        assert rig.controller.connected and rig.controller.reconnects == connects
+        assert 'link lost' not in caplog.text
+    finally:
+        rig.close()
+
+
+def test_polls_unanswered_in_a_row_lose_the_link(caplog):
+    rig = Rig(request_timeout=0.2)
+    try:
+        with caplog.at_level(logging.WARNING):
+            rig.sim.request_faults.mute('GET')
+            wait_for(lambda: not rig.controller.connected, 5.0, 'the link lost')
+        assert (f'device link lost (no reply to GET within 0.2 s ({MISSED_POLLS_LOST} polls '
+                'in a row))') in caplog.text
+    finally:
+        rig.close()

@@ -36,6 +36,8 @@ from .protocol import (
 )
 
 LOG = logging.getLogger(__name__)
+#: GET polls unanswered in a row that make the link lost (:meth:`VirtualGimbalDevice.read`)
+MISSED_POLLS_LOST = 2
 FAULT_FLAGS = [RegisterFlag(0, 'overtemperature', Level.ERROR, 'motor over temperature')]
 assert 1 << FAULT_FLAGS[0].bit == FAULT_OVERTEMP
 
@@ -52,6 +54,7 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
         self.home_timeout = home_timeout
         self._faults = 0
         self._latest: JointSample | None = None
+        self._missed_polls = 0
         self.capabilities.homing = self
         self.capabilities.status = self
 
@@ -68,7 +71,8 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
             identity = parse_identity(reply)
             info = DeviceInfo(identity.model, identity.serial_number,
                               identity.firmware_version)
-        self.read()  # the joint data: required
+        self._missed_polls = 0
+        self._read_joints()  # the joint data: required
         return info
 
     def close(self) -> None:
@@ -77,7 +81,24 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
     def description(self) -> str:
         return f'tcp://{self.client.host}:{self.client.port}'
 
-    def read(self) -> JointSample:
+    def read(self) -> JointSample | None:
+        """The joint poll. One GET left unanswered skips a sample (WARN) and the next poll
+        asks again; :data:`MISSED_POLLS_LOST` in a row lose the link. A device that answers
+        every other request does not drop one poll, but a machine that stalls for a moment
+        (a loaded host, a paused VM) makes one reply late: that is not a lost link."""
+        try:
+            sample = self._read_joints()
+        except DeviceTimeout as exc:
+            self._missed_polls += 1
+            if self._missed_polls >= MISSED_POLLS_LOST:
+                raise DeviceTimeout(f'{exc} ({self._missed_polls} polls in a row)') from None
+            LOG.warning('poll skipped: %s (the link counts as lost after %d in a row)', exc,
+                        MISSED_POLLS_LOST)
+            return None
+        self._missed_polls = 0
+        return sample
+
+    def _read_joints(self) -> JointSample:
         reply = parse_position(self.client.request('GET'))
         self._faults = reply.faults
         self._latest = JointSample(positions=reply.positions, velocities=reply.velocities,
