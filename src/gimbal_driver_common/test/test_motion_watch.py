@@ -184,8 +184,8 @@ def test_a_command_stream_to_an_axis_that_ignores_it_is_reported_once(rig) -> No
     ctl.stop()  # withdrawn, still shown until the next command for tilt
     assert ctl.motion_watch.stalled()['tilt'].withdrawn
     device.ignore(False)
-    ctl.command(['tilt'], [target], [])
-    assert ctl.motion_watch.stalled() == {}
+    ctl.command(['tilt'], [target], [])  # sent by the command thread unless it can post
+    wait_for(lambda: ctl.motion_watch.stalled() == {}, 5.0, 'the report ended by the command')
 
 
 def test_an_ignored_jog_is_reported_until_the_next_jog(rig) -> None:
@@ -197,7 +197,8 @@ def test_an_ignored_jog_is_reported_until_the_next_jog(rig) -> None:
     assert 'jog +0.4000/s' in ctl.motion_watch.reason(['pan'])
     assert len(lines.stalls()) == 1, lines.lines
     ctl.command(['pan'], [], [0.0])  # a zero jog is a stop: the WARN stays shown
-    time.sleep(3 * TIMEOUT)
+    wait_for(lambda: ctl.motion_watch.stalled()['pan'].withdrawn, 5.0, 'the stop sent')
+    time.sleep(3 * TIMEOUT)  # and stays shown while nothing moves
     assert ctl.motion_watch.stalled()['pan'].withdrawn
     assert ctl.motion_watch.reason(['pan']) is None
     device.ignore(False)

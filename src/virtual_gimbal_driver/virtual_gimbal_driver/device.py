@@ -83,9 +83,8 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
 
     def read(self) -> JointSample | None:
         """The joint poll. One GET left unanswered skips a sample (WARN) and the next poll
-        asks again; :data:`MISSED_POLLS_LOST` in a row lose the link. A device that answers
-        every other request does not drop one poll, but a machine that stalls for a moment
-        (a loaded host, a paused VM) makes one reply late: that is not a lost link."""
+        asks again; :data:`MISSED_POLLS_LOST` in a row lose the link. One late reply (a
+        host that stalled for a moment) is not a lost link; a device gone silent is."""
         try:
             sample = self._read_joints()
         except DeviceTimeout as exc:
