@@ -159,10 +159,9 @@ def offered(ros: RosTestClient, node_name: str) -> dict[tuple[str, str], str]:
         if any(key[1].startswith(f'{action}/_action/') for action in actions):
             del found[key]
     names = ros.call(ListParameters, f'/{node_name}/list_parameters',
-                     ListParameters.Request(), timeout=30, idempotent=True).result.names
+                     ListParameters.Request(), timeout=30).result.names
     described = ros.call(DescribeParameters, f'/{node_name}/describe_parameters',
-                         DescribeParameters.Request(names=names), timeout=30,
-                         idempotent=True).descriptors
+                         DescribeParameters.Request(names=names), timeout=30).descriptors
     for descriptor in described:
         found[('parameter', descriptor.name)] = PARAMETER_TYPES.get(
             descriptor.type, f'type {descriptor.type}')

@@ -71,7 +71,7 @@ def declared_parameters(package: str) -> set[str]:
         try:
             with RosTestClient(domain, 'launch_check') as ros:
                 reply = ros.call(ListParameters, f'/{spec.node_name}/list_parameters',
-                                 ListParameters.Request(), timeout=30, idempotent=True)
+                                 ListParameters.Request(), timeout=30)
         finally:
             node.stop()
     names = set(reply.result.names)
@@ -273,9 +273,9 @@ class LaunchAndConfigSuite:
                 with RosTestClient(domain, 'namespace_check') as ros:
                     reply = ros.call(GetParameters, f'{full_name}/get_parameters',
                                      GetParameters.Request(names=list(expected)),
-                                     timeout=60, idempotent=True)
+                                     timeout=60)
                     state = ros.call(GetState, f'{full_name}/get_state', GetState.Request(),
-                                     timeout=30, idempotent=True)
+                                     timeout=30)
                 assert state.current_state.label == 'unconfigured'
                 held = open_links(process.process.pid)
                 assert not held, f'{pkg} opened a link before configure: {held}'
@@ -347,7 +347,7 @@ class LaunchAndConfigSuite:
                     else:
                         # once it answers, it is unconfigured, and stays so until told
                         state = ros.call(GetState, f'/{spec.node_name}/get_state',
-                                         GetState.Request(), timeout=60, idempotent=True)
+                                         GetState.Request(), timeout=60)
                         assert state.current_state.label == 'unconfigured'
                         assert ros.lifecycle_transition(
                             spec.node_name, Transition.TRANSITION_CONFIGURE, timeout=30)

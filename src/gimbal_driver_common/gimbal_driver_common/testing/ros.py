@@ -63,6 +63,7 @@ RESEND_S = 3.0
 # other is observable from here, so this is a wait, not a condition.
 DISCOVERY_SETTLE_S = 0.5
 
+
 def settle_discovery() -> None:
     """Give the other side :data:`DISCOVERY_SETTLE_S` to match this side's new endpoint."""
     time.sleep(DISCOVERY_SETTLE_S)
@@ -269,7 +270,7 @@ class RosTestClient:
 
     def get_parameter(self, node_name: str, name: str, timeout: float = 15.0) -> Any:
         reply = self.call(GetParameters, f'/{node_name}/get_parameters',
-                          GetParameters.Request(names=[name]), timeout, idempotent=True)
+                          GetParameters.Request(names=[name]), timeout)
         return parameter_value_to_python(reply.values[0])
 
     # actions
