@@ -6,9 +6,11 @@ Waits are "up to a timeout" for a condition, never timing assertions.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import threading
+from collections.abc import Callable, Iterator, Sequence
 
 import pytest
 
@@ -332,6 +334,31 @@ def test_levelling_targets_and_reaches_the_leveling_value(tcp_rig):
         ctl.call(lambda: device.functions.start_leveling(['elbow']))
 
 
+@contextlib.contextmanager
+def a_posted_move(rig: Rig, joint: str, targets: Sequence[float],
+                  arm: Callable[[], None] = lambda: None) -> Iterator[float]:
+    """Hold the link lock and command ``joint`` to the next of ``targets`` until one is
+    posted (written at once from this thread); yields its target with the lock still held.
+    The poll's reads overlap setters, and a post gives way to the command thread while a
+    read the device may answer with a byte is in flight: that command then goes out as a
+    full move once the lock is released, and the next target is tried. ``arm`` runs under
+    the lock before each command; an attempt that was not posted clears what it injected."""
+    def posted() -> int:
+        return rig.device.client.stats['posted_moves']  # a copy each time
+
+    for target in targets:
+        with rig.device.link_lock:
+            before = posted()
+            arm()
+            rig.controller.command([joint], [target], [])
+            if posted() == before + 1:
+                yield target
+                return
+            rig.sim.model.clear_injected()
+        rig.wait_positions({joint: target})
+    raise AssertionError(f'no move of {joint} to {list(targets)} was posted')
+
+
 def test_a_posted_stream_move_is_settled_through_the_link_lock_and_a_stop_wins(tcp_rig):
     """A stream move goes out from the caller's thread (posted, one write) once the axis
     is set up; the device's one link lock settles its ACKs before the next exchange. With
@@ -339,25 +366,27 @@ def test_a_posted_stream_move_is_settled_through_the_link_lock_and_a_stop_wins(t
     ctl, sim = tcp_rig.controller, tcp_rig.sim
     ctl.command(['pan'], [0.05], [])  # the first move sets the axis up (command thread)
     tcp_rig.wait_positions({'pan': 0.05})
-    posted = tcp_rig.device.client.stats['posted_moves']
-    with tcp_rig.device.link_lock:  # the poll and the command thread wait: nothing settles
-        ctl.command(['pan'], [0.1], [])
-        assert tcp_rig.device.client.stats['posted_moves'] == posted + 1  # written at once
-    tcp_rig.wait_positions({'pan': 0.1})
+    # the command thread waits for the lock: nothing settles the post meanwhile
+    with a_posted_move(tcp_rig, 'pan', [0.1, 0.11, 0.12, 0.13, 0.14]) as target:
+        pass
+    tcp_rig.wait_positions({'pan': target})
     assert ctl.rejections.counts()['refused'] == {}
-    with tcp_rig.device.link_lock:
+    sent_before: list[int] = []  # MOT_SendPosition at the simulator before each attempt
+
+    def lose_the_next_reply() -> None:
         sim.model.lose_replies(1)
-        before = tcp_rig.sent('MOT_SendPosition')
-        ctl.command(['pan'], [1.5], [])
-        assert tcp_rig.device.client.stats['posted_moves'] == posted + 2
+        sent_before.append(tcp_rig.sent('MOT_SendPosition'))
+
+    with a_posted_move(tcp_rig, 'pan', [1.5, 1.49, 1.48, 1.47, 1.46],
+                       arm=lose_the_next_reply) as far:
         # the posted write is on its way: counted once the simulator has taken it
-        wait_for(lambda: tcp_rig.sent('MOT_SendPosition') == before + 1, 10.0,
+        wait_for(lambda: tcp_rig.sent('MOT_SendPosition') == sent_before[-1] + 1, 10.0,
                  'the posted move at the simulator')
         sends = tcp_rig.sent('MOT_SendPosition')
         ctl.stop()  # settles the post first (an ACK lost), then stops: no resend
     wait_for(lambda: sim.model.axes[1].velocity == 0.0, 10.0, 'pan stopped')
     assert tcp_rig.sent('MOT_SendPosition') == sends  # the lost move was not sent again
-    assert 'pan' not in ctl.commanded_targets or ctl.commanded_targets['pan'] != 1.5
+    assert 'pan' not in ctl.commanded_targets or ctl.commanded_targets['pan'] != far
 
 
 def test_a_move_to_drops_the_joint_commands_queued_behind_a_busy_link(tcp_rig):
