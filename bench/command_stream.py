@@ -41,7 +41,7 @@ from harness import ROOT, ProbeClient, percentiles
 from rclpy.action import ActionClient
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.testing import ManagedProcess, ros_env, wait_for
+from gimbal_driver_testing import ManagedProcess, ros_env, wait_for
 from gimbal_msgs.action import MoveTo
 
 #: a command with no device bytes this long after its publish has not taken effect

@@ -47,8 +47,8 @@ from harness import (
 )
 
 from gimbal_driver_common.registry import DriverSpec, parameter_arguments
-from gimbal_driver_common.testing import ManagedProcess, wait_for
-from gimbal_driver_common.testing.sim_handle import make_handle
+from gimbal_driver_common.sim_handle import make_handle
+from gimbal_driver_testing import ManagedProcess, wait_for
 
 # Bytes a TCP segment adds to its payload on 100BASE-TX Ethernet: preamble+SFD 8, MAC header
 # 14, FCS 4, inter-frame gap 12, IPv4 20, TCP 20 (no options). One frame per segment (the

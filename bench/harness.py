@@ -37,8 +37,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.testing import ManagedProcess, ros_env, wait_for
-from gimbal_driver_common.testing.ros import RosTestClient
+from gimbal_driver_testing import ManagedProcess, ros_env, wait_for
+from gimbal_driver_testing.ros import RosTestClient
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -35,7 +35,7 @@ from harness import (  # noqa: E402
 from tracking import tracking_figures  # noqa: E402
 
 from gimbal_driver_common.registry import DriverSpec, drivers  # noqa: E402
-from gimbal_driver_common.testing import DomainLease  # noqa: E402
+from gimbal_driver_testing import DomainLease  # noqa: E402
 
 
 def benchmarks() -> dict[str, DriverSpec]:

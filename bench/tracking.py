@@ -32,9 +32,9 @@ from driver_bench import add_note, start_node
 from harness import ROOT, freeze_heap
 
 from gimbal_driver_common.registry import DriverSpec
-from gimbal_driver_common.testing import ManagedProcess, ros_env, wait_for
-from gimbal_driver_common.testing.sim_handle import make_handle
-from gimbal_driver_common.testing.topic_system import UPDATE_RATE_HZ, rest_to_rest_peak_speed
+from gimbal_driver_common.sim_handle import make_handle
+from gimbal_driver_testing import ManagedProcess, ros_env, wait_for
+from gimbal_driver_testing.topic_system import UPDATE_RATE_HZ, rest_to_rest_peak_speed
 
 AMPLITUDE = 0.5       # rad (m for a linear joint)
 DURATION_S = 2.0
@@ -155,7 +155,7 @@ def figures(recorded: dict, joint: str, speed_limit: float, acceleration: float)
 
 if __name__ == '__main__':  # python bench/tracking.py [driver ...]: tracking alone
     from gimbal_driver_common.registry import drivers
-    from gimbal_driver_common.testing import DomainLease
+    from gimbal_driver_testing import DomainLease
 
     chosen = sys.argv[1:]
     report = {}

@@ -1,6 +1,6 @@
 """ros2_control's topic interface, in a process of its own, streaming a trajectory.
 
-The joint_state_topic_hardware_interface stand-in (``gimbal_driver_common.testing.
+The joint_state_topic_hardware_interface stand-in (``gimbal_driver_testing.
 topic_system``: write() with its threshold rule, read() on SensorDataQoS) cycles at 100 Hz
 with the package's ``<ros2_control>`` example, as a controller manager with a
 joint_trajectory_controller would: NaN commands until it starts, then it holds the joints
@@ -31,7 +31,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.testing.topic_system import (
+from gimbal_driver_testing.topic_system import (
     TopicSystemConfig,
     TopicSystemStandIn,
     rest_to_rest,

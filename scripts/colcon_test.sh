@@ -17,7 +17,12 @@ tar -C "$ROOT/src" --exclude=__pycache__ --exclude=.pytest_cache -cf - . | tar -
 source "$ROOT/scripts/ros_env.sh" --no-workspace
 cd "$WS"
 echo "colcon test: building ${PACKAGES[*]} and their dependencies in $WS"
-colcon build --packages-up-to "${PACKAGES[@]}" \
+# --packages-up-to takes each selected package's direct dependencies of every kind, its
+# test_depends included (colcon_core.package_decorator.add_recursive_dependencies: no
+# direct categories given means all), so a driver's gimbal_driver_testing is built with it.
+# gimbal_driver_common's tests use gimbal_driver_testing undeclared (the declaration would
+# be a cycle, tests/test_package_dependencies.py CYCLES): it is named here for them.
+colcon build --packages-up-to "${PACKAGES[@]}" gimbal_driver_testing \
   --cmake-args "-DPython3_EXECUTABLE=$ROOT/.venv/bin/python" \
   --event-handlers console_stderr- console_start_end- status- summary+ 2>&1 \
   | grep -v -e 'AMENT_PREFIX_PATH doesn.t contain' -e 'had stderr output'

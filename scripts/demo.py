@@ -33,14 +33,14 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common.registry import DriverSpec, parameter_arguments
-from gimbal_driver_common.testing import (
+from gimbal_driver_testing import (
     DomainLease,
     ManagedProcess,
     find_executable,
     free_tcp_port,
     wait_for,
 )
-from gimbal_driver_common.testing.ros import RosTestClient
+from gimbal_driver_testing.ros import RosTestClient
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.srv import GotoPreset, SetPreset, StartScan
 

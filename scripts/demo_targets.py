@@ -15,7 +15,7 @@ from demo import DemoTarget
 
 from gimbal_driver_common.registry import DriverSpec, drivers, resolve
 from gimbal_driver_common.sim_control import parse_ready_line
-from gimbal_driver_common.testing.ros import RosTestClient
+from gimbal_driver_testing.ros import RosTestClient
 from gimbal_msgs.action import Home
 from gimbal_msgs.srv import StartScan
 

@@ -11,6 +11,6 @@ source scripts/ros_env.sh
 echo "test: ruff check"
 ruff check .
 echo "test: mypy"
-mypy  # mypy.ini: gimbal_driver_common and every driver's runtime code
+mypy  # mypy.ini: every package under src/ (found by itself), not the tests
 echo "test: pytest"
 python -m pytest -n "${PYTEST_WORKERS:-8}" src tests "$@"

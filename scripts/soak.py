@@ -51,9 +51,9 @@ from soak_targets import make_handle, soak_targets
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common.registry import DriverSpec, parameter_arguments
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
-from gimbal_driver_common.testing.ros import _TYPE_SUPPORT_LOCK, RosTestClient
-from gimbal_driver_common.testing.sim_handle import Fault, SimHandle
+from gimbal_driver_common.sim_handle import Fault, SimHandle
+from gimbal_driver_testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_testing.ros import _TYPE_SUPPORT_LOCK, RosTestClient
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
 

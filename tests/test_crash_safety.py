@@ -28,9 +28,9 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common.registry import DriverSpec, drivers
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
-from gimbal_driver_common.testing.ros import RosTestClient, joint_positions
-from gimbal_driver_common.testing.sim_handle import SimHandle, Takeover, make_handle
+from gimbal_driver_common.sim_handle import SimHandle, Takeover, make_handle
+from gimbal_driver_testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_testing.ros import RosTestClient, joint_positions
 from gimbal_msgs.action import MoveTo
 
 pytestmark = pytest.mark.ros

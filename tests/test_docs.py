@@ -5,7 +5,7 @@ and the package READMEs resolves in the repository; nothing in the repository po
 it (``../shared``); user documents name no issue numbers; and the commands the top README
 shows are ones the workspace really has: its ``make`` targets exist in the Makefile and
 ``.ci/run`` runs its test command, its ``ros2 launch`` line loads and runs under the launch
-stand-in (gimbal_driver_common.testing.launch_standin) with those arguments and starts the
+stand-in (gimbal_driver_testing.launch_standin) with those arguments and starts the
 node with the README's parameters file (keyed ``/**``, so it applies under a namespace
 too), whose keys the driver's reference lists, and its ``ros2 topic``,
 ``ros2 action`` and ``ros2 service`` lines name interfaces of the reference with their
@@ -26,7 +26,7 @@ import pytest
 import yaml
 from test_reference import COMMON_REFERENCE, reference_entries
 
-from gimbal_driver_common.testing import launch_standin
+from gimbal_driver_testing import launch_standin
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / 'README.md'
@@ -300,9 +300,9 @@ def test_readme_capture_walkthrough_works_against_the_simulator(tmp_path: Path) 
     from std_srvs.srv import Trigger
 
     from gimbal_driver_common.registry import drivers
-    from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
-    from gimbal_driver_common.testing.ros import RosTestClient, joint_positions
-    from gimbal_driver_common.testing.sim_handle import make_handle
+    from gimbal_driver_common.sim_handle import make_handle
+    from gimbal_driver_testing import DomainLease, ManagedProcess, wait_for
+    from gimbal_driver_testing.ros import RosTestClient, joint_positions
     from gimbal_msgs.action import MoveTo
 
     spec = next(spec for spec in drivers() if spec.package == 'capture_driver')

@@ -1,9 +1,10 @@
 """The layers of ARCHITECTURE.md, read from the imports of the code (ast).
 
 - the core's top-level modules are ROS-free (the package docstring says so);
-- runtime code never imports the test scaffolding (``gimbal_driver_common.testing``, or a
-  driver's own ``<pkg>.testing`` that holds its simulator handle and demo steps): every
-  module outside a ``testing`` package is runtime, with no exemption;
+- runtime code never imports the test support (the package ``gimbal_driver_testing``) nor
+  a test library (pytest, hypothesis, geographiclib): every module of every other package
+  is runtime, with no exemption, a driver's simulator handle, demo steps and refused-request
+  data included (the registry names them, tools import them);
 - ARCHITECTURE.md names only what exists: every file it names (``<pkg>`` and the like
   stand for each driver), and every name it cites is defined where the citation points:
   ``file.py`` ``Name`` in that file (for ``<pkg>/...``, in every driver's), ``module.name``
@@ -25,6 +26,10 @@ SRC = ROOT / 'src'
 CORE = SRC / 'gimbal_driver_common' / 'gimbal_driver_common'
 #: top-level modules of ROS client libraries and message packages
 ROS_MODULES = ('rclpy', 'launch', 'launch_ros', 'ament_index_python')
+#: the one package of test support (conformance suites, harness, ROS test client)
+TEST_SUPPORT = 'gimbal_driver_testing'
+#: libraries only tests use (docs/development.md, "rosdep keys")
+TEST_LIBRARIES = ('pytest', 'hypothesis', 'geographiclib')
 
 
 def imports(path: Path) -> set[str]:
@@ -52,19 +57,18 @@ def packages() -> list[str]:
 
 
 def runtime_modules() -> list[Path]:
-    """Every installed Python module of every package outside its ``testing`` subpackage."""
+    """Every installed Python module of every package but the test support."""
     modules = []
     for package in packages():
-        root = SRC / package / package
-        modules.extend(path for path in sorted(root.rglob('*.py'))
-                       if path.relative_to(root).parts[0] != 'testing')
+        if package != TEST_SUPPORT:
+            modules.extend(sorted((SRC / package / package).rglob('*.py')))
     return modules
 
 
 def is_scaffolding(name: str) -> bool:
-    """Whether a dotted import names a ``testing`` package of ours (or something in one)."""
-    return any(name == f'{package}.testing' or name.startswith(f'{package}.testing.')
-               for package in packages())
+    """Whether a dotted import names the test support or a test library (or a module of
+    one)."""
+    return name.split('.')[0] in (TEST_SUPPORT, *TEST_LIBRARIES)
 
 
 def test_the_core_top_level_is_ros_free() -> None:
@@ -78,23 +82,29 @@ def test_the_core_top_level_is_ros_free() -> None:
 
 
 @pytest.mark.parametrize('path', runtime_modules(), ids=lambda p: str(p.relative_to(SRC)))
-def test_runtime_code_never_imports_the_test_scaffolding(path: Path) -> None:
+def test_runtime_code_never_imports_the_test_support(path: Path) -> None:
     scaffolding = sorted(name for name in imports(path) if is_scaffolding(name))
     assert scaffolding == [], f'{path.relative_to(SRC)} imports {scaffolding}'
 
 
 def test_the_runtime_check_sees_the_drivers_and_their_tool_code() -> None:
-    """The rule above is not vacuous: it covers every driver's package, and the tool code
-    the registry names sits in the ``testing`` packages it leaves out."""
+    """The rule above is not vacuous: it covers every package but the test support, and the
+    tool code the registry names (simulator handles, demo steps, refused-request data) is
+    among the modules it checks."""
     covered = {path.relative_to(SRC).parts[0] for path in runtime_modules()}
-    assert covered == set(packages())
-    assert is_scaffolding('capture_driver.testing.sim_handle')
-    assert not is_scaffolding('capture_driver.client')
+    assert covered == set(packages()) - {TEST_SUPPORT}
+    assert TEST_SUPPORT in packages()
+    assert is_scaffolding('gimbal_driver_testing.conformance')
+    assert is_scaffolding('hypothesis.strategies')
+    assert not is_scaffolding('capture_driver.sim_handle')
+    assert not is_scaffolding('gimbal_driver_common.sim_handle')
+    runtime = set(runtime_modules())
     tool_code = [path for package in packages()
                  for path in (SRC / package / package).rglob('*.py')
-                 if path.name in ('sim_handle.py', 'demo_steps.py')]
-    assert tool_code
-    assert all(path.parent.name == 'testing' for path in tool_code)
+                 if path.name in ('sim_handle.py', 'demo_steps.py', 'refused_requests.py')
+                 and package != TEST_SUPPORT]
+    assert len(tool_code) >= 10
+    assert set(tool_code) <= runtime
 
 
 #: what ARCHITECTURE.md cites from other projects (python-can's test suite)

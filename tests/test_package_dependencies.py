@@ -6,10 +6,12 @@ farm installs a package's ``exec_depend``s with it and its ``test_depend``s only
 tests. So an undeclared import works here (the venv has everything) and fails on a robot.
 The imports are read from the code (ast, plus ``importorskip``/``import_module`` of a string):
 
-- installed code needs ``exec_depend``/``depend``: the package's modules, its launch files
-  and its ``testing/`` trees (installed: the demo, soak, benchmarks and other packages' tests
-  import them, so they are runtime, see docs/development.md "rosdep keys");
+- installed code needs ``exec_depend``/``depend``: the package's modules and its launch
+  files;
 - test code (``test/``) needs a run-time or a ``test_depend`` key;
+- no runtime package brings a test-only key (pytest, hypothesis, geographiclib, the test
+  support package ``gimbal_driver_testing``) with it: only the test support may
+  exec-depend on them, everything else declares them ``test_depend``;
 - setup.py needs a build key (``buildtool_depend``/``build_depend``/``depend``).
 
 Modules map to keys through MODULE_KEYS, and every key is in ROSDEP_KEYS or JAZZY_PACKAGES
@@ -89,10 +91,17 @@ DYNAMIC_IMPORTS: dict[str, set[str]] = {
     'gimbal_driver_common/test/gimbal_msgs_peer.py': {'gimbal_msgs'},
 }
 # (package, workspace package) pairs a test may import without declaring it because the
-# declaration would be a cycle colcon refuses to order. test_cycle_exemptions_are_needed
-# fails once one is stale. None today: gimbal_msgs' own tests import only rclpy and itself
-# (its cross-process test lives in gimbal_driver_common).
-CYCLES: set[tuple[str, str]] = set()
+# declaration would be a cycle colcon refuses to order (colcon orders a package after its
+# direct dependencies of every kind, test_depend included). test_cycle_exemptions_are_needed
+# fails once one is stale. gimbal_driver_common's tests use the harness of
+# gimbal_driver_testing, which exec-depends on gimbal_driver_common; scripts/colcon_test.sh
+# builds it for them.
+CYCLES: set[tuple[str, str]] = {('gimbal_driver_common', 'gimbal_driver_testing')}
+#: the package that holds the test support; the one allowed to exec-depend on TEST_ONLY_KEYS
+TEST_SUPPORT = 'gimbal_driver_testing'
+#: keys only tests need: a robot installing a runtime package must not get them
+TEST_ONLY_KEYS = frozenset({'python3-pytest', 'python3-pytest-timeout', 'python3-hypothesis',
+                            'python3-geographiclib', TEST_SUPPORT})
 
 RUN = ('depend', 'exec_depend')
 TEST = (*RUN, 'test_depend')
@@ -218,7 +227,7 @@ def module_file(dotted: str, workspace: Mapping[str, Path]) -> Path | None:
 def closure_gaps(package: Path, workspace: Mapping[str, Path],
                  cycles: set[tuple[str, str]] = CYCLES) -> list[str]:
     """Third-party modules a package's tests reach through other workspace packages' modules
-    (e.g. gimbal_driver_common.testing.look_at_geo -> geographiclib) that are not installed
+    (e.g. gimbal_driver_testing.look_at_geo -> geographiclib) that are not installed
     for those tests: the package's own run/test keys and the exec closure of its workspace
     dependencies."""
     installed = keys_of(package, TEST)
@@ -255,7 +264,30 @@ def closure_gaps(package: Path, workspace: Mapping[str, Path],
     return sorted(gaps)
 
 
+def runtime_test_keys(package: Path, workspace: Mapping[str, Path]) -> list[str]:
+    """The test-only keys installed with runtime package ``package`` (its exec closure), as
+    messages; none for the test support itself."""
+    if package.name == TEST_SUPPORT:
+        return []
+    return [f'{package.name}: <exec_depend>{key}</exec_depend> (directly or through a workspace '
+            'package) is test-only; declare it <test_depend>'
+            for key in sorted(exec_closure(package.name, workspace) & TEST_ONLY_KEYS)]
+
+
 IDS = [p.name for p in PACKAGES]
+
+
+@pytest.mark.parametrize('package', PACKAGES, ids=IDS)
+def test_no_runtime_package_brings_test_tools(package: Path):
+    gaps = runtime_test_keys(package, workspace_of(PACKAGES))
+    assert not gaps, '\n'.join(gaps)
+
+
+def test_the_test_support_is_a_package_the_drivers_test_depend_on():
+    workspace = workspace_of(PACKAGES)
+    assert TEST_SUPPORT in workspace
+    drivers = [p for p in PACKAGES if p.name.endswith('_driver')]
+    assert drivers and all(TEST_SUPPORT in keys_of(p, ('test_depend',)) for p in drivers)
 
 
 @pytest.mark.parametrize('package', PACKAGES, ids=IDS)
@@ -339,14 +371,33 @@ def make_package(root: Path, name: str, depends: str, files: Mapping[str, str]) 
 
 
 def test_an_installed_module_needs_exec_depend(tmp_path: Path):
-    """hypothesis as a test_depend does not cover an installed testing/ module."""
+    """hypothesis as a test_depend does not cover an installed module."""
     package = make_package(tmp_path, 'pkg', '<test_depend>python3-hypothesis</test_depend>', {
-        'pkg/testing/refused.py': 'import hypothesis\n',
+        'pkg/refused.py': 'import hypothesis\n',
         'test/test_a.py': 'from hypothesis import given\n',
     })
     missing = undeclared(package, {'pkg': package})
-    assert missing == ['pkg/testing/refused.py: import hypothesis needs '
+    assert missing == ['pkg/refused.py: import hypothesis needs '
                        '<exec_depend>python3-hypothesis</exec_depend> (or depend)']
+
+
+def test_a_runtime_package_that_brings_a_test_tool_fails(tmp_path: Path):
+    """Directly, or through a workspace package it exec-depends on; the test support may."""
+    support = make_package(tmp_path, TEST_SUPPORT,
+                           '<exec_depend>python3-pytest</exec_depend>', {})
+    direct = make_package(tmp_path, 'direct', '<exec_depend>python3-hypothesis</exec_depend>'
+                          '<test_depend>python3-pytest</test_depend>', {})
+    through = make_package(tmp_path, 'through',
+                           f'<exec_depend>{TEST_SUPPORT}</exec_depend>', {})
+    fine = make_package(tmp_path, 'fine', f'<test_depend>{TEST_SUPPORT}</test_depend>', {})
+    workspace = workspace_of([support, direct, through, fine])
+    assert runtime_test_keys(support, workspace) == []
+    assert runtime_test_keys(fine, workspace) == []
+    assert [m.split(' (')[0] for m in runtime_test_keys(direct, workspace)] == [
+        'direct: <exec_depend>python3-hypothesis</exec_depend>']
+    assert [m.split(' (')[0] for m in runtime_test_keys(through, workspace)] == [
+        f'through: <exec_depend>{TEST_SUPPORT}</exec_depend>',
+        'through: <exec_depend>python3-pytest</exec_depend>']
 
 
 def test_a_fabricated_import_is_caught(tmp_path: Path):

@@ -22,9 +22,9 @@ import yaml
 
 from gimbal_driver_common import probe_cli
 from gimbal_driver_common.registry import DriverSpec, drivers, resolve
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, find_executable, ros_env
-from gimbal_driver_common.testing.ros import RosTestClient
-from gimbal_driver_common.testing.sim_handle import SimHandle, make_handle
+from gimbal_driver_common.sim_handle import SimHandle, make_handle
+from gimbal_driver_testing import DomainLease, ManagedProcess, find_executable, ros_env
+from gimbal_driver_testing.ros import RosTestClient
 
 PROBED = [spec for spec in drivers() if spec.probe and spec.sim_handle]
 
@@ -198,7 +198,7 @@ def test_a_can_channel_that_does_not_exist(tmp_path: Path) -> None:
 
 
 def test_nothing_listening_on_tcp() -> None:
-    from gimbal_driver_common.testing import free_tcp_port
+    from gimbal_driver_testing import free_tcp_port
 
     status, text = run_probe(['--tcp', f'127.0.0.1:{free_tcp_port()}'])
     assert status == probe_cli.EXIT_NOTHING
@@ -248,7 +248,7 @@ def test_a_host_without_a_port_is_tried_on_each_documented_port(
         simulator: SimHandle, monkeypatch: pytest.MonkeyPatch) -> None:
     """Each device's documented port stands in for a free one here (the real ports may be
     in use on a shared machine): the one of the simulator's device is its port."""
-    from gimbal_driver_common.testing import free_tcp_port
+    from gimbal_driver_testing import free_tcp_port
 
     for spec in PROBED:
         if spec.name in DOCUMENTED_PORT:

@@ -2,7 +2,7 @@
 
 A full garbage collection stops every thread of a test process; with an in-process
 simulator and a client in it, one pause as long as a request timeout failed a test
-(gimbal_driver_common/testing/frozen_heap.py, docs/testing.md "Pauses"). The plugin works
+(gimbal_driver_testing/frozen_heap.py, docs/testing.md "Pauses"). The plugin works
 only where a configuration loads it: the root one (``make test``) and each package's own
 (``colcon test``). gimbal_msgs has no in-process simulator and does not depend on the core.
 """
@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PLUGIN = 'gimbal_driver_common.testing.frozen_heap'
+PLUGIN = 'gimbal_driver_testing.frozen_heap'
 CONFIGS = [ROOT / 'pytest.ini', *sorted(
     p for p in (ROOT / 'src').glob('*/pytest.ini') if p.parent.name != 'gimbal_msgs')]
 

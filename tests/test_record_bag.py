@@ -50,8 +50,8 @@ def load_recorder():
 @pytest.fixture(scope='module')
 def gimbal() -> Iterator[Gimbal]:
     """The reference simulator and node, publishing joint_states, status and diagnostics."""
-    testing = pytest.importorskip('gimbal_driver_common.testing')
-    ros_testing = pytest.importorskip('gimbal_driver_common.testing.ros')
+    testing = pytest.importorskip('gimbal_driver_testing')
+    ros_testing = pytest.importorskip('gimbal_driver_testing.ros')
     from sensor_msgs.msg import JointState
 
     with testing.DomainLease() as domain:
@@ -78,7 +78,7 @@ def _status_type() -> type:
 
 
 def start_recorder(domain: int, *arguments: str):
-    from gimbal_driver_common.testing import ManagedProcess, ros_env
+    from gimbal_driver_testing import ManagedProcess, ros_env
 
     return ManagedProcess([sys.executable, str(RECORDER), *arguments], ros_env(domain),
                           name='record_bag')
@@ -111,7 +111,7 @@ def test_recorder_writes_chosen_topics_until_ctrl_c(gimbal, tmp_path, check_rosb
             recorder.wait_for_output(f'recording {topic} [{CHOSEN[topic]}]', timeout=60)
         received = gimbal.client.subscribe('/joint_states', JointState)
         seen = len(received)
-        testing = pytest.importorskip('gimbal_driver_common.testing')
+        testing = pytest.importorskip('gimbal_driver_testing')
         testing.wait_for(lambda: len(received) >= seen + 30, 60, '30 more joint_states')
         recorder.wait_for_output('messages on 3 topics', timeout=30)  # a progress line
     finally:

@@ -36,9 +36,9 @@ from rclpy.action import get_action_server_names_and_types_by_node
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.registry import DriverSpec, drivers
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, wait_for
-from gimbal_driver_common.testing.ros import RosTestClient
-from gimbal_driver_common.testing.sim_handle import make_handle
+from gimbal_driver_common.sim_handle import make_handle
+from gimbal_driver_testing import DomainLease, ManagedProcess, wait_for
+from gimbal_driver_testing.ros import RosTestClient
 
 pytestmark = pytest.mark.ros
 

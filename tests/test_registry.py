@@ -23,7 +23,7 @@ from gimbal_driver_common.registry import (
     parameter_arguments,
     resolve,
 )
-from gimbal_driver_common.testing.sim_handle import SimHandle
+from gimbal_driver_common.sim_handle import SimHandle
 
 ROOT = Path(__file__).resolve().parent.parent
 INSTALL = ROOT / 'install'
@@ -78,7 +78,12 @@ def test_references_load(spec: DriverSpec) -> None:
     if spec.refused_requests:
         from hypothesis.strategies import SearchStrategy
 
-        assert isinstance(resolve(spec.refused_requests)(), SearchStrategy)
+        from gimbal_driver_common.registry import RefusedRequests
+        from gimbal_driver_testing.refused_requests import strategy
+
+        refused = resolve(spec.refused_requests)()
+        assert isinstance(refused, RefusedRequests)
+        assert isinstance(strategy(refused), SearchStrategy)
     for label, reference in spec.demo.extra_steps:
         if reference:
             step = resolve(reference)

@@ -10,8 +10,9 @@ must answer success=false with a reason, and the simulator's receive side (the r
 in-process ``SimHandle``: the requests its device model handled) must show no command that
 moves, stops or changes the device.
 
-A driver's own services get the requests its ``DriverSpec.refused_requests`` strategy
-draws (in its ``<pkg>/testing/refused_requests.py``).
+A driver's own services get the requests its ``DriverSpec.refused_requests`` describes
+(its ``<pkg>/refused_requests.py``: plain data that
+``gimbal_driver_testing.refused_requests.strategy`` draws from).
 
 A joint_command has no answer; the node counts it in its ``joint_command`` diagnostics part
 (``rejected``, by reason; the log says each reason at most once every few seconds), so the
@@ -31,10 +32,11 @@ from lifecycle_msgs.srv import ChangeState
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.registry import DriverSpec, drivers, resolve
-from gimbal_driver_common.testing import DomainLease, ManagedProcess
-from gimbal_driver_common.testing import wait_for as wait_until
-from gimbal_driver_common.testing.ros import RosTestClient
-from gimbal_driver_common.testing.sim_handle import SimHandle, make_handle
+from gimbal_driver_common.sim_handle import SimHandle, make_handle
+from gimbal_driver_testing import DomainLease, ManagedProcess
+from gimbal_driver_testing import wait_for as wait_until
+from gimbal_driver_testing.refused_requests import strategy
+from gimbal_driver_testing.ros import RosTestClient
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.srv import ClearPreset, GotoPreset, SetPreset, StartScan
 
@@ -350,8 +352,8 @@ def test_refused_driver_requests_answer_with_a_reason_and_send_nothing(rig, data
     and commands that can cut off or brick the device without their opt-in parameter."""
     if not rig.driver.refused_requests:
         pytest.skip(f'{rig.driver.name} has no services of its own')
-    refused = resolve(rig.driver.refused_requests)
-    srv_type, name, request = data.draw(refused(), label='call')
+    refused = strategy(resolve(rig.driver.refused_requests)())
+    srv_type, name, request = data.draw(refused, label='call')
     mark = rig.device.mark()
     reply = rig.ros.call(srv_type, rig.service(name), request, timeout=20)
     assert not reply.success, request

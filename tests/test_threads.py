@@ -20,9 +20,9 @@ import pytest
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common.registry import DriverSpec, drivers
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_env, wait_for
-from gimbal_driver_common.testing.ros import RosTestClient
-from gimbal_driver_common.testing.sim_handle import make_handle
+from gimbal_driver_common.sim_handle import make_handle
+from gimbal_driver_testing import DomainLease, ManagedProcess, ros_env, wait_for
+from gimbal_driver_testing.ros import RosTestClient
 from gimbal_msgs.srv import StartScan
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -145,8 +145,8 @@ def _sim_and_node(tmp_path, node_params, sim_args=()):
     here so that the codec and client tests run without the built workspace.
     """
     from canaero_turret_driver.sim import ControlClient
-    from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments, wait_for
-    from gimbal_driver_common.testing.ros import RosTestClient
+    from gimbal_driver_testing import DomainLease, ManagedProcess, ros_arguments, wait_for
+    from gimbal_driver_testing.ros import RosTestClient
 
     tty, ready = tmp_path / "tty", tmp_path / "ready.json"
     with DomainLease() as domain:

@@ -19,7 +19,7 @@ from canaero_turret_driver.protocol import ActuatorMode, AxisStatus, CanAerospac
 from canaero_turret_driver.protocol.identifiers import DEFAULT_ZOOM_POSITION_ID
 from canaero_turret_driver.readings import si
 from canaero_turret_driver.sim import BusSimRunner, EedCode, SimConfig, TurretSimulator
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 
 
 def _latest(client, key, field):

@@ -22,7 +22,7 @@ from canaero_turret_driver.client import ClientConfig, ServiceError, TurretClien
 from canaero_turret_driver.readings import si
 from canaero_turret_driver.sim import ControlClient
 from gimbal_driver_common.sim_control import parse_ready_line
-from gimbal_driver_common.testing import ManagedProcess, wait_for
+from gimbal_driver_testing import ManagedProcess, wait_for
 
 
 def _python_path() -> str:

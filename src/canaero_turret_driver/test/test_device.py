@@ -22,7 +22,7 @@ from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidReque
 from gimbal_driver_common.policies import Motion
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.sim_server import PtySimServer
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 
 LOG = logging.getLogger("test_device")
 JOINTS = ["yaw", "pitch"]

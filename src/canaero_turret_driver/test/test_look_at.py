@@ -14,8 +14,8 @@ import pytest
 pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (make build)")
 
 from canaero_turret_driver.sim import ControlClient
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments, wait_for
-from gimbal_driver_common.testing.look_at import LookAtRig, LookAtSuite, look_at_rig_against
+from gimbal_driver_testing import DomainLease, ManagedProcess, ros_arguments, wait_for
+from gimbal_driver_testing.look_at import LookAtRig, LookAtSuite, look_at_rig_against
 
 pytestmark = pytest.mark.ros
 

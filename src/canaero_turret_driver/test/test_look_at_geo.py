@@ -18,8 +18,8 @@ from geometry_msgs.msg import Vector3Stamped
 from sensor_msgs.msg import Imu, NavSatFix
 
 from gimbal_driver_common.geodesy import GeoPoint
-from gimbal_driver_common.testing.conformance_rig import ConformanceRig
-from gimbal_driver_common.testing.look_at_geo import LookAtGeoSuite, TestPose
+from gimbal_driver_testing.conformance_rig import ConformanceRig
+from gimbal_driver_testing.look_at_geo import LookAtGeoSuite, TestPose
 
 GEOID_HEIGHT = 47.25  # m, N for the test site (EGM2008 gives about 47 m near Munich)
 

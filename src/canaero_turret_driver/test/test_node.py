@@ -19,7 +19,7 @@ from sensor_msgs.msg import Imu, JointState, NavSatFix, TimeReference
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool, Trigger
 
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import AxisState, GimbalStatus
 from gimbal_msgs.srv import (

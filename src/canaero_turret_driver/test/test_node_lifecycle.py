@@ -10,8 +10,8 @@ pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (mak
 
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_arguments
-from gimbal_driver_common.testing.ros import RosTestClient, node_refusing_to_start
+from gimbal_driver_testing import DomainLease, ManagedProcess, ros_arguments
+from gimbal_driver_testing.ros import RosTestClient, node_refusing_to_start
 from gimbal_msgs.srv import DeviceCommand
 
 pytestmark = pytest.mark.ros

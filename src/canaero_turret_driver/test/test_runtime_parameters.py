@@ -13,8 +13,8 @@ pytest.importorskip("gimbal_msgs", reason="needs the colcon-built workspace (mak
 from sensor_msgs.msg import JointState
 
 from canaero_turret_driver.sim import ControlClient
-from gimbal_driver_common.testing import wait_for
-from gimbal_driver_common.testing.ros import driver_rig
+from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.ros import driver_rig
 
 pytestmark = pytest.mark.ros
 

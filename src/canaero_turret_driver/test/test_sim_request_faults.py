@@ -14,10 +14,10 @@ from canaero_turret_driver.protocol import nodeservice as ns
 from canaero_turret_driver.protocol.identifiers import TURRET_NODE_ID
 from canaero_turret_driver.sim import SlcanSession, TurretSimulator, encode_slcan, make_control
 from gimbal_driver_common.registry import driver_of_package
+from gimbal_driver_common.sim_handle import make_handle
 from gimbal_driver_common.sim_server import PtySimServer
-from gimbal_driver_common.testing import wait_for
-from gimbal_driver_common.testing.sim_handle import make_handle
 from gimbal_driver_common.transport import SerialStream
+from gimbal_driver_testing import wait_for
 
 DELAY_S = 0.4
 

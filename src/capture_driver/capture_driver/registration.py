@@ -21,8 +21,8 @@ SPEC = DriverSpec(
     node_parameters={'transport': 'tcp', 'host': '127.0.0.1', 'port': '{port}',
                      'status_period': 0.2, 'default_speed': 1.0, 'acceleration': 6.0},
     launch_sim_arguments=('--port', '4949'),
-    sim_handle='capture_driver.testing.sim_handle:CaptureSimHandle',
-    refused_requests='capture_driver.testing.refused_requests:refused_requests',
+    sim_handle='capture_driver.sim_handle:CaptureSimHandle',
+    refused_requests='capture_driver.refused_requests:refused_requests',
     probe='capture_driver.probe:probe',
     demo=DemoSettings(
         jog_velocity=0.3,

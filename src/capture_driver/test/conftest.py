@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from gimbal_driver_common.testing import free_tcp_port
+from gimbal_driver_testing import free_tcp_port
 
 PKG = 'capture_driver'
 
@@ -18,7 +18,7 @@ def _capture_rig(sim_arguments: Sequence[str] = (), node_parameters: Sequence[st
                  **options: Any) -> Iterator[tuple[Any, int]]:
     """capture_sim over TCP and capture_driver_node connected to it, as processes
     (``driver_rig``); yields the rig and the simulator's control port."""
-    from gimbal_driver_common.testing.ros import driver_rig  # rclpy: only for node tests
+    from gimbal_driver_testing.ros import driver_rig  # rclpy: only for node tests
 
     port, control_port = free_tcp_port(), free_tcp_port()
     with driver_rig(PKG, 'capture_sim',

@@ -9,7 +9,7 @@ import pytest
 
 from capture_driver.answers import AnswerBook
 from capture_driver.protocol import Frame, ReplyByte, ReplyCode, command
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 
 ACK, NACK = ReplyByte(ReplyCode.ACK), ReplyByte(ReplyCode.INVALID_COMMAND)
 

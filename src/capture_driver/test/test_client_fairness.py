@@ -22,8 +22,8 @@ import pytest
 
 from capture_driver.client import CaptureClient
 from capture_driver.sim import CaptureSimulator
-from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import TcpStream
+from gimbal_driver_testing import wait_for
 
 POLL = [(name, axis) for axis in (1, 2) for name in ('MOT_GetLoadPosition',
                                                       'MOT_GetMotorSpeed')]

@@ -18,8 +18,8 @@ from capture_driver.protocol.registers import CMER, REGISTERS, SRL
 from capture_driver.sim import CaptureSimulator, PedestalModel
 from gimbal_driver_common.link_lock import LinkLock
 from gimbal_driver_common.sim_control import read_ready_line
-from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import SerialStream, TcpStream
+from gimbal_driver_testing import wait_for
 
 
 @pytest.fixture

@@ -25,7 +25,7 @@ from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.policies import Motion
 from gimbal_driver_common.scan import ScanRequest
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 
 JOINTS = ['pan', 'tilt']
 LOG = logging.getLogger('test_device')

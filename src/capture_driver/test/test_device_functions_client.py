@@ -12,8 +12,8 @@ from capture_driver.client import CaptureClient
 from capture_driver.errors import DeviceNack
 from capture_driver.protocol import COMMANDS, GeoPoint, ProtocolError, ReplyCode
 from capture_driver.sim import GYRO_BIAS, CaptureSimulator, PedestalModel
-from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import TcpStream
+from gimbal_driver_testing import wait_for
 
 
 @pytest.fixture

@@ -2,7 +2,7 @@
 
 from pathlib import Path
 
-from gimbal_driver_common.testing.launch_doc import launch_docstring_errors
+from gimbal_driver_testing.launch_doc import launch_docstring_errors
 
 LAUNCH_FILE = Path(__file__).resolve().parent.parent / 'launch' / 'capture_driver.launch.py'
 

@@ -19,8 +19,8 @@ from std_srvs.srv import SetBool, Trigger
 
 from capture_driver.sim import console_state as sim_state
 from capture_driver.sim import control
-from gimbal_driver_common.testing import wait_for
-from gimbal_driver_common.testing.ros import joint_positions, node_refusing_to_start
+from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.ros import joint_positions, node_refusing_to_start
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.msg import GimbalStatus
 from gimbal_msgs.srv import (

@@ -26,7 +26,7 @@ from rcl_interfaces.msg import Log
 from sensor_msgs.msg import Imu, JointState
 
 from capture_driver.sim import console_state as sim_state
-from gimbal_driver_common.testing.ros import joint_positions
+from gimbal_driver_testing.ros import joint_positions
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import GimbalStatus
 

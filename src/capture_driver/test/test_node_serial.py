@@ -10,8 +10,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
 from capture_driver.sim import control
-from gimbal_driver_common.testing import ManagedProcess, free_tcp_port, wait_for_ready
-from gimbal_driver_common.testing.ros import driver_rig
+from gimbal_driver_testing import ManagedProcess, free_tcp_port, wait_for_ready
+from gimbal_driver_testing.ros import driver_rig
 from gimbal_msgs.action import MoveTo
 
 pytestmark = pytest.mark.ros

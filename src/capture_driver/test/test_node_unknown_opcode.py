@@ -20,8 +20,8 @@ pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState, NavSatFix
 
-from gimbal_driver_common.testing import wait_for
-from gimbal_driver_common.testing.ros import RosTestClient
+from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.ros import RosTestClient
 
 pytestmark = pytest.mark.ros
 

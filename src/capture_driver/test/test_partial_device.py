@@ -25,9 +25,9 @@ from capture_driver.sim import KNOWN_SETS, CaptureSimulator, PedestalModel
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
 from gimbal_driver_common.diagnostics import Level
 from gimbal_driver_common.joint_command import JointLimits
-from gimbal_driver_common.testing import ManualClock, wait_for
 from gimbal_driver_common.transport import TcpStream
 from gimbal_driver_common.unanswered import Unanswered
+from gimbal_driver_testing import ManualClock, wait_for
 
 LOG = logging.getLogger('test_partial_device')
 POLL = [(name, axis) for axis in (1, 2) for name in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')]

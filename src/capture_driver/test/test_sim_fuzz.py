@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from capture_driver.protocol import BY_OPCODE, COMMANDS, Frame, ReplyCode, StreamDecoder
 from capture_driver.sim import CaptureSession, PedestalModel
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 
 
 def connected_session() -> CaptureSession:

@@ -11,9 +11,9 @@ import pytest
 from capture_driver.protocol import BY_OPCODE, COMMANDS, Frame, ReplyByte, ReplyCode, StreamDecoder
 from capture_driver.sim import CaptureSimulator, PedestalModel
 from gimbal_driver_common.registry import driver_of_package
-from gimbal_driver_common.testing import wait_for
-from gimbal_driver_common.testing.sim_handle import make_handle
+from gimbal_driver_common.sim_handle import make_handle
 from gimbal_driver_common.transport import ByteStream, SerialStream, TcpStream
+from gimbal_driver_testing import wait_for
 
 DELAY_S = 0.4
 

@@ -11,8 +11,9 @@ and the cross-package tests in ``tests/``. A package that is not built (installe
 found, so it is left out everywhere.
 
 ROS-free: a spec is plain data. What needs code (a demo step, the one in-process simulator
-handle of :mod:`gimbal_driver_common.testing.sim_handle`) is named by a dotted reference
-(``module:attribute``) and imported only by the tool that uses it.
+handle of :mod:`gimbal_driver_common.sim_handle`, the :class:`RefusedRequests` of the
+driver's services) is named by a dotted reference (``module:attribute``) into the driver's
+runtime package and imported only by the tool that uses it; none imports a test library.
 """
 
 from __future__ import annotations
@@ -85,6 +86,32 @@ class BenchSettings:
 
 
 @dataclass(frozen=True)
+class RefusedRequests:
+    """The requests a driver's own services must refuse, as plain data.
+
+    A driver's ``refused_requests`` function returns one;
+    ``gimbal_driver_testing.refused_requests.strategy`` turns it into the hypothesis
+    strategy the property tests draw from (``tests/test_ros_properties.py``), so the
+    driver's runtime package needs no test library. Each service is named under the node.
+
+    ``command_service``: the driver's ``gimbal_msgs/srv/DeviceCommand`` service ('' = none);
+    ``refused_commands``: names it refuses whatever the axis and arguments (behind an
+    opt-in parameter, or motion without the driver's limit checks); ``known_commands``:
+    every name it knows (any other name, out-of-scope weapon names included, is refused).
+    ``refused_triggers``: ``std_srvs/Trigger`` services refused by default.
+    ``mode_service``: a ``gimbal_msgs/srv/SetMode`` service; a mode outside
+    ``known_modes`` (compared stripped and lower-case) is refused.
+    """
+
+    command_service: str = ''
+    refused_commands: tuple[str, ...] = ()
+    known_commands: frozenset[str] = frozenset()
+    refused_triggers: tuple[str, ...] = ()
+    mode_service: str = ''
+    known_modes: frozenset[str] = frozenset()
+
+
+@dataclass(frozen=True)
 class DriverSpec:
     """One driver: its executables, how its simulator is started, and what tools do with it.
 
@@ -113,8 +140,8 @@ class DriverSpec:
     launch_sim_arguments: tuple[str, ...] = ()
     password: str = ''           # the simulator's device password (never logged)
     sim_handle: str = ''         # 'module:Class' of the in-process simulator handle
-    #: 'module:function' of a hypothesis strategy of (service type, service, request) the
-    #: driver's own services must refuse (the property tests); '' when it has none
+    #: 'module:function' returning the :class:`RefusedRequests` of the driver's own services
+    #: (the property tests); '' when it has none
     refused_requests: str = ''
     #: 'module:function' of the driver's read-only probe (gimbal_probe,
     #: gimbal_driver_common.probe): link -> the attempts it makes there; '' = none

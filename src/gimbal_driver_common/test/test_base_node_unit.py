@@ -15,7 +15,7 @@ from gimbal_driver_common.ros import messages
 from gimbal_driver_common.ros.base_node import GimbalDriverNode
 from gimbal_driver_common.ros.look_at import LookAtRefused
 from gimbal_driver_common.ros.parameters import ParameterError
-from gimbal_driver_common.testing import DomainLease, wait_for
+from gimbal_driver_testing import DomainLease, wait_for
 from gimbal_msgs.action import LookAt
 from gimbal_msgs.msg import GimbalStatus
 

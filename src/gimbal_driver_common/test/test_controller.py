@@ -35,7 +35,7 @@ from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.policies import HomingSuperseded, Motion
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.scan import ScanRequest
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 
 JOINTS = ['pan', 'tilt']
 

@@ -28,8 +28,8 @@ from gimbal_driver_common.joint_command import (
 )
 from gimbal_driver_common.presets import PresetError, PresetStore
 from gimbal_driver_common.scan import ScanError, ScanRequest, plan_scan
-from gimbal_driver_common.testing import ManualClock
 from gimbal_driver_common.watchdog import JogWatchdog
+from gimbal_driver_testing import ManualClock
 
 LIMITS = {
     'pan': JointLimits(-3.0, 3.0, 1.0),
@@ -345,7 +345,7 @@ def test_scan_rejections(request_, message) -> None:
 
 def test_domain_leases_are_exclusive_and_not_reused_at_once() -> None:
     """A held id is never handed out twice; a just-released id is not the next one leased."""
-    from gimbal_driver_common.testing import DomainLease
+    from gimbal_driver_testing import DomainLease
 
     with DomainLease() as first, DomainLease() as second:
         assert first != second

@@ -7,7 +7,7 @@ import threading
 import pytest
 
 from gimbal_driver_common.fair_lock import FairRLock
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 
 
 def test_a_waiter_goes_before_the_holder_that_asks_again() -> None:

@@ -13,8 +13,8 @@ import pytest
 
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, ros_env
-from gimbal_driver_common.testing.ros import RosTestClient
+from gimbal_driver_testing import DomainLease, ManagedProcess, ros_env
+from gimbal_driver_testing.ros import RosTestClient
 
 pytestmark = pytest.mark.ros
 

@@ -26,7 +26,7 @@ from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.policies import Motion
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.scan import ScanRequest
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 
 #: s a run may take to end once it should; reached only when the policy misses the end
 ENDS_WITHIN = 5.0

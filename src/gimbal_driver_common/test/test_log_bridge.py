@@ -18,7 +18,7 @@ from gimbal_driver_common.ros.log_bridge import (
     bridged_loggers,
     install_log_bridge,
 )
-from gimbal_driver_common.testing import DomainLease, wait_for
+from gimbal_driver_testing import DomainLease, wait_for
 
 PACKAGE = 'fake_driver_pkg'
 

@@ -16,7 +16,7 @@ from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.policies import Motion
 from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.sim_motion import AxisMotion
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 
 JOINTS = ['pan', 'tilt']
 #: the watch's timeout in these tests (s)

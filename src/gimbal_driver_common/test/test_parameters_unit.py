@@ -19,7 +19,7 @@ from gimbal_driver_common.ros.parameters import (
     declare,
     take_secret,
 )
-from gimbal_driver_common.testing import DomainLease
+from gimbal_driver_testing import DomainLease
 
 pytestmark = pytest.mark.ros
 

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from gimbal_driver_common.presets import PresetStore
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 
 SLOTS = 8
 JOINTS = 60  # a file of several kB, so a kill often lands inside a write

@@ -11,7 +11,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
 from gimbal_driver_common.ros.run import POOL_THREAD_PREFIX, InlineGroupExecutor
-from gimbal_driver_common.testing import DomainLease, wait_for
+from gimbal_driver_testing import DomainLease, wait_for
 
 pytestmark = pytest.mark.ros
 

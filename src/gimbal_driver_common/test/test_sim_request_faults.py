@@ -11,7 +11,7 @@ import pytest
 
 from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.sim_requests import LateReplies, RequestFaults, resolve_request
-from gimbal_driver_common.testing import ManualClock
+from gimbal_driver_testing import ManualClock
 
 NAMES = ('IMU_GetRoll', 'MOT_GetPosition', 'RESET')
 

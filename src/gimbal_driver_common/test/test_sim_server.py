@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from gimbal_driver_common.sim_server import PtySimServer, TcpSimServer
-from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import LinkClosed, SerialStream, TcpStream, read_exactly
+from gimbal_driver_testing import wait_for
 
 
 class UpperSession:

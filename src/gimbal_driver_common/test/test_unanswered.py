@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from gimbal_driver_common.errors import DeviceTimeout
-from gimbal_driver_common.testing import ManualClock
 from gimbal_driver_common.unanswered import BackingOff, ConnectReads, Unanswered
+from gimbal_driver_testing import ManualClock
 
 
 def test_the_back_off_doubles_with_every_timeout_in_a_row_up_to_the_longest() -> None:

@@ -71,13 +71,13 @@ SPEC = DriverSpec(
                      'motor_addresses': [2, 3, 1], **sim_rig_parameters()},
     password='kos-sim-secret',
     launch_sim_arguments=('--port', '5520', '--precalibrated'),
-    sim_handle='kessler_kos_driver.testing.sim_handle:KesslerSimHandle',
-    refused_requests='kessler_kos_driver.testing.refused_requests:refused_requests',
+    sim_handle='kessler_kos_driver.sim_handle:KesslerSimHandle',
+    refused_requests='kessler_kos_driver.refused_requests:refused_requests',
     probe='kessler_kos_driver.probe:probe',
     demo=DemoSettings(
         jog_joint='pan', jog_velocity=0.5,
         scan={'pattern': 'sector', 'pan_min': -1.0, 'pan_max': 1.0, 'speed': 1.0},
-        extra_steps=(('playback', 'kessler_kos_driver.testing.demo_steps:playback'),)),
+        extra_steps=(('playback', 'kessler_kos_driver.demo_steps:playback'),)),
     soak=SoakSettings(
         joint_ranges={'pan': (-2.5, 2.5), 'tilt': (-1.2, 1.2), 'slider': (0.1, 1.4)},
         extra_services={'take_picture': 'std_srvs/srv/Trigger',

@@ -8,8 +8,8 @@ import pytest
 
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 
-from gimbal_driver_common.testing.conformance import DriverConformance
-from gimbal_driver_common.testing.silent_request_conformance import SilentRequest
+from gimbal_driver_testing.conformance import DriverConformance
+from gimbal_driver_testing.silent_request_conformance import SilentRequest
 from gimbal_msgs.srv import DeviceCommand
 
 

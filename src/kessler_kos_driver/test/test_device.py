@@ -24,7 +24,7 @@ from gimbal_driver_common.errors import DeviceRefused, GimbalError, InvalidReque
 from gimbal_driver_common.errors import DeviceTimeout as CoreDeviceTimeout
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.policies import HomingSuperseded, Motion
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 from kessler_kos_driver.client import (
     CommandRejected,
     DeviceTimeout,

@@ -18,8 +18,8 @@ pytest.importorskip('rclpy', reason='node tests need the ROS environment')
 pytest.importorskip('gimbal_msgs', reason='node tests need the built workspace (make build)')
 
 from gimbal_driver_common.sim_control import control_state
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
-from gimbal_driver_common.testing.look_at import LookAtRig, LookAtSuite, look_at_rig_against
+from gimbal_driver_testing import DomainLease, ManagedProcess, free_tcp_port
+from gimbal_driver_testing.look_at import LookAtRig, LookAtSuite, look_at_rig_against
 
 pytestmark = pytest.mark.ros
 

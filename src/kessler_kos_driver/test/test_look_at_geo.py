@@ -17,8 +17,8 @@ import pytest
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 
 from gimbal_driver_common.geodesy import GeoPoint
-from gimbal_driver_common.testing.look_at_geo import LookAtGeoSuite, TestPose
-from gimbal_driver_common.testing.sim_handle import SimHandle
+from gimbal_driver_common.sim_handle import SimHandle
+from gimbal_driver_testing.look_at_geo import LookAtGeoSuite, TestPose
 
 
 class TestKesslerLookAtGeo(LookAtGeoSuite):

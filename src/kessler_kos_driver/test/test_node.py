@@ -25,8 +25,8 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from gimbal_driver_common.sim_control import control_state
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
-from gimbal_driver_common.testing.ros import (
+from gimbal_driver_testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
+from gimbal_driver_testing.ros import (
     RosTestClient,
     driver_rig,
     find_diagnostic,

@@ -20,8 +20,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.testing import free_tcp_port
-from gimbal_driver_common.testing.ros import (
+from gimbal_driver_testing import free_tcp_port
+from gimbal_driver_testing.ros import (
     RosTestClient,
     driver_rig,
     find_diagnostic,

@@ -10,9 +10,9 @@ from collections.abc import Callable
 import pytest
 
 from gimbal_driver_common.registry import driver_of_package
-from gimbal_driver_common.testing import wait_for
-from gimbal_driver_common.testing.sim_handle import make_handle
+from gimbal_driver_common.sim_handle import make_handle
 from gimbal_driver_common.transport import TcpStream
+from gimbal_driver_testing import wait_for
 from kessler_kos_driver.protocol import (
     DeviceGuid,
     DeviceInfo,

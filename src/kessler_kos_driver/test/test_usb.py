@@ -17,8 +17,8 @@ import pytest
 
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
 from gimbal_driver_common.joint_command import JointLimits
-from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import LinkClosed, TransportError
+from gimbal_driver_testing import wait_for
 from kessler_kos_driver.client import CommandRejected, KosClient, NotConnected
 from kessler_kos_driver.device import KosDevice as KosAdapter
 from kessler_kos_driver.device import joint_mappings

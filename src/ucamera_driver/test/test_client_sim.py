@@ -8,7 +8,7 @@ from collections.abc import Iterator
 import pytest
 
 from gimbal_driver_common.errors import DeviceTimeout, LinkError
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 from ucamera_driver.client import UCameraClient, UCameraError
 from ucamera_driver.protocol import (
     AntennaPositionReport,

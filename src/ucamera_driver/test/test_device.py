@@ -25,7 +25,7 @@ from gimbal_driver_common.errors import (
 )
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.policies import Motion
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 from ucamera_driver.device import UCameraDevice, UCameraSettings
 from ucamera_driver.device_functions import enu_flu_to_ned_frd
 from ucamera_driver.protocol import GimbalMode, ZoomReport

@@ -18,9 +18,9 @@ from sensor_msgs.msg import Imu, NavSatFix
 
 from gimbal_driver_common.geodesy import GeoPoint
 from gimbal_driver_common.orientation import quaternion_from_euler
-from gimbal_driver_common.testing import wait_for
-from gimbal_driver_common.testing.conformance_rig import ConformanceRig
-from gimbal_driver_common.testing.look_at_geo import LookAtGeoSuite, TestPose
+from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.conformance_rig import ConformanceRig
+from gimbal_driver_testing.look_at_geo import LookAtGeoSuite, TestPose
 from ucamera_driver.device_functions import enu_flu_to_ned_frd
 
 

@@ -30,13 +30,13 @@ from std_msgs.msg import Float64, UInt16  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from gimbal_driver_common.sim_control import control_request, control_state  # noqa: E402
-from gimbal_driver_common.testing import (  # noqa: E402
+from gimbal_driver_testing import (  # noqa: E402
     DomainLease,
     ManagedProcess,
     wait_for,
     wait_for_ready,
 )
-from gimbal_driver_common.testing.ros import RosTestClient, node_refusing_to_start  # noqa: E402
+from gimbal_driver_testing.ros import RosTestClient, node_refusing_to_start  # noqa: E402
 from gimbal_msgs.action import Home, MoveTo  # noqa: E402
 from gimbal_msgs.msg import GimbalStatus  # noqa: E402
 from gimbal_msgs.srv import (  # noqa: E402

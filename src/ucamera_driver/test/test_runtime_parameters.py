@@ -17,7 +17,7 @@ pytest.importorskip("gimbal_msgs", reason="needs the built workspace: make build
 
 from sensor_msgs.msg import JointState  # noqa: E402
 
-from gimbal_driver_common.testing.ros import driver_rig  # noqa: E402
+from gimbal_driver_testing.ros import driver_rig  # noqa: E402
 
 NODE = "ucamera_driver"
 

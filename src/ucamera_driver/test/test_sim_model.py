@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gimbal_driver_common.sim_control import ControlClient, control_state, read_ready_line
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 from ucamera_driver.protocol import (
     FrameParser,
     GimbalMode,

@@ -9,9 +9,9 @@ import time
 import pytest
 
 from gimbal_driver_common.registry import driver_of_package
-from gimbal_driver_common.testing import wait_for
-from gimbal_driver_common.testing.sim_handle import make_handle
+from gimbal_driver_common.sim_handle import make_handle
 from gimbal_driver_common.transport import SerialStream
+from gimbal_driver_testing import wait_for
 from ucamera_driver.protocol import (
     AntennaPositionReport,
     AntennaPositionRequest,

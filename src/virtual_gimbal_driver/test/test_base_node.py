@@ -12,8 +12,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
-from gimbal_driver_common.testing.ros import RosTestClient, find_diagnostic, joint_positions
+from gimbal_driver_testing import DomainLease, ManagedProcess, free_tcp_port, wait_for
+from gimbal_driver_testing.ros import RosTestClient, find_diagnostic, joint_positions
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import GimbalStatus
 from gimbal_msgs.srv import StartScan

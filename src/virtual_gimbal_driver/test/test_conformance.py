@@ -9,8 +9,8 @@ pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (mak
 
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.testing.conformance import DriverConformance
-from gimbal_driver_common.testing.silent_request_conformance import SilentRequest
+from gimbal_driver_testing.conformance import DriverConformance
+from gimbal_driver_testing.silent_request_conformance import SilentRequest
 
 
 class TestVirtualGimbalConformance(DriverConformance):

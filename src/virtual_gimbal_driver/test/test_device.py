@@ -17,7 +17,7 @@ import pytest
 from gimbal_driver_common.controller import ControllerConfig, GimbalController
 from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, LinkError
 from gimbal_driver_common.joint_command import JointLimits
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_testing import wait_for
 from virtual_gimbal_driver.client import VirtualGimbalClient
 from virtual_gimbal_driver.device import MISSED_POLLS_LOST, VirtualGimbalDevice
 from virtual_gimbal_driver.protocol import (

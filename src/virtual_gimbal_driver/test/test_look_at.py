@@ -9,8 +9,8 @@ import pytest
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 from lifecycle_msgs.msg import Transition
 
-from gimbal_driver_common.testing import DomainLease, ManagedProcess, free_tcp_port
-from gimbal_driver_common.testing.look_at import (
+from gimbal_driver_testing import DomainLease, ManagedProcess, free_tcp_port
+from gimbal_driver_testing.look_at import (
     LookAtRig,
     LookAtSuite,
     installed_description,

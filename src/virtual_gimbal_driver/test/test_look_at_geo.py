@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 
 from gimbal_driver_common.geodesy import GeoPoint
-from gimbal_driver_common.testing.look_at_geo import LookAtGeoSuite, TestPose
+from gimbal_driver_testing.look_at_geo import LookAtGeoSuite, TestPose
 
 
 class TestVirtualGimbalLookAtGeo(LookAtGeoSuite):

@@ -11,8 +11,8 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_common.testing import free_tcp_port
-from gimbal_driver_common.testing.ros import RosTestClient, driver_rig, joint_positions
+from gimbal_driver_testing import free_tcp_port
+from gimbal_driver_testing.ros import RosTestClient, driver_rig, joint_positions
 from gimbal_msgs.action import MoveTo
 from gimbal_msgs.msg import GimbalStatus
 

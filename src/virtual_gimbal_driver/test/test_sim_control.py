@@ -19,8 +19,8 @@ from gimbal_driver_common.sim_control import (
     read_ready_line,
     ready_line,
 )
-from gimbal_driver_common.testing import wait_for
 from gimbal_driver_common.transport import LinkClosed, TcpStream, read_exactly
+from gimbal_driver_testing import wait_for
 from virtual_gimbal_driver.sim import make_control, make_server
 
 

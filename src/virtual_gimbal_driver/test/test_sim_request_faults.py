@@ -1,7 +1,7 @@
 """The shared request faults on the virtual gimbal's simulator, over its TCP link: a muted
 request verb is never answered and a delayed one is answered late, while the other
 requests are answered at once; ``clear`` restores. Set through the in-process handle
-(:class:`~gimbal_driver_common.testing.sim_handle.SimHandle`) and the control verbs."""
+(:class:`~gimbal_driver_common.sim_handle.SimHandle`) and the control verbs."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import time
 import pytest
 
 from gimbal_driver_common.registry import driver_of_package
-from gimbal_driver_common.testing import wait_for
-from gimbal_driver_common.testing.sim_handle import make_handle
+from gimbal_driver_common.sim_handle import make_handle
 from gimbal_driver_common.transport import TcpStream
+from gimbal_driver_testing import wait_for
 
 DELAY_S = 0.4
 

@@ -16,7 +16,7 @@ SPEC = DriverSpec(
     sim_arguments=('--port', '{port}'),
     node_parameters={'host': '127.0.0.1', 'port': '{port}'},
     launch_sim_arguments=('--port', '4950'),
-    sim_handle='virtual_gimbal_driver.testing.sim_handle:VirtualGimbalSim',
+    sim_handle='virtual_gimbal_driver.sim_handle:VirtualGimbalSim',
     probe='virtual_gimbal_driver.probe:probe',
     demo=DemoSettings(scan={'pattern': 'sector', 'pan_min': -0.3, 'pan_max': 0.3,
                             'speed': 0.6}),

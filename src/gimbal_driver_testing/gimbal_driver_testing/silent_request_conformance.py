@@ -1,0 +1,485 @@
+"""The silent-request part of the conformance suite: one kind of request the device never
+answers (the simulators' ``mute REQUEST``), or answers 0.4 s late (``delay REQUEST 0.4``),
+costs only itself, through the real transport, client and node.
+
+Each driver's suite names its requests by kind (:attr:`SilentRequestConformance.silent_requests`:
+a sensor getter, a status register, a best-effort identity read, a service request) and the
+request the node cannot work without (:attr:`~SilentRequestConformance.required_request`).
+The checks are behaviour, never a timing bound of the test machine:
+
+* joint_states hold their rate: the rate by the stamps of the messages received (the node
+  stamps where the data arrived, so delivery jitter does not count) is at least 90 % of the
+  rate a healthy window measured the same way gave, and of ``publish_rate``;
+* ``~/stop`` and a jog reach the simulator *while the silent request waits*: the simulator's
+  receive log (every request stamped as it is handled) holds the stop or the jog between
+  the silent request's arrival and the end of its wait (the service call returning, or the
+  client's own timeout, or the delay);
+* the dead-man stop reaches the simulator after the last joint_command;
+* a request the node asks on its own is named at WARN on /diagnostics with how often it went
+  unanswered, and asked again after a growing back-off, not back to back;
+* the connection diagnostic stays OK and the node does not connect again;
+* a best-effort read muted at connect never keeps the node from connecting; a required one
+  muted makes the connection error name it.
+
+A figure a driver does not meet yet is marked for that driver with ``pytest.mark.xfail(
+strict=True)`` by :attr:`~SilentRequestConformance.silent_request_gaps` (strict: it fails the
+day the driver meets it).
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.conformance_rig import (
+    ERROR,
+    OK,
+    ConformanceHelpers,
+    ConformanceRig,
+)
+
+WARN = 1
+#: the late answer of the ``delay`` runs (s): later than a reply should take, within most
+#: clients' timeouts
+DELAY_S = 0.4
+#: windows measured before the joint rate is judged under the bar (the best one counts)
+RATE_TRIES = 3
+#: joint_states must hold this share of the healthy rate (and of publish_rate)
+RATE_SHARE = 0.9
+#: seconds of joint_states each rate window spans
+RATE_WINDOW_S = 4.0
+#: attempts to catch the silent request outstanding (each one a new ask of it)
+ATTEMPTS = 4
+#: asks of a muted request the back-off check waits for (two intervals between them)
+BACKOFF_ASKS = 3
+#: what a count in a diagnostics text looks like ("3 time(s)", "(2x)")
+COUNT = re.compile(r'\d+ ?(time|x\b)')
+MODES = ('mute', 'delay')
+
+
+@dataclass(frozen=True)
+class SilentRequest:
+    """One kind of request of a driver, named as its simulator's ``mute`` takes it."""
+
+    kind: str                      # 'sensor getter', 'status register', 'identity read', ...
+    request: str                   # the device's own name for it
+    #: the node asks it on its own, again and again (sensor, register): diagnostics and
+    #: back-off apply
+    periodic: bool = False
+    #: asked once at connect (identity, read-backs): best effort, checked by a restart
+    at_connect: bool = False
+    #: the node parameter holding the client's timeout for one ask (s)
+    timeout_parameter: str = ''
+    #: a topic whose subscriber makes the node ask it (the IMU getter: ~/imu), and its type
+    topic: tuple[str, type] | None = None
+    #: (service type, name under the node, request) a call of which sends it
+    service: tuple[type, str, Callable[[], Any]] | None = None
+
+
+@dataclass
+class RequestLog:
+    """The simulator's receive log with the time each request was handled."""
+
+    entries: list[tuple[float, str]] = field(default_factory=list)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    arrived: threading.Condition = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.arrived = threading.Condition(self.lock)
+
+    def add(self, request: str) -> None:
+        with self.lock:
+            self.entries.append((time.monotonic(), request))
+            self.arrived.notify_all()
+
+    def mark(self) -> int:
+        with self.lock:
+            return len(self.entries)
+
+    def since(self, mark: int) -> list[tuple[float, str]]:
+        with self.lock:
+            return list(self.entries[mark:])
+
+    def wait_for(self, name: str, mark: int, timeout: float) -> tuple[int, float]:
+        """The index and time of the first ``name`` logged from ``mark`` on."""
+        deadline = time.monotonic() + timeout
+        with self.lock:
+            while True:
+                for index in range(mark, len(self.entries)):
+                    stamp, request = self.entries[index]
+                    if named(request, name):
+                        return index, stamp
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f'{name} never reached the simulator in {timeout:g} s')
+                self.arrived.wait(left)
+
+
+def named(logged: str, name: str) -> bool:
+    """Whether a receive-log entry is the request ``name``: entries are words, the request
+    one of them ("IMU_GetRoll", "service IDS", "MOVE pan 0.1 0.5")."""
+    return name in logged.split()
+
+
+def wait_until(condition: Callable[[], bool], timeout: float) -> bool:
+    """Whether ``condition`` came true within ``timeout`` (polled; False, not an error)."""
+    try:
+        wait_for(condition, timeout, 'condition')
+    except TimeoutError:
+        return False
+    return True
+
+
+def stamp_of(msg: JointState) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def rate_by_stamps(messages: Sequence[JointState]) -> float:
+    """Samples per second by the node's own stamps (the time the device data arrived): a
+    message that repeats the last stamp brings no new data and does not count."""
+    stamps = sorted({stamp_of(m) for m in messages})
+    if len(stamps) < 2:
+        return 0.0
+    span = stamps[-1] - stamps[0]
+    return (len(stamps) - 1) / span if span > 0 else 0.0
+
+
+class SilentRequestConformance(ConformanceHelpers):
+    """Mixed into :class:`~gimbal_driver_testing.conformance.DriverConformance`."""
+
+    jog: tuple[str, float]
+    #: the driver's requests by kind (see :class:`SilentRequest`)
+    silent_requests: Sequence[SilentRequest] = ()
+    #: (request, a text the connection error shows for it): what the node cannot work
+    #: without; '' if the protocol has no request the connection hangs on
+    required_request: tuple[str, str] = ('', '')
+    #: the request that opens a connection (counted: a silent request must not make the
+    #: node connect again); '' where the protocol has none
+    handshake_request: str = ''
+    #: (figure, request or '*') -> what the driver lacks for it, marked xfail(strict=True);
+    #: figures: 'cost', 'stop', 'jog', 'connect'
+    silent_request_gaps: dict[tuple[str, str], str] = {}
+
+    # ------------------------------------------------------------ parametrisation
+    def pytest_generate_tests(self, metafunc: pytest.Metafunc) -> None:
+        """One case per (request, mute|delay) for the tests that take ``silent``."""
+        if 'silent' not in metafunc.fixturenames:
+            return
+        figure = FIGURES[metafunc.function.__name__]
+        wanted = (lambda r: r.at_connect) if figure == 'connect' else (
+            lambda r: not r.at_connect)
+        cases = []
+        for request in (r for r in self.silent_requests if wanted(r)):
+            for mode in MODES:
+                gap = (self.silent_request_gaps.get((figure, request.request))
+                       or self.silent_request_gaps.get((figure, '*')))
+                marks = [pytest.mark.xfail(strict=True, reason=gap)] if gap else []
+                cases.append(pytest.param((request, mode), marks=marks,
+                                          id=f'{request.request}-{mode}'))
+        if not cases:
+            cases = [pytest.param(None, marks=pytest.mark.skip(
+                reason=f'{self.driver} has no request of this kind'), id='none')]
+        metafunc.parametrize('silent', cases)
+
+    # ------------------------------------------------------------------ helpers
+    def request_log(self, rig: ConformanceRig) -> RequestLog:
+        """The simulator's receive log, timed (wraps the handle's ``record`` once)."""
+        sim = rig.sim
+        log = getattr(sim, 'timed_log', None)
+        if log is None:
+            log = RequestLog()
+            plain = sim.record
+
+            def record(request: str, detail: str = '') -> None:
+                log.add(f'{request} {detail}' if detail else request)
+                plain(request, detail)
+
+            sim.record = record  # type: ignore[method-assign]  # the handle's own hook
+            sim.timed_log = log
+        return log
+
+    @contextmanager
+    def silenced(self, rig: ConformanceRig, request: SilentRequest, mode: str
+                 ) -> Iterator[None]:
+        """The simulator leaves ``request`` unanswered (mute) or answers it late (delay)."""
+        if mode == 'mute':
+            rig.sim.mute(request.request)
+        else:
+            rig.sim.delay(request.request, DELAY_S)
+        subscribed = request.topic is not None
+        if subscribed:
+            rig.ros.subscribe(f'/{self.node_name}/{request.topic[0]}', request.topic[1])
+        try:
+            yield
+        finally:
+            rig.sim.clear()
+            if subscribed:
+                rig.ros.unsubscribe(f'/{self.node_name}/{request.topic[0]}')
+
+    def wait_window(self, rig: ConformanceRig, request: SilentRequest, mode: str) -> float:
+        """How long one ask of ``request`` waits for its answer, by the node's own timeout."""
+        timeout = (float(rig.ros.get_parameter(self.node_name, request.timeout_parameter))
+                   if request.timeout_parameter else float('inf'))
+        return min(timeout, DELAY_S) if mode == 'delay' else timeout
+
+    def joint_rate(self, rig: ConformanceRig, seconds: float = RATE_WINDOW_S) -> float:
+        received = rig.ros.subscribe('joint_states', JointState)
+        start = len(received)
+        time.sleep(seconds)  # a window of the stream, not a wait for a condition
+        return rate_by_stamps(list(received[start:]))
+
+    def asking(self, rig: ConformanceRig, request: SilentRequest
+               ) -> tuple[Callable[[], None], list[float]]:
+        """A way to make the node send ``request`` now (a service call, in its own thread;
+        for a request the node asks on its own, nothing) and the times the calls returned."""
+        returned: list[float] = []
+        if request.service is None:
+            return (lambda: None), returned
+        srv_type, name, make = request.service
+
+        def call() -> None:
+            try:
+                rig.ros.call(srv_type, self.srv(name), make(), timeout=30.0)
+            finally:
+                returned.append(time.monotonic())
+
+        def start() -> None:
+            threading.Thread(target=call, daemon=True, name=f'call {name}').start()
+
+        return start, returned
+
+    @contextmanager
+    def kept_asking(self, rig: ConformanceRig, request: SilentRequest) -> Iterator[None]:
+        """A service request asked again as soon as its call returns, for the whole block
+        (a request the node asks on its own: nothing to do)."""
+        if request.service is None:
+            yield
+            return
+        srv_type, name, make = request.service
+        done = threading.Event()
+
+        def keep() -> None:
+            while not done.is_set():
+                rig.ros.call(srv_type, self.srv(name), make(), timeout=30.0)
+
+        thread = threading.Thread(target=keep, daemon=True, name=f'keep calling {name}')
+        thread.start()
+        try:
+            yield
+        finally:
+            done.set()
+            thread.join(timeout=60.0)
+
+    def outstanding_until(self, start: float, window: float, returned: list[float],
+                          request: SilentRequest, calls: int = 0) -> float:
+        """Until when the ask that arrived at ``start`` surely still waits: the first half of
+        the client's wait (a client that holds the link for the whole wait sends the next
+        request just after it, and the ask's own way to the simulator may have taken a
+        moment), and never past the service call's return."""
+        until = start + window / 2
+        if request.service is not None:
+            wait_for(lambda: len(returned) > calls, 60.0,
+                     f'the {request.service[1]} call to return')
+            until = min(until, returned[-1])
+        return until
+
+    def connection_levels(self, rig: ConformanceRig, since: int) -> list[tuple[int, str]]:
+        arrays = rig.ros.subscribe('/diagnostics', DiagnosticArray)[since:]
+        name = f'{self.node_name}: connection'
+        return [(s.level[0], s.message) for a in list(arrays) for s in a.status
+                if s.name == name]
+
+    def handshakes(self, log: RequestLog, mark: int) -> int:
+        return sum(1 for _, r in log.since(mark)
+                   if self.handshake_request and named(r, self.handshake_request))
+
+    # ------------------------------------------------------------------- tests
+    @pytest.mark.ros
+    def test_a_silent_request_costs_only_itself(self, rig: ConformanceRig, silent) -> None:
+        request, mode = silent
+        log = self.request_log(rig)
+        diagnostics = rig.ros.subscribe('/diagnostics', DiagnosticArray)
+        healthy = self.joint_rate(rig)
+        publish_rate = float(rig.ros.get_parameter(self.node_name, 'publish_rate'))
+        window = self.wait_window(rig, request, mode)
+        mark, seen = log.mark(), len(diagnostics)
+        bar = RATE_SHARE * min(healthy, publish_rate)
+        with self.silenced(rig, request, mode), self.kept_asking(rig, request):
+            log.wait_for(request.request, mark, 30.0)
+            # a loaded machine's scheduling can take one window under the bar: a node that
+            # waits behind the silent request is under it in every window
+            silent_rate = self.joint_rate(rig)
+            for _ in range(RATE_TRIES - 1):
+                if silent_rate >= bar:
+                    break
+                silent_rate = max(silent_rate, self.joint_rate(rig))
+            if request.periodic and mode == 'mute':
+                self.check_named_at_warn(rig, request)
+                self.check_backoff(log, request, mark, window)
+        levels = self.connection_levels(rig, seen)
+        assert silent_rate >= bar, (
+            f'joint_states at {silent_rate:.1f} Hz with {request.request} {mode}: '
+            f'{healthy:.1f} Hz healthy, publish_rate {publish_rate:g}')
+        assert levels and all(level == OK for level, _ in levels), (
+            f'the connection left OK with only {request.request} {mode}d: {levels[-5:]}')
+        assert self.handshakes(log, mark) == 0, f'the node connected again ({log.since(mark)})'
+
+    def check_named_at_warn(self, rig: ConformanceRig, request: SilentRequest) -> None:
+        """A status of the node at WARN names the request and how often it went unanswered."""
+        def names_it(status: DiagnosticStatus) -> bool:
+            text = ' '.join([status.message, *(f'{kv.key} {kv.value}' for kv in status.values)])
+            return request.request in text and bool(COUNT.search(text))
+
+        def found(array: DiagnosticArray) -> bool:
+            return any(names_it(s) for s in self.node_statuses(array))
+
+        try:
+            array = rig.ros.wait_for_message('/diagnostics', DiagnosticArray, found, timeout=30)
+        except TimeoutError:
+            raise AssertionError(f'/diagnostics never named {request.request} with a count'
+                                 ) from None
+        levels = [s.level[0] for s in self.node_statuses(array) if names_it(s)]
+        assert WARN in levels and ERROR not in levels, levels
+
+    def check_backoff(self, log: RequestLog, request: SilentRequest, mark: int,
+                      window: float) -> None:
+        """The muted request is asked again, each time after a longer pause, never at once.
+        Each form of it in the log is one request: Capture's per-axis register read for
+        axis 1 and for axis 2 are two (the read of axis 2 follows axis 1's timeout)."""
+        def series() -> dict[str, list[float]]:
+            asked: dict[str, list[float]] = {}
+            for t, r in log.since(mark):
+                if named(r, request.request):
+                    asked.setdefault(r, []).append(t)
+            return asked
+
+        wait_for(lambda: (asked := series()) and all(len(times) >= BACKOFF_ASKS
+                                                     for times in asked.values()), 60.0,
+                 f'{BACKOFF_ASKS} asks of each form of {request.request}')
+        for form, times in series().items():
+            gaps = [later - earlier
+                    for earlier, later in itertools.pairwise(times[:BACKOFF_ASKS])]
+            assert all(gap > window for gap in gaps), (
+                f'{form} asked back to back (gaps {gaps}, its timeout {window:g} s)')
+            assert all(b > a for a, b in itertools.pairwise(gaps)), (
+                f'{form}: the pauses between asks do not grow: {gaps}')
+
+    def motion_after(self, rig: ConformanceRig, log: RequestLog, mark: int
+                     ) -> list[tuple[float, str]]:
+        return [(t, r) for t, r in log.since(mark) if rig.sim.motion(r)]
+
+    @pytest.mark.ros
+    def test_stop_goes_out_while_a_silent_request_waits(self, rig: ConformanceRig,
+                                                       silent) -> None:
+        request, mode = silent
+        log = self.request_log(rig)
+        window = self.wait_window(rig, request, mode)
+        rig.ros.call(Trigger, self.srv('stop'), Trigger.Request())  # the client is ready
+        outcomes = []
+        with self.silenced(rig, request, mode):
+            ask, returned = self.asking(rig, request)
+            for _attempt in range(ATTEMPTS):
+                mark, calls = log.mark(), len(returned)
+                ask()
+                index, arrived = log.wait_for(request.request, mark, 60.0)
+                rig.ros.call(Trigger, self.srv('stop'), Trigger.Request())
+                until = self.outstanding_until(arrived, window, returned, request, calls)
+                stops = self.motion_after(rig, log, index)
+                outcomes.append((round(until - arrived, 3),
+                                 [round(t - arrived, 3) for t, _ in stops[:1]]))
+                if stops and stops[0][0] < until:
+                    return
+        pytest.fail(f'~/stop reached the simulator only after {request.request} stopped '
+                    f'waiting, in {ATTEMPTS} tries: (wait, stop) after its arrival {outcomes}')
+
+    @pytest.mark.ros
+    def test_a_jog_goes_out_while_a_silent_request_waits(self, rig: ConformanceRig,
+                                                        silent) -> None:
+        request, mode = silent
+        log = self.request_log(rig)
+        window = self.wait_window(rig, request, mode)
+        joint, velocity = self.jog
+        outcomes = []
+        with self.silenced(rig, request, mode):
+            ask, returned = self.asking(rig, request)
+            for attempt in range(ATTEMPTS):
+                mark, calls = log.mark(), len(returned)
+                ask()
+                index, arrived = log.wait_for(request.request, mark, 60.0)
+                sign = 1.0 if attempt % 2 == 0 else -1.0
+                rig.ros.publish('joint_command', JointState(name=[joint],
+                                                            velocity=[sign * velocity]))
+                last_command = time.monotonic()
+                moved = wait_until(lambda: rig.sim.moving(joint), 10.0)
+                until = self.outstanding_until(arrived, window, returned, request, calls)
+                # no further joint_command: the dead-man stop must reach the device
+                self.wait_stopped(rig, joint, 'the dead-man stop of the jog')
+                motions = self.motion_after(rig, log, index)
+                if moved:
+                    assert motions and motions[-1][0] > last_command, (
+                        f'no stop reached the simulator after the last joint_command: '
+                        f'{motions}')
+                outcomes.append((round(until - arrived, 3), moved,
+                                 [round(t - arrived, 3) for t, _ in motions[:1]]))
+                if moved and motions[0][0] < until:
+                    return
+        pytest.fail(f'the jog reached the simulator only after {request.request} stopped '
+                    f'waiting, in {ATTEMPTS} tries: (wait, moved, jog) after its arrival '
+                    f'{outcomes}')
+
+    @pytest.mark.ros
+    def test_a_silent_best_effort_read_never_keeps_the_node_from_connecting(
+            self, rig: ConformanceRig, silent) -> None:
+        request, mode = silent
+        log = self.request_log(rig)
+        mark = log.mark()
+        rig.stop_node()
+        with self.silenced(rig, request, mode):
+            node = rig.start_node('reconnect_period:=0.3', wait_active=False)
+            self.wait_connection(rig.ros, OK, timeout=60.0)
+            assert any(named(r, request.request) for _, r in log.since(mark)), (
+                f'the node never asked {request.request} at connect')
+            if mode == 'mute':
+                node.wait_for_output(request.request)
+                lines = [line for line in node.output().splitlines()
+                         if request.request in line]
+                assert any('WARN' in line for line in lines), lines
+        rig.ros.wait_for_message('joint_states', JointState, timeout=30)
+        rig.stop_node()
+
+    @pytest.mark.ros
+    def test_a_silent_required_request_names_itself(self, rig: ConformanceRig) -> None:
+        name, text = self.required_request
+        if not name:
+            pytest.skip(f'{self.driver}: no request the connection hangs on')
+        rig.stop_node()
+        rig.sim.mute(name)
+        try:
+            node = rig.start_node('reconnect_period:=0.3', wait_active=False)
+            self.wait_connection(rig.ros, ERROR, timeout=60.0)
+            node.wait_for_output(text)
+            lines = [line for line in node.output().splitlines() if text in line]
+            assert any('ERROR' in line for line in lines), lines
+        finally:
+            rig.sim.clear()
+            rig.stop_node()
+
+
+FIGURES = {
+    'test_a_silent_request_costs_only_itself': 'cost',
+    'test_stop_goes_out_while_a_silent_request_waits': 'stop',
+    'test_a_jog_goes_out_while_a_silent_request_waits': 'jog',
+    'test_a_silent_best_effort_read_never_keeps_the_node_from_connecting': 'connect',
+}
