@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from probe_links import link_arguments
 
 from gimbal_driver_common import probe_cli
 from gimbal_driver_common.registry import DriverSpec, drivers, resolve
@@ -27,17 +28,6 @@ from gimbal_driver_testing import DomainLease, ManagedProcess, find_executable, 
 from gimbal_driver_testing.ros import RosTestClient
 
 PROBED = [spec for spec in drivers() if spec.probe and spec.sim_handle]
-
-
-def link_arguments(parameters: dict, password: str = '') -> list[str]:
-    """gimbal_probe's arguments for the link a driver's node parameters name."""
-    if 'can_channel' in parameters:
-        return ['--can', parameters['can_channel'], '--can-interface',
-                parameters['can_interface']]
-    if 'serial_port' in parameters:
-        return ['--serial', parameters['serial_port']]
-    arguments = ['--tcp', f'{parameters["host"]}:{parameters["port"]}']
-    return arguments + (['--password', password] if password else [])
 
 
 def run_probe(argv: list[str]) -> tuple[int, str]:

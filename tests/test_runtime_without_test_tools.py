@@ -17,7 +17,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from test_probe import link_arguments
+from probe_links import link_arguments
 
 from gimbal_driver_common import probe_cli
 from gimbal_driver_common.registry import DriverSpec, drivers, parameter_arguments
