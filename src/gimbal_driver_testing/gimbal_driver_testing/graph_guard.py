@@ -13,7 +13,10 @@ of the process id (little-endian) in bytes 4-5. A node is this test's when that 
 this one, one it started (:data:`gimbal_driver_testing.STARTED_PIDS`) or a descendant; an
 endpoint whose process no longer exists is the discovery trace of a stopped node (removed
 after its lease) and counts as no one's. An endpoint of another DDS vendor cannot be told
-apart and counts as foreign.
+apart and counts as foreign. Only 16 bits of the pid are there: where ``pid_max`` is above
+65536, an unrelated live process can share them with a stopped node's (then the refusal
+names that node), or with a foreign node's (then it is missed), so the domain pool is the
+first guard and this one the second.
 """
 
 from __future__ import annotations
