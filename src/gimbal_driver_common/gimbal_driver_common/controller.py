@@ -35,9 +35,9 @@ from gimbal_driver_common.config import ControllerConfig, Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
 from gimbal_driver_common.errors import (
     DeviceRefused,
+    EverySteps,
     GimbalError,
     LinkError,
-    as_gimbal_error,
     device_boundary,
 )
 from gimbal_driver_common.joint_command import validate_joint_command
@@ -413,30 +413,20 @@ class GimbalController:
     def _stop_device(self, joints: Sequence[str] | None) -> None:
         """Write every step of the stop, device motion first, then its scans; a step that
         fails skips no other. Raises after all were sent, with every failure."""
-        errors: list[GimbalError] = []
-
-        def step(request: Callable[[], object]) -> None:
-            try:
-                request()
-            except Exception as exc:  # noqa: BLE001 - collected, raised after every step
-                errors.append(as_gimbal_error(exc))
+        steps = EverySteps()
 
         def send() -> None:
-            step(lambda: self.device.stop(None if joints is None else list(joints)))
+            steps.run(self.device.stop, None if joints is None else list(joints))
             scans = self.device.capabilities.scans
             if scans is not None and joints is None:
-                step(scans.stop)
+                steps.run(scans.stop)
 
         self.stop_watch.stopped(self.config.joint_names if joints is None else joints)
         try:
             self.commands.send(joints, send, urgent=True)  # ahead of every queued read
         finally:
             self.motion_watch.withdraw(joints)
-        if len(errors) == 1:
-            raise errors[0]
-        if errors:
-            raise GimbalError('; '.join(map(str, errors)), reason=errors[0].reason) \
-                from errors[0]
+        steps.raise_errors()
 
     def _on_jog_expired(self, joints: list[str]) -> None:
         self.log.warning(

@@ -24,19 +24,11 @@ from gimbal_driver_common.policies import Motion
 from gimbal_driver_common.ros.messages import with_axis_parts
 from gimbal_driver_common.scan import ScanRequest
 from gimbal_driver_common.stop_watch import RESEND_PERIOD_S, StopWatch
-from gimbal_driver_common.testing import wait_for
+from gimbal_driver_common.testing import ManualClock, wait_for
 
 JOINTS = ['pan', 'tilt']
 DECELERATION = 1.0   # rad/s^2 the controller is configured with
 MARGIN = 0.5         # s
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 class JogAxes(Device):
@@ -124,7 +116,7 @@ def config(**overrides: object) -> ControllerConfig:
 
 @pytest.fixture
 def rig():
-    clock, device, lines = Clock(), JogAxes(), Lines()
+    clock, device, lines = ManualClock(), JogAxes(), Lines()
     log = logging.getLogger(f'test_stop_watch.{id(clock)}')
     log.addHandler(lines)
     log.propagate = False
@@ -139,7 +131,7 @@ def rig():
 class Rig:
     """Plays the device thread (a sample per tick) and the housekeeping thread."""
 
-    def __init__(self, ctl: GimbalController, device: JogAxes, clock: Clock,
+    def __init__(self, ctl: GimbalController, device: JogAxes, clock: ManualClock,
                  lines: Lines) -> None:
         self.ctl, self.device, self.clock, self.lines = ctl, device, clock, lines
 
@@ -267,7 +259,7 @@ def test_a_motion_policy_ends_the_confirmation(rig) -> None:
 
 
 def test_a_sample_read_before_the_stop_confirms_nothing() -> None:
-    clock = Clock()
+    clock = ManualClock()
     watch = StopWatch(lambda: DECELERATION, lambda: MARGIN,
                       lambda sample, joint: bool(sample and sample.velocities.get(joint)),
                       logging.getLogger('test'), clock=clock)
@@ -282,7 +274,7 @@ def test_a_sample_read_before_the_stop_confirms_nothing() -> None:
 
 
 def test_wait_returns_the_axes_still_moving_after_their_time() -> None:
-    clock = Clock()
+    clock = ManualClock()
     watch = StopWatch(lambda: DECELERATION, lambda: MARGIN,
                       lambda sample, joint: bool(sample and sample.velocities.get(joint)),
                       logging.getLogger('test'), clock=clock)
