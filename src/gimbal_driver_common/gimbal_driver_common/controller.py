@@ -215,11 +215,12 @@ class GimbalController:
     def _confirm_before_close(self, why: str) -> None:
         """Before the link closes (nothing could send the stop again after it): wait for
         the axes to rest, the housekeeping thread resending meanwhile; log what did not."""
-        joints = list(self.config.joint_names)
-        timeout = max(self.stop_watch.settle_time(j) for j in joints) + SHUTDOWN_CONFIRM_S
+        joints = self.config.joint_names
+        timeout = self.stop_watch.settle_time(*joints) + SHUTDOWN_CONFIRM_S
         moving = self.stop_watch.wait(joints, timeout) if self.connected else []
         if moving:
-            self.log.error(f'{why}: {self._still_moving(moving)}; closing the link anyway')
+            self.log.error(f'{why}: {self.stop_watch.still_moving(moving)}; closing the '
+                           'link anyway')
 
     # ---------------------------------------------------------- parameters
     def set_publish_rate(self, rate: float) -> None:
@@ -345,8 +346,8 @@ class GimbalController:
         or the step the device refused though the axes rest."""
         self._cancel_motion()
         self.require_connected('nothing to stop')
-        joints = list(self.config.joint_names)
-        timeout = max(self.stop_watch.settle_time(j) for j in joints)
+        joints = self.config.joint_names
+        timeout = self.stop_watch.settle_time(*joints)
         failed: GimbalError | None = None
         try:
             self._stop_device(None)
@@ -355,20 +356,11 @@ class GimbalController:
         moving = self.stop_watch.wait(joints, timeout)
         if moving:
             sent = f' (the device answered: {failed})' if failed else ''
-            raise DeviceRefused(f'{self._still_moving(moving)}{sent}; the stop is sent again '
-                                'until they rest', reason='stop not confirmed')
+            raise DeviceRefused(f'{self.stop_watch.still_moving(moving)}{sent}; the stop is '
+                                'sent again until they rest', reason='stop not confirmed')
         if failed is not None:
             return f'all axes stopped and at rest; but a step of the stop failed: {failed}'
         return 'all axes stopped and at rest; scans, moves and jogs cancelled'
-
-    def _still_moving(self, joints: Sequence[str]) -> str:
-        episodes = self.stop_watch.episodes()
-        parts = []
-        for joint in joints:
-            episode = episodes.get(joint)
-            if episode is not None:
-                parts.append(f'{joint} {episode.describe().removeprefix("stop not confirmed: ")}')
-        return 'stop not confirmed: ' + ('; '.join(parts) or ', '.join(joints))
 
     def stop_joints(self, joints: Sequence[str] | None) -> None:
         """Stop some joints (a cancelled move or homing, the dead-man stop); logs instead

@@ -69,12 +69,14 @@ class StopWatch:
         self._latest: JointSample | None = None
 
     # ------------------------------------------------------------ stops
-    def settle_time(self, joint: str) -> float:
-        """s an axis needs to come to rest from its last known speed, plus the margin."""
-        speed = self._speed(self._latest, joint)
+    def settle_time(self, *joints: str) -> float:
+        """s the slowest of these axes needs to rest from its last known speed, plus the
+        margin."""
         deceleration = self._deceleration()
-        braking = speed / deceleration if math.isfinite(speed) and deceleration > 0 else 0.0
-        return braking + max(self._margin(), 0.0)
+        braking = [speed / deceleration for speed in
+                   (self._speed(self._latest, joint) for joint in joints)
+                   if math.isfinite(speed) and deceleration > 0]
+        return max(braking, default=0.0) + max(self._margin(), 0.0)
 
     def stopped(self, joints: Iterable[str]) -> None:
         """A stop of ``joints`` is being sent: an episode starts (or counts one more)."""
@@ -153,6 +155,13 @@ class StopWatch:
         """Every stop still waiting for its axis (copies)."""
         with self._changed:
             return {j: StopEpisode(**vars(e)) for j, e in self._episodes.items()}
+
+    def still_moving(self, joints: Sequence[str]) -> str:
+        """"stop not confirmed: pan still moving at 0.300 rad/s, stop sent twice; ..." """
+        episodes = self.episodes()
+        parts = [f'{j} {episodes[j].describe().removeprefix("stop not confirmed: ")}'
+                 for j in joints if j in episodes]
+        return 'stop not confirmed: ' + ('; '.join(parts) or ', '.join(joints))
 
     def wait(self, joints: Sequence[str], timeout: float,
              wait: Callable[[threading.Condition, float], object] | None = None) -> list[str]:
