@@ -259,23 +259,24 @@ class SimControl:
         self.request_faults.mute(name, muted)
         return f'{name} {"never answered" if muted else "answered"}'
 
-    def _delay(self, args: list[str]) -> str:
-        name = self._request('delay', args, 'delay REQUEST SECONDS')
+    def _request_seconds(self, verb: str, args: list[str]) -> tuple[str, float]:
+        """``REQUEST SECONDS`` of ``delay`` and ``ignore``: the device's name, seconds >= 0."""
+        usage = f'{verb} REQUEST SECONDS'
+        name = self._request(verb, args, usage)
         if len(args) != 2:
-            raise ControlError('usage: delay REQUEST SECONDS')
+            raise ControlError(f'usage: {usage}')
         seconds = float(args[1])
         if not (math.isfinite(seconds) and seconds >= 0.0):
             raise ControlError(f'seconds {args[1]!r}: not a finite number >= 0')
+        return name, seconds
+
+    def _delay(self, args: list[str]) -> str:
+        name, seconds = self._request_seconds('delay', args)
         self.request_faults.delay(name, seconds)
         return f'{name} answered {seconds:g} s late' if seconds else f'{name} answered at once'
 
     def _ignore(self, args: list[str]) -> str:
-        name = self._request('ignore', args, 'ignore REQUEST SECONDS')
-        if len(args) != 2:
-            raise ControlError('usage: ignore REQUEST SECONDS')
-        seconds = float(args[1])
-        if not (math.isfinite(seconds) and seconds >= 0.0):
-            raise ControlError(f'seconds {args[1]!r}: not a finite number >= 0')
+        name, seconds = self._request_seconds('ignore', args)
         self.request_faults.ignore(name, seconds)
         return (f'{name} answered but not acted on for {seconds:g} s' if seconds
                 else f'{name} acted on again')

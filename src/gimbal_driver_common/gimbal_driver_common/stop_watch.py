@@ -93,8 +93,11 @@ class StopWatch:
                     episode.due = max(episode.due, now + self.resend_period)
 
     def superseded(self, joints: Iterable[str] | None = None) -> None:
-        """A new motion command owns these joints (None: all): not waited for any more."""
+        """A new motion command owns these joints (None: all): not waited for any more.
+        On the joint_command path: a lock and a look, nothing more while nothing waits."""
         with self._changed:
+            if not self._episodes:
+                return
             for joint in list(self._episodes) if joints is None else joints:
                 self._episodes.pop(joint, None)
             self._changed.notify_all()
