@@ -342,8 +342,8 @@ class GimbalController:
     def stop(self) -> str:
         """~/stop: cancel jogs, moves, scans and queued commands, stop every axis, then
         wait (woken by samples) until every axis is at rest, at most its deceleration
-        time plus ``stop_margin``. Raises naming the axes still moving and what was sent,
-        or the step the device refused though the axes rest."""
+        time plus ``stop_margin``. Raises naming the axes still moving and what was sent;
+        with every axis at rest it answers, naming a step that failed if one did."""
         self._cancel_motion()
         self.require_connected('nothing to stop')
         joints = self.config.joint_names
