@@ -94,10 +94,11 @@ class StopWatch:
 
     def superseded(self, joints: Iterable[str] | None = None) -> None:
         """A new motion command owns these joints (None: all): not waited for any more.
-        On the joint_command path: a lock and a look, nothing more while nothing waits."""
+        On the joint_command path: one look, no lock, while no stop waits (a stop sent
+        meanwhile is newer than this command and stays watched)."""
+        if not self._episodes:
+            return
         with self._changed:
-            if not self._episodes:
-                return
             for joint in list(self._episodes) if joints is None else joints:
                 self._episodes.pop(joint, None)
             self._changed.notify_all()
@@ -105,11 +106,13 @@ class StopWatch:
     # ----------------------------------------------------------- samples
     def observe(self, sample: JointSample, read_at: float) -> None:
         """A sample whose read began at ``read_at`` (the watch's clock): an axis it shows
-        at rest, read after that axis's stop, is confirmed."""
+        at rest, read after that axis's stop, is confirmed. Per sample while no stop
+        waits: one assignment and one look, no lock (a stop sent meanwhile is confirmed by
+        the next sample, which is read after it)."""
+        self._latest = sample
+        if not self._episodes:
+            return
         with self._changed:
-            self._latest = sample
-            if not self._episodes:
-                return
             for joint, episode in list(self._episodes.items()):
                 speed = self._speed(sample, joint)
                 if math.isfinite(speed):
@@ -125,6 +128,8 @@ class StopWatch:
         """The axes to send the whole stop again now (still moving past their time);
         the first time per episode it is logged. The caller sends it and calls
         :meth:`stopped`."""
+        if not self._episodes:  # the housekeeping thread's usual look: no lock
+            return []
         now = self._clock()
         newly: list[tuple[str, StopEpisode]] = []
         found: list[str] = []
