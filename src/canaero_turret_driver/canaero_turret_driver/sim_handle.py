@@ -23,6 +23,8 @@ class CanaeroSimHandle(SimHandle):
                               'sends; its error path is the EED event, injected as fault_bits'}
     far_move = ('yaw', 2.5, 0.2)
     takeover_goal = {'yaw': 0.2, 'pitch': 0.1}
+    stop_requests = ('stop_actuators',)
+    stop_request = 'stop_actuators'
     # preset 0 is the turret's remembered position, recalled (and cleared) as it is
     valid_preset_calls = (('clear_preset', 0), ('goto_preset', 0))
     # node_timeout: the silence that counts as a lost link. The simulator broadcasts from a

@@ -26,6 +26,8 @@ class CaptureSimHandle(SimHandle):
 
     far_move = ('pan', 2.5, 0.1)
     takeover = Takeover.STOPS_ON_CONNECT
+    stop_requests = ('MOT_SetSpeedMode', 'MOT_SetSpeed', 'MOT_Update', 'SCN_StopScan')
+    stop_request = 'MOT_SetSpeed'  # speed 0: a jog's stop
     # clearing an empty slot is a no-op on the device
     valid_preset_calls = (('clear_preset', None),)
     process_test_parameters = {'status_period': 0.5}

@@ -9,10 +9,18 @@ import pytest
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 
 from sensor_msgs.msg import Imu
+from std_srvs.srv import Trigger
 
-from gimbal_driver_testing.conformance import DriverConformance
+from gimbal_driver_testing.conformance import ConformanceRig, DriverConformance
 from gimbal_driver_testing.silent_request_conformance import SilentRequest
+from gimbal_driver_testing.stop_conformance import request_name
 from gimbal_msgs.srv import DeviceCommand
+
+#: s SCN_StopScan is answered late: "Stop scan can take up to 500 milliseconds before
+#: sending ACK" (protocol 4.3.9), a little beyond
+STOP_SCAN_LATE_S = 0.55
+#: the commands that stop a Capture axis in a stop
+AXIS_STOP = ('MOT_SetSpeedMode', 'MOT_SetSpeed', 'MOT_Update')
 
 
 class TestCaptureConformance(DriverConformance):
@@ -41,3 +49,23 @@ class TestCaptureConformance(DriverConformance):
     )
     required_request = ('COM_Connect', 'COM_Connect')
     handshake_request = 'COM_Connect'
+
+    @pytest.mark.ros
+    def test_stop_scan_answered_after_500_ms_still_stops_the_axes(
+            self, rig: ConformanceRig) -> None:
+        """~/stop while SCN_StopScan takes its documented 500 ms: the axes are told to stop
+        first (device motion before scans), they rest, and ~/stop says so."""
+        joint = self.jog[0]
+        with self.device_fault(rig):
+            self.start_jog(rig)
+            rig.sim.delay('SCN_StopScan', STOP_SCAN_LATE_S)
+            mark = rig.sim.mark()
+            reply = rig.ros.call(Trigger, self.srv('stop'), Trigger.Request(), timeout=60.0)
+            self.wait_stopped(rig, joint, 'the axes to rest with SCN_StopScan answered late')
+            names = [request_name(r) for r in rig.sim.requests()[mark:]]
+            assert 'SCN_StopScan' in names, names
+            first_axis_stop = next((i for i, n in enumerate(names) if n in AXIS_STOP), None)
+            assert first_axis_stop is not None, f'the axes were never told to stop: {names}'
+            assert first_axis_stop < names.index('SCN_StopScan'), (
+                f'the scan stop went before the axes were told to stop: {names}')
+            assert reply.success, reply.message

@@ -156,3 +156,23 @@ def test_the_sim_handle_logs_a_muted_command_as_received(tmp_path) -> None:
     finally:
         link.close()
         handle.stop()
+
+
+def test_an_ignored_setter_is_acked_and_not_executed(rig) -> None:
+    simulator, link = rig
+    answer = simulator.control('ignore MOT_SetSpeed 30')
+    assert answer == 'ok MOT_SetSpeed answered but not acted on for 30 s', answer
+    before = count(simulator, 'MOT_SetSpeed')
+    with simulator.model.lock:
+        speed = simulator.model.axes[1].speed or 0.0
+    link.send('MOT_SetSpeed', 1, speed + 7.0)
+    link.send('MOT_GetLoadPosition', 1)
+    assert [link.reply() for _ in range(2)] == ['ACK', 'MOT_GetLoadPosition']
+    assert count(simulator, 'MOT_SetSpeed') == before + 1  # received
+    with simulator.model.lock:
+        assert simulator.model.axes[1].speed == speed  # not executed
+    simulator.control('ignore MOT_SetSpeed 0')
+    link.send('MOT_SetSpeed', 1, speed + 7.0)
+    assert link.reply() == 'ACK'
+    with simulator.model.lock:
+        assert simulator.model.axes[1].speed == speed + 7.0

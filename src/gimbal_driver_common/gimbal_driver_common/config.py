@@ -34,6 +34,10 @@ class ControllerConfig:
     move_timeout: float = 60.0
     #: s before an accepted command that shows no motion is reported (<= 0: never)
     motion_start_timeout: float = 1.0
+    #: rad/s^2 an axis is trusted to brake at after a stop: its speed over this, plus
+    #: ``stop_margin`` s, is how long it may take to rest before the stop is sent again
+    stop_deceleration: float = 0.5
+    stop_margin: float = 0.5
     #: the (pan, tilt) joints a scan sweeps; empty: pan/tilt if named so, else the first two
     scan_joints: Sequence[str] = field(default_factory=tuple)
 

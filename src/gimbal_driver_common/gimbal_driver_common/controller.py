@@ -33,11 +33,18 @@ from typing import TypeVar
 from gimbal_driver_common.command_path import CommandPath
 from gimbal_driver_common.config import ControllerConfig, Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
-from gimbal_driver_common.errors import DeviceRefused, GimbalError, LinkError, device_boundary
+from gimbal_driver_common.errors import (
+    DeviceRefused,
+    EverySteps,
+    GimbalError,
+    LinkError,
+    device_boundary,
+)
 from gimbal_driver_common.joint_command import validate_joint_command
 from gimbal_driver_common.motion_watch import MotionWatch
 from gimbal_driver_common.periodic import Periodic
 from gimbal_driver_common.rejections import CommandRejections
+from gimbal_driver_common.stop_watch import StopWatch
 from gimbal_driver_common.watchdog import JogWatchdog
 
 T = TypeVar('T')
@@ -47,6 +54,10 @@ __all__ = ['ControllerConfig', 'GimbalController', 'LinkState', 'Logger', 'is_mo
 MOVING_SPEED = 1e-3
 #: longest a streamed device's thread waits for data before checking the link again
 STREAM_WAIT_S = 0.05
+#: s between two looks of the housekeeping thread at the stops not yet confirmed
+STOP_CHECK_S = 0.05
+#: s a shutdown waits beyond the deceleration time for the axes to rest before closing
+SHUTDOWN_CONFIRM_S = 1.0
 
 
 class LinkState(enum.Enum):
@@ -76,8 +87,11 @@ class GimbalController:
         on_link_change: Callable[[], None] | None = None, periodic: Periodic | None = None,
         sensors: Periodic | None = None,
         rejections: CommandRejections | None = None,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        """``clock`` times the jog watchdog and the stop confirmation (tests inject one)."""
         self.device = device
+        self.clock = clock
         self.config = config
         self.log = log
         device.attach(config, log, self._show_targets)
@@ -96,6 +110,11 @@ class GimbalController:
         #: accepted commands that show no motion (motion_start_timeout): diagnostics, goals
         self.motion_watch = MotionWatch(lambda: self.config.motion_start_timeout,
                                         lambda: self.config.goal_tolerance, log)
+        #: stops not yet confirmed by the axis (stop_deceleration, stop_margin): resent
+        #: from the housekeeping thread until the axis is at rest; diagnostics, ~/stop
+        self.stop_watch = StopWatch(lambda: self.config.stop_deceleration,
+                                    lambda: self.config.stop_margin, is_moving, log,
+                                    clock=clock)
         self._targets_lock = threading.Lock()
         #: bumped by every stop and halt (:meth:`bump_motion_generation`): a running move
         #: or scan sees it and ends
@@ -103,7 +122,8 @@ class GimbalController:
         #: :meth:`shutdown` began: what a move that ends now was stopped by
         self.shutting_down = False
         self._generation_lock = threading.Lock()
-        self.watchdog = JogWatchdog(config.command_timeout, self._on_jog_expired)
+        self.watchdog = JogWatchdog(config.command_timeout, self._on_jog_expired, clock=clock,
+                                    settled=self.stop_watch.at_rest)
         self.periodic = periodic or Periodic(on_error=log.error)
         #: jobs that do device I/O (sensor topics): never on the watchdog's thread
         self.sensors = sensors or Periodic(on_error=log.error, name='sensors')
@@ -111,6 +131,7 @@ class GimbalController:
         #: configure/cleanup and passes it in)
         self.rejections = rejections or CommandRejections(log)
         self.periodic.add(self._watchdog_period(), self.watchdog.check)
+        self.periodic.add(STOP_CHECK_S, self.confirm_stops)
         self.halt_hooks: list[Callable[[], None]] = []  # stop and halt call these first (policies)
         self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
         self.commands = CommandPath(device, self.rejections, self.record_targets,
@@ -166,6 +187,7 @@ class GimbalController:
         self._close_device()
         self.link_state = LinkState.NOT_CONFIGURED
         self.periodic.remove(self.watchdog.check)
+        self.periodic.remove(self.confirm_stops)
         for _, job in self._background:
             self.sensors.remove(job)
         self._background = []
@@ -175,6 +197,7 @@ class GimbalController:
         self.shutting_down = True  # before the halt: the goals it ends say why
         if self.active:
             self.halt(why)
+            self._confirm_before_close(why)
         self.active = False
         self.close()
 
@@ -185,9 +208,19 @@ class GimbalController:
             return
         try:
             self._stop_device(None)
-            self.log.info(f'{why}: axes stopped')
+            self.log.info(f'{why}: stop sent to every axis')
         except GimbalError as exc:
             self.log.error(f'{why}: stopping the axes failed: {exc}')
+
+    def _confirm_before_close(self, why: str) -> None:
+        """Before the link closes (nothing could send the stop again after it): wait for
+        the axes to rest, the housekeeping thread resending meanwhile; log what did not."""
+        joints = self.config.joint_names
+        timeout = self.stop_watch.settle_time(*joints) + SHUTDOWN_CONFIRM_S
+        moving = self.stop_watch.wait(joints, timeout) if self.connected else []
+        if moving:
+            self.log.error(f'{why}: {self.stop_watch.still_moving(moving)}; closing the '
+                           'link anyway')
 
     # ---------------------------------------------------------- parameters
     def set_publish_rate(self, rate: float) -> None:
@@ -268,6 +301,7 @@ class GimbalController:
             hook()
         self.watchdog.cancel(list(plan.moves) + [j for j, v in plan.jogs.items() if v == 0.0])
         self.watchdog.feed([j for j, v in plan.jogs.items() if v != 0.0])
+        self.stop_watch.superseded(movers)
         self.commands.submit(plan.moves, plan.jogs)
 
     def _send_refusal(self) -> str | None:
@@ -278,6 +312,7 @@ class GimbalController:
         """Position targets sent (by the command path, or by a policy through a device
         capability): ~/status shows them and the motion watch waits for motion."""
         self._show_targets(targets)
+        self.stop_watch.superseded(targets)
         self.motion_watch.commanded(targets)
 
     def _show_targets(self, targets: dict[str, float]) -> None:
@@ -305,18 +340,50 @@ class GimbalController:
         self.record_targets({joint: move[0] for joint, move in moves.items()})
 
     def stop(self) -> str:
-        """~/stop: cancel jogs, moves, scans and queued commands, then stop every axis."""
+        """~/stop: cancel jogs, moves, scans and queued commands, stop every axis, then
+        wait (woken by samples) until every axis is at rest, at most its deceleration
+        time plus ``stop_margin``. Raises naming the axes still moving and what was sent;
+        with every axis at rest it answers, naming a step that failed if one did."""
         self._cancel_motion()
         self.require_connected('nothing to stop')
-        self._stop_device(None)
-        return 'all axes stopped; scans, moves and jogs cancelled'
+        joints = self.config.joint_names
+        timeout = self.stop_watch.settle_time(*joints)
+        failed: GimbalError | None = None
+        try:
+            self._stop_device(None)
+        except GimbalError as exc:
+            failed = exc
+        moving = self.stop_watch.wait(joints, timeout)
+        if moving:
+            sent = f' (the device answered: {failed})' if failed else ''
+            raise DeviceRefused(f'{self.stop_watch.still_moving(moving)}{sent}; the stop is '
+                                'sent again until they rest', reason='stop not confirmed')
+        if failed is not None:
+            return f'all axes stopped and at rest; but a step of the stop failed: {failed}'
+        return 'all axes stopped and at rest; scans, moves and jogs cancelled'
 
     def stop_joints(self, joints: Sequence[str] | None) -> None:
-        """Stop some joints (a cancelled move or homing); logs instead of raising."""
+        """Stop some joints (a cancelled move or homing, the dead-man stop); logs instead
+        of raising: the stop watch sends it again until the axes rest."""
         try:
             self._stop_device(joints)
         except GimbalError as exc:
             self.log.error(f'stop failed: {exc}')
+
+    def confirm_stops(self) -> None:
+        """Housekeeping: send the whole stop again to the axes still moving past their
+        deceleration time (:class:`~gimbal_driver_common.stop_watch.StopWatch`)."""
+        if not self.connected:
+            return
+        due = self.stop_watch.due()
+        if not due:
+            return
+        everything = set(due) >= set(self.config.joint_names)
+        try:
+            self._stop_device(None if everything else due)
+        except GimbalError as exc:
+            if self._throttle('stop resend', 5.0):
+                self.log.error(f'sending the stop again failed: {exc}')
 
     def require_connected(self, what: str) -> None:
         if not self.connected:
@@ -336,14 +403,22 @@ class GimbalController:
         self.bump_motion_generation()
 
     def _stop_device(self, joints: Sequence[str] | None) -> None:
+        """Write every step of the stop, device motion first, then its scans; a step that
+        fails skips no other. Raises after all were sent, with every failure."""
+        steps = EverySteps()
+
         def send() -> None:
+            steps.run(self.device.stop, None if joints is None else list(joints))
             scans = self.device.capabilities.scans
             if scans is not None and joints is None:
-                scans.stop()
-            self.device.stop(None if joints is None else list(joints))
+                steps.run(scans.stop)
 
-        self.commands.send(joints, send, urgent=True)  # ahead of every queued read
-        self.motion_watch.withdraw(joints)
+        self.stop_watch.stopped(self.config.joint_names if joints is None else joints)
+        try:
+            self.commands.send(joints, send, urgent=True)  # ahead of every queued read
+        finally:
+            self.motion_watch.withdraw(joints)
+        steps.raise_errors()
 
     def _on_jog_expired(self, joints: list[str]) -> None:
         self.log.warning(
@@ -376,6 +451,7 @@ class GimbalController:
                 with device_boundary():
                     if not self.device.link_healthy():
                         raise LinkError('the client reports its link is down')
+                    read_at = self.clock()
                     sample = self.device.read()
             except GimbalError as exc:
                 self._on_link_lost(exc)
@@ -383,6 +459,7 @@ class GimbalController:
             if sample is not None and not (self.device.streamed and sample.stamp == last_stamp):
                 self.latest, last_stamp = sample, sample.stamp
                 self.motion_watch.observe(sample)
+                self.stop_watch.observe(sample, read_at)
                 if self.active:
                     self.on_sample(sample)
                     last_publish = time.monotonic()

@@ -9,7 +9,7 @@ carries the device's own reason.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 
@@ -90,3 +90,33 @@ def device_boundary() -> Iterator[None]:
         raise
     except Exception as exc:
         raise as_gimbal_error(exc) from exc
+
+
+class EverySteps:
+    """The steps of a stop: each is tried whatever the one before did (an error or a
+    timeout skips no other step); :meth:`raise_errors` then raises every failure at once.
+    ``with EverySteps() as steps: steps.run(...)`` raises on leaving the block."""
+
+    def __init__(self) -> None:
+        self.errors: list[GimbalError] = []
+
+    def run(self, request: Callable[..., object], *args: object) -> None:
+        try:
+            request(*args)
+        except Exception as exc:  # noqa: BLE001 - collected, raised after every step
+            self.errors.append(as_gimbal_error(exc))
+
+    def raise_errors(self) -> None:
+        """Raise the one failure, or one GimbalError naming them all (the first's reason)."""
+        if len(self.errors) == 1:
+            raise self.errors[0]
+        if self.errors:
+            raise GimbalError('; '.join(map(str, self.errors)),
+                              reason=self.errors[0].reason) from self.errors[0]
+
+    def __enter__(self) -> EverySteps:
+        return self
+
+    def __exit__(self, kind: object, exc: object, traceback: object) -> None:
+        if kind is None:
+            self.raise_errors()

@@ -72,6 +72,7 @@ class GuardedProcedures:
             self._wake.clear()
             self._halted.clear()
             generation = ctl.motion_generation
+            ctl.stop_watch.superseded(procedure.joints)  # the device moves them now
             ctl.call(procedure.start)
             return self._watch(procedure, generation, report, cancelled)
         finally:

@@ -188,6 +188,7 @@ class Motion:
         self._scan_stop.set()
         self.controller.commands.drop(None)
         self.controller.motion_watch.withdraw()
+        self.controller.stop_watch.superseded()  # the new command owns the axes
         return self.controller.bump_motion_generation()
 
     # ---------------------------------------------------------------- homing

@@ -13,17 +13,20 @@ own verbs beside the shared ones. One request line gives one answer line: ``ok``
     ignore_motion on|off        ACK move and jog commands but do not act on them
     mute REQUEST [off]          never answer this request (it is received and dropped)
     delay REQUEST SECONDS       answer this request SECONDS late (0: at once again)
+    ignore REQUEST SECONDS      for SECONDS, answer this request as the device does but do
+                                not act on it (stops and motion messages too; 0: act again)
     clear                       remove every injected fault (silence, NACKs, fault bits,
-                                ignore_motion, mute, delay)
+                                ignore_motion, mute, delay, ignore)
     state                       ok {JSON}: "axes" and the device's own fields
     help                        the verbs of this simulator
     quit                        stop the simulator process
 
 A device without NACKs or a fault register answers ``nack``/``fault`` with an error that
-says why. ``mute``/``delay`` take the device's own request names (the simulator gives them
-through ``request_names``; an unknown one is answered with the list) and set the
+says why. ``mute``/``delay``/``ignore`` take the device's own request names (the
+simulator gives them through ``request_names``; an unknown one is answered with the list)
+and set the
 :class:`~gimbal_driver_common.sim_requests.RequestFaults` the simulator consults
-(``request_faults``); ``state`` shows them as ``muted`` and ``delayed``.
+(``request_faults``); ``state`` shows them as ``muted``, ``delayed`` and ``ignored``.
 
 The same :meth:`SimControl.execute` serves the programmatic API, the stdin console and the
 TCP console on 127.0.0.1 (:class:`ControlServer`). Each simulator's
@@ -124,9 +127,9 @@ class SimControl:
     on_quit: Callable[[], None] | None = None
     #: the simulator's axis models, for ``ignore_motion`` (None: the verb is refused)
     axes: Callable[[], Iterable[AxisMotion]] | None = None
-    #: the device's request names ``mute``/``delay`` take (None: the verbs are refused)
+    #: the device's request names ``mute``/``delay``/``ignore`` take (None: refused)
     request_names: Callable[[], Iterable[str]] | None = None
-    #: what the simulator consults where it answers a request (``mute``, ``delay``)
+    #: what the simulator consults where it answers a request (mute, delay, ignore)
     request_faults: RequestFaults = field(default_factory=RequestFaults)
     seed: int = 1
     verbs: dict[str, Verb] = field(default_factory=dict)
@@ -144,6 +147,7 @@ class SimControl:
             'ignore_motion': Verb(self._ignore_motion, 'ignore_motion on|off'),
             'mute': Verb(self._mute, 'mute REQUEST [off]'),
             'delay': Verb(self._delay, 'delay REQUEST SECONDS'),
+            'ignore': Verb(self._ignore, 'ignore REQUEST SECONDS'),
             'clear': Verb(self._clear, 'clear'),
             'state': Verb(self._state, 'state'),
             'help': Verb(self._help, 'help'),
@@ -255,15 +259,27 @@ class SimControl:
         self.request_faults.mute(name, muted)
         return f'{name} {"never answered" if muted else "answered"}'
 
-    def _delay(self, args: list[str]) -> str:
-        name = self._request('delay', args, 'delay REQUEST SECONDS')
+    def _request_seconds(self, verb: str, args: list[str]) -> tuple[str, float]:
+        """``REQUEST SECONDS`` of ``delay`` and ``ignore``: the device's name, seconds >= 0."""
+        usage = f'{verb} REQUEST SECONDS'
+        name = self._request(verb, args, usage)
         if len(args) != 2:
-            raise ControlError('usage: delay REQUEST SECONDS')
+            raise ControlError(f'usage: {usage}')
         seconds = float(args[1])
         if not (math.isfinite(seconds) and seconds >= 0.0):
             raise ControlError(f'seconds {args[1]!r}: not a finite number >= 0')
+        return name, seconds
+
+    def _delay(self, args: list[str]) -> str:
+        name, seconds = self._request_seconds('delay', args)
         self.request_faults.delay(name, seconds)
         return f'{name} answered {seconds:g} s late' if seconds else f'{name} answered at once'
+
+    def _ignore(self, args: list[str]) -> str:
+        name, seconds = self._request_seconds('ignore', args)
+        self.request_faults.ignore(name, seconds)
+        return (f'{name} answered but not acted on for {seconds:g} s' if seconds
+                else f'{name} acted on again')
 
     def _clear(self, args: list[str]) -> None:
         self.request_faults.clear()

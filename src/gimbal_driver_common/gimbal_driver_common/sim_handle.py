@@ -22,7 +22,7 @@ back, the device answers again); the soak times joint_states from that moment. T
 faults (link drop, silence, garbage) go through the simulator's control protocol
 (:mod:`gimbal_driver_common.sim_control`, :meth:`SimHandle.control`), the same verbs its
 console and TCP control port take; so do the request faults :meth:`SimHandle.mute`,
-:meth:`SimHandle.delay` and :meth:`SimHandle.clear`. ``link``
+:meth:`SimHandle.delay`, :meth:`SimHandle.ignore` and :meth:`SimHandle.clear`. ``link``
 marks faults that interrupt joint_states (link drop, silence, restart). Faults a protocol
 cannot carry are listed in ``not_applicable`` with the reason.
 """
@@ -108,6 +108,10 @@ class SimHandle:
     valid_preset_calls: tuple[tuple[str, int | None], ...] = ()
     #: node parameters that replace the spec's with ``process_tests`` (None: leave it unset)
     process_test_parameters: Mapping[str, Any] = {}
+    #: the device's names (as ``mute``/``delay``/``ignore`` take them) of every message a
+    #: stop sends, and the one among them that stops a jogging axis (the stop conformance)
+    stop_requests: tuple[str, ...] = ()
+    stop_request: str = ''
 
     def __init__(self, spec: DriverSpec, workdir: Path, process_tests: bool = False) -> None:
         self.spec = spec
@@ -253,8 +257,13 @@ class SimHandle:
         """Answer ``request`` ``seconds`` late; other requests are answered at once."""
         self.control(f'delay {request} {seconds!r}')
 
+    def ignore(self, request: str, seconds: float) -> None:
+        """For ``seconds``, answer ``request`` as the device does but do not act on it (a
+        stop or motion message the device drops)."""
+        self.control(f'ignore {request} {seconds!r}')
+
     def clear(self) -> None:
-        """Remove every injected fault (mutes and delays included): the ``clear`` verb."""
+        """Remove every injected fault (mutes, delays and ignores included): ``clear``."""
         self.control('clear')
 
     def link_drop(self, rng: random.Random) -> None:

@@ -1,4 +1,5 @@
-"""The request faults of every simulator: ``mute <request>`` and ``delay <request> <seconds>``.
+"""The request faults of every simulator: ``mute <request>``, ``delay <request> <seconds>``
+and ``ignore <request> <seconds>``.
 
 A device in the field can leave one kind of request unanswered (an IMU not fitted, firmware
 that drops a request it cannot serve, a sensor board that hangs) or answer it late while it
@@ -8,6 +9,10 @@ simulator consults it where it decides how to answer a request:
 
 * muted: the request is read off the link and logged as received, then dropped: the device
   does not act on it and never answers it;
+* ignored (for a time): the request is received, logged and answered as the device answers
+  it (an ACK, an OK line; nothing where the protocol answers nothing) but not acted on:
+  a stop or a motion message the device dropped (a controller busy with something else, a
+  CAN frame it missed, a corrupted serial packet). It ends by itself after its seconds;
 * delayed: the request is executed when it arrives and its reply (data, ACK, NACK, error:
   whatever the device answers) is held in the link's :class:`LateReplies` and written by the
   link's own writer when due, so the replies to other requests go out at once meanwhile and
@@ -32,13 +37,17 @@ T = TypeVar('T')
 
 
 class RequestFaults:
-    """Which requests go unanswered (muted) or are answered late (delayed); thread-safe:
+    """Which requests go unanswered (muted), are answered late (delayed) or answered and
+    not acted on (ignored, for a time); thread-safe:
     the control console writes, the link threads read."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
         self._lock = threading.Lock()
         self._muted: set[str] = set()
         self._delays: dict[str, float] = {}
+        #: name -> until when (the clock's time) it is taken and not acted on
+        self._ignored: dict[str, float] = {}
 
     def mute(self, name: str, muted: bool = True) -> None:
         """Never answer ``name`` (``muted=False``: answer it again); a mute replaces a delay."""
@@ -60,10 +69,32 @@ class RequestFaults:
             else:
                 self._delays.pop(name, None)
 
+    def ignore(self, name: str, seconds: float) -> None:
+        """Take ``name`` and answer it, but do not act on it, for ``seconds`` (0: act again)."""
+        if not (math.isfinite(seconds) and seconds >= 0.0):
+            raise ValueError(f'ignore {seconds!r}: not a finite number of seconds >= 0')
+        with self._lock:
+            if seconds > 0.0:
+                self._ignored[name] = self._clock() + seconds
+            else:
+                self._ignored.pop(name, None)
+
+    def ignored(self, name: str) -> bool:
+        """True while ``name`` is to be answered but not acted on."""
+        with self._lock:
+            until = self._ignored.get(name)
+            if until is None:
+                return False
+            if self._clock() < until:
+                return True
+            del self._ignored[name]
+            return False
+
     def clear(self) -> None:
         with self._lock:
             self._muted.clear()
             self._delays.clear()
+            self._ignored.clear()
 
     def muted(self, name: str) -> bool:
         with self._lock:
@@ -75,9 +106,14 @@ class RequestFaults:
             return self._delays.get(name, 0.0)
 
     def snapshot(self) -> dict[str, object]:
-        """For the ``state`` answer: ``muted`` (names) and ``delayed`` (name -> seconds)."""
+        """For the ``state`` answer: ``muted`` (names), ``delayed`` (name -> seconds) and
+        ``ignored`` (name -> seconds left)."""
         with self._lock:
-            return {'muted': sorted(self._muted), 'delayed': dict(sorted(self._delays.items()))}
+            now = self._clock()
+            ignored = {n: round(until - now, 3) for n, until in sorted(self._ignored.items())
+                       if until > now}
+            return {'muted': sorted(self._muted), 'delayed': dict(sorted(self._delays.items())),
+                    'ignored': ignored}
 
 
 class LateReplies(Generic[T]):

@@ -127,3 +127,30 @@ def test_late_replies_come_out_when_due_in_order() -> None:
     clock.now += 0.125
     assert late.due() == [b'a1', b'a2', b'c']
     assert len(late) == 0 and late.due(clock.now + 10) == []
+
+
+def test_ignore_takes_a_request_without_acting_on_it_for_its_seconds() -> None:
+    clock = ManualClock()
+    control = SimControl('test_sim', lambda: {'axes': {}}, request_names=lambda: NAMES,
+                         request_faults=RequestFaults(clock=clock))
+    faults = control.request_faults
+    assert control.execute('ignore reset 1.3') == 'ok RESET answered but not acted on for 1.3 s'
+    assert faults.ignored('RESET') and not faults.ignored('IMU_GetRoll')
+    assert not faults.muted('RESET') and faults.delay_of('RESET') == 0.0  # still answered
+    assert state_of(control)['ignored'] == {'RESET': 1.3}
+    clock.now += 1.2
+    assert faults.ignored('RESET')
+    clock.now += 0.2
+    assert not faults.ignored('RESET')  # ends by itself
+    assert state_of(control)['ignored'] == {}
+
+
+def test_ignore_zero_and_clear_act_on_the_request_again(control) -> None:
+    control.execute('ignore RESET 100')
+    assert control.execute('ignore RESET 0') == 'ok RESET acted on again'
+    assert not control.request_faults.ignored('RESET')
+    control.execute('ignore RESET 100')
+    control.execute('clear')
+    assert not control.request_faults.ignored('RESET')
+    for bad in ('ignore RESET', 'ignore RESET -1', 'ignore RESET nan', 'ignore NOPE 1'):
+        assert control.execute(bad).startswith('error ignore'), bad

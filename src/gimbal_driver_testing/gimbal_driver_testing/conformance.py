@@ -40,6 +40,7 @@ from gimbal_driver_testing.log_conformance import LogConformance
 from gimbal_driver_testing.motion_start_conformance import MotionStartConformance
 from gimbal_driver_testing.restart_conformance import RestartConformance
 from gimbal_driver_testing.silent_request_conformance import SilentRequestConformance
+from gimbal_driver_testing.stop_conformance import StopConformance
 from gimbal_driver_testing.topic_system_conformance import TopicInterfaceConformance
 from gimbal_msgs.action import Home, MoveTo
 from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, StartScan
@@ -51,7 +52,8 @@ REJECTED_BURSTS = 6
 
 
 class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionStartConformance,
-                        LogConformance, DiagnosticsConformance, SilentRequestConformance):
+                        LogConformance, DiagnosticsConformance, SilentRequestConformance,
+                        StopConformance):
     """The common contract of every gimbal driver node, tested through the real transport.
 
     Subclasses set the attributes below; the package, node and simulator come from the

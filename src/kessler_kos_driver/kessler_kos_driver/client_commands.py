@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 from typing import Protocol
 
+from gimbal_driver_common.errors import EverySteps
+
 from .client_state import KosState, calibrated_key
 from .client_types import CommandRejected, DeviceTimeout, MotorState
 from .protocol import (
@@ -123,12 +125,15 @@ class KosCommands:
                                                motor.max_acceleration))
 
     def stop_all(self) -> None:
-        """StopPlayback (stops every motor immediately) and speed 0 for each motor."""
-        self.send(StopPlayback())
+        """Speed 0 for each motor, then StopPlayback (which also stops every motor): every
+        message is written whatever the one before did; the failures are raised after."""
+        steps = EverySteps()
         for address, motor in list(self._state.motors.items()):
             if motor.online:
-                self.send(SetPositionSpeedAcceleration(address, motor.position, 0.0,
-                                                       motor.max_acceleration))
+                steps.run(self.send, SetPositionSpeedAcceleration(
+                    address, motor.position, 0.0, motor.max_acceleration))
+        steps.run(self.send, StopPlayback())
+        steps.raise_errors()
 
     def take_picture(self, exposure: float = 0.0) -> None:
         if not math.isfinite(exposure) or exposure < 0:

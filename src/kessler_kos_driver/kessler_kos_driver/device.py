@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves, PostedWrite
-from gimbal_driver_common.errors import DeviceRefused, InvalidRequest
+from gimbal_driver_common.errors import DeviceRefused, EverySteps, InvalidRequest
 from gimbal_driver_common.joint_command import JointLimits
 
 from .client import KosClient, MotorState, NotConnected
@@ -328,10 +328,11 @@ class KosDevice(Device):
         if joints is None:
             client.commands.stop_all()
             return
-        for name in joints:
-            motor = client.motors.get(self.joints[name].address)
-            if motor is not None and motor.online:
-                client.commands.stop_motor(motor.address)
+        with EverySteps() as steps:  # one motor's failed write skips no other
+            for name in joints:
+                motor = client.motors.get(self.joints[name].address)
+                if motor is not None and motor.online:
+                    steps.run(client.commands.stop_motor, motor.address)
 
     def reset_faults(self) -> str:
         """kOS has no fault-clear command: clear the latched errors and re-read MotorInfo."""

@@ -25,6 +25,8 @@ class KesslerSimHandle(SimHandle):
     #: (0.8 rotations/s) lasts about a minute of simulated time
     far_move = ('pan', 3.0, 0.05)
     takeover_goal = {'pan': 0.3, 'tilt': 0.2}
+    stop_requests = ('SetPositionSpeedAcceleration', 'StopPlayback')
+    stop_request = 'SetPositionSpeedAcceleration'  # speed 0 at the current position
     READS = ('UserPassword', 'DevicePassword')
     #: the simulator's time scale with ``process_tests`` (their moves settle sooner)
     PROCESS_TESTS_TIME_SCALE = 2.0

@@ -276,6 +276,26 @@ def test_stop_halts_a_move(rig):
     assert rig.motor_position('slider') < 900.0 / TWO_PI - 1.0
 
 
+@pytest.mark.parametrize('joints', [None, ['slider', 'pan', 'tilt']])
+def test_a_stop_writes_every_motor_whatever_one_write_does(rig, monkeypatch, joints):
+    commands = rig.client.commands
+    real, sent = commands.send, []
+
+    def send(message):
+        sent.append(type(message).__name__)
+        if len(sent) == 1:
+            raise OSError('write failed')  # the first motor's stop does not go out
+        real(message)
+
+    monkeypatch.setattr(commands, 'send', send)
+    with pytest.raises(GimbalError, match='write failed'):
+        rig.device.stop(joints)
+    # every other motor's stop still went out, device motion before the program's stop
+    expected = ['SetPositionSpeedAcceleration'] * 3 + (['StopPlayback'] if joints is None
+                                                       else [])
+    assert sent == expected
+
+
 def test_refusal_reasons_in_si_and_nothing_sent(rig):
     ctl = rig.controller
     before, received = rig.motor_commands(), len(rig.received)

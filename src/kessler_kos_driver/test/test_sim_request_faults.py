@@ -109,10 +109,11 @@ def test_clear_restores_every_answer(tcp) -> None:
 
 def test_an_unknown_message_name_is_refused_with_the_requests(tcp) -> None:
     simulator, _ = tcp
-    assert simulator.command('mute SetPositionSpeedAcceleration') == (
-        "error mute: unknown request 'SetPositionSpeedAcceleration'; known: GetDeviceGuid, "
+    assert simulator.command('mute TakePicture') == (
+        "error mute: unknown request 'TakePicture'; known: GetDeviceGuid, "
         'GetDeviceInfo, GetLedStatus, GetMotorInfo, GetNetworkInfo, GetSoftwareId, '
-        'GetTrajectoryData')
+        'GetTrajectoryData, RapidToFirstKeyFrame, SetPositionSpeedAcceleration, '
+        'StartPlayback, StopPlayback')
 
 
 def test_a_delayed_answer_comes_late_over_usb_too() -> None:

@@ -114,9 +114,9 @@ def test_clear_restores_every_answer(rig) -> None:
 
 def test_an_unknown_packet_name_is_refused_with_the_requests(rig) -> None:
     sim, _ = rig
-    assert sim.command('mute SetAngles') == (
-        "error mute: unknown request 'SetAngles'; known: AntennaPositionRequest, "
-        'TelemetryRateRequest, VersionRequest')
+    assert sim.command('mute SetZoomTurbo') == (
+        "error mute: unknown request 'SetZoomTurbo'; known: AntennaPositionRequest, "
+        'SetAngles, SetMode, SetRates, TelemetryRateRequest, VersionRequest')
 
 
 def test_the_sim_handle_logs_a_muted_request_as_received(tmp_path) -> None:

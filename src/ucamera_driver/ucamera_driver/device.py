@@ -33,7 +33,9 @@ the previous step), so the speed holds at any telemetry rate.
 "Moving": the gimbal reports its *actual* axis rates (5.5.3.4), which on a
 stabilised gimbal in flight follow the airframe even while it holds a
 direction. So the adapter sets the moving bit from what the driver commanded:
-in rates mode a non-zero commanded rate; in angles mode a running set-point
+in rates mode a non-zero commanded rate, and after a stop the reported rate
+until it first falls under ``STOP_RATE`` (so the axis confirms the stop: a
+SetRates the gimbal dropped reads moving); in angles mode a running set-point
 ramp or a reported angle farther than ``goal_tolerance`` from the set-point.
 In modes the gimbal drives itself (stow, pilot, init, autoalign, FFC) it sets
 no bit, and the controller's one rule (reported speed) applies.
@@ -59,6 +61,9 @@ from .device_functions import UCameraFunctions
 from .protocol import AnglesReport, GimbalMode, GimbalType, GpsFeed, Packet
 
 LOG = logging.getLogger(__name__)
+#: rad/s: after a stop in rates mode an axis reads moving while its reported rate is above
+#: this (a stabilised gimbal in calm flight holds its direction well under it)
+STOP_RATE = 0.02
 
 
 @dataclass
@@ -118,6 +123,9 @@ class UCameraDevice(Device):
         self._ramp: dict[str, tuple[float, float]] = {}  # joint -> (target, speed)
         self._ramp_time = 0.0
         self._jog_rates: dict[str, float] = {}
+        #: joints stopped in rates mode whose reported rate has not fallen under
+        #: STOP_RATE since: they read moving until it does (the axis confirms the stop)
+        self._braking: set[str] = set()
         self._rates_check_pending = False
         self.functions = UCameraFunctions(self.client, settings, axes=self)
         self.capabilities.homing = PilotHoming(self)
@@ -232,16 +240,24 @@ class UCameraDevice(Device):
         if state.pan is None or state.tilt is None:
             return None
         positions = self.from_device(state.pan, state.tilt)
+        rates = self.from_device(state.pan_rate or 0.0, state.tilt_rate or 0.0)
         return JointSample(
-            positions=positions,
-            velocities=self.from_device(state.pan_rate or 0.0, state.tilt_rate or 0.0),
-            stamp=state.angles_time, moving=self._moving_bits(positions, state.mode))
+            positions=positions, velocities=rates,
+            stamp=state.angles_time, moving=self._moving_bits(positions, rates, state.mode))
 
-    def _moving_bits(self, positions: dict[str, float], mode: int | None) -> dict[str, bool]:
-        """From what the driver commanded (see the module docstring)."""
+    def _moving_bits(self, positions: dict[str, float], rates: dict[str, float],
+                     mode: int | None) -> dict[str, bool]:
+        """From what the driver commanded (see the module docstring); after a stop in rates
+        mode, from the reported rate until it first falls under STOP_RATE."""
         with self._lock:
             if self._jog_rates and mode == GimbalMode.RATES:
-                return {name: rate != 0.0 for name, rate in self._jog_rates.items()}
+                bits = {}
+                for name, rate in self._jog_rates.items():
+                    braking = name in self._braking and abs(rates.get(name, 0.0)) > STOP_RATE
+                    if not braking:
+                        self._braking.discard(name)
+                    bits[name] = rate != 0.0 or braking
+                return bits
             if self._setpoint and mode == GimbalMode.ANGLES:
                 band = self.tolerance()
                 return {name: name in self._ramp or abs(positions[name] - target) > band
@@ -295,6 +311,8 @@ class UCameraDevice(Device):
             for name in self.joint_names:
                 self._jog_rates.setdefault(name, 0.0)
             self._jog_rates.update(velocities)
+            for name, velocity in velocities.items():  # a zero jog is that axis' stop
+                (self._braking.add if velocity == 0.0 else self._braking.discard)(name)
             self._setpoint.clear()
             self.client.set_rates(*self.to_device(self._jog_rates))
 
@@ -304,12 +322,14 @@ class UCameraDevice(Device):
             if joints is not None and self._jog_rates and set(joints) != set(self.joint_names):
                 for name in joints:  # expired jog of some joints: zero only those rates
                     self._jog_rates[name] = 0.0
+                    self._braking.add(name)
                 self.client.set_rates(*self.to_device(self._jog_rates))
                 return
             self._forget_motion()
             self.client.hold()
             if self.client.desired_mode == GimbalMode.RATES:
                 self._jog_rates = dict.fromkeys(self.joint_names, 0.0)
+                self._braking = set(self.joint_names)
             else:
                 state = self.client.state()
                 self._setpoint = self.from_device(state.pan or 0.0, state.tilt or 0.0)
@@ -328,6 +348,7 @@ class UCameraDevice(Device):
         with self._lock:
             self._ramp.clear()
             self._jog_rates.clear()
+            self._braking.clear()
             self._setpoint.clear()
 
     def _current_positions(self) -> dict[str, float]:

@@ -26,6 +26,8 @@ class UCameraSimHandle(SimHandle):
     }
     far_move = ('pan', 2.5, 0.2)
     takeover = Takeover.STOPS_WITH_NODE
+    stop_requests = ('SetRates', 'SetAngles')
+    stop_request = 'SetRates'  # zero rates: a jog's stop
     process_test_parameters = {'silence_timeout': 0.5}
     MOTION = ('SetMode', 'SetAngles', 'SetRates')
 

@@ -105,3 +105,28 @@ def test_the_console_names_the_request_verbs(sim) -> None:
                       'RESET, STOP')
     assert '(requests: GET, HOME, ID, JOG, MOVE, RESET, STOP)' in \
         handle.controls().execute('help')
+
+
+def test_an_ignored_stop_is_answered_ok_and_not_acted_on_until_its_time_ends(sim) -> None:
+    handle, link = sim
+    link.send('JOG pan 0.3')
+    assert link.reply()[0] == 'OK'
+    wait_for(lambda: handle.moving('pan'), 10.0, 'pan jogging')
+    handle.ignore('STOP', 0.5)
+    link.send('STOP pan')
+    assert link.reply()[0] == 'OK'  # answered as always
+    assert handle.moving('pan')  # and not acted on
+    assert handle.requests()[-1] == 'STOP pan'  # received
+    wait_for(lambda: not handle.controls().request_faults.ignored('STOP'), 10.0,
+             'the ignore to end')
+    link.send('STOP pan')
+    assert link.reply()[0] == 'OK'
+    wait_for(lambda: not handle.moving('pan'), 10.0, 'pan at rest')
+
+
+def test_a_delay_beyond_the_request_timeout_still_answers(sim) -> None:
+    handle, link = sim
+    handle.delay('STOP', 1.5)  # beyond the client's request_timeout
+    sent = link.send('STOP')
+    reply, arrived = link.reply()
+    assert reply == 'OK' and arrived - sent >= 1.5

@@ -3,8 +3,9 @@
 It answers the line protocol of :mod:`virtual_gimbal_driver.protocol`. Motion runs on the
 shared trapezoidal axis model (``sim_motion.AxisMotion``); the simulator is driven by the
 shared control verbs (``sim_control``: drop, silence, garbage, ``nack`` = ERR replies,
-``fault overtemp|BITS``, ignore_motion, ``mute VERB``, ``delay VERB SECONDS``, clear, state,
-quit); ``mute``/``delay`` take the request verbs of :data:`REQUESTS`.
+``fault overtemp|BITS``, ignore_motion, ``mute VERB``, ``delay VERB SECONDS``, ``ignore VERB
+SECONDS``, clear, state, quit); ``mute``/``delay``/``ignore`` take the request verbs of
+:data:`REQUESTS` (an ignored MOVE, JOG, STOP, HOME or RESET is answered OK, not acted on).
 """
 
 from __future__ import annotations
@@ -20,13 +21,13 @@ from gimbal_driver_common.sim_motion import AxisMotion
 from gimbal_driver_common.sim_requests import LateReplies, RequestFaults
 from gimbal_driver_common.sim_server import TcpSimServer
 
-from .protocol import FAULT_NAMES, JOINTS, format_position, split_tag, tagged, verb
+from .protocol import FAULT_NAMES, JOINTS, READS, format_position, split_tag, tagged, verb
 
 DEFAULT_SPEED = 0.8  # rad/s
 #: rad/s^2, accelerating and braking: DEFAULT_SPEED in 0.1 s, so moves keep nearly the
 #: timing of the earlier constant-speed model (an invented device: no spec to follow)
 DEFAULT_ACCELERATION = 8.0
-#: the request verbs of the line protocol (``mute``/``delay`` take them)
+#: the request verbs of the line protocol (``mute``/``delay``/``ignore`` take them)
 REQUESTS = ('ID', 'GET', 'MOVE', 'JOG', 'STOP', 'HOME', 'RESET')
 
 
@@ -61,6 +62,8 @@ class VirtualGimbal:
                 return 'ERR empty request'
             if self.request_faults.muted(command):
                 return None
+            if command not in READS and self.request_faults.ignored(command):
+                return 'OK'  # ignore: answered as always, not acted on
             refused = self._injected_nack(command)
             if refused:
                 return refused

@@ -23,6 +23,8 @@ class VirtualGimbalSim(SimHandle):
                 'would be a framing fault (covered by garbage/malformed)',
         'lost_frames': 'one reply per request over TCP; a lost reply is a silence (covered)',
     }
+    stop_requests = ('STOP',)
+    stop_request = 'STOP'
 
     def __init__(self, spec: DriverSpec, workdir: Path, process_tests: bool = False) -> None:
         super().__init__(spec, workdir, process_tests)

@@ -75,7 +75,8 @@ def make_control(simulator: TurretSimulator, link: Link | None = None) -> SimCon
         no_nack="CANaerospace services have no negative acknowledge the turret sends; its "
                 "error path is the EED event (fault, eed)",
         fault=fault, fault_names=FAULT_NAMES, clear_device=simulator.clear_faults,
-        axes=lambda: simulator.axes.values(), request_names=lambda: REQUESTS,
+        axes=lambda: simulator.axes.values(),
+        request_names=lambda: REQUESTS + tuple(simulator.command_names()),
         request_faults=simulator.request_faults)
     control.add_verb("node_silence", node_silence,
                      "node_silence NODE|all [on|off|SECONDS] "

@@ -7,6 +7,8 @@ import math
 from collections.abc import Callable, Iterable
 from typing import SupportsInt
 
+from gimbal_driver_common.sim_requests import RequestFaults
+
 from ..protocol import nodeservice as ns
 from ..protocol.datatypes import DataType
 from ..protocol.identifiers import (
@@ -57,6 +59,7 @@ class CommandHandlers:
     memories: dict[int, Memory]
     _table: dict[int, Identifier]
     _handlers: dict[str, Callable[[object], None]]
+    request_faults: RequestFaults
     _intervals: dict[int, int]
     _next_due: dict[int, float]
     _cover_target: int | None
@@ -77,9 +80,16 @@ class CommandHandlers:
         self.received_commands.append((key, value))
         if self._is_silent(self.config.turret_node_id, self._clock()) and key != "cover_control":
             return
+        if self.request_faults.muted(key) or self.request_faults.ignored(key):
+            return  # mute/ignore: received, not acted on (a command frame has no answer)
         handler = self._handlers.get(key)
         if handler is not None:
             handler(value)
+
+    def command_names(self) -> list[str]:
+        """The command keys ``mute``/``ignore`` take besides the node services (a command
+        frame has no answer: ``delay`` of one holds nothing)."""
+        return sorted(self._handlers)
 
     def _command_handlers(self) -> dict[str, Callable[[object], None]]:
         """Command key -> handler: the turret's commands as a table (ICD 6, 7)."""

@@ -317,6 +317,9 @@ class PedestalModel(CommandHandlers):
             command = BY_OPCODE.get(frame.opcode)
             if command is not None and self.request_faults.muted(command.name):
                 return b''  # mute: received and dropped, never executed or answered
+            if command is not None and command.ret is DataType.NONE and \
+                    self.request_faults.ignored(command.name):
+                return bytes([ReplyCode.ACK])  # ignore: ACKed as always, not executed
             if self.nack_all is not None:
                 self.protocol_error = f'injected NACK 0x{int(self.nack_all):02X}'
                 return bytes([self.nack_all])

@@ -92,6 +92,8 @@ class GimbalDriverNode(LifecycleNode):
     DEFAULT_VELOCITY_MAX: Sequence[float] = (1.0, 1.0)
     #: default ``publish_rate`` (docs/interface.md says 50 Hz)
     DEFAULT_PUBLISH_RATE = 50.0
+    #: default ``stop_deceleration`` (rad/s^2): the gentlest braking of this device's axes
+    DEFAULT_STOP_DECELERATION = 0.5
     #: the (pan, tilt) joints a scan sweeps; None: `pan`/`tilt` if named so, else the first two
     SCAN_JOINTS: tuple[str, str] | None = None
     #: patterns the driver-side scan offers (a device's own scans come from its capability)
@@ -112,6 +114,8 @@ class GimbalDriverNode(LifecycleNode):
     goal_tolerance: float
     move_timeout: float
     motion_start_timeout: float
+    stop_deceleration: float
+    stop_margin: float
     autostart: bool
 
     def __init__(self, node_name: str, **kwargs: Any) -> None:  # rclpy Node's keywords
@@ -307,7 +311,7 @@ class GimbalDriverNode(LifecycleNode):
         self.runtime_parameter('diagnostics_period', set_diagnostics_period)
         self.runtime_parameter('command_timeout', set_command_timeout)
         for name in ('reconnect_period', 'goal_tolerance', 'move_timeout',
-                     'motion_start_timeout'):
+                     'motion_start_timeout', 'stop_deceleration', 'stop_margin'):
             self.runtime_parameter(name, set_config(name))
         limit_names = ('position_min', 'position_max', 'velocity_max')
         for name in limit_names:

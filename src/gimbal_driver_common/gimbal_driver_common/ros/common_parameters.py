@@ -69,6 +69,15 @@ def declare_common_parameters(node: Any) -> ControllerConfig:
         node, 'motion_start_timeout', 1.0,
         's: an accepted move or jog whose axis shows no motion for this long is reported '
         '(diagnostics WARN, a running goal ends); <= 0 disables', value_range=(-1.0, 600.0))
+    node.stop_deceleration = declare(
+        node, 'stop_deceleration', float(node.DEFAULT_STOP_DECELERATION),
+        'rad/s^2 (m/s^2) every axis brakes at, at least, after a stop: its speed over this '
+        'plus stop_margin is how long it may take to rest before the stop is sent again',
+        value_range=(1e-3, 1000.0))
+    node.stop_margin = declare(
+        node, 'stop_margin', 0.5,
+        's an axis may take beyond its braking time to confirm a stop (at rest)',
+        value_range=(0.05, 60.0))
     node.autostart = declare(node, 'autostart', True,
                              'walk the lifecycle to active by itself (false for managed bring-up)')
     return ControllerConfig(
@@ -76,4 +85,5 @@ def declare_common_parameters(node: Any) -> ControllerConfig:
         publish_rate=node.publish_rate, command_timeout=node.command_timeout,
         reconnect_period=node.reconnect_period, goal_tolerance=node.goal_tolerance,
         move_timeout=node.move_timeout, motion_start_timeout=node.motion_start_timeout,
+        stop_deceleration=node.stop_deceleration, stop_margin=node.stop_margin,
         scan_joints=tuple(node.SCAN_JOINTS or ()))

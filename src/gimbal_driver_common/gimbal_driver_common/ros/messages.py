@@ -71,8 +71,9 @@ def diagnostic_parts(
 def with_axis_parts(parts: list[StatusPart], ctl: GimbalController,
                     joint_names: list[str]) -> list[StatusPart]:
     """One status per axis (the contract), and an axis the motion watch found commanded but
-    not moving reads WARN in it. A device that reports no part of its own for an axis gets
-    one from what the controller knows (OK unless the watch says otherwise)."""
+    not moving reads WARN in it, one whose stop the axis does not confirm ERROR. A device
+    that reports no part of its own for an axis gets one from what the controller knows
+    (OK unless a watch says otherwise)."""
     by_name = {part.part: part for part in parts}
     for joint in joint_names:
         if joint not in by_name:
@@ -91,6 +92,14 @@ def with_axis_parts(parts: list[StatusPart], ctl: GimbalController,
                        ('commanded', 'jog' if episode.target is None
                         else f'{episode.target:.4f}'),
                        ('position', f'{episode.position:.4f}'), *part.values]
+    for joint, stop in ctl.stop_watch.unconfirmed().items():
+        part = by_name.get(joint)
+        if part is None:
+            continue
+        reason = stop.describe()
+        part.message = reason if part.level == Level.OK else f'{reason}; {part.message}'
+        part.level = max(part.level, Level.ERROR)
+        part.values = [('stop', 'not confirmed'), ('stops_sent', str(stop.sent)), *part.values]
     return parts
 
 

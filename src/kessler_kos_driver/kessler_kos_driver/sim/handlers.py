@@ -59,10 +59,13 @@ if TYPE_CHECKING:
 
 LOG = logging.getLogger('kessler_kos_sim')
 
-#: the client messages the device answers (``mute``/``delay`` take these names)
+#: the client messages the device answers, and the motion messages it acts on without an
+#: answer (``mute``/``delay``/``ignore`` take these names; a delay of an unanswered
+#: message holds nothing)
 REQUESTS = tuple(message.__name__ for message in (
     GetDeviceGuid, GetDeviceInfo, GetLedStatus, GetMotorInfo, GetNetworkInfo, GetSoftwareId,
-    GetTrajectoryData))
+    GetTrajectoryData, SetPositionSpeedAcceleration, StopPlayback, StartPlayback,
+    RapidToFirstKeyFrame))
 
 
 class _StartHoming(Protocol):
@@ -102,6 +105,9 @@ class MessageHandlers:
         self.frames_received += 1
         if self.request_faults.muted(type(message).__name__):
             return  # mute: received and dropped, never acted on or answered
+        if self.request_faults.ignored(type(message).__name__) and \
+                not type(message).__name__.startswith('Get'):
+            return  # ignore: taken and not acted on (kOS answers a command with nothing)
         out = session.outbox
         if not session.unlocked and not isinstance(message, ALLOWED_WHILE_LOCKED):
             return   # "the Device will simply ignore most messages"

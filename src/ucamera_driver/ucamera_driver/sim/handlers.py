@@ -42,9 +42,12 @@ if TYPE_CHECKING:
 
 LOG = logging.getLogger("ucamera_sim")
 
-#: the UCSP requests the gimbal answers (``mute``/``delay`` take these packet names)
+#: the UCSP requests the gimbal answers, and the motion packets it acts on without an
+#: answer (``mute``/``delay``/``ignore`` take these packet names; a delay of an unanswered
+#: packet holds nothing)
 REQUESTS = tuple(packet.__name__ for packet in (
-    AntennaPositionRequest, TelemetryRateRequest, VersionRequest))
+    AntennaPositionRequest, TelemetryRateRequest, VersionRequest, SetMode, SetAngles,
+    SetRates))
 
 
 class CommandHandlers:
@@ -91,6 +94,8 @@ class CommandHandlers:
             self.received[name] = self.received.get(name, 0) + 1
             if self.request_faults.muted(name):
                 return []  # mute: received and dropped, never answered
+            if self.request_faults.ignored(name) and not name.endswith('Request'):
+                return []  # ignore: a setter answers nothing anyway; not acted on
             answers: list[Packet] = []
             if isinstance(packet, SetMode):
                 if packet.mode in set(GimbalMode):

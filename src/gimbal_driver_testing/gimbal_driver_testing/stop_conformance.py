@@ -1,0 +1,138 @@
+"""The stop part of the conformance suite: every stop reaches rest, through the real
+transport, client and node.
+
+* a stop with one step answered late (the simulators' ``delay``, beyond the request
+  timeout) still stops the axis: each message of the stop in turn;
+* a stop the device takes and drops (``ignore``: the stop message answered as always, not
+  acted on, for longer than the axis needs to brake) is sent again, and the axis comes to
+  rest: the dead-man stop of a jog, read from the simulator's receive log;
+* ``~/stop`` never answers success while an axis still moves, names the axis, and answers
+  success once the axis rests.
+
+Each driver's simulator handle names its stop messages (``SimHandle.stop_requests``) and
+the one that stops a jogging axis (``SimHandle.stop_request``). The checks are behaviour
+(what reached the simulator, in what order; "at rest eventually"), never timings.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import pytest
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.conformance_rig import ConformanceHelpers, ConformanceRig
+from gimbal_driver_testing.ros import joint_positions
+
+#: s a step of the stop is answered late: beyond every driver's request timeout
+LATE_S = 2.0
+#: s beyond its braking time (speed / stop_deceleration + stop_margin) the device drops the
+#: stop: at least one resend falls inside, and ~/stop's wait ends inside
+IGNORE_EXTRA_S = 1.5
+#: s the axis gets to rest once the device takes the stop again (a generous outer bound)
+REST_TIMEOUT_S = 30.0
+
+
+def request_name(logged: str) -> str:
+    """The request name of a receive-log entry ("STOP pan", "stop_actuators 3")."""
+    return logged.split()[0] if logged else ''
+
+
+class StopConformance(ConformanceHelpers):
+    """Mixed into :class:`~gimbal_driver_testing.conformance.DriverConformance`."""
+
+    jog: tuple[str, float]
+
+    # ------------------------------------------------------------------ helpers
+    def stop_names(self, rig: ConformanceRig) -> tuple[tuple[str, ...], str]:
+        assert rig.sim is not None
+        names, jog_stop = tuple(rig.sim.stop_requests), rig.sim.stop_request
+        assert names and jog_stop in names, (
+            f'{type(rig.sim).__name__} names no stop_requests/stop_request')
+        return names, jog_stop
+
+    def braking_time(self, rig: ConformanceRig) -> float:
+        """s the node gives the jogging axis to rest after a stop, by its parameters."""
+        speed = abs(self.jog[1])
+        deceleration = float(rig.ros.get_parameter(self.node_name, 'stop_deceleration'))
+        margin = float(rig.ros.get_parameter(self.node_name, 'stop_margin'))
+        return speed / deceleration + margin
+
+    def start_jog(self, rig: ConformanceRig) -> None:
+        joint, velocity = self.jog
+        rig.ros.publish('joint_command', JointState(name=[joint], velocity=[velocity]))
+        wait_for(lambda: rig.sim.moving(joint), 20.0, f'{joint} to start jogging')
+
+    def logged_since(self, rig: ConformanceRig, mark: int, name: str) -> list[int]:
+        """Indices (from ``mark``) of the receive-log entries of request ``name``."""
+        return [i for i, logged in enumerate(rig.sim.requests()[mark:])
+                if request_name(logged) == name]
+
+    @contextmanager
+    def device_fault(self, rig: ConformanceRig) -> Iterator[None]:
+        """Afterwards: the faults cleared, the axis at rest and back where it was (the
+        jogs of these tests run it far; the next test's jog must not meet a limit)."""
+        joint = self.jog[0]
+        here = joint_positions(rig.ros.wait_for_message('joint_states', JointState))[joint]
+        try:
+            yield
+        finally:
+            rig.sim.clear()
+            rig.ros.call(Trigger, self.srv('stop'), Trigger.Request())
+            self.wait_stopped(rig, joint, 'the axis to rest after the test')
+            rig.ros.publish('joint_command', JointState(name=[joint], position=[here]))
+            self.wait_positions(rig.ros, {joint: here})
+
+    # -------------------------------------------------------------------- tests
+    @pytest.mark.ros
+    def test_a_stop_with_a_step_answered_late_still_stops(self, rig: ConformanceRig) -> None:
+        names, _ = self.stop_names(rig)
+        joint = self.jog[0]
+        for name in names:
+            with self.device_fault(rig):
+                self.start_jog(rig)
+                rig.sim.delay(name, LATE_S)
+                mark = rig.sim.mark()
+                rig.ros.call(Trigger, self.srv('stop'), Trigger.Request(), timeout=60.0)
+                self.wait_stopped(rig, joint, f'the stop with {name} answered {LATE_S:g} s '
+                                  'late')
+                assert rig.sim.changes_since(mark), f'no stop reached the simulator ({name})'
+
+    @pytest.mark.ros
+    def test_a_dropped_dead_man_stop_is_sent_again_until_the_axis_rests(
+            self, rig: ConformanceRig) -> None:
+        _, jog_stop = self.stop_names(rig)
+        joint = self.jog[0]
+        with self.device_fault(rig):
+            self.start_jog(rig)
+            window = self.braking_time(rig) + IGNORE_EXTRA_S
+            rig.sim.ignore(jog_stop, window)
+            mark = rig.sim.mark()
+            # no further joint_command: the dead-man stop goes out and the device drops it
+            wait_for(lambda: self.logged_since(rig, mark, jog_stop), 20.0,
+                     f'the dead-man stop ({jog_stop}) to reach the simulator')
+            assert rig.sim.moving(joint), 'the ignored stop stopped the axis'
+            self.wait_stopped(rig, joint, 'the stop sent again once the device takes it')
+            sent = self.logged_since(rig, mark, jog_stop)
+            assert len(sent) >= 2, f'the stop was never sent again: {rig.sim.requests()[mark:]}'
+
+    @pytest.mark.ros
+    def test_stop_never_answers_success_while_an_axis_moves(self, rig: ConformanceRig) -> None:
+        _, jog_stop = self.stop_names(rig)
+        joint = self.jog[0]
+        with self.device_fault(rig):
+            self.start_jog(rig)
+            rig.sim.ignore(jog_stop, self.braking_time(rig) + IGNORE_EXTRA_S)
+            reply = rig.ros.call(Trigger, self.srv('stop'), Trigger.Request(), timeout=60.0)
+            still = rig.sim.moving(joint)
+            assert not (reply.success and still), f'success while {joint} moves: {reply.message}'
+            if still:  # the usual case: the device still drops the stop
+                assert not reply.success and joint in reply.message, reply.message
+                assert 'stop not confirmed' in reply.message, reply.message
+            self.wait_stopped(rig, joint, 'the stop sent again once the device takes it')
+            rig.sim.clear()
+            reply = rig.ros.call(Trigger, self.srv('stop'), Trigger.Request(), timeout=60.0)
+            assert reply.success, reply.message
