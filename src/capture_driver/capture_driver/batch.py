@@ -112,8 +112,8 @@ class BatchedReads:
         not say, so a read that got one is asked alone), or None (nothing)."""
         link = self._link
         waitings = link.write([(name, frame, True) for name, frame in frames]) or []
-        deadline = link.last_activity + link.timeout
-        answers = [link.answer(waiting, deadline) for waiting in waitings]
+        answers = [link.answer(waiting, link.deadline(waiting, link.timeout))
+                   for waiting in waitings]
         if all(answer is None for answer in answers):  # not one answer: a timeout
             link.count_timeout('batched read')
         # each read answered (a NACK or ACK too): the controller handles queued requests
@@ -122,10 +122,9 @@ class BatchedReads:
 
     def count_batch(self, complete: bool) -> None:
         """One batch (the poll's getters, or a posted stream move) came back whole or not.
-        A whole one leaves nothing late to come; ``BATCH_FAILURES`` incomplete ones in a
+        ``BATCH_FAILURES`` incomplete ones in a
         row end batching for the connection (one request at a time)."""
         if complete:
-            self._link.settled()
             self._failures = 0
             return
         self._link.count('incomplete_batches')

@@ -72,6 +72,21 @@ from .protocol import (
 
 LOG = logging.getLogger('capture_driver.client')  # the name the node's log bridge forwards
 
+#: requests after which the controller may take this long (s) before it answers them and
+#: handles anything new: 4.3.9 "Stop scan can take up to 500 milliseconds before sending
+#: ACK and handle new incoming commands". Its second witness, a public CapTrack Wireshark
+#: dissector (port 4949), agrees on the opcodes (0x0408 SCN_StopScan) and names no time.
+BUSY_AFTER = {'SCN_StopScan': 0.5}
+#: what the driver adds to a documented answer time before it calls a request unanswered
+ANSWER_MARGIN_S = 0.3
+
+
+def answer_time(name: str) -> float:
+    """The least time to wait for ``name``'s answer: the document's time plus a margin
+    (0 for requests the document gives no time: the request timeout applies)."""
+    return BUSY_AFTER[name] + ANSWER_MARGIN_S if name in BUSY_AFTER else 0.0
+
+
 
 class AxisSetups:
     """What this client's last motion set-up left on each axis, shared by the link (which
@@ -133,6 +148,8 @@ class CaptureLink(Protocol):
         self._connect_opcode = command('COM_Connect').opcode
         #: when the last request (or batch) was written
         self.last_activity = 0.0
+        #: until when the controller may hold every answer (after SCN_StopScan, 4.3.9)
+        self._busy_until = 0.0
         #: when the device last answered anything (the handshake, any request)
         self._last_answer = 0.0
         #: requests may overlap (see :mod:`.answers`); off for a controller that drops what
@@ -368,7 +385,7 @@ class CaptureLink(Protocol):
                 return self.decode(name, frame, reply) if cmd.replies_with_data else None
             except DeviceNack as exc:
                 # 0xF6: the controller did not execute the packet, so resending is safe.
-                if exc.code == ReplyCode.WRONG_CHECKSUM and attempt == 1:
+                if exc.code == ReplyCode.WRONG_CHECKSUM and attempt == 1 and not exc.doubt:
                     continue
                 raise
             except (DeviceTimeout, WrongReply) as exc:
@@ -400,18 +417,25 @@ class CaptureLink(Protocol):
             lost = session.error if session is not None else None
             raise NotConnected(f'{requests[0][0]}: link lost ({lost})' if lost is not None
                                else f'{requests[0][0]}: not connected ({self.last_error})')
+        started = time.monotonic()
         try:
             waitings = self.answers.write(
                 requests, session.write, urgent=self._lock.held_urgently(), block=block,
                 timeout=2 * self.timeout + 1.0)
         except LinkError as exc:
             raise NotConnected(f'{requests[0][0]}: link lost ({exc})') from exc
+        # time spent waiting for the link to resynchronise is not the device's silence
+        self._last_answer += time.monotonic() - started
         if waitings is None:
             if block:
                 raise DeviceTimeout(f'{requests[0][0]}: the link stayed busy')
             return None
         self._stats['requests'] += len(requests)
         self.last_activity = time.monotonic()
+        for waiting in waitings:
+            if waiting.name in BUSY_AFTER:
+                self._busy_until = max(self._busy_until,
+                                       waiting.written_at + BUSY_AFTER[waiting.name])
         return waitings
 
     def answer(self, waiting: Waiting, deadline: float) -> Frame | ReplyByte | None:
@@ -424,10 +448,14 @@ class CaptureLink(Protocol):
     def _transact(self, name: str, frame: Frame, expect_data: bool, timeout: float,
                   optional: bool = False) -> Frame:
         [waiting] = self.write([(name, frame, expect_data)]) or []
-        answer = self.answer(waiting, waiting.written_at + timeout)
+        timeout = max(timeout, answer_time(name))
+        answer = self.answer(waiting, self.deadline(waiting, timeout))
+        if waiting.superseded and answer is None:
+            raise DeviceTimeout(f'{self.label(name, frame)}: a stop went out before its '
+                                'answer came (its answer can no longer be told apart)')
         if isinstance(answer, ReplyByte):
             if not answer.is_ack:
-                raise DeviceNack(self.label(name, frame), answer.code)
+                raise DeviceNack(self.label(name, frame), answer.code, doubt=waiting.doubt)
             if expect_data:
                 raise self.wrong_reply(name, frame, 'ACK', 'data')
         elif isinstance(answer, Frame):
@@ -442,13 +470,13 @@ class CaptureLink(Protocol):
             else:
                 self.count_timeout(name)
             raise DeviceTimeout(f'{self.label(name, frame)}: no reply within {timeout:g} s')
-        self.settled()
         return answer if isinstance(answer, Frame) else frame
 
-    def settled(self) -> None:
-        """A request (or a batch) got its answer: when nothing else is in flight no late
-        reply can come any more."""
-        self.answers.settled()
+    def deadline(self, waiting: Waiting, timeout: float) -> float:
+        """When ``waiting`` gives up: ``timeout`` after it was written, and later by what
+        remains of a scan stop's busy time then (4.3.9: the controller handles new
+        commands up to 500 ms after SCN_StopScan)."""
+        return waiting.written_at + timeout + max(0.0, self._busy_until - waiting.written_at)
 
     def wrong_reply(self, name: str, frame: Frame, answer: str, expected: str) -> WrongReply:
         """Count a reply of the wrong kind for ``name`` (diagnostics, per command)."""
