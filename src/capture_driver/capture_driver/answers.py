@@ -62,6 +62,8 @@ class Exchange:
     #: owns every byte that comes while it is in flight (a stop written over late answers)
     whole: bool = False
     received: list[ReplyByte] = field(default_factory=list)
+    #: bytes that came while a NACK its next request may own is held (None: counting)
+    pending: list[ReplyByte] | None = None
     #: why the bytes of this exchange cannot be given one by one ('' when they can)
     doubt: str = ''
 
@@ -103,6 +105,8 @@ class Held:
 
     byte: ReplyByte
     candidates: list[Waiting]
+    #: the batch whose counting waits for it (its later bytes are its ``pending``)
+    batch: Exchange | None = None
 
 
 class AnswerBook:
@@ -228,12 +232,29 @@ class AnswerBook:
                 for other in held.candidates:  # void: nobody else gets it for certain
                     other.doubt = other.doubt or f'a NACK {waiting.name} also may own'
                 self._held.remove(held)
+                batch = held.batch
+                if batch is not None:  # it owns the rest of its bytes as a whole
+                    pending, batch.pending = batch.pending or [], None
+                    batch.whole = True
+                    batch.doubt = (f'a NACK came that {waiting.name} and '
+                                   + ', '.join(others) + ' may own')
+                    if waiting not in batch.waitings:
+                        batch.received.append(held.byte)
+                    for byte in pending:
+                        self._deliver_byte(byte, counted=True)
                 return
 
     def _end_exchange(self, exchange: Exchange) -> None:
         if self._byte is exchange and all(w.done or w.ended_at is not None or
                                           w not in self._flight for w in exchange.waitings):
             self._byte = None
+            self._cond.notify_all()
+
+    def dropped(self, waitings: Sequence[Waiting]) -> None:
+        """``waitings`` gave up and were never taken by the device (the batch reads of a
+        controller that drops what it queues): no late answer is waited for."""
+        with self._cond:
+            self._late = [w for w in self._late if w not in waitings]
             self._cond.notify_all()
 
     def in_flight(self) -> list[str]:
@@ -320,10 +341,13 @@ class AnswerBook:
         self._resolve_one(target, item)
         return True
 
-    def _deliver_byte(self, item: ReplyByte) -> bool:
-        if not item.is_ack:
+    def _deliver_byte(self, item: ReplyByte, counted: bool = False) -> bool:
+        if not item.is_ack and not counted:
             self.nacks += 1
         exchange = self._byte
+        if exchange is not None and exchange.pending is not None:
+            exchange.pending.append(item)  # counted once the held NACK has its owner
+            return True
         if exchange is not None and exchange.whole:
             exchange.received.append(item)
             slot = self._slot(exchange)
@@ -346,16 +370,11 @@ class AnswerBook:
             self._late.remove(min(candidates, key=lambda w: w.seq))  # stale either way
             return False
         if len(candidates) > 1:
-            if slot is not None and exchange is not None and len(exchange.waitings) > 1:
-                # a batch cannot count past a byte it may not own: it owns the rest whole
-                exchange.whole = True
-                exchange.doubt = 'a NACK came that ' + ', '.join(
-                    w.name for w in candidates if w is not slot) + ' also may own'
-                exchange.received.append(item)
-                slot.doubt = exchange.doubt
-                self._resolve_one(slot, item)
-                return True
-            self._held.append(Held(item, candidates))
+            batch = exchange if slot is not None and exchange is not None and len(
+                exchange.waitings) > 1 else None
+            if batch is not None:  # a batch cannot count past a byte it may not own
+                batch.pending = []
+            self._held.append(Held(item, candidates, batch))
             return True
         [target] = candidates
         if target in self._late:
@@ -373,7 +392,12 @@ class AnswerBook:
                      and not w.superseded and w in self._flight), None)
 
     def _resolve(self) -> None:
-        """Give each held NACK to its last candidate (the others answered or expired)."""
+        """Give each held NACK to its last candidate (the others answered or expired),
+        until none is left to give (a batch's counting may settle another)."""
+        while self._resolve_once():
+            pass
+
+    def _resolve_once(self) -> bool:
         for held in list(self._held):
             held.candidates[:] = [w for w in held.candidates if w.answer is None and (
                 w in self._flight or w in self._late)]
@@ -386,11 +410,18 @@ class AnswerBook:
                         target.answer = held.byte
                         self.stale += 1
                     else:
-                        if target in target.exchange.waitings and target.exchange.byte:
+                        if target.exchange.byte:
                             target.exchange.received.append(held.byte)
                         self._resolve_one(target, held.byte)
                 else:
                     self.stale += 1
+                batch = held.batch
+                if batch is not None:  # its counting goes on from the byte it waited for
+                    pending, batch.pending = batch.pending or [], None
+                    for byte in pending:
+                        self._deliver_byte(byte, counted=True)
+                return True
+        return False
 
     @staticmethod
     def _resolve_one(waiting: Waiting, item: Item) -> None:

@@ -407,11 +407,12 @@ class CaptureLink(Protocol):
             raise self.wrong_reply(name, frame, f'{len(reply.data)} data bytes ({exc})',
                                    'data') from None
 
-    def write(self, requests: Sequence[Request], block: bool = True) -> list[Waiting] | None:
+    def write(self, requests: Sequence[Request], block: bool = True,
+              urgent: bool = False) -> list[Waiting] | None:
         """Write ``requests`` in one write, registered for their answers (see
         :class:`~.answers.AnswerBook` for when they may go out); None when ``block`` is
-        False and they may not go out now. A stop (the link lock held urgently) goes out
-        at once."""
+        False and they may not go out now. A stop (``urgent``, or the link lock held
+        urgently) goes out at once."""
         session = self._session
         if session is None or not session.alive:
             lost = session.error if session is not None else None
@@ -420,7 +421,7 @@ class CaptureLink(Protocol):
         started = time.monotonic()
         try:
             waitings = self.answers.write(
-                requests, session.write, urgent=self._lock.held_urgently(), block=block,
+                requests, session.write, urgent=urgent or self._lock.held_urgently(), block=block,
                 timeout=2 * self.timeout + 1.0)
         except LinkError as exc:
             raise NotConnected(f'{requests[0][0]}: link lost ({exc})') from exc

@@ -272,7 +272,10 @@ class MotionRequests:
         (4.3.9). While it scans the controller may refuse the motor steps with 0xA6 (4.3);
         SCN_StopScan "stops both motors immediately", so such a refusal is no failure when
         the scan stop is ACKed. One write, one exchange of the answer book: no step waits
-        for the answer of another, and a step that fails skips nothing. Each answer waits
+        for the answer of another, and a step that fails skips nothing. (On a controller
+        found to drop queued requests, :attr:`~.batch.BatchedReads.batching` off, the
+        steps go one at a time, each after the answer or timeout of the one before: it
+        would drop the rest of one write; still none is skipped.) Each answer waits
         its own time (the request timeout; SCN_StopScan its 500 ms plus
         :data:`~.link.ANSWER_MARGIN_S`). Whether the axes came to rest is the core's to
         confirm from the joint samples; these answers say only what the device said.
@@ -287,9 +290,15 @@ class MotionRequests:
                 requests += [(name, command(name).frame(None, None, link.group), False)
                              for name in PROGRAM_STOPS]
             self._setups.commanded()
-            waitings = link.write(requests) or []
-            answers = [link.answer(w, link.deadline(w, max(link.timeout, answer_time(w.name))))
-                       for w in waitings]
+            if self._batch.batching:
+                waitings = link.write(requests, urgent=True) or []  # a stop waits for nothing
+                answers = [link.answer(w, self._deadline(w)) for w in waitings]
+            else:  # a controller that drops queued requests: one step at a time, none skipped
+                waitings, answers = [], []
+                for request in requests:
+                    [waiting] = link.write([request], urgent=True) or []
+                    waitings.append(waiting)
+                    answers.append(link.answer(waiting, self._deadline(waiting)))
             for axis in axes:
                 self._setups.known[axis] = ('speed', None, 0.0, False)
         result = StopAnswers(len(waitings))
@@ -301,6 +310,9 @@ class MotionRequests:
         else:
             self._judge_each(result, waitings, answers)
         return result
+
+    def _deadline(self, waiting: Waiting) -> float:
+        return self._link.deadline(waiting, max(self._link.timeout, answer_time(waiting.name)))
 
     def _judge_each(self, result: StopAnswers, waitings: list[Waiting],
                     answers: list[Frame | ReplyByte | None]) -> None:

@@ -118,6 +118,41 @@ def test_probe_a_late_ack_answers_no_later_setter_and_a_stop_sees_a_real_nack() 
     assert NACK in exchange.received  # the refusal is the stop's to report
 
 
+def test_a_batch_counts_past_a_nack_a_getter_could_own_once_the_getter_has_its_data() -> None:
+    """A stop's batch NACKed while the poll's getters wait: the NACK may be a getter's,
+    so the batch's counting waits for it; the getters' data comes, the NACK is the
+    batch's first step's for certain, and the later bytes count on from there."""
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    known(book, wire, getter('MOT_GetLoadPosition', 1))
+    [position] = book.write([getter('MOT_GetLoadPosition', 1)], wire, timeout=1.0)
+    stop = book.write([setter('MOT_SetSpeedMode', 1), setter('MOT_SetSpeed', 1, 0.0),
+                       setter('MOT_Update', 1)], wire, urgent=True) or []
+    for byte in (NACK, ACK, ACK):
+        book.deliver(byte)
+    book.deliver(data('MOT_GetLoadPosition', 1))
+    assert isinstance(book.wait(position, clock.now), Frame)
+    assert [book.wait(w, clock.now) for w in stop] == [NACK, ACK, ACK]
+    assert not any(w.doubt for w in stop) and not stop[0].exchange.whole
+
+
+def test_a_batch_whose_nack_a_silent_getter_could_own_owns_its_bytes_as_a_whole() -> None:
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    known(book, wire, getter('IMU_GetRoll', 0))
+    [roll] = book.write([getter('IMU_GetRoll', 0)], wire, timeout=1.0)
+    stop = book.write([setter('MOT_SetSpeedMode', 1), setter('MOT_SetSpeed', 1, 0.0),
+                       setter('MOT_Update', 1)], wire, urgent=True) or []
+    for byte in (NACK, ACK, ACK):
+        book.deliver(byte)
+    assert book.wait(roll, clock.now) == NACK and 'MOT_SetSpeedMode' in roll.doubt
+    for waiting in stop:
+        book.wait(waiting, clock.now)
+    exchange = stop[0].exchange
+    assert exchange.whole and 'IMU_GetRoll' in exchange.doubt
+    assert exchange.received == [NACK, ACK, ACK]  # the stop sees the NACK it may own
+
+
 def test_after_a_timeout_the_late_ack_is_stale_and_the_next_setter_gets_its_own() -> None:
     clock = Clock()
     book, wire = AnswerBook(clock), Wire()
