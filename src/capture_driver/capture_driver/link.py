@@ -2,19 +2,20 @@
 
 The link has one owner of its input: the reader thread ``capture-reader`` (the session
 base, :class:`gimbal_driver_common.session.Session`, as every streaming client has). It
-decodes everything the controller sends and gives each reply to the request it answers
-(:class:`~.answers.AnswerBook`): a data packet to the getter with its opcode and axis, a
-reply byte to the setter in flight. Callers write their requests and wait for their own
-answers; nobody reads the link but the reader. So requests that the protocol can tell
-apart overlap: the joint poll's getters go out while a sensor or register read waits for
-an answer that is slow or never comes, and a stop goes out at once (see the overlap rules
-in :mod:`.answers`). Setters go one sequence at a time: they hold the device's link lock
-(:class:`~gimbal_driver_common.link_lock.LinkLock`, which the adapter passes in; a client
-made alone makes its own), and so does the core's command path for its sends; a stream
-move posted without waiting (:meth:`MotionRequests.post_moves`) is settled by that lock
-before the next setter. A controller that drops what it queues (batched reads that come
-back incomplete, see :mod:`.batch`) is driven one request at a time instead: then every
-request holds the lock (:attr:`CaptureLink.overlap` off).
+decodes everything the controller sends and hands it to :class:`~.answers.AnswerBook`,
+which gives an answer only to the one request that can own it (the rules are in
+:mod:`.answers`): data packets name their getter; at most one byte-answered exchange (a
+setter, a getter not yet answered with data, a stop's batch) is in flight, and after a
+request gives up the next one waits until its late answer came or the late window
+passed. Callers write their requests and wait for their own answers; nobody reads the
+link but the reader. So the joint poll's getters go out while a setter or a slow sensor
+read waits, and a stop goes out at once. Setters go one sequence at a time: they hold the
+device's link lock (:class:`~gimbal_driver_common.link_lock.LinkLock`, which the adapter
+passes in; a client made alone makes its own), and so does the core's command path for
+its sends; a stream move posted without waiting (:meth:`MotionRequests.post_moves`) is
+settled by that lock before the next setter. A controller that drops what it queues
+(batched reads that come back incomplete, see :mod:`.batch`) is driven one request at a
+time instead: then every request holds the lock (:attr:`CaptureLink.overlap` off).
 
 A getter is answered by its data packet, a setter by a single ACK byte; a NACK byte raises
 :class:`DeviceNack` carrying the spec's meaning and advice. A reply of the other kind (an

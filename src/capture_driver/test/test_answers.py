@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from capture_driver.answers import LATE_WINDOW_S, AnswerBook
+from capture_driver.answers import LATE_WINDOW_S, AnswerBook, Waiting
 from capture_driver.protocol import Frame, ReplyByte, ReplyCode, command
 
 ACK, NACK = ReplyByte(ReplyCode.ACK), ReplyByte(ReplyCode.INVALID_COMMAND)
@@ -118,18 +118,26 @@ def test_probe_a_late_ack_answers_no_later_setter_and_a_stop_sees_a_real_nack() 
     assert NACK in exchange.received  # the refusal is the stop's to report
 
 
-def test_a_batch_counts_past_a_nack_a_getter_could_own_once_the_getter_has_its_data() -> None:
-    """A stop's batch NACKed while the poll's getters wait: the NACK may be a getter's,
-    so the batch's counting waits for it; the getters' data comes, the NACK is the
-    batch's first step's for certain, and the later bytes count on from there."""
+def stop_over_a_read(name: str, axis: int) -> tuple[Clock, AnswerBook, Waiting,
+                                                   list[Waiting]]:
+    """A getter known to answer with data waits while a stop's batch (one axis) goes out
+    and is answered NACK, ACK, ACK: the NACK may be the getter's or the first step's."""
     clock = Clock()
     book, wire = AnswerBook(clock), Wire()
-    known(book, wire, getter('MOT_GetLoadPosition', 1))
-    [position] = book.write([getter('MOT_GetLoadPosition', 1)], wire, timeout=1.0)
+    known(book, wire, getter(name, axis))
+    [read] = book.write([getter(name, axis)], wire, timeout=1.0)
     stop = book.write([setter('MOT_SetSpeedMode', 1), setter('MOT_SetSpeed', 1, 0.0),
                        setter('MOT_Update', 1)], wire, urgent=True) or []
     for byte in (NACK, ACK, ACK):
         book.deliver(byte)
+    return clock, book, read, stop
+
+
+def test_a_batch_counts_past_a_nack_a_getter_could_own_once_the_getter_has_its_data() -> None:
+    """A stop's batch NACKed while the poll's getters wait: the NACK may be a getter's,
+    so the batch's counting waits for it; the getters' data comes, the NACK is the
+    batch's first step's for certain, and the later bytes count on from there."""
+    clock, book, position, stop = stop_over_a_read('MOT_GetLoadPosition', 1)
     book.deliver(data('MOT_GetLoadPosition', 1))
     assert isinstance(book.wait(position, clock.now), Frame)
     assert [book.wait(w, clock.now) for w in stop] == [NACK, ACK, ACK]
@@ -137,14 +145,7 @@ def test_a_batch_counts_past_a_nack_a_getter_could_own_once_the_getter_has_its_d
 
 
 def test_a_batch_whose_nack_a_silent_getter_could_own_owns_its_bytes_as_a_whole() -> None:
-    clock = Clock()
-    book, wire = AnswerBook(clock), Wire()
-    known(book, wire, getter('IMU_GetRoll', 0))
-    [roll] = book.write([getter('IMU_GetRoll', 0)], wire, timeout=1.0)
-    stop = book.write([setter('MOT_SetSpeedMode', 1), setter('MOT_SetSpeed', 1, 0.0),
-                       setter('MOT_Update', 1)], wire, urgent=True) or []
-    for byte in (NACK, ACK, ACK):
-        book.deliver(byte)
+    clock, book, roll, stop = stop_over_a_read('IMU_GetRoll', 0)
     assert book.wait(roll, clock.now) == NACK and 'MOT_SetSpeedMode' in roll.doubt
     for waiting in stop:
         book.wait(waiting, clock.now)
