@@ -289,7 +289,6 @@ class MotionRequests:
             if programs:
                 requests += [(name, command(name).frame(None, None, link.group), False)
                              for name in PROGRAM_STOPS]
-            self._setups.commanded()
             if self._batch.batching:
                 waitings = link.write(requests, urgent=True) or []  # a stop waits for nothing
                 answers = [link.answer(w, self._deadline(w)) for w in waitings]
