@@ -153,8 +153,7 @@ class AnswerBook:
                     return False  # its late data would be taken for the new one's
                 return not byte or (self._byte is None and not self._late_bytes())
 
-            if not urgent and not allowed() and not (
-                    block and self._cond.wait_for(allowed, timeout)):
+            if not urgent and not self._wait_until(allowed, block, timeout):
                 return None
             exchange = Exchange(byte=byte)
             if byte:
@@ -175,6 +174,21 @@ class AnswerBook:
                     self._byte = None
                 raise
             return exchange.waitings
+
+    def _wait_until(self, allowed: Callable[[], bool], block: bool, timeout: float) -> bool:
+        """Wait (up to ``timeout``) until ``allowed``; woken by every answer and by the
+        end of each late window (time, not an answer, ends those)."""
+        end = self._clock() + timeout
+        while not allowed():
+            left = end - self._clock()
+            if not block or left <= 0.0:
+                return False
+            expiries = [w.ended_at + self.late_window for w in self._late
+                        if w.ended_at is not None]
+            if expiries:
+                left = min(left, max(0.001, min(expiries) - self._clock()))
+            self._cond.wait(left)
+        return True
 
     def _take_over(self, exchange: Exchange) -> None:
         """``exchange`` becomes the byte-answered one; a stop supersedes one in flight and

@@ -259,3 +259,13 @@ def test_a_failed_write_leaves_nothing_in_flight() -> None:
     with pytest.raises(OSError):
         book.write([getter('MOT_GetLoadPosition', 1)], broken, timeout=1.0)
     assert book.idle()
+
+
+def test_a_writer_held_by_a_late_answer_goes_out_when_the_window_ends_without_any_answer() -> None:
+    """The late window ends by time, not by an answer: a setter waiting behind a late ACK
+    that never comes is written once the window passed, though nothing arrives to wake it
+    (real time here, a short window: only that it is written is checked)."""
+    book, wire = AnswerBook(late_window=0.05), Wire()
+    [update] = book.write([setter('MOT_Update', 1)], wire, timeout=1.0)
+    assert book.wait(update, 0.0) is None
+    assert book.write([setter('MOT_Update', 1)], wire, timeout=30.0) is not None
