@@ -1,25 +1,33 @@
 """Which written Capture request an answer belongs to (no ROS, no I/O).
 
 The link's reader thread decodes everything the controller sends and hands each item to
-:class:`AnswerBook`, which gives it to the request it answers. A data packet names its
-opcode and axis (section 3), so getters can be in flight together and each finds its
-reply. A reply byte (ACK, NACK) names nothing: it goes to the oldest setter in flight, and
-only when no setter is in flight to the oldest getter (a getter answered by a byte: a NACK,
-or the ACK of a controller that acknowledges what it does not know). So the book lets
-requests overlap only where that rule cannot give a byte to the wrong one:
+:class:`AnswerBook`. A data packet names its opcode and axis (section 3); a reply byte
+(ACK, NACK) names nothing. The book gives an answer to a request only when no other
+request could own it; the rule, which a newcomer can check against :meth:`deliver`:
 
-- getters overlap each other (a byte among them is named by asking the read alone);
-- setters go one sequence at a time (the caller holds the link lock) and overlap only the
-  getters the device has answered with data on this connection (*trusted*: they answer
-  with data, not a byte) or has left unanswered before (they answer nothing);
-- a getter not trusted yet waits while a setter is in flight, and a setter waits while
-  such a getter is in flight (one round trip, or that getter's timeout once per
-  connection);
-- a stop (the link lock held urgently) waits for nothing: it goes out while any read
-  waits for its answer. Should an untrusted getter's NACK come first, the stop takes it
-  and the getter times out: rare, and the stop is on the wire at once either way. A stop
-  does wait for the link lock itself: when a setter sequence holds it and waits for an
-  untrusted getter (once per getter and connection), the stop comes after that wait.
+- *Data-answered* getters (answered with data on this connection, or left unanswered:
+  they answer data or nothing) overlap everything. Data goes to the getter of its opcode
+  and axis. A getter is not written while an earlier one of its opcode and axis gave up
+  and its data may still come (until that data comes, counted stale, or
+  :data:`LATE_WINDOW_S` passes): a retried getter never takes its first attempt's late
+  data.
+- Every other request is *byte-answered* (a setter, a getter not known yet or known to
+  answer with a byte). At most one byte-answered *exchange* is in flight: one request,
+  or one batch written in one call whose bytes are counted in order and owned by the
+  batch as a whole (a stop's steps, a posted stream move). A byte goes to that exchange.
+- After a byte-answered request ends without its answer, its byte may still come: the
+  link is resynchronised before the next byte-answered exchange goes out, by that late
+  byte arriving (counted stale) or :data:`LATE_WINDOW_S` passing.
+- A NACK may answer any packet (0xF6 checksum, 0x16 pedestal, 0xE6 execution, 0xB6 motor,
+  and 0xA6/0x76 for a getter refused in a mode): while a data-answered getter or a late
+  request could own it, it is *held* and given once only one candidate is left (the
+  others answered with data, or expired); a candidate whose wait ends first gets it with
+  :attr:`Waiting.doubt` saying whose it may be.
+- A stop (``urgent``) never waits: it goes out at once. A byte-answered exchange in
+  flight then gives up (:attr:`Waiting.superseded`) and the stop's batch owns, as a whole,
+  every byte that comes until its own answers are counted (:attr:`Exchange.received`,
+  :attr:`Exchange.doubt`): whether its steps were refused is read from the whole, never
+  from a byte given by guess.
 """
 
 from __future__ import annotations
@@ -35,10 +43,29 @@ from .protocol import Frame, ReplyByte
 Request = tuple[str, Frame, bool]
 Item = Frame | ReplyByte
 
+#: how long after a request gave up its answer may still come (later, it is taken as lost):
+#: the longest answer time the document names (SCN_StopScan, 500 ms, 4.3.9)
+LATE_WINDOW_S = 0.5
+
 
 def is_greeting(item: Frame) -> bool:
     """The controller's COM_Connect packet (section 6.1): sent on its own, never an answer."""
     return 0x0700 <= item.opcode <= 0x07FF and not item.data
+
+
+@dataclass(eq=False)
+class Exchange:
+    """One write: its requests, and for a byte-answered one the bytes it owns."""
+
+    waitings: list[Waiting] = field(default_factory=list)
+    byte: bool = False
+    #: owns every byte that comes while it is in flight (a stop written over late answers)
+    whole: bool = False
+    received: list[ReplyByte] = field(default_factory=list)
+    #: bytes that came while a NACK its next request may own is held (None: counting)
+    pending: list[ReplyByte] | None = None
+    #: why the bytes of this exchange cannot be given one by one ('' when they can)
+    doubt: str = ''
 
 
 @dataclass(eq=False)
@@ -48,78 +75,145 @@ class Waiting:
     name: str
     frame: Frame
     expect_data: bool
-    #: a getter that answers with data (see the module docstring); setters: True
-    trusted: bool
+    #: a getter that answers data or nothing (see the module docstring); setters: False
+    data_answered: bool
     written_at: float = 0.0
+    seq: int = 0
+    exchange: Exchange = field(default_factory=Exchange)
     #: what answered it: its data packet or a reply byte (None: nothing yet)
     answer: Item | None = None
-    #: the first answer of the wrong kind that may have been a late reply to an earlier
-    #: request (a getter named with it at its deadline, instead of a timeout)
+    #: the first answer of the wrong kind that came while it alone waited
     unexpected: str = ''
+    #: why its answer is not certainly its own ('' when it is)
+    doubt: str = ''
+    #: a stop went out while it waited: a byte can no longer be told to be its own (a
+    #: setter gives up at once; a getter still takes its data)
+    superseded: bool = False
     error: BaseException | None = None
-    done: bool = field(default=False)
+    done: bool = False
+    #: when its wait ended without an answer (its late answer may come until + window)
+    ended_at: float | None = None
 
     @property
     def key(self) -> tuple[int, int]:
         return frame_key(self.frame)
 
 
+@dataclass(eq=False)
+class Held:
+    """A NACK more than one request could own, until one candidate is left."""
+
+    byte: ReplyByte
+    candidates: list[Waiting]
+    #: the batch whose counting waits for it (its later bytes are its ``pending``)
+    batch: Exchange | None = None
+
+
 class AnswerBook:
     """The requests in flight on one link, in write order; thread-safe."""
 
-    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, clock: Callable[[], float] = time.monotonic,
+                 late_window: float = LATE_WINDOW_S) -> None:
         self._cond = threading.Condition()
         self._clock = clock
-        self._in_flight: list[Waiting] = []
+        self.late_window = late_window
+        self._seq = 0
+        self._flight: list[Waiting] = []
+        self._late: list[Waiting] = []
+        self._held: list[Held] = []
+        self._byte: Exchange | None = None
         #: (opcode, axis) of getters answered with data, or left unanswered, on this link
-        self._trusted: set[tuple[int, int]] = set()
-        #: requests that ended without their answer whose reply may still come
-        self._late = 0
+        self._data_keys: set[tuple[int, int]] = set()
         self.stale = 0
         self.nacks = 0
         self.greetings = 0
 
     # ------------------------------------------------------------ the writers
     def reset(self, error: BaseException) -> None:
-        """A new connection: what was in flight fails with ``error``, nothing is trusted."""
+        """A new connection: what was in flight fails with ``error``, nothing is known."""
         self.fail_all(error)
         with self._cond:
-            self._trusted.clear()
-            self._late = 0
+            self._data_keys.clear()
 
     def write(self, requests: Sequence[Request], write: Callable[[bytes], None], *,
               urgent: bool = False, block: bool = True, timeout: float = 0.0,
               ) -> list[Waiting] | None:
-        """Register ``requests`` and write them (``write``, in one call, under the book's
-        lock so that write order is the book's order) once the overlap rules allow;
-        None when ``block`` is False and they do not allow it now, or ``timeout`` s
-        passed (a stuck request ends at its own deadline, so this is a bound only)."""
+        """Register ``requests`` as one exchange and write them (``write``, in one call,
+        under the book's lock so that write order is the book's order) once the rules
+        allow; None when ``block`` is False and they do not allow it now, or ``timeout``
+        s passed. ``urgent`` (a stop) goes out at once."""
         with self._cond:
-            setters = any(not expect_data for _, _, expect_data in requests)
-            untrusted = any(expect_data and frame_key(frame) not in self._trusted
-                            for _, frame, expect_data in requests)
+            byte = any(not (expect_data and frame_key(frame) in self._data_keys)
+                       for _, frame, expect_data in requests)
+            keys = {frame_key(frame) for _, frame, expect_data in requests if expect_data}
 
             def allowed() -> bool:
-                busy = [w for w in self._in_flight if not w.done]
-                if setters and not urgent and any(w.expect_data and not w.trusted
-                                                  for w in busy):
-                    return False
-                return not (untrusted and any(not w.expect_data for w in busy))
+                self._expire()
+                if any(w.expect_data and w.key in keys for w in self._late):
+                    return False  # its late data would be taken for the new one's
+                return not byte or (self._byte is None and not self._late_bytes())
 
-            if not allowed() and not (block and self._cond.wait_for(allowed, timeout)):
+            if not urgent and not self._wait_until(allowed, block, timeout):
                 return None
+            exchange = Exchange(byte=byte)
+            if byte:
+                self._take_over(exchange)
             now = self._clock()
-            waitings = [Waiting(name, frame, expect_data,
-                                trusted=not expect_data or frame_key(frame) in self._trusted,
-                                written_at=now)
-                        for name, frame, expect_data in requests]
-            self._in_flight.extend(waitings)
+            for name, frame, expect_data in requests:
+                self._seq += 1
+                exchange.waitings.append(Waiting(
+                    name, frame, expect_data,
+                    data_answered=expect_data and frame_key(frame) in self._data_keys,
+                    written_at=now, seq=self._seq, exchange=exchange))
+            self._flight.extend(exchange.waitings)
             try:
                 write(b''.join(frame.encode() for _, frame, _ in requests))
             except BaseException:
-                self._drop(waitings)
+                self._drop(exchange.waitings)
+                if self._byte is exchange:
+                    self._byte = None
                 raise
-            return waitings
+            return exchange.waitings
+
+    def _wait_until(self, allowed: Callable[[], bool], block: bool, timeout: float) -> bool:
+        """Wait (up to ``timeout``) until ``allowed``; woken by every answer and by the
+        end of each late window (time, not an answer, ends those)."""
+        end = self._clock() + timeout
+        while not allowed():
+            left = end - self._clock()
+            if not block or left <= 0.0:
+                return False
+            expiries = [w.ended_at + self.late_window for w in self._late
+                        if w.ended_at is not None]
+            if expiries:
+                left = min(left, max(0.001, min(expiries) - self._clock()))
+            self._cond.wait(left)
+        return True
+
+    def _take_over(self, exchange: Exchange) -> None:
+        """``exchange`` becomes the byte-answered one; a stop supersedes one in flight and
+        owns, as a whole, the bytes that may still come for it or for late requests."""
+        old = self._byte
+        now = self._clock()
+        if old is not None:
+            for waiting in old.waitings:
+                if waiting.answer is None and not waiting.done:
+                    # its byte may still come: counted with the stop's own while the stop
+                    # is in flight, and it holds up the next exchange after the stop. A
+                    # getter still takes its data (named), never a byte
+                    waiting.superseded = True
+                    if not waiting.expect_data:
+                        waiting.done = True
+                        waiting.ended_at = now
+                        self._late.append(waiting)
+        late = self._late_bytes() + [w for w in (old.waitings if old else [])
+                                     if w.superseded and not w.done]
+        if late:
+            exchange.whole = True
+            exchange.doubt = ('written while answers to ' + ', '.join(w.name for w in late)
+                              + ' may come')
+        self._byte = exchange
+        self._cond.notify_all()
 
     def wait(self, waiting: Waiting, deadline: float) -> Item | None:
         """The answer to ``waiting`` by ``deadline`` (None: none came; it may come late).
@@ -129,99 +223,224 @@ class AnswerBook:
             self._cond.wait_for(lambda: waiting.done or waiting.error is not None,
                                 max(0.0, deadline - self._clock()))
             self._drop([waiting])
+            if waiting.answer is None and waiting.error is not None:
+                raise waiting.error
             if waiting.answer is None:
-                if waiting.error is not None:
-                    raise waiting.error
-                self._late += 1
-                if waiting.expect_data:  # it answers nothing: overlapping it is safe
-                    self._trusted.add(waiting.key)
+                self._give_held_doubtfully(waiting)
+            if waiting.answer is None and waiting.ended_at is None:
+                waiting.ended_at = self._clock()
+                self._late.append(waiting)
+                if waiting.expect_data and waiting.data_answered is False:
+                    self._data_keys.add(waiting.key)  # it answers nothing: it may overlap
+            self._end_exchange(waiting.exchange)
             return waiting.answer
+
+    def _give_held_doubtfully(self, waiting: Waiting) -> None:
+        for held in self._held:
+            if waiting in held.candidates:
+                others = [w.name for w in held.candidates if w is not waiting]
+                waiting.answer = held.byte
+                waiting.doubt = 'may be the answer of ' + ', '.join(others)
+                held.candidates.remove(waiting)
+                held.candidates[:] = [w for w in held.candidates if w.answer is None]
+                for other in held.candidates:  # void: nobody else gets it for certain
+                    other.doubt = other.doubt or f'a NACK {waiting.name} also may own'
+                self._held.remove(held)
+                batch = held.batch
+                if batch is not None:  # it owns the rest of its bytes as a whole
+                    pending, batch.pending = batch.pending or [], None
+                    batch.whole = True
+                    batch.doubt = (f'a NACK came that {waiting.name} and '
+                                   + ', '.join(others) + ' may own')
+                    if waiting not in batch.waitings:
+                        batch.received.append(held.byte)
+                    for byte in pending:
+                        self._deliver_byte(byte, counted=True)
+                return
+
+    def _end_exchange(self, exchange: Exchange) -> None:
+        if self._byte is exchange and all(w.done or w.ended_at is not None or
+                                          w not in self._flight for w in exchange.waitings):
+            self._byte = None
+            self._cond.notify_all()
+
+    def dropped(self, waitings: Sequence[Waiting]) -> None:
+        """``waitings`` gave up and were never taken by the device (the batch reads of a
+        controller that drops what it queues): no late answer is waited for."""
+        with self._cond:
+            self._late = [w for w in self._late if w not in waitings]
+            self._cond.notify_all()
 
     def in_flight(self) -> list[str]:
         """The names of the requests waiting for an answer (diagnostics, tests)."""
         with self._cond:
-            return [w.name for w in self._in_flight if not w.done]
+            return [w.name for w in self._flight if not w.done]
 
     def idle(self) -> bool:
         """Nothing in flight."""
         with self._cond:
-            return not self._in_flight
-
-    def settled(self) -> None:
-        """Everything written so far is answered: no late reply can come any more."""
-        with self._cond:
-            if not self._in_flight:
-                self._late = 0
+            return not self._flight
 
     @property
     def late_possible(self) -> bool:
         """A request ended without its answer, and that answer may still come."""
         with self._cond:
-            return self._late > 0
+            self._expire()
+            return bool(self._late)
 
     def fail_all(self, error: BaseException) -> None:
         """The link is gone: every request in flight raises ``error``."""
         with self._cond:
-            for waiting in self._in_flight:
+            for waiting in self._flight:
                 if not waiting.done:
                     waiting.error = error
-            self._in_flight.clear()  # nothing of that link answers anything any more
+            self._flight.clear()  # nothing of that link answers anything any more
+            self._late.clear()
+            self._held.clear()
+            self._byte = None
             self._cond.notify_all()
 
     def _drop(self, waitings: list[Waiting]) -> None:
-        self._in_flight = [w for w in self._in_flight if w not in waitings]
+        self._flight = [w for w in self._flight if w not in waitings]
         self._cond.notify_all()
+
+    def _expire(self) -> None:
+        now = self._clock()
+        self._late = [w for w in self._late
+                      if w.ended_at is not None and now - w.ended_at < self.late_window]
+
+    def _late_bytes(self) -> list[Waiting]:
+        """Late requests whose byte may still come (any late request may be NACKed, but
+        only byte-answered ones hold up the next exchange: the others are held)."""
+        return [w for w in self._late if not w.data_answered]
 
     # ------------------------------------------------------------ the reader
     def deliver(self, item: Item) -> bool:
         """Give ``item`` to the request it answers; False when none did (stale: a reply
         that came after its request gave up, or noise that decoded; counted)."""
         with self._cond:
-            target = self._target(item)
-            if target is None:
+            self._expire()
+            taken = (self._deliver_byte(item) if isinstance(item, ReplyByte)
+                     else self._deliver_data(item))
+            if not taken:
                 self.stale += 1
-                if self._late:
-                    self._late -= 1  # the late reply has come
-                return False
+            self._resolve()
             self._cond.notify_all()
-            return True
+            return taken
 
-    def _target(self, item: Item) -> Waiting | None:
-        busy = [w for w in self._in_flight if not w.done]
-        if isinstance(item, ReplyByte):
-            if not item.is_ack:
-                self.nacks += 1
-            setter = next((w for w in busy if not w.expect_data), None)
-            if setter is not None:
-                return self._resolve(setter, item)
-            getter = next(iter(busy), None)
-            if getter is None:
-                return None
-            if item.is_ack and self._late:  # perhaps the late ACK of an earlier setter
-                getter.unexpected = getter.unexpected or 'ACK'
-                return None
-            return self._resolve(getter, item)
+    def _deliver_data(self, item: Frame) -> bool:
         if is_greeting(item):
             self.greetings += 1
-            return None
+            return False
         key = (item.opcode, item.axis)
-        for waiting in busy:  # the getter that asked, else a setter with that opcode
-            if waiting.key == key and waiting.expect_data:
-                self._trusted.add(key)
-                return self._resolve(waiting, item)
-        for waiting in busy:
-            if waiting.key == key:
-                return self._resolve(waiting, item)
-        if len(busy) == 1:  # alone on the link: name what it got if nothing else comes
-            busy[0].unexpected = busy[0].unexpected or (
-                f'data of opcode 0x{item.opcode:04X} (axis {item.axis})')
-        return None
+        # the oldest getter that may still be answered, a late one first; else a setter
+        # of that opcode (data where an ACK belongs)
+        getters = sorted((w for w in self._late + self._flight
+                          if w.key == key and w.expect_data and w.answer is None),
+                         key=lambda w: w.seq)
+        setters = [w for w in self._flight if w.key == key and w.answer is None]
+        target = getters[0] if getters else (setters[0] if setters else None)
+        if target is None:
+            busy = [w for w in self._flight if not w.done]
+            if len(busy) == 1:  # alone on the link: name what it got if nothing else comes
+                busy[0].unexpected = busy[0].unexpected or (
+                    f'data of opcode 0x{item.opcode:04X} (axis {item.axis})')
+            return False
+        if target.expect_data:
+            self._data_keys.add(key)
+        if target in self._late:
+            self._late.remove(target)
+            target.answer = item
+            return False  # the late data of a request that gave up: stale
+        self._resolve_one(target, item)
+        return True
+
+    def _deliver_byte(self, item: ReplyByte, counted: bool = False) -> bool:
+        if not item.is_ack and not counted:
+            self.nacks += 1
+        exchange = self._byte
+        if exchange is not None and exchange.pending is not None:
+            exchange.pending.append(item)  # counted once the held NACK has its owner
+            return True
+        if exchange is not None and exchange.whole:
+            exchange.received.append(item)
+            slot = self._slot(exchange)
+            if slot is not None:
+                slot.doubt = exchange.doubt
+                self._resolve_one(slot, item)
+            return True
+        slot = self._slot(exchange) if exchange is not None else None
+        candidates = [slot] if slot is not None else []
+        candidates += [w for w in self._late if item.is_ack is False or not w.data_answered]
+        if not item.is_ack:  # a NACK may answer a data-answered getter too
+            candidates += [w for w in self._flight if w.expect_data and w.data_answered
+                           and w.answer is None and w is not slot]
+        if not candidates:
+            lone = [w for w in self._flight if not w.done]
+            if item.is_ack and len(lone) == 1:
+                lone[0].unexpected = lone[0].unexpected or 'ACK'
+            return False
+        if len(candidates) > 1 and all(w in self._late for w in candidates):
+            self._late.remove(min(candidates, key=lambda w: w.seq))  # stale either way
+            return False
+        if len(candidates) > 1:
+            batch = exchange if slot is not None and exchange is not None and len(
+                exchange.waitings) > 1 else None
+            if batch is not None:  # a batch cannot count past a byte it may not own
+                batch.pending = []
+            self._held.append(Held(item, candidates, batch))
+            return True
+        [target] = candidates
+        if target in self._late:
+            self._late.remove(target)
+            target.answer = item
+            return False
+        if exchange is not None and target in exchange.waitings:
+            exchange.received.append(item)
+        self._resolve_one(target, item)
+        return True
+
+    def _slot(self, exchange: Exchange) -> Waiting | None:
+        """The next request of a byte-answered exchange to count a byte for."""
+        return next((w for w in exchange.waitings if w.answer is None and not w.done
+                     and not w.superseded and w in self._flight), None)
+
+    def _resolve(self) -> None:
+        """Give each held NACK to its last candidate (the others answered or expired),
+        until none is left to give (a batch's counting may settle another)."""
+        while self._resolve_once():
+            pass
+
+    def _resolve_once(self) -> bool:
+        for held in list(self._held):
+            held.candidates[:] = [w for w in held.candidates if w.answer is None and (
+                w in self._flight or w in self._late)]
+            if len(held.candidates) <= 1:
+                self._held.remove(held)
+                if held.candidates:
+                    [target] = held.candidates
+                    if target in self._late:
+                        self._late.remove(target)
+                        target.answer = held.byte
+                        self.stale += 1
+                    else:
+                        if target.exchange.byte:
+                            target.exchange.received.append(held.byte)
+                        self._resolve_one(target, held.byte)
+                else:
+                    self.stale += 1
+                batch = held.batch
+                if batch is not None:  # its counting goes on from the byte it waited for
+                    pending, batch.pending = batch.pending or [], None
+                    for byte in pending:
+                        self._deliver_byte(byte, counted=True)
+                return True
+        return False
 
     @staticmethod
-    def _resolve(waiting: Waiting, item: Item) -> Waiting:
+    def _resolve_one(waiting: Waiting, item: Item) -> None:
         waiting.answer = item
         waiting.done = True
-        return waiting
 
 
 def frame_key(frame: Frame) -> tuple[int, int]:

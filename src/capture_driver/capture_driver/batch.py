@@ -66,7 +66,10 @@ class BatchedReads:
                 raise ProtocolError(f'{name} is not a getter: only getters are batched')
             frames.append((cmd, axis, cmd.frame(axis, None, self._link.group)))
         link = self._link
-        with contextlib.nullcontext() if link.overlap else link.link_lock:
+        with contextlib.ExitStack() as held:
+            held_lock = not link.overlap
+            if held_lock:
+                held.enter_context(link.link_lock)
             values: list[Any] = [None] * len(frames)
             asked = [i for i, (cmd, axis, _) in enumerate(frames)
                      if not (optional and self._left_out(cmd.name, axis))]
@@ -75,6 +78,12 @@ class BatchedReads:
             if batched:
                 answers = self._transact_batch([(frames[i][0].name, frames[i][2])
                                                 for i in asked])
+                if not link.overlap and not held_lock:  # this batch ended the overlap:
+                    held.enter_context(link.link_lock)  # its reads alone go one at a time
+            # only the first read answered: what a controller that drops queued requests
+            # does, not one silent read (with two reads the two look alike)
+            dropped_queue = (batched and answers[0] is not None
+                             and all(answer is None for answer in answers[1:]))
             for i, answer in zip(asked, answers, strict=True):
                 cmd, axis, frame = frames[i]
                 if isinstance(answer, Frame):
@@ -83,7 +92,8 @@ class BatchedReads:
                         if optional:
                             self._polls.answered(cmd.name, axis)
                         continue
-                if optional and batched and answer is None and answers.count(None) == 1:
+                if optional and batched and answer is None and answers.count(None) == 1 and (
+                        not dropped_queue):
                     # the one read of the batch with nothing at all while the device answered
                     # the rest: silent, not ambiguous (a controller that drops what it queues
                     # loses every read after the first); asked again after its back-off, not
@@ -112,8 +122,14 @@ class BatchedReads:
         not say, so a read that got one is asked alone), or None (nothing)."""
         link = self._link
         waitings = link.write([(name, frame, True) for name, frame in frames]) or []
-        deadline = link.last_activity + link.timeout
-        answers = [link.answer(waiting, deadline) for waiting in waitings]
+        answers = [link.answer(waiting, link.deadline(waiting, link.timeout))
+                   for waiting in waitings]
+        if len(answers) >= 2 and answers[0] is not None and all(
+                answer is None for answer in answers[1:]):
+            # only the first answered: the rest were dropped unread (a controller that
+            # drops what it queues), not answered late, so asking them again waits for
+            # no late answer (see answers.py)
+            link.answers.dropped(waitings[1:])
         if all(answer is None for answer in answers):  # not one answer: a timeout
             link.count_timeout('batched read')
         # each read answered (a NACK or ACK too): the controller handles queued requests
@@ -122,10 +138,9 @@ class BatchedReads:
 
     def count_batch(self, complete: bool) -> None:
         """One batch (the poll's getters, or a posted stream move) came back whole or not.
-        A whole one leaves nothing late to come; ``BATCH_FAILURES`` incomplete ones in a
+        ``BATCH_FAILURES`` incomplete ones in a
         row end batching for the connection (one request at a time)."""
         if complete:
-            self._link.settled()
             self._failures = 0
             return
         self._link.count('incomplete_batches')

@@ -25,7 +25,7 @@ from gimbal_driver_common.errors import DeviceRefused, InvalidRequest, LinkError
 from gimbal_driver_common.scan import ScanError, ScanRequest, check_scan
 
 from .device_requests import SCAN_COMMANDS
-from .errors import REQUEST_ERRORS, DeviceNack, NotConnected, WrongReply
+from .errors import REQUEST_ERRORS, NotConnected
 from .protocol import GeoPoint, PresetRecord
 
 if TYPE_CHECKING:
@@ -208,19 +208,13 @@ class CaptureScans(DeviceScans):
                 f'{steps} step(s) of {math.degrees(request.tilt_step):.2f} deg')
 
     def stop(self) -> None:
-        """SCN_StopScan. A refusal (or a reply of the wrong kind) while the driver knows of
-        no device scan is not a failed stop: a controller without the scan functions
-        refuses it, and ~/stop must stop its axes all the same (``device.stop`` follows)."""
-        device = self.device
-        if device.client.connected:
-            try:
-                device.client.request('SCN_StopScan')
-            except (DeviceNack, WrongReply) as exc:
-                if device.programs.scanning:
-                    raise
-                LOG.debug('SCN_StopScan with no device scan known: %s', exc)
-        device.programs.scanning = False
-
+        """The device's whole stop (``CaptureDevice.stop``): SCN_StopScan "stops both
+        motors immediately" (4.3.9), and it goes out after the axes' own stop, so that
+        the axes are told to stop whatever the scan stop's answer (up to 500 ms late) is.
+        A refusal of SCN_StopScan fails it only while the driver knows of a device scan."""
+        if self.device.client.connected:
+            self.device.stop(None)
+        self.device.programs.scanning = False
 
 
 #: the pose source of the position and heading the user inserted on the device (4.4.21-27)

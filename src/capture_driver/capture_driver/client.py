@@ -31,7 +31,7 @@ from .batch import BatchedReads
 from .device_requests import DeviceRequests, Identity, Polls, TrackingState
 from .errors import CaptureError, DeviceNack
 from .link import CaptureLink
-from .motion import MotionRequests, PostedMoves
+from .motion import MotionRequests, PostedMoves, StopAnswers
 from .protocol import GeoPoint, PresetRecord
 
 
@@ -137,8 +137,11 @@ class CaptureClient(CaptureLink):
     def read_axis(self, axis: int, with_current: bool = False) -> tuple[float, float, float | None]:
         return self.device_requests.read_axis(axis, with_current)
 
-    def stop_all(self, axes: list[int]) -> list[str]:
+    def stop_all(self, axes: list[int]) -> StopAnswers:
         return self.device_requests.stop_all(axes)
+
+    def stop_axes(self, axes: Sequence[int], programs: bool = False) -> StopAnswers:
+        return self.motion.stop_axes(axes, programs)
 
     def reset_faults(self, axis: int) -> None:
         self.device_requests.reset_faults(axis)

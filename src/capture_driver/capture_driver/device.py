@@ -347,19 +347,23 @@ class CaptureDevice(Device):
                                     math.degrees(self.settings.acceleration))
 
     def stop(self, joints: Sequence[str] | None = None) -> None:
-        """None: scans, loops and every axis (SCN_StopScan, PRST_StopPresetLooping,
-        GPS_StopTargetLooping, then speed 0 per axis); else those axes."""
+        """Send the whole stop now; raise if it failed. None: every axis, then the preset
+        loop, the target loop and the scan (the client's ``stop_axes``: one write, the
+        answers read afterwards); else those axes. A refusal of SCN_StopScan fails the
+        stop only while the driver knows a scan runs: a controller without the scan
+        functions refuses it."""
+        if joints is None:
+            axes = [self.axis(j) for j in self.joint_names]
+        else:
+            axes = [self.axis(j) for j in joints]
         with self.client.link_lock:
+            answers = self.client.stop_axes(axes, programs=joints is None)
+            problems = [str(exc) for exc in answers.errors]
             if joints is None:
-                problems = self.client.stop_all([self.axis(j) for j in self.joint_names])
+                scan = answers.programs.get('SCN_StopScan')
+                if scan is not None and self.programs.scanning:
+                    problems.append(str(scan))
                 self.programs.clear()
-            else:
-                problems = []
-                for joint in joints:
-                    try:
-                        self.client.stop_axis(self.axis(joint))
-                    except REQUEST_ERRORS as exc:
-                        problems.append(str(exc))
         if problems:
             raise DeviceRefused('; '.join(problems))
 

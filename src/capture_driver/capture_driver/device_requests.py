@@ -34,7 +34,7 @@ from .protocol.registers import CSR_ERROR_STRINGS, CSR_PROTOCOL_ERROR, REGISTERS
 if TYPE_CHECKING:  # the parts import this module for request_key: no import cycle at run time
     from .batch import BatchedReads
     from .link import CaptureLink
-    from .motion import MotionRequests
+    from .motion import MotionRequests, StopAnswers
 
 LOG = logging.getLogger('capture_driver.device_requests')
 
@@ -99,7 +99,7 @@ class Polls:
             detail = self.optional('ERR_GetProtocolErrorString')
         except CaptureError:  # the link went
             return exc
-        return DeviceNack(exc.request, exc.code, detail) if detail else exc
+        return DeviceNack(exc.request, exc.code, detail, exc.doubt) if detail else exc
 
     def run(self, name: str, axis: int | None = None, value: Any = None) -> Any:
         """:meth:`request`, with the controller's reason attached to an 0xA6 NACK."""
@@ -225,20 +225,13 @@ class DeviceRequests:
         current = self._link.request('MOT_GetMotorCurrent', axis) if with_current else None
         return position, speed, current
 
-    def stop_all(self, axes: list[int]) -> list[str]:
-        """Stop scans, loops and every axis; returns the problems (empty when all worked)."""
-        problems = []
-        for name in ('SCN_StopScan', 'PRST_StopPresetLooping', 'GPS_StopTargetLooping'):
-            try:
-                self._link.request(name)
-            except REQUEST_ERRORS as exc:
-                LOG.debug('stop: %s', exc)
-        for axis in axes:
-            try:
-                self._motion.stop_axis(axis)
-            except REQUEST_ERRORS as exc:
-                problems.append(str(exc))
-        return problems
+    def stop_all(self, axes: list[int]) -> StopAnswers:
+        """Stop every axis, then loops and scans, all written at once
+        (:meth:`MotionRequests.stop_axes`)."""
+        answers = self._motion.stop_axes(axes, programs=True)
+        for name, exc in answers.programs.items():
+            LOG.debug('stop: %s: %s', name, exc)
+        return answers
 
     def reset_faults(self, axis: int) -> None:
         """4.10: "send the 'Reset faults' and the 'AxisOn' commands"."""

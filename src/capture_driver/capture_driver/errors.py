@@ -56,9 +56,12 @@ class NotSupported(CaptureError, errors.Unsupported):
 class DeviceNack(CaptureError, errors.DeviceRefused):
     """The controller answered with a NACK byte; the message carries its meaning."""
 
-    def __init__(self, request: str, code: ReplyCode, detail: str = '') -> None:
+    def __init__(self, request: str, code: ReplyCode, detail: str = '',
+                 doubt: str = '') -> None:
         info = REPLY_INFO[code]
         message = f'{request}: NACK 0x{int(code):02X} {info.title} ({info.meaning})'
+        if doubt:  # the byte names no request: say whose else it may be
+            message += f' (not certainly its own: {doubt})'
         if detail:
             message += f'; device says: {detail}'
         if info.advice:
@@ -67,6 +70,8 @@ class DeviceNack(CaptureError, errors.DeviceRefused):
         self.code = code
         self.request = request
         self.detail = detail
+        #: why this NACK may be another request's ('' when it is certainly this one's)
+        self.doubt = doubt
 
 
 #: what a request can fail with while the link stays up: a NACK, a reply of the wrong kind,

@@ -2,19 +2,20 @@
 
 The link has one owner of its input: the reader thread ``capture-reader`` (the session
 base, :class:`gimbal_driver_common.session.Session`, as every streaming client has). It
-decodes everything the controller sends and gives each reply to the request it answers
-(:class:`~.answers.AnswerBook`): a data packet to the getter with its opcode and axis, a
-reply byte to the setter in flight. Callers write their requests and wait for their own
-answers; nobody reads the link but the reader. So requests that the protocol can tell
-apart overlap: the joint poll's getters go out while a sensor or register read waits for
-an answer that is slow or never comes, and a stop goes out at once (see the overlap rules
-in :mod:`.answers`). Setters go one sequence at a time: they hold the device's link lock
-(:class:`~gimbal_driver_common.link_lock.LinkLock`, which the adapter passes in; a client
-made alone makes its own), and so does the core's command path for its sends; a stream
-move posted without waiting (:meth:`MotionRequests.post_moves`) is settled by that lock
-before the next setter. A controller that drops what it queues (batched reads that come
-back incomplete, see :mod:`.batch`) is driven one request at a time instead: then every
-request holds the lock (:attr:`CaptureLink.overlap` off).
+decodes everything the controller sends and hands it to :class:`~.answers.AnswerBook`,
+which gives an answer only to the one request that can own it (the rules are in
+:mod:`.answers`): data packets name their getter; at most one byte-answered exchange (a
+setter, a getter not yet answered with data, a stop's batch) is in flight, and after a
+request gives up the next one waits until its late answer came or the late window
+passed. Callers write their requests and wait for their own answers; nobody reads the
+link but the reader. So the joint poll's getters go out while a setter or a slow sensor
+read waits, and a stop goes out at once. Setters go one sequence at a time: they hold the
+device's link lock (:class:`~gimbal_driver_common.link_lock.LinkLock`, which the adapter
+passes in; a client made alone makes its own), and so does the core's command path for
+its sends; a stream move posted without waiting (:meth:`MotionRequests.post_moves`) is
+settled by that lock before the next setter. A controller that drops what it queues
+(batched reads that come back incomplete, see :mod:`.batch`) is driven one request at a
+time instead: then every request holds the lock (:attr:`CaptureLink.overlap` off).
 
 A getter is answered by its data packet, a setter by a single ACK byte; a NACK byte raises
 :class:`DeviceNack` carrying the spec's meaning and advice. A reply of the other kind (an
@@ -71,6 +72,21 @@ from .protocol import (
 )
 
 LOG = logging.getLogger('capture_driver.client')  # the name the node's log bridge forwards
+
+#: requests after which the controller may take this long (s) before it answers them and
+#: handles anything new: 4.3.9 "Stop scan can take up to 500 milliseconds before sending
+#: ACK and handle new incoming commands". Its second witness, a public CapTrack Wireshark
+#: dissector (port 4949), agrees on the opcodes (0x0408 SCN_StopScan) and names no time.
+BUSY_AFTER = {'SCN_StopScan': 0.5}
+#: what the driver adds to a documented answer time before it calls a request unanswered
+ANSWER_MARGIN_S = 0.3
+
+
+def answer_time(name: str) -> float:
+    """The least time to wait for ``name``'s answer: the document's time plus a margin
+    (0 for requests the document gives no time: the request timeout applies)."""
+    return BUSY_AFTER[name] + ANSWER_MARGIN_S if name in BUSY_AFTER else 0.0
+
 
 
 class AxisSetups:
@@ -133,6 +149,8 @@ class CaptureLink(Protocol):
         self._connect_opcode = command('COM_Connect').opcode
         #: when the last request (or batch) was written
         self.last_activity = 0.0
+        #: until when the controller may hold every answer (after SCN_StopScan, 4.3.9)
+        self._busy_until = 0.0
         #: when the device last answered anything (the handshake, any request)
         self._last_answer = 0.0
         #: requests may overlap (see :mod:`.answers`); off for a controller that drops what
@@ -368,7 +386,7 @@ class CaptureLink(Protocol):
                 return self.decode(name, frame, reply) if cmd.replies_with_data else None
             except DeviceNack as exc:
                 # 0xF6: the controller did not execute the packet, so resending is safe.
-                if exc.code == ReplyCode.WRONG_CHECKSUM and attempt == 1:
+                if exc.code == ReplyCode.WRONG_CHECKSUM and attempt == 1 and not exc.doubt:
                     continue
                 raise
             except (DeviceTimeout, WrongReply) as exc:
@@ -390,28 +408,36 @@ class CaptureLink(Protocol):
             raise self.wrong_reply(name, frame, f'{len(reply.data)} data bytes ({exc})',
                                    'data') from None
 
-    def write(self, requests: Sequence[Request], block: bool = True) -> list[Waiting] | None:
+    def write(self, requests: Sequence[Request], block: bool = True,
+              urgent: bool = False) -> list[Waiting] | None:
         """Write ``requests`` in one write, registered for their answers (see
         :class:`~.answers.AnswerBook` for when they may go out); None when ``block`` is
-        False and they may not go out now. A stop (the link lock held urgently) goes out
-        at once."""
+        False and they may not go out now. A stop (``urgent``, or the link lock held
+        urgently) goes out at once."""
         session = self._session
         if session is None or not session.alive:
             lost = session.error if session is not None else None
             raise NotConnected(f'{requests[0][0]}: link lost ({lost})' if lost is not None
                                else f'{requests[0][0]}: not connected ({self.last_error})')
+        started = time.monotonic()
         try:
             waitings = self.answers.write(
-                requests, session.write, urgent=self._lock.held_urgently(), block=block,
+                requests, session.write, urgent=urgent or self._lock.held_urgently(), block=block,
                 timeout=2 * self.timeout + 1.0)
         except LinkError as exc:
             raise NotConnected(f'{requests[0][0]}: link lost ({exc})') from exc
+        # time spent waiting for the link to resynchronise is not the device's silence
+        self._last_answer += time.monotonic() - started
         if waitings is None:
             if block:
                 raise DeviceTimeout(f'{requests[0][0]}: the link stayed busy')
             return None
         self._stats['requests'] += len(requests)
         self.last_activity = time.monotonic()
+        for waiting in waitings:
+            if waiting.name in BUSY_AFTER:
+                self._busy_until = max(self._busy_until,
+                                       waiting.written_at + BUSY_AFTER[waiting.name])
         return waitings
 
     def answer(self, waiting: Waiting, deadline: float) -> Frame | ReplyByte | None:
@@ -424,10 +450,14 @@ class CaptureLink(Protocol):
     def _transact(self, name: str, frame: Frame, expect_data: bool, timeout: float,
                   optional: bool = False) -> Frame:
         [waiting] = self.write([(name, frame, expect_data)]) or []
-        answer = self.answer(waiting, waiting.written_at + timeout)
+        timeout = max(timeout, answer_time(name))
+        answer = self.answer(waiting, self.deadline(waiting, timeout))
+        if waiting.superseded and answer is None:
+            raise DeviceTimeout(f'{self.label(name, frame)}: a stop went out before its '
+                                'answer came (its answer can no longer be told apart)')
         if isinstance(answer, ReplyByte):
             if not answer.is_ack:
-                raise DeviceNack(self.label(name, frame), answer.code)
+                raise DeviceNack(self.label(name, frame), answer.code, doubt=waiting.doubt)
             if expect_data:
                 raise self.wrong_reply(name, frame, 'ACK', 'data')
         elif isinstance(answer, Frame):
@@ -442,13 +472,13 @@ class CaptureLink(Protocol):
             else:
                 self.count_timeout(name)
             raise DeviceTimeout(f'{self.label(name, frame)}: no reply within {timeout:g} s')
-        self.settled()
         return answer if isinstance(answer, Frame) else frame
 
-    def settled(self) -> None:
-        """A request (or a batch) got its answer: when nothing else is in flight no late
-        reply can come any more."""
-        self.answers.settled()
+    def deadline(self, waiting: Waiting, timeout: float) -> float:
+        """When ``waiting`` gives up: ``timeout`` after it was written, and later by what
+        remains of a scan stop's busy time then (4.3.9: the controller handles new
+        commands up to 500 ms after SCN_StopScan)."""
+        return waiting.written_at + timeout + max(0.0, self._busy_until - waiting.written_at)
 
     def wrong_reply(self, name: str, frame: Frame, answer: str, expected: str) -> WrongReply:
         """Count a reply of the wrong kind for ``name`` (diagnostics, per command)."""

@@ -8,9 +8,11 @@ moves may be posted, and their count).
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
+from gimbal_driver_common.errors import DeviceRefused
 from gimbal_driver_common.transport import ByteStream
 
 from .answers import Waiting
@@ -19,9 +21,10 @@ from .device_requests import Polls
 from .errors import (
     CaptureError,
     DeviceNack,
+    DeviceTimeout,
     NotConnected,
 )
-from .link import AxisSetups, CaptureLink
+from .link import AxisSetups, CaptureLink, answer_time
 from .protocol import (
     Frame,
     ProtocolError,
@@ -49,6 +52,23 @@ class PostedMoves:
     moves: dict[int, tuple[float, float, float]]
     waitings: list[Waiting]
     stream: ByteStream
+
+
+#: one axis' stop (speed mode, speed 0, update); see :meth:`MotionRequests.stop_axes`
+AXIS_STOP: tuple[tuple[str, Any], ...] = (('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
+                                          ('MOT_Update', None))
+#: the device programs a stop of everything ends, after the axes, the scan last (4.3.9)
+PROGRAM_STOPS = ('PRST_StopPresetLooping', 'GPS_StopTargetLooping', 'SCN_StopScan')
+
+
+@dataclass
+class StopAnswers:
+    """What the device answered to a stop: the axis steps' problems (``errors``) and the
+    program stops' (``programs``, by name: a refusal there is the caller's to judge)."""
+
+    steps: int
+    errors: list[CaptureError | DeviceRefused] = field(default_factory=list)
+    programs: dict[str, CaptureError] = field(default_factory=dict)
 
 
 class MotionRequests:
@@ -201,7 +221,8 @@ class MotionRequests:
         resend = False
         for waiting, answer in zip(posted.waitings, answers, strict=True):
             if isinstance(answer, ReplyByte) and not answer.is_ack and error is None:
-                error = DeviceNack(link.label(waiting.name, waiting.frame), answer.code)
+                error = DeviceNack(link.label(waiting.name, waiting.frame), answer.code,
+                                   doubt=waiting.doubt)
                 resend = answer.code == ReplyCode.WRONG_CHECKSUM
             elif isinstance(answer, Frame) and error is None:  # data where an ACK belongs
                 error = link.wrong_reply(waiting.name, waiting.frame, 'data', 'ACK')
@@ -234,13 +255,105 @@ class MotionRequests:
             self._setups.known[axis] = ('speed', acceleration, velocity_deg_s, False)
 
     def stop_axis(self, axis: int) -> None:
-        """Decelerate to rest: speed mode with speed 0 (works from position or speed mode).
-        Always the full sequence: a stop never relies on what the client remembers."""
-        with self._link.link_lock:
-            known = self._setups.known.pop(axis, None)
-            self._run_setup(axis, [('MOT_SetSpeedMode', None), ('MOT_SetSpeed', 0.0),
-                                   ('MOT_Update', None)])
-            self._setups.known[axis] = ('speed', known[1] if known else None, 0.0, False)
+        """:meth:`stop_axes` of one axis; raises its first problem."""
+        answers = self.stop_axes([axis])
+        if answers.errors:
+            raise answers.errors[0]
+
+    def stop_axes(self, axes: Sequence[int], programs: bool = False) -> StopAnswers:
+        """Decelerate ``axes`` to rest, and with ``programs`` end the device's preset loop,
+        target loop and scan: every step written at once, then the answers read.
+
+        Per axis speed mode with speed 0 (works from position or speed mode): MOT_SetSpeedMode,
+        MOT_SetSpeed 0, MOT_Update, always the whole sequence (a stop never relies on what
+        the client remembers). Then PRST_StopPresetLooping, GPS_StopTargetLooping and last
+        SCN_StopScan: the axes' motion goes first, and nothing waits behind the scan stop,
+        which the controller may take 500 ms to answer before it handles anything new
+        (4.3.9). While it scans the controller may refuse the motor steps with 0xA6 (4.3);
+        SCN_StopScan "stops both motors immediately", so such a refusal is no failure when
+        the scan stop is ACKed. One write, one exchange of the answer book: no step waits
+        for the answer of another, and a step that fails skips nothing. (On a controller
+        found to drop queued requests, :attr:`~.batch.BatchedReads.batching` off, the
+        steps go one at a time, each after the answer or timeout of the one before: it
+        would drop the rest of one write; still none is skipped.) Each answer waits
+        its own time (the request timeout; SCN_StopScan its 500 ms plus
+        :data:`~.link.ANSWER_MARGIN_S`). Whether the axes came to rest is the core's to
+        confirm from the joint samples; these answers say only what the device said.
+        """
+        link = self._link
+        with link.link_lock:
+            for axis in axes:
+                self._setups.known.pop(axis, None)
+            requests = [(name, command(name).frame(axis, value, link.group), False)
+                        for axis in axes for name, value in AXIS_STOP]
+            if programs:
+                requests += [(name, command(name).frame(None, None, link.group), False)
+                             for name in PROGRAM_STOPS]
+            if self._batch.batching:
+                waitings = link.write(requests, urgent=True) or []  # a stop waits for nothing
+                answers = [link.answer(w, self._deadline(w)) for w in waitings]
+            else:  # a controller that drops queued requests: one step at a time, none skipped
+                waitings, answers = [], []
+                for request in requests:
+                    [waiting] = link.write([request], urgent=True) or []
+                    waitings.append(waiting)
+                    answers.append(link.answer(waiting, self._deadline(waiting)))
+            for axis in axes:
+                self._setups.known[axis] = ('speed', None, 0.0, False)
+        result = StopAnswers(len(waitings))
+        exchange = waitings[0].exchange if waitings else None
+        if all(answer is None for answer in answers) and waitings:
+            link.count_timeout('stop')
+        if exchange is not None and exchange.whole:
+            self._judge_whole(result, exchange.received, exchange.doubt, waitings)
+        else:
+            self._judge_each(result, waitings, answers)
+        return result
+
+    def _deadline(self, waiting: Waiting) -> float:
+        return self._link.deadline(waiting, max(self._link.timeout, answer_time(waiting.name)))
+
+    def _judge_each(self, result: StopAnswers, waitings: list[Waiting],
+                    answers: list[Frame | ReplyByte | None]) -> None:
+        """Answers the book gave one by one: each step's own."""
+        link = self._link
+        scan = next((a for w, a in zip(waitings, answers, strict=True)
+                     if w.name == 'SCN_StopScan'), None)
+        scan_stopped = isinstance(scan, ReplyByte) and scan.is_ack
+        for waiting, answer in zip(waitings, answers, strict=True):
+            label = link.label(waiting.name, waiting.frame)
+            error: CaptureError | None = None
+            if isinstance(answer, ReplyByte) and not answer.is_ack:
+                if scan_stopped and waiting.frame.axis and (
+                        answer.code == ReplyCode.INVALID_COMMAND):
+                    continue  # refused while scanning; the scan stop stopped the motors
+                error = DeviceNack(label, answer.code, doubt=waiting.doubt)
+            elif isinstance(answer, Frame):
+                error = link.wrong_reply(waiting.name, waiting.frame, 'data', 'ACK')
+            elif answer is None:
+                error = DeviceTimeout(f'{label}: no reply within '
+                                      f'{max(link.timeout, answer_time(waiting.name)):g} s')
+            if error is None:
+                continue
+            if waiting.frame.axis:
+                result.errors.append(error)
+            else:
+                result.programs[waiting.name] = error
+
+    @staticmethod
+    def _judge_whole(result: StopAnswers, received: list[ReplyByte], doubt: str,
+                     waitings: list[Waiting]) -> None:
+        """Bytes the stop's batch owns as a whole (it went out while other answers could
+        still come): only what they say together is known."""
+        names = ', '.join(dict.fromkeys(w.name for w in waitings))
+        nacks = sorted({f'0x{int(b.code):02X}' for b in received if not b.is_ack})
+        if nacks:
+            result.errors.append(DeviceRefused(
+                f'stop ({names}): NACK {", ".join(nacks)} among its {len(waitings)} '
+                f'answers, which name no request ({doubt})'))
+        if len(received) < len(waitings):
+            result.errors.append(DeviceTimeout(
+                f'stop ({names}): {len(received)} of {len(waitings)} answers came ({doubt})'))
 
     def _run_setup(self, axis: int, steps: list[tuple[str, Any]]) -> None:
         """Send one axis' motion set-up under the lock; the setters in it do not count as

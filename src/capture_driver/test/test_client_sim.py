@@ -810,6 +810,9 @@ def test_the_poll_reads_beside_a_post_and_the_next_setter_settles_it_first(sim):
     lock.before_use = settle_posted
     client.connect()
     try:
+        # once answered with data, the poll's getters are data-answered: they go out beside
+        # the post (a getter not known yet would wait for it, see answers.py)
+        client.read_many(POLL)
         client.move_absolute(1, 1.0, SPEED, ACCELERATION)
         client.move_absolute(2, -1.0, SPEED, ACCELERATION)
         assert lock.try_hold()  # as the joint_command callback does: no settle
@@ -884,3 +887,82 @@ def test_a_link_lost_before_the_acks_is_reported_as_not_connected(sim, link):
     with pytest.raises(NotConnected, match='stream move'):  # not the new connection's
         client.settle_posted(posted)
     assert client.post_moves({1: (3.0, SPEED, ACCELERATION)}) is None  # a new connection
+
+
+STOP_STEPS = ('MOT_SetSpeedMode', 'MOT_SetSpeed', 'MOT_Update')
+
+
+def received(sim, since: int) -> list[tuple[str, int]]:
+    """(name, axis) of what the simulator received after its first ``since`` requests."""
+    return [(BY_OPCODE[f.opcode].name, f.axis) for f in list(sim.model.requests)[since:]
+            if f.opcode in BY_OPCODE]
+
+
+def test_a_stop_with_its_first_step_answered_late_reaches_every_step_of_every_axis(sim):
+    """Issue 44 item 1, over TCP: MOT_SetSpeedMode answered 0.7 s late (beyond the request
+    timeout) holds up no other step: every step of both axes, then the program stops,
+    reach the pedestal in that order (its receive log), and both axes come to rest."""
+    c = tcp_client(sim)
+    c.connect()
+    try:
+        c.jog(1, 30.0, 300.0)
+        c.jog(2, -20.0, 300.0)
+        wait_for(lambda: sim.model.axes[1].velocity > 1.0 and sim.model.axes[2].velocity < -1.0,
+                 5.0, 'both axes jogging')
+        sim.model.request_faults.delay('MOT_SetSpeedMode', 0.7)
+        before = len(sim.model.requests)
+        answers = c.stop_axes([1, 2], programs=True)
+        log = [item for item in received(sim, before)
+               if item[0] in (*STOP_STEPS, 'PRST_StopPresetLooping', 'GPS_StopTargetLooping',
+                              'SCN_StopScan')]
+        assert log[:9] == [(name, axis) for axis in (1, 2) for name in STOP_STEPS] + [
+            ('PRST_StopPresetLooping', 0), ('GPS_StopTargetLooping', 0), ('SCN_StopScan', 0)]
+        assert answers.steps == 9
+        wait_for(lambda: sim.model.axes[1].velocity == 0.0 and sim.model.axes[2].velocity == 0.0,
+                 5.0, 'both axes at rest')
+    finally:
+        sim.model.request_faults.clear()
+        c.stop()
+
+
+def test_a_scan_stop_answered_after_500_ms_still_stops_the_axes_and_is_no_failure(sim):
+    """Issue 44 item 1, over TCP: SCN_StopScan may take 500 ms before its ACK (4.3.9). It
+    goes out after the axes' steps, which are answered at once, and its answer 0.55 s
+    late is within its own time: the stop reports no problem, and the axes are at rest."""
+    c = tcp_client(sim)
+    c.connect()
+    try:
+        c.jog(1, 30.0, 300.0)
+        wait_for(lambda: sim.model.axes[1].velocity > 1.0, 5.0, 'the jog')
+        sim.model.request_faults.delay('SCN_StopScan', 0.55)
+        before = len(sim.model.requests)
+        answers = c.stop_axes([1, 2], programs=True)
+        assert answers.errors == [] and 'SCN_StopScan' not in answers.programs
+        log = received(sim, before)
+        assert log.index(('SCN_StopScan', 0)) > log.index(('MOT_Update', 2))
+        wait_for(lambda: sim.model.axes[1].velocity == 0.0, 5.0, 'pan at rest')
+    finally:
+        sim.model.request_faults.clear()
+        c.stop()
+
+
+def test_a_stop_during_a_device_scan_stops_the_axes_and_the_scan(sim):
+    """Issue 44, over TCP: while the device scans it refuses motor commands with 0xA6
+    (4.3); the stop's axis steps go out first all the same, SCN_StopScan after them ends
+    the scan and stops both motors, so those refusals are no failure."""
+    c = tcp_client(sim)
+    c.connect()
+    try:
+        c.configure_scan(-10.0, 10.0, 0.0, 2, 5.0, 40.0)
+        c.start_scan('snake')
+        wait_for(lambda: abs(sim.model.axes[1].velocity) > 1.0, 5.0, 'the scan moving pan')
+        before = len(sim.model.requests)
+        answers = c.stop_axes([1, 2], programs=True)
+        assert answers.errors == [] and answers.programs == {}
+        log = received(sim, before)
+        assert log.index(('SCN_StopScan', 0)) > log.index(('MOT_Update', 2))
+        assert c.request('SCN_IsScanOn') is False
+        wait_for(lambda: sim.model.axes[1].velocity == 0.0 and sim.model.axes[2].velocity == 0.0,
+                 5.0, 'both axes at rest')
+    finally:
+        c.stop()

@@ -263,8 +263,13 @@ def test_device_scan_converts_limits_and_stop_ends_it(tcp_rig):
         (-math.degrees(0.2), math.degrees(0.2)), abs=1e-3)
     assert params['speed'] == pytest.approx(math.degrees(0.5), abs=1e-3)
     assert tcp_rig.sim.model.scan is not None
-    ctl.stop()
+    before = len(tcp_rig.sim.model.requests)
+    assert ctl.stop().startswith('all axes stopped')  # the axes' 0xA6 while scanning: no failure
     assert tcp_rig.sim.model.scan is None
+    # issue 44: the axes are told to stop before the scan stop, whose answer may take 500 ms
+    log = [BY_OPCODE[f.opcode].name for f in list(tcp_rig.sim.model.requests)[before:]
+           if f.opcode in BY_OPCODE]
+    assert log.index('MOT_Update') < log.index('SCN_StopScan')
     with pytest.raises(InvalidRequest, match='zigzag'):
         motion.start_scan(ScanRequest('sector', -0.2, 0.2, 0.0, 0.0, 0.3, 0.1, 0.0))
 
