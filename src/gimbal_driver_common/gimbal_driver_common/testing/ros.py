@@ -282,6 +282,19 @@ class RosTestClient:
             settle_discovery()  # the subscriber may not have matched it yet
         publisher.publish(msg)
 
+    def subscribers_matched(self, topic: str, count: int, timeout: float = 30.0) -> None:
+        """Wait until this client's publisher on ``topic`` (if it has one) has ``count``
+        subscriptions matched, then :data:`DISCOVERY_SETTLE_S` when ``count`` > 0: around a
+        node's restart (0 once the old one is gone, 1 when the new one came), so that the
+        first message to the new node is not lost to its discovery."""
+        publisher = self._publishers.get(topic)
+        if publisher is None:
+            return  # publish() makes it and waits for the subscriber itself
+        self._wait(lambda: publisher.get_subscription_count() == count, timeout,
+                   f'{count} subscriber(s) on {topic}')
+        if count:
+            settle_discovery()
+
     # services
     def call(self, srv_type: type, name: str, request: Any, timeout: float = 15.0,
              idempotent: bool = False) -> Any:
