@@ -2,7 +2,7 @@
 # Every ROS process started here runs with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
-.PHONY: setup build test lint demo bench soak clean
+.PHONY: setup build test test-one-core lint demo bench soak clean
 
 setup:
 	scripts/setup_env.sh --no-build
@@ -12,6 +12,11 @@ build:
 
 test:
 	scripts/run_tests.sh
+
+# The same run with every process pinned to CPU 0 (docs/testing.md, "On one core"): no
+# verdict may depend on the machine's speed. 4 workers: CI's load per core (8 on 2 cores).
+test-one-core:
+	PYTEST_WORKERS=$${PYTEST_WORKERS:-4} taskset -c 0 scripts/run_tests.sh
 
 lint: setup
 	.venv/bin/ruff check .

@@ -97,7 +97,8 @@ def test_new_node_takes_over_a_device_in_motion_after_sigkill(driver: DriverSpec
             advance = (joint_positions(states[count])[joint] - last_before) * direction
             assert -TOLERANCE < advance <= STEP_FACTOR * slow * since_kill + TOLERANCE, (
                 advance, since_kill)
-            assert (far - joint_positions(states[count])[joint]) * direction > TOLERANCE
+            if device.moving(joint):  # then it was when that sample was taken
+                assert (far - joint_positions(states[count])[joint]) * direction > TOLERANCE
             # no jump: successive samples advance at most at the axis speed, never back
             wait_for(lambda: len(states) > count + 10, 30, '10 joint_states')
             samples = list(states)[count:]
@@ -110,7 +111,14 @@ def test_new_node_takes_over_a_device_in_motion_after_sigkill(driver: DriverSpec
                 # the device still runs the old move: the new node sent nothing that moves
                 # or stops an axis on its own
                 assert device.motions_since(mark) == []
-                assert device.moving(joint), 'the takeover stopped the move'
+                # Still moving, or at its target: on a slow machine the move can run to its
+                # end while the new node starts. Stopped short of it is what a takeover
+                # that stops the move looks like, whatever the machine's speed.
+                if not device.moving(joint):
+                    mark_states = len(states)
+                    wait_for(lambda: len(states) > mark_states, 30, 'a joint_states sample')
+                    at = joint_positions(states[-1])[joint]
+                    assert abs(at - far) <= TOLERANCE, f'the takeover stopped the move at {at}'
 
             stopped = ros.call(Trigger, f'/{driver.node_name}/stop', Trigger.Request())
             assert stopped.success, stopped.message

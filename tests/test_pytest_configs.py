@@ -1,10 +1,12 @@
-"""Every pytest configuration of the repository freezes the collected heap.
+"""Every pytest configuration of the repository freezes the collected heap and reports the
+nodes a failed test left running.
 
 A full garbage collection stops every thread of a test process; with an in-process
 simulator and a client in it, one pause as long as a request timeout failed a test
 (gimbal_driver_testing/frozen_heap.py, docs/testing.md "Pauses"). The plugin works
 only where a configuration loads it: the root one (``make test``) and each package's own
 (``colcon test``). gimbal_msgs has no in-process simulator and does not depend on the core.
+The node reports (testing/node_reports.py: a thread dump and the log of each node) likewise.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-PLUGIN = 'gimbal_driver_testing.frozen_heap'
+PLUGINS = ('gimbal_driver_testing.frozen_heap',
+           'gimbal_driver_testing.node_reports')
 CONFIGS = [ROOT / 'pytest.ini', *sorted(
     p for p in (ROOT / 'src').glob('*/pytest.ini') if p.parent.name != 'gimbal_msgs')]
 
@@ -31,9 +34,10 @@ def loaded_plugins(config: Path) -> list[str]:
     return [name for option, name in itertools.pairwise(words) if option == '-p']
 
 
+@pytest.mark.parametrize('plugin', PLUGINS, ids=lambda name: name.rsplit('.', 1)[-1])
 @pytest.mark.parametrize('config', CONFIGS, ids=lambda p: str(p.relative_to(ROOT)))
-def test_the_configuration_loads_the_frozen_heap_plugin(config: Path) -> None:
-    assert PLUGIN in loaded_plugins(config), f'{config} does not load {PLUGIN}'
+def test_the_configuration_loads_the_plugins(config: Path, plugin: str) -> None:
+    assert plugin in loaded_plugins(config), f'{config} does not load {plugin}'
 
 
 def test_the_reader_finds_a_plugin_and_misses_none(tmp_path: Path) -> None:

@@ -21,6 +21,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState, NavSatFix
 
 from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.conformance_rig import frequency_level_fits
 from gimbal_driver_testing.ros import RosTestClient
 
 pytestmark = pytest.mark.ros
@@ -55,10 +56,14 @@ def default_node(capture_rig):
 
 
 def all_ok(array: DiagnosticArray) -> bool:
+    """Every part OK; joint_states frequency measured and at the level its own rate gives
+    (a node that 8 test workers on 2 cores starve really publishes below its rate, and WARN
+    is then true: frequency_level_fits)."""
     mine = [s for s in array.status if s.name.startswith(f'{NODE}:')]
     names = {s.name.split(': ', 1)[1] for s in mine}
     return {'connection', 'joint_states frequency', 'pan', 'tilt', 'device'} <= names and all(
-        s.level == OK for s in mine)
+        (s.message != 'measuring' and frequency_level_fits(s))
+        if s.name.endswith(': joint_states frequency') else s.level == OK for s in mine)
 
 
 def device_status(array: DiagnosticArray):
@@ -76,8 +81,7 @@ def test_healthy_device_with_default_parameters_is_all_ok(default_node):
         wait_for(lambda: sim_state(control_port)['requests_by_command'].get(
             'GPS_GetLatitude', 0) >= 1, 15.0, 'the fix poll (fix_rate 1 Hz) to read the GPS')
         # every part OK again after the fix poll: a GPS getter the device did not answer
-        # would leave a lasting WARN (unsupported.*); joint_states frequency may dip for a
-        # moment while 8 test workers share 2 cores (a transient WARN failed a full run)
+        # would leave a lasting WARN (unsupported.*)
         array = ros.wait_for_message('/diagnostics', DiagnosticArray, all_ok, timeout=30)
         assert not any(kv.key.startswith(('unsupported.', 'wrong_reply.'))
                        for kv in device_status(array).values)

@@ -19,7 +19,7 @@ import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TypeVar
+from typing import ClassVar, TypeVar
 
 from gimbal_driver_common.sim_control import parse_ready_line
 
@@ -65,6 +65,13 @@ def domain_pool(environ: Mapping[str, str] | None = None) -> tuple[int, ...]:
 #: own (gimbal_driver_testing.graph_guard), also after they ended
 STARTED_PIDS: set[int] = set()
 
+#: the signal a driver process dumps its threads on (``ros.run.THREAD_DUMP_SIGNAL``; kept
+#: here too so that this module stays free of rclpy)
+THREAD_DUMP_SIGNAL = signal.SIGUSR2
+#: what faulthandler writes at the head of each thread's stack
+THREAD_DUMP_MARK = '(most recent call first)'
+#: characters of a process' output a failure report shows (the whole log stays on disk)
+REPORT_TAIL = 8000
 _LOCK_DIR = Path(tempfile.gettempdir()) / 'gimbal-ros-domain-locks'
 
 
@@ -147,7 +154,15 @@ def ros_arguments(parameters: Iterable[str]) -> list[str]:
 
 
 class ManagedProcess:
-    """A child process with its output in a log file, stopped like Ctrl-C would."""
+    """A child process with its output in a log file, stopped like Ctrl-C would.
+
+    The processes of this test process that are still running are in :attr:`live`: when a
+    test fails, :mod:`gimbal_driver_testing.node_reports` asks each for a thread dump
+    and attaches its log (:meth:`report`); a process that ends a ``with`` block on an
+    error does the same before it stops (:meth:`__exit__`).
+    """
+
+    live: ClassVar[dict[int, ManagedProcess]] = {}
 
     def __init__(
         self, args: Sequence[str], env: Mapping[str, str] | None = None, name: str = ''
@@ -164,6 +179,7 @@ class ManagedProcess:
             start_new_session=True,
         )
         STARTED_PIDS.add(self.process.pid)
+        ManagedProcess.live[id(self)] = self
 
     @classmethod
     def ros(
@@ -199,6 +215,40 @@ class ManagedProcess:
             raise AssertionError(f'{self.name} exited before printing {text!r}:\n{out}')
         return out
 
+    def catches(self, sig: int) -> bool:
+        """Whether the process has a handler for ``sig`` (SigCgt in /proc): only then is a
+        signal whose default ends a process safe to send."""
+        try:
+            status = Path(f'/proc/{self.process.pid}/status').read_text()
+        except OSError:
+            return False
+        caught = next((line.split()[1] for line in status.splitlines()
+                       if line.startswith('SigCgt:')), '0')
+        return bool(int(caught, 16) >> (sig - 1) & 1)
+
+    def thread_dump(self, timeout: float = 5.0) -> bool:
+        """Ask a driver process for a dump of its threads (faulthandler, into its log);
+        whether one came. False at once for a process without the handler."""
+        if not self.running or not self.catches(THREAD_DUMP_SIGNAL):
+            return False
+        before = self.output().count(THREAD_DUMP_MARK)
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.process.pid, THREAD_DUMP_SIGNAL)
+        try:
+            wait_for(lambda: self.output().count(THREAD_DUMP_MARK) > before or not self.running,
+                     timeout, f'a thread dump of {self.name}')
+        except TimeoutError:
+            return False
+        time.sleep(0.2)  # the handler writes one thread after the other
+        return True
+
+    def report(self, tail: int = REPORT_TAIL) -> str:
+        """The process' state, where its whole log is kept, and the log's last ``tail``
+        characters, for a failure report."""
+        state = 'running' if self.running else f'exited {self.process.returncode}'
+        return (f'{self.name} (pid {self.process.pid}, {state}); log: {self.log_path}\n'
+                f'{self.output()[-tail:]}')
+
     def send_signal(self, sig: int) -> None:
         if self.running:
             with contextlib.suppress(ProcessLookupError):
@@ -213,13 +263,24 @@ class ManagedProcess:
             with contextlib.suppress(subprocess.TimeoutExpired):
                 self.process.wait(wait)
         self._log.close()
+        ManagedProcess.live.pop(id(self), None)
         return self.process.returncode if self.process.returncode is not None else -9
 
     def __enter__(self) -> ManagedProcess:
         return self
 
-    def __exit__(self, *exc_info: object) -> None:
+    def __exit__(self, exc_type: object, exc: BaseException | None, tb: object) -> None:
+        if isinstance(exc, Exception):
+            attach_report(exc, self)
         self.stop()
+
+
+def attach_report(exc: BaseException, process: ManagedProcess) -> None:
+    """Add a thread dump (if the process takes one) and the log of ``process`` to ``exc``'s
+    notes, so that a failure shows what the process was doing."""
+    dumped = process.thread_dump()
+    exc.add_note(f'--- {"thread dump and " if dumped else ""}log of '
+                 f'{process.report()}')
 
 
 class ManualClock:

@@ -26,8 +26,31 @@ REJECTED = 'joint_command rejected, nothing sent'
 #: the diagnostics part that counts refused joint_commands (gimbal_driver_common.rejections)
 COMMAND_PART = 'joint_command'
 OK = 0
+WARN = 1
 ERROR = 2
 STALE = 3
+
+
+#: the joint_states frequency window interface.md documents: OK within ±10 % of the
+#: expected rate (diagnostic_updater's FrequencyStatusParam tolerance), WARN outside
+FREQUENCY_TOLERANCE = 0.1
+
+
+def frequency_level_fits(status: DiagnosticStatus) -> bool:
+    """Whether a measured ``joint_states frequency`` status has the level its own measured
+    rate gives by the documented window, and a rate of published messages (> 0).
+
+    Through a process this is what holds on any machine: a node starved of CPU (8 workers
+    on 2 cores) really publishes below its rate for a while, and then WARN is the truth.
+    The level logic itself is tested on an injected clock (test_core.py, FrequencyMonitor).
+    """
+    values = {kv.key: kv.value for kv in status.values}
+    expected, measured = float(values['expected_hz']), float(values['measured_hz'])
+    low, high = expected * (1 - FREQUENCY_TOLERANCE), expected * (1 + FREQUENCY_TOLERANCE)
+    # measured_hz is rounded to 0.01: a rate on the edge may read either way
+    edge = min(abs(measured - low), abs(measured - high)) <= 0.01
+    level = OK if low <= measured <= high else WARN
+    return measured > 0 and (status.level[0] == level or edge)
 
 
 def command_counts(status: DiagnosticStatus) -> dict[str, int]:

@@ -23,7 +23,7 @@ from geometry_msgs.msg import Point, PointStamped
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common.kinematics import AimingChain
-from gimbal_driver_testing import ManagedProcess
+from gimbal_driver_testing import ManagedProcess, wait_for
 from gimbal_driver_testing.ros import RosTestClient, joint_positions
 from gimbal_msgs.action import LookAt
 from gimbal_msgs.msg import GimbalStatus
@@ -76,7 +76,10 @@ class LookAtCheck:
         assert status == GOAL_SUCCEEDED
         assert list(result.joint_names) == self.joints
         assert list(result.positions) == pytest.approx([pan, tilt], abs=tolerance), result.positions
-        assert feedback and all(len(f.positions) == 2 for f in feedback)
+        # feedback and result come on different entities, in no set order: a goal already
+        # at its target has one feedback, which can come after the result
+        wait_for(lambda: feedback, 20.0, 'the feedback of the goal')
+        assert all(len(f.positions) == 2 for f in feedback)
         self.ros.wait_for_message(
             'joint_states', JointState,
             lambda m: all(abs(joint_positions(m).get(j, math.inf) - p) <= tolerance

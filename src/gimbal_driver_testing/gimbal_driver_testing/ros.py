@@ -5,9 +5,10 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import Any, NoReturn, TypeVar
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -28,7 +29,13 @@ from rclpy.parameter import Parameter, parameter_value_to_python
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from gimbal_driver_testing import DomainLease, ManagedProcess, ros_arguments, wait_for
+from gimbal_driver_testing import (
+    DomainLease,
+    ManagedProcess,
+    attach_report,
+    ros_arguments,
+    wait_for,
+)
 from gimbal_driver_testing.graph_guard import refuse_foreign_nodes
 from gimbal_msgs.srv import ListPresets
 
@@ -119,6 +126,9 @@ class RosTestClient:
         # the GIL while a worker has not yet taken a ready message, delaying messages.
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self._closing = threading.Event()
+        #: tracebacks of errors out of a spin (:meth:`_spin`)
+        self.spin_errors: list[str] = []
         self._thread = threading.Thread(target=self._spin, daemon=True, name=f'{name}-spin')
         self._thread.start()
         self._messages: dict[str, list[Any]] = {}
@@ -130,11 +140,44 @@ class RosTestClient:
         self._answered_clients: set[tuple[type, str]] = set()
 
     def _spin(self) -> None:
-        # Shutdown races end the spin thread with assorted errors; that is expected.
-        with contextlib.suppress(Exception):
-            self.executor.spin()
+        """Spin until closed. An error out of one spin (a callback's, or rclpy's wait-set
+        build) is kept in :attr:`spin_errors` and the spin goes on: the thread used to end
+        silently on the first one, and the client then got no message and no answer, which
+        failed every later test of a module as "no matching joint_states", "no reply"."""
+        while not self._closing.is_set():
+            try:
+                self.executor.spin_once()  # executor.shutdown() wakes it
+            except Exception as exc:  # noqa: BLE001 - kept and reported, see above
+                if self._closing.is_set():
+                    return  # shutdown races end the spin with assorted errors
+                self.spin_errors.append(''.join(traceback.format_exception(exc)))
+
+    def check_spinning(self) -> None:
+        """Raise if the spin thread has ended or an error came out of a spin (the waits
+        call it when they time out, so the failure names the cause)."""
+        if self.spin_errors:
+            raise RuntimeError(f'the test client\'s executor raised {len(self.spin_errors)} '
+                               f'time(s); the first:\n{self.spin_errors[0]}')
+        if not self._thread.is_alive() and not self._closing.is_set():
+            raise RuntimeError('the test client\'s spin thread has ended')
+
+    def _wait(self, condition: Callable[[], Any], timeout: float, what: str) -> Any:
+        """:func:`wait_for`, naming a broken client (:meth:`check_spinning`) on a timeout."""
+        try:
+            return wait_for(condition, timeout, what)
+        except TimeoutError as exc:
+            self._timed_out(exc)
+
+    def _timed_out(self, exc: TimeoutError) -> NoReturn:
+        """Raise ``exc``, with what broke this client if it is broken."""
+        try:
+            self.check_spinning()
+        except RuntimeError as broken:
+            raise TimeoutError(f'{exc}: {broken}') from None
+        raise exc
 
     def close(self) -> None:
+        self._closing.set()
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)
@@ -176,12 +219,21 @@ class RosTestClient:
         return received
 
     def unsubscribe(self, topic: str) -> None:
-        """Stop recording ``topic`` and destroy the subscription (no-op if none)."""
+        """Stop recording ``topic`` and destroy the subscription (no-op if none).
+
+        Destroyed on the spin thread, between two waits: destroyed from another thread, its
+        QoS event handler can be destroyed while the executor adds it to the wait set, and
+        rclpy raises ``InvalidHandle`` out of the spin (``EventHandler.add_to_wait_set``;
+        reproduced: a subscription made and destroyed every 2 ms beside a spinning
+        executor ended the spin within seconds, on the spin thread never in 15 s). That
+        ended this client's spin thread in a Capture node test (docs/testing.md).
+        """
         with self._lock:
             self._messages.pop(topic, None)
             subscription = self._subscriptions.pop(topic, None)
         if subscription is not None:
-            self.node.destroy_subscription(subscription)
+            self._on_spin_thread(lambda: self.node.destroy_subscription(subscription), 15.0,
+                                 f'the executor to destroy the {topic} subscription')
 
     def wait_for_message(
         self, topic: str, msg_type: type, predicate: Callable[[Any], bool] | None = None,
@@ -200,7 +252,7 @@ class RosTestClient:
                         return msg
             return None
 
-        return wait_for(match, timeout, f'a matching message on {topic}')
+        return self._wait(match, timeout, f'a matching message on {topic}')
 
     def wait_for_diagnostic(
         self, node: str, part: str,
@@ -228,8 +280,8 @@ class RosTestClient:
         received = self.subscribe(topic, msg_type)
         with self._lock:
             start = len(received)
-        wait_for(lambda: len(received) >= start + count + 1, timeout,
-                 f'{count + 1} messages on {topic}')
+        self._wait(lambda: len(received) >= start + count + 1, timeout,
+                   f'{count + 1} messages on {topic}')
         with self._lock:
             stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
                       for m in received[start:start + count + 1]]
@@ -246,6 +298,19 @@ class RosTestClient:
             settle_discovery()  # the subscriber may not have matched it yet
             refuse_foreign_nodes(self.node, self.domain_id, f'publish on {topic}')
         publisher.publish(msg)
+
+    def subscribers_matched(self, topic: str, count: int, timeout: float = 30.0) -> None:
+        """Wait until this client's publisher on ``topic`` (if it has one) has ``count``
+        subscriptions matched, then :data:`DISCOVERY_SETTLE_S` when ``count`` > 0: around a
+        node's restart (0 once the old one is gone, 1 when the new one came), so that the
+        first message to the new node is not lost to its discovery."""
+        publisher = self._publishers.get(topic)
+        if publisher is None:
+            return  # publish() makes it and waits for the subscriber itself
+        self._wait(lambda: publisher.get_subscription_count() == count, timeout,
+                   f'{count} subscriber(s) on {topic}')
+        if count:
+            settle_discovery()
 
     # services
     def call(self, srv_type: type, name: str, request: Any, timeout: float = 15.0,
@@ -271,8 +336,11 @@ class RosTestClient:
         if not idempotent and (srv_type, name) not in self._answered_clients:
             settle_discovery()
             refuse_foreign_nodes(self.node, self.domain_id, f'call {name}')
-        reply = newest_answered(lambda: client.call_async(request), timeout,
-                                f'the reply of {name}', resend=idempotent)
+        try:
+            reply = newest_answered(lambda: client.call_async(request), timeout,
+                                    f'the reply of {name}', resend=idempotent)
+        except TimeoutError as exc:
+            self._timed_out(exc)
         self._answered_clients.add((srv_type, name))
         return reply.result()
 
@@ -305,6 +373,7 @@ class RosTestClient:
         the goal runs once, as the newest.
         """
         client = self._clients.get((action_type, name))
+        new = client is None
         if client is None:
             with _TYPE_SUPPORT_LOCK:
                 client = ActionClient(self.node, action_type, name)
@@ -312,6 +381,14 @@ class RosTestClient:
         if not client.wait_for_server(timeout_sec=timeout):
             raise TimeoutError(f'action {name} not available after {timeout:g} s')
         refuse_foreign_nodes(self.node, self.domain_id, f'send a goal to {name}')
+        if new:
+            # wait_for_server sees the goal, cancel and result services; the feedback
+            # topic is matched on its own, and a goal that ends at once (already at its
+            # target) may publish its only feedback before that: wait until this side
+            # has discovered the server's feedback writer
+            feedback_topic = f'{name}/_action/feedback'
+            self._wait(lambda: self.node.count_publishers(feedback_topic) > 0, timeout,
+                       f'the feedback publisher of {name}')
         received: list[list[Any]] = []  # each goal's feedback
 
         def send_goal() -> Any:
@@ -322,7 +399,11 @@ class RosTestClient:
                     goal, feedback_callback=lambda f: feedback.append(f.feedback)),
                 timeout, f'{name} to send the goal')
 
-        send = newest_answered(send_goal, timeout, f'{name} to accept the goal', resend=True)
+        try:
+            send = newest_answered(send_goal, timeout, f'{name} to accept the goal',
+                                   resend=True)
+        except TimeoutError as exc:
+            self._timed_out(exc)
         feedback = received[-1]
         handle = send.result()
         if not handle.accepted:
@@ -330,9 +411,9 @@ class RosTestClient:
         if cancel_after is not None:
             time.sleep(cancel_after)
             cancel = self._on_spin_thread(handle.cancel_goal_async, timeout, 'the cancel')
-            wait_for(cancel.done, timeout, f'{name} to answer the cancel')
+            self._wait(cancel.done, timeout, f'{name} to answer the cancel')
         result_future = self._on_spin_thread(handle.get_result_async, timeout, 'the request')
-        wait_for(result_future.done, timeout, f'the result of {name}')
+        self._wait(result_future.done, timeout, f'the result of {name}')
         response = result_future.result()
         return response.result, response.status, feedback
 
@@ -344,7 +425,7 @@ class RosTestClient:
         completes. Called from the (single) spin thread, the answer waits until it has.
         """
         task = self.executor.create_task(request)
-        wait_for(task.done, timeout, f'the executor to send {what}')
+        self._wait(task.done, timeout, f'the executor to run {what}')
         return task.result()
 
     # lifecycle
@@ -408,6 +489,10 @@ def driver_rig(
             recorded = {topic: ros.subscribe(topic, msg_type) for topic, msg_type in record}
             ros.wait_for_message('joint_states', JointState, timeout=40.0)
             yield DriverRig(ros, node, sim, domain, recorded)
+        except Exception as exc:
+            if node is not None:
+                attach_report(exc, node)  # before it stops: where its threads are
+            raise
         finally:
             if ros is not None:
                 ros.close()

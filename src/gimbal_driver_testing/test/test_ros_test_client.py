@@ -161,3 +161,55 @@ def test_a_call_sent_once_first_lets_discovery_settle(monkeypatch) -> None:
         finally:
             client.close()
             server.close()
+
+
+@pytest.mark.ros
+def test_unsubscribing_beside_a_busy_spin_keeps_the_client_spinning() -> None:
+    """A subscription destroyed from the test's thread while the client's executor built its
+    wait set raised InvalidHandle out of the spin, and the client went deaf for the rest of a
+    module (docs/testing.md, the Capture node tests): unsubscribe now destroys it on the spin
+    thread. 300 rounds beside a 1 kHz publisher ended the old spin within a few hundred."""
+    from std_msgs.msg import String
+
+    with DomainLease() as domain:
+        client = ros_testing.RosTestClient(domain)
+        try:
+            publisher = client.node.create_publisher(String, 'chatter', 10)
+            timer = client.node.create_timer(0.001, lambda: publisher.publish(String(data='x')))
+            for _ in range(300):
+                client.subscribe('chatter', String)
+                client.unsubscribe('chatter')
+            client.node.destroy_timer(timer)
+            client.check_spinning()
+            # and it still receives
+            received = client.subscribe('chatter', String)
+            publisher.publish(String(data='after'))
+            wait_for(lambda: any(m.data == 'after' for m in received), 10.0, 'the message')
+        finally:
+            client.close()
+
+
+@pytest.mark.ros
+def test_an_error_out_of_a_spin_is_kept_and_named_by_a_timed_out_wait() -> None:
+    """A callback that raises no longer ends the spin thread silently: the spin goes on, and
+    a wait that times out says what the executor raised."""
+    from std_msgs.msg import String
+
+    def broken() -> None:
+        raise ValueError('a broken callback')
+
+    with DomainLease() as domain:
+        client = ros_testing.RosTestClient(domain)
+        try:
+            client.executor.create_task(broken)
+            wait_for(lambda: client.spin_errors, 10.0, 'the error to be kept')
+            assert 'a broken callback' in client.spin_errors[0]
+            with pytest.raises(TimeoutError,
+                               match=r'(?s)executor raised 1 time.*a broken callback'):
+                client.wait_for_message('nothing_here', String, timeout=0.5)
+            client.spin_errors.clear()
+            task = client.executor.create_task(lambda: 7)  # the thread goes on spinning
+            wait_for(task.done, 10.0, 'a task after the error')
+            assert task.result() == 7
+        finally:
+            client.close()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import faulthandler
 import signal
 import sys
 import threading
@@ -31,6 +32,11 @@ from gimbal_driver_common.ros.parameters import ParameterError
 if TYPE_CHECKING:
     from gimbal_driver_common.ros.base_node import GimbalDriverNode
 
+#: the signal on which a driver process writes every thread's stack to stderr (its log):
+#: the test harness sends it to a node under test when a test fails
+#: (gimbal_driver_testing.node_reports); ``kill -USR2 <pid>`` does it by hand.
+#: Not SIGUSR1: tests/node_thread_probe.py has that one for its thread list.
+THREAD_DUMP_SIGNAL = signal.SIGUSR2
 #: Python thread switch interval in driver processes (default 5 ms)
 GIL_SWITCH_INTERVAL_S = 0.001
 #: seconds a shutting-down node waits for its action goals to answer their clients
@@ -62,6 +68,8 @@ def run_driver(node_class: NodeClass, args: Sequence[str] | None = None) -> int:
     executor spins in a worker thread and the main thread waits on an Event, which (unlike
     a blocking rcl_wait) lets the Python signal handler run at once.
     """
+    # first, so that a process that hangs anywhere later can still say where
+    faulthandler.register(THREAD_DUMP_SIGNAL, file=sys.stderr, all_threads=True)
     rclpy.init(args=None if args is None else list(args),
                signal_handler_options=SignalHandlerOptions.NO)
     # The device thread must not wait the default 5 ms for the GIL while a receive thread

@@ -96,6 +96,7 @@ class SimulatedRig(MessageHandlers):
                 dt = min(PHYSICS_STEP_S, sim_dt)
                 sim_dt -= dt
                 self._step(dt)
+            self._set_curve_positions()
 
     def _step(self, dt: float) -> None:
         self.sim_time += dt
@@ -218,20 +219,17 @@ class SimulatedRig(MessageHandlers):
         traj = pb.trajectory
         assert traj is not None
         pb.move_time += dt
+        pb.curve_dt += dt
         fraction = min(pb.move_time / pb.pass_length, 1.0) if pb.pass_length > 0 else 1.0
         pb.elapsed = fraction if pb.direction > 0 else 1.0 - fraction
-        previous = {a: self.motors[a].position for a in traj.axes}
-        for address, position in self._curve_positions(pb.elapsed).items():
-            motor = self.motors[address]
-            motor.position = position
-            motor.velocity = (position - previous[address]) / dt
         if traj.playback.playback_mode == PlaybackMode.TIMELAPSE_CONTINUOUS:
             due = int(pb.move_time / self._frame_time())
             while pb.photos < traj.timelapse.pre_move_photos + min(
                     due, traj.timelapse.move_photos):
                 self._take_photo()
         if fraction < 1.0:
-            return
+            return  # the axes are set on the curve once per advance (_set_curve_positions)
+        self._set_curve_positions()
         for motor in (self.motors[a] for a in traj.axes):
             motor.halt_now()
         if traj.playback.playback_mode == PlaybackMode.TIMELAPSE_CONTINUOUS:
@@ -251,6 +249,23 @@ class SimulatedRig(MessageHandlers):
             self._start_pass(forward=False, rapid=bool(pl.loop_after_rapid_reverse))
             return
         self._finish()
+
+    def _set_curve_positions(self) -> None:
+        """Put the playing axes where the curve is now, at the speed since they were last put.
+
+        Once per :meth:`advance` and at the end of a pass, not each physics step: the curve
+        gives the position at any time, and evaluating it (a Bezier inverted by bisection)
+        each 2 ms step cost 0.3-0.8 ms, so at the tests' time scale of 20 the simulator
+        needed several cores to keep up and ran as slow as the machine (docs/testing.md).
+        """
+        pb = self.playback
+        if pb.phase != 'play' or pb.trajectory is None or pb.curve_dt <= 0.0:
+            return
+        for address, position in self._curve_positions(pb.elapsed).items():
+            motor = self.motors[address]
+            motor.velocity = (position - motor.position) / pb.curve_dt
+            motor.position = position
+        pb.curve_dt = 0.0
 
     def _take_photo(self) -> None:
         self.playback.photos += 1

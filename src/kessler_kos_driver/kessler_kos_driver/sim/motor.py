@@ -94,6 +94,7 @@ class _Playback:
     loops_left: int = 0
     loop_forever: bool = False
     move_time: float = 0.0   # simulated seconds into the current pass
+    curve_dt: float = 0.0    # simulated seconds since the playing axes were set on the curve
     pass_length: float = 0.0
     elapsed: float = 0.0     # normalised
     photos: int = 0
