@@ -15,7 +15,12 @@ thread name (``BENCH_THREAD_CPU_DIR``: the node hook writes each node's thread n
 ``/proc/<pid>/task/*`` gives each thread's ticks; ``native`` is DDS and rcl).
 
 The point's figure is the median over ``--repeats`` windows of the per-window ratio
-(sum of the drivers' CPU / sum of the bare nodes' CPU), with its min and max.
+(sum of the drivers' CPU / sum of the bare nodes' CPU), with its min and max; beside it
+the same per message received (``cpu_per_message_ratio``): on a loaded machine a driver
+whose in-process simulator waits for a core publishes below its rate, and spends less.
+With ``--baseline-src DIR`` (``git archive REV src | tar -x -C DIR``) each rig also runs
+the driver of that revision against a simulator of its own, in the same windows
+(``driver_vs_baseline_cpu``).
 """
 
 from __future__ import annotations
@@ -59,15 +64,14 @@ def pss_mb(pid: int) -> float:
 class Pair:
     """One rig: a driver node at its simulator, a bare rclpy node, a probe on both."""
 
-    def __init__(self, spec, workdir: Path, rate_hz: float) -> None:
+    def __init__(self, spec, workdir: Path, rate_hz: float,
+                 baseline: list[str] | None = None) -> None:
         self.lease = DomainLease()
         domain = self.lease.acquire()
-        self.handle = make_handle(spec, workdir)
-        self.handle.start()
-        parameters = {**self.handle.node_parameters(),
-                      'presets_file': str(workdir / 'presets.yaml'), 'publish_rate': rate_hz}
-        self.node = start_node(domain, spec.package, parameters,
-                               executable=spec.node_executable)
+        self.handle, self.node = self._driver(spec, workdir, rate_hz, domain)
+        self.baseline: Baseline | None = None
+        if baseline:
+            self.baseline = Baseline(spec, workdir, rate_hz, baseline)
         self.bare = ManagedProcess(
             [sys.executable, str(ROOT / 'bench' / 'reference_publisher.py'), str(rate_hz)],
             ros_env(domain), name='reference_publisher')
@@ -75,13 +79,53 @@ class Pair:
         self.states = JointStateProbe(self.probe)
         self.bare_states = JointStateProbe(self.probe, 'reference_joint_states')
 
+    @staticmethod
+    def _driver(spec, workdir: Path, rate_hz: float, domain: int):
+        handle = make_handle(spec, workdir)
+        handle.start()
+        parameters = {**handle.node_parameters(),
+                      'presets_file': str(workdir / 'presets.yaml'), 'publish_rate': rate_hz}
+        return handle, start_node(domain, spec.package, parameters,
+                                  executable=spec.node_executable)
+
     def wait_ready(self, timeout: float) -> None:
         wait_for(lambda: len(self.states.arrivals) > 10 and len(self.bare_states.arrivals) > 10,
                  timeout, 'joint_states from the driver node and the bare node')
+        if self.baseline is not None:
+            wait_for(lambda: len(self.baseline.states.arrivals) > 10, timeout,
+                     'joint_states from the baseline driver node')
 
     def close(self) -> None:
         for step in (self.probe.close, lambda: self.node.stop(timeout=5.0), self.bare.stop,
                      self.handle.stop, self.lease.release):
+            with contextlib.suppress(Exception):
+                step()
+        if self.baseline is not None:
+            self.baseline.close()
+
+
+class Baseline:
+    """The same driver from other sources (``--baseline-src``: an older revision's
+    ``src/<pkg>/`` directories first on the node's PYTHONPATH), in a domain of its own, so
+    a change is measured against what it changed in one window."""
+
+    def __init__(self, spec, workdir: Path, rate_hz: float, paths: list[str]) -> None:
+        self.lease = DomainLease()
+        domain = self.lease.acquire()
+        path = Path(workdir, 'baseline')
+        path.mkdir()
+        saved = os.environ.get('PYTHONPATH', '')
+        os.environ['PYTHONPATH'] = os.pathsep.join([*paths, saved])
+        try:
+            self.handle, self.node = Pair._driver(spec, path, rate_hz, domain)
+        finally:
+            os.environ['PYTHONPATH'] = saved
+        self.probe = ProbeClient(domain, f'bench_scale_baseline_{domain}')
+        self.states = JointStateProbe(self.probe)
+
+    def close(self) -> None:
+        for step in (self.probe.close, lambda: self.node.stop(timeout=5.0), self.handle.stop,
+                     self.lease.release):
             with contextlib.suppress(Exception):
                 step()
 
@@ -96,13 +140,24 @@ def measure(pairs: list[Pair], seconds: float, threads: bool) -> dict:
     """One window over every node process at once."""
     drivers_ = [pair.node.process.pid for pair in pairs]
     bares = [pair.bare.process.pid for pair in pairs]
+    baselines = [pair.baseline.node.process.pid for pair in pairs if pair.baseline]
     before = {pid: thread_cpu_seconds(pid) for pid in drivers_} if threads else {}
     start = time.time()
-    cpu = cpu_percents(drivers_ + bares, seconds)
+    cpu = cpu_percents(drivers_ + bares + baselines, seconds)
     end = time.time()
     n = len(pairs)
-    driver_cpu, bare_cpu = cpu[:n], cpu[n:]
-    window = {
+    driver_cpu, bare_cpu, baseline_cpu = cpu[:n], cpu[n:2 * n], cpu[2 * n:]
+    window: dict = {}
+    if baselines:
+        window.update({
+            'baseline_cpu_percent': baseline_cpu,
+            'baseline_cpu_ratio': round(sum(baseline_cpu) / max(sum(bare_cpu), 1e-9), 3),
+            'driver_vs_baseline_cpu': round(sum(driver_cpu) / max(sum(baseline_cpu), 1e-9), 3),
+            'baseline_pss_mb': [pss_mb(pid) for pid in baselines],
+            'baseline_hz': [round(rate(p.baseline.states, start, end), 1)
+                            for p in pairs if p.baseline],
+        })
+    window.update({
         'driver_cpu_percent': driver_cpu,
         'bare_cpu_percent': bare_cpu,
         'cpu_ratio': round(sum(driver_cpu) / max(sum(bare_cpu), 1e-9), 3),
@@ -110,7 +165,12 @@ def measure(pairs: list[Pair], seconds: float, threads: bool) -> dict:
         'bare_pss_mb': [pss_mb(pid) for pid in bares],
         'driver_hz': [round(rate(p.states, start, end), 1) for p in pairs],
         'bare_hz': [round(rate(p.bare_states, start, end), 1) for p in pairs],
-    }
+    })
+    # CPU per message published: a node that falls behind its rate (a loaded machine, a
+    # simulator in this process waiting for a core) spends less for fewer messages
+    per_message = [cpu / max(hz, 1e-9) for cpu, hz in zip(
+        driver_cpu + bare_cpu, window['driver_hz'] + window['bare_hz'], strict=True)]
+    window['cpu_per_message_ratio'] = round(sum(per_message[:n]) / sum(per_message[n:]), 3)
     window['pss_ratio'] = round(sum(window['driver_pss_mb']) / sum(window['bare_pss_mb']), 3)
     if threads:
         wall = end - start
@@ -129,14 +189,14 @@ def spread(values: list[float]) -> dict[str, float]:
 
 
 def run_point(spec, n: int, seconds: float, repeats: int, rate_hz: float,
-              threads: bool) -> dict:
+              threads: bool, baseline: list[str] | None = None) -> dict:
     with tempfile.TemporaryDirectory(prefix=f'scale-{spec.name}-') as workdir:
         pairs: list[Pair] = []
         try:
             for index in range(n):
                 path = Path(workdir, str(index))
                 path.mkdir()
-                pairs.append(Pair(spec, path, rate_hz))
+                pairs.append(Pair(spec, path, rate_hz, baseline))
             for pair in pairs:
                 pair.wait_ready(60.0)
             time.sleep(3.0)  # discovery and start-up transients
@@ -145,9 +205,19 @@ def run_point(spec, n: int, seconds: float, repeats: int, rate_hz: float,
             for pair in pairs:
                 pair.close()
     per_node = lambda key: [statistics.mean(w[key]) for w in windows]  # noqa: E731
-    return {
+    compared = {}
+    if baseline:
+        compared = {
+            'baseline_cpu_ratio': spread([w['baseline_cpu_ratio'] for w in windows]),
+            'driver_vs_baseline_cpu': spread([w['driver_vs_baseline_cpu'] for w in windows]),
+            'baseline_pss_mb_per_node': spread(per_node('baseline_pss_mb')),
+        }
+    return {**compared,
         'nodes': n, 'seconds_per_window': seconds, 'windows': windows,
         'cpu_ratio': spread([w['cpu_ratio'] for w in windows]),
+        'cpu_per_message_ratio': spread([w['cpu_per_message_ratio'] for w in windows]),
+        'driver_hz': spread(per_node('driver_hz')),
+        'bare_hz': spread(per_node('bare_hz')),
         'pss_ratio': spread([w['pss_ratio'] for w in windows]),
         'driver_cpu_percent_per_node': spread(per_node('driver_cpu_percent')),
         'bare_cpu_percent_per_node': spread(per_node('bare_cpu_percent')),
@@ -164,6 +234,9 @@ def main() -> int:
     parser.add_argument('--seconds', type=float, default=30.0)
     parser.add_argument('--repeats', type=int, default=3)
     parser.add_argument('--threads', action='store_true', help='split driver CPU per thread')
+    parser.add_argument('--baseline-src', type=Path, default=None,
+                        help='a tree with src/<pkg>/ of another revision (git archive): its '
+                             'driver runs beside, against a simulator of its own')
     parser.add_argument('--output', type=Path, default=ROOT / 'bench_output' / 'scale.json')
     args = parser.parse_args()
     if args.threads and not os.environ.get('BENCH_THREAD_CPU_DIR'):
@@ -175,8 +248,10 @@ def main() -> int:
         results[name] = {}
         for n in args.nodes:
             print(f'scale: {name} N={n} ...', file=sys.stderr, flush=True)
+            baseline = ([str(path) for path in sorted((args.baseline_src / 'src').iterdir())]
+                        if args.baseline_src else None)
             point = run_point(spec, n, args.seconds, args.repeats, spec.bench.publish_rate,
-                              args.threads)
+                              args.threads, baseline)
             results[name][str(n)] = point
             print(json.dumps({k: v for k, v in point.items() if k != 'windows'}),
                   file=sys.stderr, flush=True)
