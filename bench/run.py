@@ -153,7 +153,7 @@ def markdown(results: dict) -> str:
             continue
         codec = data.get('codec', {})
         for key, value in codec.items():
-            if key.endswith('_per_s') and not key.startswith('wire'):
+            if key.endswith('_per_s') and not key.startswith(('wire', 'machine')):
                 wire = codec.get('wire_limit_frames_per_s')
                 machine = codec.get('machine_reference_frames_per_s')
                 beside = (f'; machine reference {machine:,.0f} (ratio '
