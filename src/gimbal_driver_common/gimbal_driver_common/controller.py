@@ -58,6 +58,8 @@ STREAM_WAIT_S = 0.05
 STOP_CHECK_S = 0.05
 #: s a shutdown waits beyond the deceleration time for the axes to rest before closing
 SHUTDOWN_CONFIRM_S = 1.0
+#: how often the jog watchdog checks while no joint jogs (or it is disabled)
+WATCHDOG_IDLE_PERIOD_S = 0.5
 
 
 class LinkState(enum.Enum):
@@ -130,7 +132,10 @@ class GimbalController:
         #: refused joint_commands, counted and logged by reason (the node keeps one across
         #: configure/cleanup and passes it in)
         self.rejections = rejections or CommandRejections(log)
-        self.periodic.add(self._watchdog_period(), self.watchdog.check)
+        #: the watchdog's check runs often only while a jog runs (:meth:`_pace_watchdog`)
+        self._watchdog_lock = threading.Lock()
+        self._watchdog_fast = False
+        self.periodic.add(self._watchdog_period(), self._check_watchdog)
         self.periodic.add(STOP_CHECK_S, self.confirm_stops)
         self.halt_hooks: list[Callable[[], None]] = []  # stop and halt call these first (policies)
         self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
@@ -186,7 +191,7 @@ class GimbalController:
         # else the reason it is not connected (say, why configure failed) stays readable
         self._close_device()
         self.link_state = LinkState.NOT_CONFIGURED
-        self.periodic.remove(self.watchdog.check)
+        self.periodic.remove(self._check_watchdog)
         self.periodic.remove(self.confirm_stops)
         for _, job in self._background:
             self.sensors.remove(job)
@@ -230,12 +235,35 @@ class GimbalController:
     def set_command_timeout(self, timeout: float) -> None:
         self.config.command_timeout = timeout
         self.watchdog.timeout_s = timeout
-        self.periodic.set_period(self.watchdog.check, self._watchdog_period())
+        with self._watchdog_lock:
+            self.periodic.set_period(self._check_watchdog, self._watchdog_period())
 
     def _watchdog_period(self) -> float:
-        """Check jogs 4 times per timeout (at least every 50 ms); slowly while disabled."""
+        """Check jogs 4 times per timeout (at least every 50 ms) while a jog runs; slowly
+        (every WATCHDOG_IDLE_PERIOD_S) with no jog to watch or the watchdog disabled."""
         timeout = self.config.command_timeout
-        return min(0.05, timeout / 4) if timeout > 0 else 0.5
+        if timeout > 0 and self._watchdog_fast:
+            return min(0.05, timeout / 4)
+        return WATCHDOG_IDLE_PERIOD_S
+
+    def _check_watchdog(self) -> None:
+        self.watchdog.check()
+        self._pace_watchdog()
+
+    def _pace_watchdog(self) -> None:
+        """The check's period: fast while a joint jogs, slow once none does.
+
+        An idle driver's housekeeping thread woke 20 times a second (command_timeout 0.5)
+        to find no jog. The first jog switches to the fast period (from the command's
+        thread) and the check that finds none left switches back; both decide under one
+        lock from the watchdog's own state, so a jog fed while the check switches to slow
+        is seen by one of them and never waits the slow period.
+        """
+        with self._watchdog_lock:
+            fast = bool(self.watchdog.jogging)
+            if fast != self._watchdog_fast:
+                self._watchdog_fast = fast
+                self.periodic.set_period(self._check_watchdog, self._watchdog_period())
 
     # ------------------------------------------------------------- refusals
     def refusal(self, joints: Sequence[str] | None = None) -> str | None:
@@ -300,7 +328,10 @@ class GimbalController:
         for hook in self.preempt_hooks:
             hook()
         self.watchdog.cancel(list(plan.moves) + [j for j, v in plan.jogs.items() if v == 0.0])
-        self.watchdog.feed([j for j, v in plan.jogs.items() if v != 0.0])
+        jogs = [j for j, v in plan.jogs.items() if v != 0.0]
+        if jogs:
+            self.watchdog.feed(jogs)
+            self._pace_watchdog()
         self.stop_watch.superseded(movers)
         self.commands.submit(plan.moves, plan.jogs)
 

@@ -15,10 +15,12 @@ import select
 import socket
 import threading
 import time
-
-import serial
+from typing import TYPE_CHECKING
 
 from gimbal_driver_common.errors import LinkError
+
+if TYPE_CHECKING:
+    import serial
 
 #: Linux's TCP_QUICKACK (None elsewhere): see :meth:`TcpStream.read`.
 QUICKACK: int | None = getattr(socket, 'TCP_QUICKACK', None)
@@ -221,15 +223,20 @@ def read_ready(fd: int, max_bytes: int, timeout: float | None) -> bytes | None:
 
 
 class SerialStream(ByteStream):
-    """Serial-port link via pyserial (RS-232/422/485 adapters or a pseudo-terminal)."""
+    """Serial-port link via pyserial (RS-232/422/485 adapters or a pseudo-terminal).
+
+    pyserial is imported when a port is opened, so a node on a TCP link does not carry it
+    (bench/README.md, "What a node imports"); its ``SerialException`` is an ``OSError``.
+    The defaults are pyserial's ``EIGHTBITS``, ``PARITY_NONE`` and ``STOPBITS_ONE``.
+    """
 
     def __init__(
         self,
         port: str,
         baudrate: int = 115200,
-        bytesize: int = serial.EIGHTBITS,
-        parity: str = serial.PARITY_NONE,
-        stopbits: float = serial.STOPBITS_ONE,
+        bytesize: int = 8,
+        parity: str = 'N',
+        stopbits: float = 1,
     ) -> None:
         self.port = port
         self.baudrate = int(baudrate)
@@ -247,18 +254,20 @@ class SerialStream(ByteStream):
         return self._serial is not None
 
     def open(self) -> None:
+        import serial
+
         self.close()
         try:
             self._serial = serial.Serial(
                 self.port, self.baudrate, timeout=0.1, **self._settings
             )
-        except (serial.SerialException, OSError, ValueError) as exc:
+        except (OSError, ValueError) as exc:  # serial.SerialException is an OSError
             raise TransportError(f'cannot open {self.description}: {exc}') from exc
 
     def close(self) -> None:
         port, self._serial = self._serial, None
         if port is not None:
-            with contextlib.suppress(serial.SerialException, OSError):
+            with contextlib.suppress(OSError):
                 port.close()
 
     def _require(self) -> serial.Serial:
@@ -277,8 +286,7 @@ class SerialStream(ByteStream):
             except TimeoutError:
                 raise LinkClosed(f'{self.description}: write stalled for '
                                  f'{self.write_timeout:g} s (the device does not read)') from None
-            except (serial.SerialException, OSError, TypeError, AttributeError,
-                    ValueError) as exc:
+            except (OSError, TypeError, AttributeError, ValueError) as exc:
                 raise LinkClosed(f'{self.description}: write failed: {exc}') from exc
 
     def read(self, max_bytes: int, timeout: float) -> bytes:
@@ -288,7 +296,7 @@ class SerialStream(ByteStream):
         port = self._require()
         try:
             data = read_ready(port.fileno(), max_bytes, max(timeout, 0.0))
-        except (serial.SerialException, OSError, TypeError, AttributeError, ValueError) as exc:
+        except (OSError, TypeError, AttributeError, ValueError) as exc:
             # A USB adapter or pty that disappears raises EIO; a port closed by another
             # thread has no descriptor.
             raise LinkClosed(f'{self.description}: read failed: {exc}') from exc

@@ -6,11 +6,16 @@ import contextlib
 import logging
 import math
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import pytest
 
-from gimbal_driver_common.controller import ControllerConfig, GimbalController, is_moving
+from gimbal_driver_common.controller import (
+    WATCHDOG_IDLE_PERIOD_S,
+    ControllerConfig,
+    GimbalController,
+    is_moving,
+)
 from gimbal_driver_common.device import (
     Device,
     DeviceInfo,
@@ -32,6 +37,7 @@ from gimbal_driver_common.errors import (
     device_boundary,
 )
 from gimbal_driver_common.joint_command import JointLimits
+from gimbal_driver_common.periodic import Periodic
 from gimbal_driver_common.policies import HomingSuperseded, Motion
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.scan import ScanRequest
@@ -369,6 +375,46 @@ def test_jog_stops_when_the_watchdog_expires(controller, device) -> None:
     wait_for(lambda: controller.moving('pan'), 2.0, 'the jog')
     wait_for(lambda: ('stop', ['pan']) in device.sent, 2.0, 'the dead-man stop')
     assert controller.watchdog.jogging == []
+
+
+class PeriodRecorder(Periodic):
+    """A Periodic that records every period set for a job (what the thread would wait)."""
+
+    def __init__(self) -> None:
+        super().__init__(name='housekeeping')
+        self.periods: list[float] = []
+
+    def add(self, period: float, callback: Callable[[], object]) -> None:
+        self.periods.append(period)
+        super().add(period, callback)
+
+    def set_period(self, callback: Callable[[], object], period: float) -> None:
+        self.periods.append(period)
+        super().set_period(callback, period)
+
+
+def test_the_watchdog_checks_often_only_while_a_jog_runs(device) -> None:
+    """An idle node's housekeeping thread does not wake 4 times per command_timeout to
+    find no jog: fast from the first jog, slow again once the dead-man stop ended it."""
+    periodic = PeriodRecorder()
+    ctl = GimbalController(device, config(), logging.getLogger('test'), periodic=periodic)
+    try:
+        ctl.open()
+        ctl.activate()
+        assert periodic.periods == [WATCHDOG_IDLE_PERIOD_S]
+        ctl.command(['pan'], [], [0.5])
+        fast = min(0.05, ctl.config.command_timeout / 4)
+        assert periodic.periods == [WATCHDOG_IDLE_PERIOD_S, fast]
+        ctl.command(['pan'], [], [0.4])  # still jogging: no new period
+        assert periodic.periods == [WATCHDOG_IDLE_PERIOD_S, fast]
+        wait_for(lambda: ('stop', ['pan']) in device.sent, 5.0, 'the dead-man stop')
+        wait_for(lambda: periodic.periods[-1] == WATCHDOG_IDLE_PERIOD_S, 5.0,
+                 'the slow period again')
+        assert periodic.periods == [WATCHDOG_IDLE_PERIOD_S, fast, WATCHDOG_IDLE_PERIOD_S]
+    finally:
+        ctl.shutdown()
+        periodic.stop()
+        ctl.sensors.stop()
 
 
 def test_a_joint_command_never_waits_for_the_device_reply(controller, device) -> None:

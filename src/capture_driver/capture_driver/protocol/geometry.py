@@ -13,13 +13,16 @@ from __future__ import annotations
 
 import math
 
-import pymap3d
-
 from .datatypes import GeoPoint
 
 
 def aim_at(origin: GeoPoint, heading_deg: float, target: GeoPoint) -> tuple[float, float]:
-    """(pan, tilt) in device degrees: pan clockwise from the system heading, tilt up."""
+    """(pan, tilt) in device degrees: pan clockwise from the system heading, tilt up.
+
+    pymap3d is imported at the first geographic aim, not with the node (2.7 MB of PSS
+    with its dependencies; bench/README.md, "What a node imports")."""
+    import pymap3d
+
     east, north, up = pymap3d.geodetic2enu(
         target.latitude, target.longitude, target.altitude,
         origin.latitude, origin.longitude, origin.altitude)

@@ -342,6 +342,7 @@ class GimbalDriverNode(LifecycleNode):
         state_qos = QoSProfile(
             depth=10, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
         self._joint_pub = self.create_publisher(JointState, 'joint_states', state_qos)
+        self._joint_message = messages.JointStateMessage()  # refilled per sample
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._status_pub = self.create_publisher(GimbalStatus, '~/status', 10)
         # keep-last 1 (docs/interface.md): newest wins; the callback never waits on the device,
@@ -435,7 +436,7 @@ class GimbalDriverNode(LifecycleNode):
     # ---------------------------------------------------------- topics
     def _publish_joint_state(self, sample: JointSample) -> None:
         if self.context.ok():
-            self._joint_pub.publish(messages.joint_state(sample, self.joint_names))
+            self._joint_pub.publish(self._joint_message.fill(sample, self.joint_names))
             self._joint_rate.tick()
 
     def _publish_diagnostics(self) -> None:
