@@ -36,6 +36,7 @@ from gimbal_driver_common.testing.conformance_rig import (
     SimulatorHandle,
 )
 from gimbal_driver_common.testing.diagnostics_conformance import DiagnosticsConformance
+from gimbal_driver_common.testing.effort_conformance import EffortConformance
 from gimbal_driver_common.testing.log_conformance import LogConformance
 from gimbal_driver_common.testing.motion_start_conformance import MotionStartConformance
 from gimbal_driver_common.testing.restart_conformance import RestartConformance
@@ -51,7 +52,8 @@ REJECTED_BURSTS = 6
 
 
 class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionStartConformance,
-                        LogConformance, DiagnosticsConformance, SilentRequestConformance):
+                        LogConformance, DiagnosticsConformance, SilentRequestConformance,
+                        EffortConformance):
     """The common contract of every gimbal driver node, tested through the real transport.
 
     Subclasses set the attributes below; the package, node and simulator come from the
