@@ -13,6 +13,11 @@ line is each axis' ``target_position`` in ``<ns>/<node>/status``
 (gimbal_msgs/msg/GimbalStatus): the last target the driver sent, which motions the
 device runs by itself (its scans, homing, playback) do not change.
 
+Below a driver's positions, a row of motor current in A (``AxisState.current`` in
+``~/status``, for devices that report it) and a row of effort as torque in N*m (N for a
+linear axis; joint_states ``effort``, published only when the node's ``torque_constants``
+are set), each where the bag has any.
+
     python scripts/plot_bag.py BAG OUT.png [COMMANDS.json]
     python scripts/plot_bag.py demo_output/demo_bag /tmp/plot.png demo_output/demo_commands.json
 """
@@ -38,10 +43,25 @@ GIMBAL_STATUS = 'gimbal_msgs/msg/GimbalStatus'
 Series = dict[str, list[tuple[float, float]]]
 
 
-def read_series(bag: Path) -> tuple[dict[str, Series], dict[str, Series]]:
-    """(actual, commanded): namespace -> joint -> [(t, position)]."""
-    actual: dict[str, Series] = defaultdict(lambda: defaultdict(list))
-    commanded: dict[str, Series] = defaultdict(lambda: defaultdict(list))
+class BagSeries:
+    """namespace -> joint -> [(t, value)] of each quantity the plot shows."""
+
+    def __init__(self) -> None:
+        self.actual: dict[str, Series] = defaultdict(_series)
+        self.commanded: dict[str, Series] = defaultdict(_series)
+        #: motor current, A (~/status AxisState.current)
+        self.current: dict[str, Series] = defaultdict(_series)
+        #: torque, N*m or N (joint_states effort)
+        self.effort: dict[str, Series] = defaultdict(_series)
+
+
+def _series() -> Series:
+    return defaultdict(list)
+
+
+def read_bag(bag: Path) -> BagSeries:
+    """Every joint_states and ~/status message of the bag, by driver namespace."""
+    series = BagSeries()
     with AnyReader([bag]) as reader:
         wanted = [c for c in reader.connections
                   if c.msgtype in (JOINT_STATE, GIMBAL_STATUS)]
@@ -52,13 +72,33 @@ def read_series(bag: Path) -> tuple[dict[str, Series], dict[str, Series]]:
             if connection.msgtype == JOINT_STATE:
                 ns = topic.rsplit('/', 1)[0] or '/'
                 for name, position in zip(msg.name, msg.position, strict=False):
-                    actual[ns][name].append((t, float(position)))
+                    series.actual[ns][name].append((t, float(position)))
+                for name, effort in zip(msg.name, msg.effort, strict=False):
+                    if math.isfinite(effort):
+                        series.effort[ns][name].append((t, float(effort)))
             else:
                 ns = topic.rsplit('/', 2)[0] or '/'
                 for axis in msg.axes:
                     if not math.isnan(axis.target_position):
-                        commanded[ns][axis.name].append((t, axis.target_position))
-    return actual, commanded
+                        series.commanded[ns][axis.name].append((t, axis.target_position))
+                    current = getattr(axis, 'current', math.nan)  # absent in older bags
+                    if math.isfinite(current):
+                        series.current[ns][axis.name].append((t, float(current)))
+    return series
+
+
+def read_series(bag: Path) -> tuple[dict[str, Series], dict[str, Series]]:
+    """(actual, commanded): namespace -> joint -> [(t, position)]."""
+    series = read_bag(bag)
+    return series.actual, series.commanded
+
+
+#: the rows under a driver's positions: (BagSeries field, y label, title)
+EXTRA_ROWS = (
+    ('current', 'motor current [A]', 'motor current (~/status AxisState.current)'),
+    ('effort', 'effort (torque) [N·m; N linear]',
+     'effort = current x torque_constants (joint_states)'),
+)
 
 
 CAPTION = ('Solid: the position each joint reported (joint_states). Dashed: what the demo '
@@ -145,19 +185,58 @@ def draw_commands(ax: Any, records: list[dict[str, Any]], joints: list[str], t0:
                         transform=ax.get_xaxis_transform())
 
 
+def draw_extra_row(ax: Any, ns: str, quantity: str, by_joint: Series, joints: list[str],
+                   t0: float) -> None:
+    """One driver's motor current (A) or effort (torque) per joint, labelled with its unit
+    and where it came from."""
+    _, ylabel, title = next(row for row in EXTRA_ROWS if row[0] == quantity)
+    for index, joint in enumerate(joints):
+        points = by_joint.get(joint, [])
+        if points:
+            ax.plot([p[0] - t0 for p in points], [p[1] for p in points], color=f'C{index}',
+                    label=f'{joint} {quantity}')
+    ax.set_title(f'{ns}: {title}', pad=6)
+    ax.set_xlabel('time [s]')
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc='upper left', bbox_to_anchor=(1.005, 1.0), fontsize='small')
+
+
+def rows_of(series: BagSeries) -> list[tuple[str, str]]:
+    """The figure's rows: (namespace, '' for its positions or an EXTRA_ROWS quantity)."""
+    rows: list[tuple[str, str]] = []
+    for ns in sorted(series.actual):
+        rows.append((ns, ''))
+        rows.extend((ns, name) for name, _, _ in EXTRA_ROWS if getattr(series, name).get(ns))
+    return rows
+
+
 def plot(bag: Path, out: Path, commands: Path | None = None) -> Path:
-    actual, status_targets = read_series(bag)
-    by_ns = load_commands(commands)
-    namespaces = sorted(actual)
-    if not namespaces:
+    series = read_bag(bag)
+    if not series.actual:
         raise SystemExit(f'{bag}: no joint_states recorded')
+    fig = figure(series, load_commands(commands))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=90)
+    plt.close(fig)
+    return out
+
+
+def figure(series: BagSeries, by_ns: dict[str, list[dict[str, Any]]]) -> Any:
+    """The matplotlib figure of a bag's series (and the demo's commands, if any)."""
+    actual = series.actual
+    namespaces = sorted(actual)
     t0 = min(points[0][0] for ns in namespaces for points in actual[ns].values() if points)
     t_end = max(points[-1][0] for ns in namespaces for points in actual[ns].values() if points)
-    fig, axes = plt.subplots(len(namespaces), 1, figsize=(13, 3.4 * len(namespaces) + 0.8),
+    rows = rows_of(series)
+    fig, axes = plt.subplots(len(rows), 1, figsize=(13, 3.4 * len(rows) + 0.8),
                              squeeze=False)
-    for row, ns in enumerate(namespaces):
+    for row, (ns, quantity) in enumerate(rows):
         ax = axes[row][0]
         joints = sorted(actual[ns])
+        if quantity:
+            draw_extra_row(ax, ns, quantity, getattr(series, quantity)[ns], joints, t0)
+            continue
         for index, joint in enumerate(joints):
             points = actual[ns][joint]
             ax.plot([p[0] - t0 for p in points], [p[1] for p in points], color=f'C{index}',
@@ -166,7 +245,7 @@ def plot(bag: Path, out: Path, commands: Path | None = None) -> Path:
             draw_commands(ax, by_ns.get(ns, []), joints, t0, t_end)
         else:
             for index, joint in enumerate(joints):
-                targets = status_targets[ns].get(joint, [])
+                targets = series.commanded[ns].get(joint, [])
                 if targets:
                     ax.step([p[0] - t0 for p in targets], [p[1] for p in targets],
                             where='post', color=f'C{index}', linestyle='--',
@@ -180,12 +259,13 @@ def plot(bag: Path, out: Path, commands: Path | None = None) -> Path:
         'Solid: the position each joint reported (joint_states). Dashed: the last target '
         'the driver sent (~/status target_position); motions the device runs by itself '
         '(its scans, homing, playback) do not change it.')
+    if any(quantity for _, quantity in rows):
+        caption += (' Current rows: motor current in A (~/status AxisState.current). Effort '
+                    'rows: torque in N·m (N for a linear axis), current x the node\'s '
+                    'torque_constants (joint_states effort).')
     fig.text(0.01, 0.005, textwrap.fill(caption, 150), fontsize='small', va='bottom')
     fig.tight_layout(rect=(0, 0.7 / fig.get_figheight(), 1, 1))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=90)
-    plt.close(fig)
-    return out
+    return fig
 
 
 def main() -> int:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import math
 import re
 import subprocess
 import sys
@@ -144,6 +145,10 @@ def test_recorder_writes_chosen_topics_until_ctrl_c(gimbal, tmp_path, check_rosb
     assert len(actual['/']['pan']) == len(joint_states)
     png = plot_bag.plot(bag, tmp_path / 'positions.png')
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    # the virtual gimbal reports no motor current: no effort, no current or effort rows
+    assert all(len(m.effort) == 0 for m in joint_states)
+    assert all(math.isnan(a.current) for m in statuses for a in m.axes)
+    assert plot_bag.rows_of(plot_bag.read_bag(bag)) == [('/', '')]
 
 
 @pytest.mark.ros
@@ -303,3 +308,50 @@ def test_the_plot_names_the_steps_and_says_what_the_line_means(tmp_path: Path) -
         {'ns': '/g', 'kind': 'step', 't': 101.0, 'name': 'move', 't0': 100.0, 't1': 101.0}]))
     assert plot_bag.load_commands(commands)['/g'][0]['name'] == 'move'
     assert plot_bag.load_commands(tmp_path / 'missing.json') == {}
+
+
+def test_the_plot_shows_current_in_amperes_and_effort_as_torque(tmp_path: Path) -> None:
+    """A bag with ~/status currents and joint_states efforts (a node with torque_constants)
+    gets a current row in A and an effort row in N·m, each saying where it came from."""
+    pytest.importorskip('gimbal_msgs')
+    from rclpy.serialization import serialize_message
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from sensor_msgs.msg import JointState
+
+    from gimbal_msgs.msg import AxisState, GimbalStatus
+
+    recorder, plot_bag = load_recorder(), load_script('plot_bag.py')
+    types = recorder.WorkspaceTypes()
+    if not types.msg_files('gimbal_msgs'):
+        pytest.skip('gimbal_msgs is not built (make build)')
+    types.ensure('gimbal_msgs/msg/GimbalStatus')
+    bag = tmp_path / 'torque'
+    writer = Writer(bag, version=recorder.METADATA_VERSION, storage_plugin=StoragePlugin.MCAP)
+    writer.open()
+    states = writer.add_connection('/turret/joint_states', 'sensor_msgs/msg/JointState',
+                                   typestore=types.store)
+    status = writer.add_connection('/turret/canaero_turret_driver/status',
+                                   'gimbal_msgs/msg/GimbalStatus', typestore=types.store)
+    for step in range(3):
+        t = 1_000_000_000 * (step + 1)
+        writer.write(states, t, serialize_message(JointState(
+            name=['yaw', 'pitch'], position=[0.1 * step, 0.0], velocity=[0.0, 0.0],
+            effort=[0.5 * step, float('nan')])))
+        writer.write(status, t, serialize_message(GimbalStatus(axes=[
+            AxisState(name='yaw', current=1.0 * step, target_position=float('nan')),
+            AxisState(name='pitch', current=2.0, target_position=float('nan'))])))
+    writer.close()
+    series = plot_bag.read_bag(bag)
+    assert series.current['/turret'] == {'yaw': [(1.0, 0.0), (2.0, 1.0), (3.0, 2.0)],
+                                         'pitch': [(1.0, 2.0), (2.0, 2.0), (3.0, 2.0)]}
+    assert series.effort['/turret'] == {'yaw': [(1.0, 0.0), (2.0, 0.5), (3.0, 1.0)]}
+    assert plot_bag.rows_of(series) == [('/turret', ''), ('/turret', 'current'),
+                                        ('/turret', 'effort')]
+    fig = plot_bag.figure(series, {})
+    labels = [ax.get_ylabel() for ax in fig.axes]
+    assert labels == ['position [rad or m]', 'motor current [A]',
+                      'effort (torque) [N·m; N linear]']
+    assert 'AxisState.current' in fig.axes[1].get_title()
+    assert 'torque_constants' in fig.axes[2].get_title()
+    png = plot_bag.plot(bag, tmp_path / 'torque.png')
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'

@@ -71,8 +71,21 @@ class Intervals:
 
     def __init__(self) -> None:
         self.accepted_ms: dict[str, int] = {}   # TIS intervals the nodes accepted
-        self.refused: dict[str, str] = {}       # key -> why TIS was refused
+        self.refused: dict[str, str] = {}       # key -> why TIS was refused (a status)
+        self.timed_out: dict[str, str] = {}     # key -> the TIS that got no answer in time
         self.observed: dict[str, float] = {}
+
+    def failures(self) -> str:
+        """What became of the TIS requests that failed, for the log and diagnostics:
+        refused (the node answered with a status) and timed out (no answer) said apart;
+        '' when none failed."""
+        parts = []
+        if self.refused:
+            parts.append(f"the turret refused TIS for {', '.join(sorted(self.refused))}")
+        if self.timed_out:
+            parts.append(f"TIS for {', '.join(sorted(self.timed_out))} timed out "
+                         "(no answer)")
+        return '; '.join(parts)
 
     def learn(self, key: str, gap: float) -> None:
         """A smoothed inter-arrival time; gaps longer than 4x the estimate (an outage, a
@@ -303,23 +316,26 @@ class NodeServices:
         self.intervals.observed.pop(key, None)
 
     def request_intervals(self, intervals: dict[str, int]) -> dict[str, str]:
-        """TIS for several identifiers; returns {key: reason} for those that were refused.
+        """TIS for several identifiers; returns {key: reason} for those that failed:
+        refused (a negative status, in ``intervals.refused``) or timed out (no answer, in
+        ``intervals.timed_out``).
 
-        A refusal (negative status or no answer) is not an error: the identifier keeps the
-        rate the node chose, which staleness and rate checks then learn from the frames
-        (`interval_of`). A closed interface still raises LinkError.
+        Neither is an error: the identifier keeps the rate the node chose, which staleness
+        and rate checks then learn from the frames (`interval_of`). A closed interface
+        still raises LinkError.
         """
         refused: dict[str, str] = {}
+        timed_out: dict[str, str] = {}
         for key, interval_ms in intervals.items():
             try:
                 self.set_transmission_interval(key, interval_ms)
             except ServiceError as exc:
                 if not self._link.connected:
                     raise LinkError(str(exc)) from exc
-                refused[key] = str(exc)
+                (timed_out if isinstance(exc, ServiceTimeout) else refused)[key] = str(exc)
                 self.intervals.accepted_ms.pop(key, None)
-        self.intervals.refused = refused
-        return refused
+        self.intervals.refused, self.intervals.timed_out = refused, timed_out
+        return {**refused, **timed_out}
 
     def set_node_id(self, new_node_id: int, node_id: int | None = None) -> None:
         """NIS: only when `allow_node_id_change` is set (changes the device's identity)."""

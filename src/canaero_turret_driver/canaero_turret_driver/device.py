@@ -152,13 +152,12 @@ class TurretDevice(Device):
         self._cycle.clear()
         client.open()
         info = self._identify()
-        refused = client.services.request_intervals(self.interval_requests())
-        if refused and not self._tis_refusal_logged:
+        failed = client.services.request_intervals(self.interval_requests())
+        if failed and not self._tis_refusal_logged:
             self._tis_refusal_logged = True
             self.log.warning(
-                f"the turret refused TIS for {', '.join(sorted(refused))}: rate and staleness "
-                "checks follow the intervals it actually sends (see /diagnostics "
-                "'transmission intervals')")
+                f"{client.intervals.failures()}: rate and staleness checks follow the "
+                "intervals it actually sends (see /diagnostics 'transmission intervals')")
         node = client.config.turret_node_id
         firmware = ("unknown (IDS unanswered)" if info is None else
                     f"hw {info.hardware_revision} sw {info.software_revision}")
@@ -236,7 +235,7 @@ class TurretDevice(Device):
         client = self.client
         positions: dict[str, float] = {}
         velocities: dict[str, float] = {}
-        efforts: dict[str, float] = {}
+        currents: dict[str, float] = {}
         moving: dict[str, bool] = {}
         stamp = 0.0
         for axis in AXES:
@@ -251,13 +250,11 @@ class TurretDevice(Device):
             velocities[joint] = math.nan if velocity is None else velocity
             current = si(client.latest(f"{axis}_current"))
             if current is not None:
-                efforts[joint] = current
+                currents[joint] = current
             status = client.latest(f"{axis}_status")
             if status is not None:
                 moving[joint] = AxisStatus.decode(status.integer).target != TargetState.REACHED
-        if len(efforts) != len(positions):
-            efforts = {}
-        self._latest = JointSample(positions, velocities, efforts, stamp, moving)
+        self._latest = JointSample(positions, velocities, currents, stamp, moving)
         return self._latest
 
     def positions(self) -> dict[str, float]:

@@ -22,6 +22,7 @@ SPEC = DriverSpec(
                      'can_options': ['sleep_after_open=0'], 'service_timeout': 0.3,
                      'transmission_intervals': ['yaw_position=20', 'pitch_position=20'],
                      'actuator_mode': 'auto_brake'},
+    link_parameters=('can_interface', 'can_channel'),
     launch_sim_arguments=('--link', '/tmp/canaero_turret'),
     sim_handle='canaero_turret_driver.sim_handle:CanaeroSimHandle',
     refused_requests='canaero_turret_driver.refused_requests:refused_requests',

@@ -84,13 +84,14 @@ class TurretStatus(StatusReport):
         publish_rate = self.device.publish_rate()
         values.append(("expected_joint_states_hz",
                        f"{self.device.expected_rate(publish_rate):.2f}"))
-        refused = client.intervals.refused
-        if refused:
-            for key, reason in sorted(refused.items()):
+        failures = client.intervals.failures()
+        if failures:
+            for key, reason in sorted(client.intervals.refused.items()):
                 values.append((f"refused_{key}", reason))
+            for key, reason in sorted(client.intervals.timed_out.items()):
+                values.append((f"timed_out_{key}", reason))
             return StatusPart("transmission intervals", Level.OK,
-                              f"the turret refused TIS for {', '.join(sorted(refused))}: "
-                              "checks follow the intervals it sends", values)
+                              f"{failures}: checks follow the intervals it sends", values)
         return StatusPart("transmission intervals", Level.OK,
                           "intervals accepted by the turret", values)
 

@@ -13,6 +13,10 @@ Arguments (default after :=; docs/interface.md, "Launch arguments"):
                              the URDF robot_state_publisher publishes and ~/look_at aims with
     sim:=false               true: also start canaero_turret_sim (slcan on /tmp/canaero_turret,
                              config/canaero_turret_driver_sim.yaml)
+    log_level:=''            the node's --ros-args --log-level: debug, info, warn, error,
+                             fatal, or logger:=level ('' = not given: info)
+    can_interface:=''        python-can interface (socketcan, slcan, ...); '' = the params file's
+    can_channel:=''          CAN channel (can0, or the slcan tty); '' = the params file's
 
 Bring the CAN interface up first (see the package README), e.g.
     sudo ip link set can0 type can bitrate 500000 && sudo ip link set can0 up

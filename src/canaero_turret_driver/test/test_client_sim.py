@@ -193,6 +193,23 @@ def test_refused_intervals_fall_back_to_the_observed_rate(refusing_client):
     assert wait_for(lambda: not client.is_stale("yaw_position"))
 
 
+def test_refused_and_timed_out_intervals_are_told_apart(refusing_client):
+    """A TIS answered with a negative status is refused; one never answered timed out,
+    and the log/diagnostics text says which (the turret did not refuse it)."""
+    client, sim = refusing_client
+    client.services.request_intervals({"yaw_position": 20})
+    assert set(client.intervals.refused) == {"yaw_position"} and not client.intervals.timed_out
+    assert client.intervals.failures() == "the turret refused TIS for yaw_position"
+    sim.request_faults.mute("TIS")
+    failed = client.services.request_intervals({"yaw_position": 20, "pitch_position": 20})
+    assert set(failed) == {"yaw_position", "pitch_position"}
+    assert not client.intervals.refused
+    assert "no TIS response" in client.intervals.timed_out["pitch_position"]
+    assert client.intervals.failures() == ("TIS for pitch_position, yaw_position timed out "
+                                           "(no answer)")
+    assert "refused" not in client.intervals.failures()
+
+
 def test_node_id_and_flash_services_need_opt_in(client, simulator):
     before = simulator.state()["commands_received"]
     with pytest.raises(NotAllowedError):

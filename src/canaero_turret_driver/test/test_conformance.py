@@ -16,6 +16,7 @@ from gimbal_msgs.srv import DeviceCommand
 class TestCanaeroTurretConformance(DriverConformance):
     __test__ = True
     driver = "canaero_turret"
+    reports_current = True  # motor current (A) in ~/status; effort via torque_constants
     joints = ("yaw", "pitch")
     small_move = {"yaw": 0.4, "pitch": 0.2}
     far_move = ("yaw", -2.5, 0.2)

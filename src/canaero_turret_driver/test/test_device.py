@@ -93,8 +93,8 @@ def test_connect_identity_and_streamed_samples(rig):
     assert rig.device.expected_rate(10.0) == pytest.approx(10.0)  # never above publish_rate
     wait_for(lambda: rig.samples >= 10, 30, "joint samples from the broadcasts")
     sample = rig.controller.latest
-    assert set(sample.positions) == set(JOINTS) and set(sample.efforts) == set(JOINTS)
-    assert sample.efforts["yaw"] > 0.0  # motor current, A
+    assert set(sample.positions) == set(JOINTS) and set(sample.currents) == set(JOINTS)
+    assert sample.currents["yaw"] > 0.0  # motor current, A
     assert sample.moving == {"yaw": False, "pitch": False}  # status bytes: target reached
 
 

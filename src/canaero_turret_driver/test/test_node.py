@@ -81,11 +81,13 @@ def move(ros, names, values, relative=False):
 
 def test_joint_states_status_and_diagnostics(rig):
     ros, _, _, _ = rig
-    msg = ros.wait_for_message("joint_states", JointState, lambda m: len(m.effort) == 2)
+    msg = ros.wait_for_message("joint_states", JointState)
     assert msg.name == ["yaw", "pitch"] and len(msg.velocity) == 2
-    assert msg.effort[0] > 0.0  # motor current, A
+    assert not msg.effort  # amperes are no effort; no torque_constants set
     assert msg.header.stamp.sec > 0
-    status = ros.wait_for_message(f"/{NODE}/status", GimbalStatus, lambda m: m.mode)
+    status = ros.wait_for_message(f"/{NODE}/status", GimbalStatus,
+                                  lambda m: m.mode and m.axes[0].current > 0.0)
+    assert math.isnan(status.axes[0].effort)  # motor current (1462), A, in ~/status only
     assert status.connection == GimbalStatus.CONNECTION_CONNECTED
     assert status.firmware_version == "hw 2 sw 7" and "auto_brake" in status.mode
     diag = wait_diag(ros, "connection", 0)

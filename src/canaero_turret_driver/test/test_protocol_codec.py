@@ -117,6 +117,18 @@ def test_malformed_frames_name_the_problem(can_id, data, reason):
         CanAerospaceMessage.from_frame(can_id, data)
 
 
+@pytest.mark.parametrize(("code", "name"), [
+    (31, "DOUBLEL"), (32, "RESVD(32)"), (99, "RESVD(99)"), (100, "UDEF(100)"),
+    (101, "UDEF(101)"), (102, "UDEF(102)"), (255, "UDEF(255)"),
+])
+def test_type_names_of_reserved_and_user_defined_codes(code, name):
+    """RESVD 32-99, UDEF 100-255 (CANaerospace 1.7, libcanaerospace); the ICD's "102-255"
+    would leave 100-101 unassigned."""
+    from canaero_turret_driver.protocol.datatypes import type_name
+
+    assert type_name(code) == name
+
+
 def test_unknown_type_keeps_raw_payload():
     message = CanAerospaceMessage.from_frame(1303, bytes.fromhex("0164000001020304"))
     assert message.type_name == "UDEF(100)"

@@ -10,14 +10,15 @@ Errors found in the ICD text and the rule followed instead:
   used, matching CANaerospace 1.7.
 * LONG range printed "-2147483647 to 2147483648": used -2147483648..2147483647.
 * ACHAR3 explained as "4 x ASCII character": 3 characters (name and Bits column say 3).
-* UDEF printed 102-255 (0x66-0xFF) after RESVD 32-99: 100/101 are unassigned; every
+* UDEF printed 102-255 (0x66-0xFF) after RESVD 32-99: UDEF is 100-255, as CANaerospace
+  1.7 and libcanaerospace have it (100/101 are user-defined, not unassigned); every
   code >= 32 is kept as raw bytes.
 * "UCAR" for Stop actuators and the axis status bytes: read as UCHAR.
 * Weapon identifiers (out of scope, never encoded): "Fuse control 1416 (0x57F)" where
   0x57F = 1407, and "Global shot counter 1418 (0x589)" where 0x589 = 1417 (the fuse state
   id). Neither is in the driver's table; both are ignored on receive.
-* TIS/FPS/NIS responses put the result in the message code (NODATA) while CANaerospace
-  1.7 puts it in LONG data: the client accepts both.
+* TIS/FPS/NIS responses put the result in the message code (NODATA), as CANaerospace
+  1.7 (4.6, 4.7, 4.12) and libcanaerospace do; the client also accepts it as LONG data.
 * Figure 4 (EED layout) was lost: error code bytes 4-5, operation id byte 6, location id
   byte 7 (CANaerospace 1.7).
 * 7.5.1 Camera0 zoom position: on the file's last line (no trailing newline): 1342

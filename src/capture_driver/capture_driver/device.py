@@ -263,7 +263,7 @@ class CaptureDevice(Device):
             currents = self._status.get('current', {})
         return JointSample(
             positions=positions, velocities=velocities, stamp=stamp,
-            efforts={j: currents[j] for j in self.joint_names if j in currents})
+            currents={j: currents[j] for j in self.joint_names if j in currents})
 
     def refresh_status(self) -> None:
         """Registers, currents (A) and error strings, cached for diagnostics, ~/status and
@@ -275,7 +275,7 @@ class CaptureDevice(Device):
             axis = self.axis(joint)
             try:
                 status['axes'][joint] = client.registers(axis)
-                with contextlib.suppress(NotSupported):  # no effort in joint_states
+                with contextlib.suppress(NotSupported):  # no current in ~/status
                     status['current'][joint] = client.poll('MOT_GetMotorCurrent', axis) / 1000.0
             except REQUEST_ERRORS as exc:
                 status['problems'].append(f'{joint}: {exc}')

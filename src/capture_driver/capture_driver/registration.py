@@ -20,6 +20,7 @@ SPEC = DriverSpec(
     sim_arguments=('--port', '{port}'),
     node_parameters={'transport': 'tcp', 'host': '127.0.0.1', 'port': '{port}',
                      'status_period': 0.2, 'default_speed': 1.0, 'acceleration': 6.0},
+    link_parameters=('transport', 'host', 'port', 'serial_port', 'baudrate'),
     launch_sim_arguments=('--port', '4949'),
     sim_handle='capture_driver.sim_handle:CaptureSimHandle',
     refused_requests='capture_driver.refused_requests:refused_requests',

@@ -13,6 +13,13 @@ Arguments (default after :=; docs/interface.md, "Launch arguments"):
                              the URDF robot_state_publisher publishes and ~/look_at aims with
     sim:=false               true: also start capture_sim on TCP 127.0.0.1:4949
                              (config/capture_driver_sim.yaml)
+    log_level:=''            the node's --ros-args --log-level: debug, info, warn, error,
+                             fatal, or logger:=level ('' = not given: info)
+    transport:=''            link to the device (tcp, serial); '' = the params file's
+    host:=''                 device host name or IP address; '' = the params file's
+    port:=''                 device TCP port; '' = the params file's
+    serial_port:=''          serial device, e.g. /dev/ttyUSB0; '' = the params file's
+    baudrate:=''             serial baud rate; '' = the params file's
 
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """

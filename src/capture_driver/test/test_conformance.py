@@ -26,6 +26,7 @@ AXIS_STOP = ('MOT_SetSpeedMode', 'MOT_SetSpeed', 'MOT_Update')
 class TestCaptureConformance(DriverConformance):
     __test__ = True
     driver = 'capture'
+    reports_current = True  # motor current (A) in ~/status; effort via torque_constants
     joints = ('pan', 'tilt')
     small_move = {'pan': 0.4, 'tilt': -0.2}
     far_move = ('pan', -2.5, 0.1)

@@ -75,7 +75,10 @@ def test_joint_states_and_identity(rig):
     values = {kv.key: kv.value for kv in status.values}
     assert values['serial_number'] == '24017'
     assert values['firmware'].startswith('2.24.0')
-    ros.wait_for_message('joint_states', JointState, lambda m: len(m.effort) == 2)
+    # motor current (MOT_GetMotorCurrent) in ~/status, A; no effort without torque_constants
+    ros.wait_for_message(srv('status'), GimbalStatus,
+                         lambda m: all(math.isfinite(a.current) for a in m.axes))
+    assert not ros.wait_for_message('joint_states', JointState).effort
     ros.wait_for_diagnostic(NODE, 'joint_states frequency', lambda s: s.level == b'\x00')
 
 

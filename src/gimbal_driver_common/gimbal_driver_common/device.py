@@ -76,11 +76,14 @@ class JointSample:
     ``stamp`` is the wall-clock time (``time.time()``) the data arrived.
     ``moving`` holds the device's own in-motion bits where it has them; the
     controller's one "moving" rule falls back to the velocity otherwise.
+    ``currents`` is the motor current (A) of the joints whose device reports one: it is
+    ``~/status`` ``current``, and reaches joint_states ``effort`` only as torque, through
+    the ``torque_constants`` the user sets (ros/messages.py).
     """
 
     positions: dict[str, float]
     velocities: dict[str, float] = field(default_factory=dict)
-    efforts: dict[str, float] = field(default_factory=dict)
+    currents: dict[str, float] = field(default_factory=dict)
     stamp: float = field(default_factory=time.time)
     moving: dict[str, bool] = field(default_factory=dict)
 

@@ -27,6 +27,17 @@ from pathlib import Path
 from typing import Any
 
 ENTRY_POINT_GROUP = 'gimbal_driver_common.drivers'
+#: the link's main parameters (docs/interface.md), which a driver's launch file takes as
+#: arguments where its node declares them: name -> (type of the parameter, what it is)
+LINK_ARGUMENTS: Mapping[str, tuple[type, str]] = {
+    'host': (str, 'device host name or IP address'),
+    'port': (int, 'device TCP port'),
+    'transport': (str, 'link to the device (tcp, serial, usb: the ones the driver has)'),
+    'serial_port': (str, 'serial device, e.g. /dev/ttyUSB0'),
+    'baudrate': (int, 'serial baud rate'),
+    'can_interface': (str, 'python-can interface, e.g. socketcan or slcan'),
+    'can_channel': (str, 'CAN channel, e.g. can0 (slcan: the serial device)'),
+}
 #: the package of the reference driver (the virtual gimbal); every other one is a device driver
 REFERENCE_PACKAGE = 'virtual_gimbal_driver'
 
@@ -138,6 +149,8 @@ class DriverSpec:
     #: the package's simulator YAML (config/<package>_sim.yaml) connects to, so no
     #: placeholder here
     launch_sim_arguments: tuple[str, ...] = ()
+    #: the LINK_ARGUMENTS the node declares (its launch file takes them as arguments)
+    link_parameters: tuple[str, ...] = ()
     password: str = ''           # the simulator's device password (never logged)
     sim_handle: str = ''         # 'module:Class' of the in-process simulator handle
     #: 'module:function' returning the :class:`RefusedRequests` of the driver's own services
@@ -181,6 +194,12 @@ class DriverSpec:
     def is_reference(self) -> bool:
         """The reference virtual gimbal (an invented device, no vendor document)."""
         return self.package == REFERENCE_PACKAGE
+
+    def __post_init__(self) -> None:
+        unknown = [name for name in self.link_parameters if name not in LINK_ARGUMENTS]
+        if unknown:
+            raise RegistryError(f'{self.name}: link_parameters {unknown} are not among '
+                                f'{list(LINK_ARGUMENTS)}')
 
     def executables(self) -> tuple[str, str]:
         return self.node_executable, self.sim_executable

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
@@ -73,6 +74,45 @@ def test_scan_uses_first_two_joints_without_pan_tilt_names(context) -> None:
 def test_invalid_parameters_name_the_parameter(context, overrides, message) -> None:
     with pytest.raises(ParameterError, match=message):
         make(context, **overrides)
+
+
+def test_torque_constants_default_to_none(context) -> None:
+    """joint_states effort is current x torque_constants (test_effort.py); none by default."""
+    node = make(context)
+    try:
+        assert node.torque_constants == {}
+        assert list(node.get_parameter('torque_constants').value) == []
+        assert 'N*m/A' in node.describe_parameter('torque_constants').description
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize(('value', 'message'), [
+    ([0.5, 1.0], "'torque_constants': 2 values but joint_names has 3"),
+    ([0.5, 1.0, -1.0], "'torque_constants': -1.0 is not a finite torque constant > 0"),
+    ([0.5, 1.0, 0.0], "'torque_constants': 0.0 is not a finite"),
+    ([0.5, 1.0, math.inf], "'torque_constants': inf is not a finite"),
+])
+def test_invalid_torque_constants_are_refused_at_start(context, value, message) -> None:
+    with pytest.raises(ParameterError, match=message):
+        make(context, torque_constants=value)
+
+
+def test_torque_constants_apply_at_run_time_and_bad_ones_are_refused(context) -> None:
+    node = make(context, torque_constants=[2.0, 0.5, 2.0])
+    try:
+        assert node.torque_constants == {'slider': 2.0, 'pan': 0.5, 'tilt': 2.0}
+        result = node.set_parameters([Parameter('torque_constants', value=[1.0])])[0]
+        assert not result.successful and 'joint_names has 3' in result.reason
+        assert node.torque_constants == {'slider': 2.0, 'pan': 0.5, 'tilt': 2.0}
+        result = node.set_parameters([Parameter('torque_constants', value=[0.1, 0.2, 0.3])])[0]
+        assert result.successful, result.reason
+        assert node.torque_constants == {'slider': 0.1, 'pan': 0.2, 'tilt': 0.3}
+        empty = Parameter('torque_constants', Parameter.Type.DOUBLE_ARRAY, [])
+        assert node.set_parameters([empty])[0].successful
+        assert node.torque_constants == {}
+    finally:
+        node.destroy_node()
 
 
 # ~/look_at set-up (ros/look_at.py): which description, and clear refusals. ThreeAxisNode's

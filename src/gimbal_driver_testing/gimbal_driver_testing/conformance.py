@@ -37,6 +37,7 @@ from gimbal_driver_testing.conformance_rig import (
     frequency_level_fits,
 )
 from gimbal_driver_testing.diagnostics_conformance import DiagnosticsConformance
+from gimbal_driver_testing.effort_conformance import EffortConformance
 from gimbal_driver_testing.log_conformance import LogConformance
 from gimbal_driver_testing.motion_start_conformance import MotionStartConformance
 from gimbal_driver_testing.restart_conformance import RestartConformance
@@ -54,7 +55,7 @@ REJECTED_BURSTS = 6
 
 class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionStartConformance,
                         LogConformance, DiagnosticsConformance, SilentRequestConformance,
-                        StopConformance):
+                        StopConformance, EffortConformance):
     """The common contract of every gimbal driver node, tested through the real transport.
 
     Subclasses set the attributes below; the package, node and simulator come from the

@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 
 import gimbal_driver_common
+from gimbal_driver_common.registry import driver_of_package
 
 #: read as a file beside the (ROS-free) package it belongs to, never imported
 DESCRIPTION_LAUNCH = Path(gimbal_driver_common.__file__).resolve().parent / 'ros' / \
@@ -27,7 +28,8 @@ def declared_defaults(package: str, source: str | None = None) -> dict[str, str]
     """The launch arguments and defaults ``driver_launch_description(package)`` declares.
 
     ``description_file``'s default is a call, ``default_description(package)``: it is
-    given as ``share/<package>/urdf/<package>.urdf``, as the docstrings write it.
+    given as ``share/<package>/urdf/<package>.urdf``, as the docstrings write it. The link
+    arguments are the registry's ``link_parameters`` of the package, each defaulting to ''.
     """
     text = DESCRIPTION_LAUNCH.read_text(encoding='utf-8') if source is None else source
     function = next(node for node in ast.walk(ast.parse(text))
@@ -39,6 +41,10 @@ def declared_defaults(package: str, source: str | None = None) -> dict[str, str]
     assert isinstance(listing, ast.List), ast.dump(listing)
     defaults: dict[str, str] = {}
     for entry in listing.elts:
+        if isinstance(entry, ast.Starred):  # the link arguments: the spec's, default ''
+            assert 'link_parameters' in ast.unparse(entry), ast.unparse(entry)
+            defaults.update(dict.fromkeys(driver_of_package(package).link_parameters, ''))
+            continue
         assert isinstance(entry, ast.Tuple) and isinstance(entry.elts[0], ast.Constant)
         name, default = entry.elts[0].value, entry.elts[1]
         if isinstance(default, ast.Constant):

@@ -32,7 +32,12 @@ the jazzy branch of ros2/launch and ros2/launch_ros, file and function named bel
   a dict written to a temporary file keyed with the node's full name when name and namespace
   are both given, else ``/**`` (node.py ``_create_params_file_from_dict``); a dict value that
   is a substitution is performed and read as YAML
-  (launch_ros/launch_ros/utilities/evaluate_parameters.py, ``evaluate_parameter_dict``).
+  (launch_ros/launch_ros/utilities/evaluate_parameters.py, ``evaluate_parameter_dict``),
+  a plain str, int, float or bool keeps its type (a str is ``yaml.dump``-ed and read back
+  as the same string: launch_ros/launch_ros/utilities/normalize_parameters.py,
+  ``normalize_parameter_dict``). ``ros_arguments`` given (even empty) add ``--ros-args``
+  and them ahead of the ``--ros-args`` launch_ros reserves (node.py ``Node.__init__``), so
+  ``--log-level`` reaches rcl.
   ``LifecycleNode`` takes ``name`` and ``namespace`` as required keywords
   (launch_ros/launch_ros/actions/lifecycle_node.py). Every ``Node`` command line gets
   ``--ros-args``, so a program that is not a ROS node runs
@@ -262,7 +267,8 @@ class Node(Action):
         self.executable, self.package, self.name, self.namespace = (executable, package, name,
                                                                     namespace)
         self.parameters, self.remappings = list(parameters or []), list(remappings or [])
-        self.arguments, self.ros_arguments = list(arguments or []), list(ros_arguments or [])
+        self.arguments = list(arguments or [])
+        self.ros_arguments = None if ros_arguments is None else list(ros_arguments)
 
     def execute(self, context: LaunchContext) -> None:
         package = perform(context, self.package) if self.package is not None else ''
@@ -293,7 +299,7 @@ class Node(Action):
         path = (find_executable(package, executable) if package not in NOT_HERE
                 else f'{package}/lib/{executable}') if package else executable
         cmd = [path, *(perform(context, a) for a in self.arguments)]
-        if self.ros_arguments:
+        if self.ros_arguments is not None:  # [] too: a bare --ros-args (Node.__init__)
             cmd += ['--ros-args', *(perform(context, a) for a in self.ros_arguments)]
         cmd.append('--ros-args')
         if name is not None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import ast
 import math
 import os
+import re
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -30,7 +31,19 @@ import yaml
 #: docs/interface.md: every driver's launch file takes these arguments (defaults; the URDF's
 #: default is the package's installed one). A bare launch ends with an active node.
 CONTRACT_ARGUMENTS = {'params_file': '', 'autostart': 'true', 'namespace': '',
-                      'use_description': 'false', 'description_file': None, 'sim': 'false'}
+                      'use_description': 'false', 'description_file': None, 'sim': 'false',
+                      'log_level': ''}
+#: a value of each link argument other than any shipped YAML's (as ``ros2 launch`` passes
+#: it: text), and the typed value the node then gets
+GIVEN_LINK = {'host': ('127.0.0.2', '127.0.0.2'), 'port': ('4321', 4321),
+              'transport': ('given-transport', 'given-transport'),
+              'serial_port': ('/dev/ttyGIVEN0', '/dev/ttyGIVEN0'),
+              'baudrate': ('57600', 57600), 'can_interface': ('virtual', 'virtual'),
+              'can_channel': ('given0', 'given0')}
+#: what a parameters file of the user's sets them to before the arguments override it
+FILE_LINK = {'host': '127.0.0.3', 'port': 1111, 'transport': 'file-transport',
+             'serial_port': '/dev/ttyFILE0', 'baudrate': 9600, 'can_interface': 'socketcan',
+             'can_channel': 'file0'}
 #: the namespace the namespaced launches use (the issue's `namespace:=robot/gimbal`)
 NAMESPACE = 'robot/gimbal'
 
@@ -167,12 +180,59 @@ class LaunchAndConfigSuite:
         """What `ros2 launch <pkg> <pkg>.launch.py --show-args` lists."""
         declared = {argument.name: argument.default_value for argument in
                     launch.load_description(self.launch_file()).declared_arguments()}
-        assert set(declared) == set(CONTRACT_ARGUMENTS)
-        for name, default in CONTRACT_ARGUMENTS.items():
+        links = dict.fromkeys(self.spec.link_parameters, '')
+        assert set(declared) == set(CONTRACT_ARGUMENTS) | set(links)
+        for name, default in {**CONTRACT_ARGUMENTS, **links}.items():
             if default is not None:
                 assert declared[name] == default, name
         assert declared['description_file'] == str(
             share(self.package, 'urdf', f'{self.package}.urdf'))
+
+    def test_the_link_arguments_are_the_link_parameters_the_node_declares(self) -> None:
+        """``DriverSpec.link_parameters`` (the launch file's link arguments) are exactly the
+        registry's LINK_ARGUMENTS the running node declares."""
+        from gimbal_driver_common.registry import LINK_ARGUMENTS
+
+        declared = declared_parameters(self.package) & set(LINK_ARGUMENTS)
+        assert set(self.spec.link_parameters) == declared, (
+            f'{self.package}: registration.py link_parameters {self.spec.link_parameters}, '
+            f'but the node declares {sorted(declared)}')
+
+    def test_link_and_log_level_arguments_override_the_parameters_file_only_when_given(
+            self, launch: Any, tmp_path: Path) -> None:
+        """Each link argument given beats the parameters file (the dict after the file, rcl's
+        later-wins); not given, the file's value holds and the dict does not name it;
+        ``log_level`` becomes ``--ros-args --log-level`` ahead of the parameters."""
+        names = self.spec.link_parameters
+        params = tmp_path / 'robot.yaml'
+        params.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
+            'publish_rate': 20.0, **{n: FILE_LINK[n] for n in names}}}}))
+        given = {n: GIVEN_LINK[n][0] for n in names}
+        node = self.run_launch(launch, {'params_file': str(params), 'log_level': 'debug',
+                                        **given}, tmp_path).launched[-1]
+        assert node.parameters[0] == params
+        assert {n: node.parameters[1][n] for n in names} == {
+            n: GIVEN_LINK[n][1] for n in names}
+        assert launch.node_parameters(node.cmd) == {
+            'publish_rate': 20.0, **node.parameters[1]}
+        reserved = len(node.cmd) - node.cmd[::-1].index('--ros-args') - 1
+        assert node.cmd[1:4] == ['--ros-args', '--log-level', 'debug'] and reserved == 4
+        for name in names:  # one given alone: only it is overridden
+            node = self.run_launch(launch, {'params_file': str(params),
+                                            name: GIVEN_LINK[name][0]}, tmp_path).launched[-1]
+            assert launch.node_parameters(node.cmd) == {
+                'publish_rate': 20.0, **{n: FILE_LINK[n] for n in names},
+                name: GIVEN_LINK[name][1], 'autostart': True,
+                'description_file': node.parameters[1]['description_file']}
+        node = self.run_launch(launch, {'params_file': str(params)}, tmp_path).launched[-1]
+        assert not set(node.parameters[1]) & set(GIVEN_LINK), node.parameters[1]
+        assert '--log-level' not in node.cmd and node.cmd.count('--ros-args') == 1
+        for name in ('port', 'baudrate'):
+            if name in names:
+                with pytest.raises(ValueError, match=f"{name}:='fast': expected an integer"):
+                    self.run_launch(launch, {name: 'fast'}, tmp_path)
+        with pytest.raises(ValueError, match="log_level:='loud'"):
+            self.run_launch(launch, {'log_level': 'loud'}, tmp_path)
 
     def test_a_bare_launch_starts_the_driver(self, launch: Any, tmp_path: Path) -> None:
         from gimbal_driver_testing import find_executable
@@ -255,8 +315,10 @@ class LaunchAndConfigSuite:
         from gimbal_driver_testing.ros import RosTestClient
 
         pkg, spec = self.package, self.spec
+        # with the simulator YAML also log_level:=debug, which the process then shows
         context = self.run_launch(launch, {'namespace': NAMESPACE, 'autostart': 'false',
-                                           'sim': 'true' if sim else 'false'}, tmp_path)
+                                           'sim': 'true' if sim else 'false',
+                                           'log_level': 'debug' if sim else ''}, tmp_path)
         node = context.launched[-1]
         assert node.kind == 'lifecycle_node' and node.namespace == f'/{NAMESPACE}'
         yaml_file = share(pkg, 'config', f'{pkg}_sim.yaml' if sim else f'{pkg}.yaml')
@@ -281,6 +343,9 @@ class LaunchAndConfigSuite:
                 assert not held, f'{pkg} opened a link before configure: {held}'
             finally:
                 process.stop()
+        # rcl's DEBUG lines on the console: the node's log level is the one given, else INFO
+        debug = re.search(r'^\[DEBUG\] \[[\d.]+\] \[', process.output(), re.MULTILINE)
+        assert bool(debug) is sim, process.output()[-2000:]
         got = {name: parameter_value_to_python(value)
                for name, value in zip(expected, reply.values, strict=True)}
         wrong = {name: (got[name], want) for name, want in expected.items()
@@ -331,6 +396,14 @@ class LaunchAndConfigSuite:
         assert keys, f'{sim_yaml.name} must name the simulator address {address}'
         private = free_tcp_port() if option == '--port' else str(tmp_path / 'link')
         sim_cmd = [str(private) if part == address else part for part in simulator.cmd]
+        # the private address given as the launch's link argument(s), over the sim YAML
+        # (a key that is no link argument, Kessler's discovery_port, as -p: later wins)
+        links = [k for k in keys if k in spec.link_parameters]
+        assert links, f'{keys}: none is a link argument {spec.link_parameters}'
+        node = self.run_launch(launch, {**arguments, **dict.fromkeys(links, str(private))},
+                               tmp_path).launched[-1]
+        assert {k: node.parameters[1][k] for k in links} == dict.fromkeys(links, private)
+        others = parameter_arguments(dict.fromkeys(set(keys) - set(links), private))
         with DomainLease() as domain:
             sim = ManagedProcess(sim_cmd, ros_env(domain), name=spec.sim_executable)
             started = None
@@ -338,9 +411,9 @@ class LaunchAndConfigSuite:
                 wait_for(lambda: parse_ready_line(sim.output()) or not sim.running, 30.0,
                          f'{spec.sim_executable} to be ready')
                 assert sim.running, sim.output()[-2000:]
-                # the launch's command line, the private address appended (-p wins: later)
-                node_cmd = [*node.cmd, *parameter_arguments(dict.fromkeys(keys, private))]
-                started = ManagedProcess(node_cmd, ros_env(domain), name=spec.node_executable)
+                # the launch's command line: the link argument reaches rclpy
+                started = ManagedProcess([*node.cmd, *others], ros_env(domain),
+                                         name=spec.node_executable)
                 with RosTestClient(domain, 'launch_sim_check') as ros:
                     if autostart is None:
                         ros.wait_for_lifecycle_state(spec.node_name, 'active', timeout=60)

@@ -40,6 +40,29 @@ def test_reading_a_launch_configuration_before_its_declaration_fails(launch) -> 
     assert launch.run(in_order).launched[0].parameters == [{'x': 1.5}]
 
 
+@pytest.mark.parametrize(('ros_arguments', 'head'), [
+    (None, ['some_node', '--ros-args', '-r']),
+    ([], ['some_node', '--ros-args', '--ros-args', '-r']),
+    (['--log-level', 'debug'], ['some_node', '--ros-args', '--log-level', 'debug',
+                                '--ros-args', '-r']),
+])
+def test_ros_arguments_go_ahead_of_the_reserved_ros_args(launch, ros_arguments, head) -> None:
+    """launch_ros node.py ``Node.__init__``: ``ros_arguments`` given (even empty) add
+    ``--ros-args`` and them before the ``--ros-args`` for name, namespace and parameters."""
+    started = launch.run(launch.LaunchDescription([a_node(
+        launch, name='n', ros_arguments=ros_arguments)])).launched[0]
+    assert started.cmd[:len(head)] == head
+
+
+def test_plain_dict_values_keep_their_type(launch, tmp_path: Path) -> None:
+    """normalize_parameter_dict: a str stays a string (yaml.dump, read back), an int an
+    int, so a text that looks like a number is not turned into one."""
+    node = launch.run(launch.LaunchDescription([a_node(
+        launch, name='n', namespace='', parameters=[{'host': '10', 'port': 4950}])]),
+        params_dir=tmp_path).launched[0]
+    assert launch.node_parameters(node.cmd) == {'host': '10', 'port': 4950}
+
+
 def test_the_command_line_is_launch_ros_one(launch, tmp_path: Path) -> None:
     params = tmp_path / 'p.yaml'
     params.write_text(yaml.safe_dump({'/**': {'ros__parameters': {'rate': 2.0}}}))

@@ -70,6 +70,7 @@ SPEC = DriverSpec(
                      'discovery_bind': '127.0.0.1', 'joint_names': list(JOINTS),
                      'motor_addresses': [2, 3, 1], **sim_rig_parameters()},
     password='kos-sim-secret',
+    link_parameters=('transport', 'host', 'port'),
     launch_sim_arguments=('--port', '5520', '--precalibrated'),
     sim_handle='kessler_kos_driver.sim_handle:KesslerSimHandle',
     refused_requests='kessler_kos_driver.refused_requests:refused_requests',

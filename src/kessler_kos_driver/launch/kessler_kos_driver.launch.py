@@ -13,6 +13,11 @@ Arguments (default after :=; docs/interface.md, "Launch arguments"):
                              the URDF robot_state_publisher publishes and ~/look_at aims with
     sim:=false               true: also start kessler_kos_sim --precalibrated on TCP
                              127.0.0.1:5520 (config/kessler_kos_driver_sim.yaml)
+    log_level:=''            the node's --ros-args --log-level: debug, info, warn, error,
+                             fatal, or logger:=level ('' = not given: info)
+    transport:=''            link to the device (tcp, usb); '' = the params file's
+    host:=''                 device host name or IP address; '' = the params file's
+    port:=''                 device TCP port; '' = the params file's
 
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """

@@ -13,8 +13,13 @@ Arguments (default after :=; docs/interface.md, "Launch arguments"):
                              the URDF robot_state_publisher publishes and ~/look_at aims with
     sim:=false               true: also start ucamera_sim on /tmp/ucamera_sim_tty
                              (config/ucamera_driver_sim.yaml)
+    log_level:=''            the node's --ros-args --log-level: debug, info, warn, error,
+                             fatal, or logger:=level ('' = not given: info)
+    serial_port:=''          serial device, e.g. /dev/ttyUSB0; '' = the params file's
+    baudrate:=''             serial baud rate; '' = the params file's
 
-The serial port is the params file's serial_port (config/ucamera_driver.yaml: /dev/ttyUSB0).
+The serial port is serial_port:=, else the params file's (config/ucamera_driver.yaml:
+/dev/ttyUSB0).
 Uses launch/launch_ros, which a full ROS 2 install provides (not the pip environment).
 """
 

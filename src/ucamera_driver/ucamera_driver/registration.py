@@ -19,6 +19,7 @@ SPEC = DriverSpec(
     move_goal=(0.4, -0.3),
     sim_arguments=('--link', '{link}'),
     node_parameters={'serial_port': '{link}', 'telemetry_rate': 50, 'gps_feed': 'external'},
+    link_parameters=('serial_port', 'baudrate'),
     launch_sim_arguments=('--link', '/tmp/ucamera_sim_tty'),
     sim_handle='ucamera_driver.sim_handle:UCameraSimHandle',
     refused_requests='ucamera_driver.refused_requests:refused_requests',

@@ -13,6 +13,10 @@ Arguments (default after :=; docs/interface.md, "Launch arguments"):
                              the URDF robot_state_publisher publishes and ~/look_at aims with
     sim:=false               true: also start virtual_gimbal_sim on TCP 127.0.0.1:4950
                              (config/virtual_gimbal_driver_sim.yaml)
+    log_level:=''            the node's --ros-args --log-level: debug, info, warn, error,
+                             fatal, or logger:=level ('' = not given: info)
+    host:=''                 device host name or IP address; '' = the params file's
+    port:=''                 device TCP port; '' = the params file's
 
 Its device is its simulator: run `ros2 run virtual_gimbal_driver virtual_gimbal_sim --port 4950`
 first, or pass sim:=true.

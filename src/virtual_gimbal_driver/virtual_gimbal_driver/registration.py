@@ -15,6 +15,7 @@ SPEC = DriverSpec(
     move_goal=(0.4, -0.2),
     sim_arguments=('--port', '{port}'),
     node_parameters={'host': '127.0.0.1', 'port': '{port}'},
+    link_parameters=('host', 'port'),
     launch_sim_arguments=('--port', '4950'),
     sim_handle='virtual_gimbal_driver.sim_handle:VirtualGimbalSim',
     probe='virtual_gimbal_driver.probe:probe',

@@ -10,7 +10,9 @@ Reconstruction notes (the ICD is OCR text):
   integer spans -2147483648 .. 2147483647 (section text: "2's complement integer").
 * ACHAR3 is explained as "4 x ASCII character" but its Bits column says 3 x 8 and its
   name says 3: three characters.
-* RESVD is 32-99 and UDEF is printed "102-255 (0x66-0xFF)", leaving 100-101 unassigned.
+* RESVD is 32-99 and UDEF is printed "102-255 (0x66-0xFF)", which would leave 100-101
+  unassigned; CANaerospace 1.7 and libcanaerospace (``CANAS_DATATYPE_UDEF_BEGIN_ =
+  100``) start the user-defined types at 100, so 100-255 are UDEF here (`type_name`).
   Types >= 32 have no codec here: their payload is kept as raw bytes.
 * ERROR (type 1) is the EED payload; its layout is in `eed.py`.
 
@@ -138,7 +140,8 @@ FLOAT32_MAX = 3.4028234663852886e38
 
 
 def type_name(code: int) -> str:
-    """Human name of a type code, also for reserved and user-defined codes."""
+    """Human name of a type code, also for reserved (32-99) and user-defined (100-255)
+    codes."""
     try:
         return DataType(code).name
     except ValueError:

@@ -8,10 +8,11 @@ carries the same node-id. A response is due within 100 ms.
 
 Result codes. The ICD tables for TIS, FPS and NIS put the result into the response's
 *message code* with data type NODATA ("0 = OK, -6 = out of range", "-3 = invalid security
-code"), while DDS/DUS carry it as a LONG in the data bytes. The published CANaerospace
-1.7 standard carries the TIS/FPS/NIS result as LONG data too. `response_status` accepts
-both: LONG data when present, else the message code read as a signed byte. The
-simulator answers in the ICD's NODATA form.
+code"), and so do the published CANaerospace 1.7 standard (4.6 TIS, 4.7 FPS, 4.12 NIS)
+and libcanaerospace; DDS/DUS carry theirs as a LONG in the data bytes. `response_status`
+accepts both forms for every service: LONG data when present (a node that answers a TIS
+that way is understood too), else the message code read as a signed byte. The simulator
+answers TIS/FPS/NIS in the NODATA form.
 
 DDS/DUS reconstruction: the start request's message code holds the number of data
 messages n (1..255, "1-1020 bytes, specified by the message number field"); the

@@ -117,6 +117,8 @@ class GimbalDriverNode(LifecycleNode):
     stop_deceleration: float
     stop_margin: float
     autostart: bool
+    #: N*m/A by joint (``torque_constants``): joint_states effort = current x this
+    torque_constants: dict[str, float]
 
     def __init__(self, node_name: str, **kwargs: Any) -> None:  # rclpy Node's keywords
         super().__init__(node_name, **kwargs)
@@ -436,7 +438,8 @@ class GimbalDriverNode(LifecycleNode):
     # ---------------------------------------------------------- topics
     def _publish_joint_state(self, sample: JointSample) -> None:
         if self.context.ok():
-            self._joint_pub.publish(self._joint_message.fill(sample, self.joint_names))
+            self._joint_pub.publish(self._joint_message.fill(sample, self.joint_names,
+                                                             self.torque_constants))
             self._joint_rate.tick()
 
     def _publish_diagnostics(self) -> None:
@@ -455,7 +458,7 @@ class GimbalDriverNode(LifecycleNode):
         # CPU. A new subscriber gets its first message within one status period.
         if not self._status_pub.get_subscription_count():
             return
-        msg = messages.gimbal_status(self.controller, self.joint_names)
+        msg = messages.gimbal_status(self.controller, self.joint_names, self.torque_constants)
         msg.header.stamp = self.get_clock().now().to_msg()
         self._status_pub.publish(msg)
 

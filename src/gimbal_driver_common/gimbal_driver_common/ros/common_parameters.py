@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
 from gimbal_driver_common.controller import ControllerConfig
 from gimbal_driver_common.joint_command import JointLimits, limits_from_parameters
-from gimbal_driver_common.ros.parameters import ParameterError, ValueOf, declare
+from gimbal_driver_common.ros.parameters import ParameterError, ValueOf, declare, plain_value
+
+TORQUE_CONSTANTS = 'torque_constants'
 
 
 def limits_from(joint_names: Sequence[str], value_of: ValueOf) -> dict[str, JointLimits]:
@@ -18,6 +21,43 @@ def limits_from(joint_names: Sequence[str], value_of: ValueOf) -> dict[str, Join
             value_of('velocity_max'))
     except ValueError as exc:
         raise ParameterError(f'joint limits: {exc}') from exc
+
+
+def torque_constants_from(joint_names: Sequence[str], value: Any) -> dict[str, float]:
+    """The ``torque_constants`` parameter by joint (empty: no effort in joint_states).
+
+    Empty, or one finite positive value per joint, in N*m/A (N/A for a linear axis): the
+    device's motor current times it is the joint's effort. ParameterError otherwise.
+    """
+    values = [float(v) for v in plain_value(value)]
+    if not values:
+        return {}
+    if len(values) != len(joint_names):
+        raise ParameterError(
+            f'parameter {TORQUE_CONSTANTS!r}: {len(values)} values but joint_names has '
+            f'{len(joint_names)}; give one N*m/A per joint, or [] for no effort')
+    bad = [v for v in values if not (math.isfinite(v) and v > 0.0)]
+    if bad:
+        raise ParameterError(f'parameter {TORQUE_CONSTANTS!r}: {bad[0]} is not a finite '
+                             'torque constant > 0 (N*m/A)')
+    return dict(zip(joint_names, values, strict=True))
+
+
+def declare_torque_constants(node: Any) -> dict[str, float]:
+    """Declare ``torque_constants`` (runtime: ``ros2 param set`` applies it at once)."""
+    names = list(node.joint_names)
+    constants = torque_constants_from(names, declare(
+        node, TORQUE_CONSTANTS, [],
+        'N*m/A per joint (N/A for a linear axis): joint_states effort = motor current x '
+        'this; [] = no effort (amperes are never published as effort; ~/status has the '
+        'current in A)', element_type=float))
+
+    def apply(value: Any) -> None:
+        node.torque_constants = torque_constants_from(names, value)
+
+    node.parameter_registry.make_runtime(
+        TORQUE_CONSTANTS, apply, check=lambda value: torque_constants_from(names, value))
+    return constants
 
 
 def declare_common_parameters(node: Any) -> ControllerConfig:
@@ -78,6 +118,7 @@ def declare_common_parameters(node: Any) -> ControllerConfig:
         node, 'stop_margin', 0.5,
         's an axis may take beyond its braking time to confirm a stop (at rest)',
         value_range=(0.05, 60.0))
+    node.torque_constants = declare_torque_constants(node)
     node.autostart = declare(node, 'autostart', True,
                              'walk the lifecycle to active by itself (false for managed bring-up)')
     return ControllerConfig(

@@ -22,7 +22,27 @@ argument            default                      meaning
                                                  ``~/look_at`` aims with (one file, so both agree)
 ``sim``             ``false``                    ``true``: also start the package's simulator,
                                                  serving the address the simulator YAML names
+``log_level``       ``''``                       the node's ``--ros-args --log-level`` (``debug``,
+                                                 ``info``, ``warn``, ``error``, ``fatal``, or
+                                                 ``logger:=level``); ``''``: not given
+``host``, ``port``, ``''``                       the link's main parameters, where the node
+``transport``, ...                               declares them (``DriverSpec.link_parameters``,
+                                                 registry ``LINK_ARGUMENTS``); each overrides
+                                                 the parameters file when given, ``''``: the
+                                                 file's value
 =================== ============================ ==============================================
+
+How a given argument reaches the node, as launch_ros (jazzy) builds the command line
+(launch_ros/launch_ros/actions/node.py): ``Node.__init__`` puts ``ros_arguments`` after
+``--ros-args`` ahead of the ``--ros-args`` it reserves for name, namespace and parameters,
+so ``log_level`` becomes ``--ros-args --log-level LEVEL``. ``Node._perform_substitutions``
+turns each entry of ``parameters`` into one ``--params-file``, in list order (a dict in a
+file of its own, ``_create_params_file_from_dict``, keyed with the node's full name), and rcl
+applies the files in that order, a later value winning: the link arguments go in the dict
+after ``params_file``, and only the given ones, so an argument not given leaves the file's
+value. Dict values are typed here (an int for ``port``/``baudrate``): a plain ``str`` stays a
+string (launch_ros/launch_ros/utilities/normalize_parameters.py,
+``normalize_parameter_dict``: a str is ``yaml.dump``-ed, and read back as that string).
 
 All arguments are declared first; one OpaqueFunction after them reads them and builds the
 actions. Launch executes actions in order and a LaunchConfiguration read before its
@@ -36,6 +56,7 @@ Imports ``launch``/``launch_ros``: only launch files use this module.
 from __future__ import annotations
 
 import os
+import re
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
@@ -44,10 +65,13 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, Node
 from launch_ros.substitutions import ExecutableInPackage
 
-from gimbal_driver_common.registry import driver_of_package
+from gimbal_driver_common.registry import LINK_ARGUMENTS, driver_of_package
 
 #: the boolean arguments, and what `true`/`false` may be written as (IfCondition's rule)
 _TRUE, _FALSE = ('true', '1'), ('false', '0')
+#: what ``--log-level`` takes (rcl/src/rcl/arguments.c ``_rcl_parse_log_level``: a
+#: severity rcutils knows, case-insensitive, optionally for one logger, ``name:=severity``)
+_LOG_LEVEL = re.compile(r'([\w.]+:=)?(debug|info|warn|error|fatal)', re.IGNORECASE)
 
 
 def default_description(package: str) -> str:
@@ -77,6 +101,10 @@ def driver_launch_description(package: str) -> LaunchDescription:
         ('description_file', default_description(package),
          'URDF of the device (placeholder dimensions: measure yours); ~/look_at uses it too'),
         ('sim', 'false', "true: also start the package's simulator and connect the node to it"),
+        ('log_level', '', "the node's --ros-args --log-level (debug, info, warn, error, "
+                          "fatal, or logger:=level); '' = not given"),
+        *((name, '', f"{LINK_ARGUMENTS[name][1]}; overrides params_file; '' = the file's")
+          for name in driver_of_package(package).link_parameters),
     ]
     return LaunchDescription([
         *(DeclareLaunchArgument(name, default_value=default, description=description)
@@ -90,6 +118,34 @@ def _flag(context: object, name: str) -> bool:
     if value not in _TRUE + _FALSE:
         raise ValueError(f"launch argument {name}:={value!r}: expected 'true' or 'false'")
     return value in _TRUE
+
+
+def _link_overrides(context: object, names: tuple[str, ...]) -> dict[str, object]:
+    """The link arguments given (not ''), typed as the node declares them."""
+    overrides: dict[str, object] = {}
+    for name in names:
+        text = LaunchConfiguration(name).perform(context).strip()
+        if not text:
+            continue
+        kind = LINK_ARGUMENTS[name][0]
+        try:
+            overrides[name] = kind(text)
+        except ValueError:
+            raise ValueError(f'launch argument {name}:={text!r}: expected '
+                             f'{"an integer" if kind is int else kind.__name__}') from None
+    return overrides
+
+
+def _log_level(context: object) -> list[str] | None:
+    """``--log-level LEVEL`` for the node's ros_arguments; None when not given (an empty
+    list would still add a bare ``--ros-args``: node.py ``Node.__init__``)."""
+    level = LaunchConfiguration('log_level').perform(context).strip()
+    if not level:
+        return None
+    if not _LOG_LEVEL.fullmatch(level):
+        raise ValueError(f"launch argument log_level:={level!r}: expected debug, info, warn, "
+                         "error, fatal or logger:=level")
+    return ['--log-level', level]
 
 
 def _driver_actions(context: object, package: str) -> list[object]:
@@ -106,11 +162,13 @@ def _driver_actions(context: object, package: str) -> list[object]:
             cmd=[ExecutableInPackage(executable=spec.sim_executable, package=package),
                  *spec.launch_sim_arguments],
             name=spec.sim_executable, output='screen'))
+    # later parameters entries override earlier ones (node.py _perform_substitutions)
     actions.append(LifecycleNode(
         package=package, executable=spec.node_executable, name=spec.node_name,
-        namespace=namespace, output='screen',
+        namespace=namespace, output='screen', ros_arguments=_log_level(context),
         parameters=[params_file, {'autostart': _flag(context, 'autostart'),
-                                  'description_file': description_file}]))
+                                  'description_file': description_file,
+                                  **_link_overrides(context, spec.link_parameters)}]))
     if _flag(context, 'use_description'):
         with open(description_file, encoding='utf-8') as description:
             xml = description.read()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from array import array
+from collections.abc import Mapping
 from typing import SupportsInt
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -14,6 +15,21 @@ from gimbal_driver_common.device import DeviceInfo, JointSample
 from gimbal_driver_common.diagnostics import FrequencyMonitor, Level, StatusPart
 from gimbal_driver_common.ros.diagnostics import to_message
 from gimbal_msgs.msg import AxisState, GimbalStatus
+
+
+def torques(sample: JointSample, names: list[str],
+            torque_constants: Mapping[str, float]) -> list[float]:
+    """joint_states ``effort``: torque (N*m; N for a linear axis) = motor current (A) times
+    the joint's torque constant (N*m/A, N/A), as sensor_msgs/JointState defines effort.
+
+    Empty (sensor_msgs allows it) unless the user set ``torque_constants`` and the device
+    reports current: amperes are never published as effort. NaN for a joint the sample
+    has no current for.
+    """
+    if not torque_constants or not sample.currents:
+        return []
+    return [sample.currents.get(n, math.nan) * torque_constants.get(n, math.nan)
+            for n in names]
 
 
 class JointStateMessage:
@@ -30,19 +46,22 @@ class JointStateMessage:
     def __init__(self) -> None:
         self.msg = JointState()
 
-    def fill(self, sample: JointSample, joint_names: list[str]) -> JointState:
+    def fill(self, sample: JointSample, joint_names: list[str],
+             torque_constants: Mapping[str, float] | None = None) -> JointState:
+        """The message for ``sample``; effort only as torque (:func:`torques`)."""
         msg = self.msg
         sec = math.floor(sample.stamp)
         msg.header.stamp.sec = int(sec)
         msg.header.stamp.nanosec = int((sample.stamp - sec) * 1e9)
-        positions, velocities, efforts = sample.positions, sample.velocities, sample.efforts
+        positions, velocities = sample.positions, sample.velocities
         names = [n for n in joint_names if n in positions]
         if names != msg.name:
             msg.name = names
         msg.position = array('d', [positions[n] for n in names])
         msg.velocity = array('d', [velocities.get(n, math.nan) for n in names])
+        efforts = torques(sample, names, torque_constants) if torque_constants else []
         if efforts or msg.effort:
-            msg.effort = array('d', [efforts.get(n, math.nan) for n in names] if efforts else [])
+            msg.effort = array('d', efforts)
         return msg
 
 
@@ -135,8 +154,10 @@ def _state_code(value: object) -> int:
     return int(value)
 
 
-def gimbal_status(ctl: GimbalController | None, joint_names: list[str]) -> GimbalStatus:
-    """~/status: link, identity, mode, errors and one AxisState per joint."""
+def gimbal_status(ctl: GimbalController | None, joint_names: list[str],
+                  torque_constants: Mapping[str, float] | None = None) -> GimbalStatus:
+    """~/status: link, identity, mode, errors and one AxisState per joint (``current`` in
+    A as the device reports it, ``effort`` the torque joint_states carries, else NaN)."""
     msg = GimbalStatus()
     connected = bool(ctl and ctl.connected)
     if connected:
@@ -147,7 +168,8 @@ def gimbal_status(ctl: GimbalController | None, joint_names: list[str]) -> Gimba
         msg.connection = GimbalStatus.CONNECTION_DISCONNECTED
     if ctl is None:
         msg.axes = [AxisState(name=n, position=math.nan, velocity=math.nan, effort=math.nan,
-                              target_position=math.nan) for n in joint_names]
+                              target_position=math.nan, current=math.nan)
+                    for n in joint_names]
         return msg
     info = ctl.device_info
     msg.link = ctl.device.description()
@@ -165,7 +187,8 @@ def gimbal_status(ctl: GimbalController | None, joint_names: list[str]) -> Gimba
         axis = AxisState(name=name)
         axis.position = sample.positions.get(name, math.nan) if sample else math.nan
         axis.velocity = sample.velocities.get(name, math.nan) if sample else math.nan
-        axis.effort = sample.efforts.get(name, math.nan) if sample else math.nan
+        axis.current = sample.currents.get(name, math.nan) if sample else math.nan
+        axis.effort = axis.current * (torque_constants or {}).get(name, math.nan)
         axis.target_position = ctl.commanded_targets.get(name, math.nan)
         if not connected:
             axis.state = AxisState.STATE_UNKNOWN
