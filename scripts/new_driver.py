@@ -45,8 +45,8 @@ STUBS = {
     'registration.py': 'the DriverSpec: joints, a reachable move_goal, link_parameters, '
                        'the simulator arguments, demo/soak/bench settings',
     'probe.py': 'the read-only probe: your handshake and identity reads, nothing else',
-    'testing/sim_handle.py': 'the in-process simulator handle: classify your requests '
-                             '(changing, motion), your optional faults and not_applicable',
+    'sim_handle.py': 'the in-process simulator handle: classify your requests '
+                     '(changing, motion), your optional faults and not_applicable',
 }
 
 
