@@ -49,8 +49,8 @@ from harness import (  # noqa: E402
 )
 
 from gimbal_driver_common.registry import drivers  # noqa: E402
-from gimbal_driver_testing import DomainLease, ManagedProcess, ros_env, wait_for  # noqa: E402
 from gimbal_driver_common.sim_handle import make_handle  # noqa: E402
+from gimbal_driver_testing import DomainLease, ManagedProcess, ros_env, wait_for  # noqa: E402
 
 
 def pss_mb(pid: int) -> float:

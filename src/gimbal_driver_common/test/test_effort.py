@@ -17,6 +17,11 @@ from gimbal_driver_common.device import Device, JointSample
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.ros import messages
 
+
+def fill(*args):
+    """joint_states from a fresh message (no test shares one)."""
+    return messages.JointStateMessage().fill(*args)
+
 JOINTS = ['pan', 'tilt']
 
 
@@ -37,8 +42,8 @@ SAMPLE = JointSample({'pan': 0.1, 'tilt': -0.2}, {'pan': 0.0, 'tilt': 0.0},
 
 
 def test_without_torque_constants_effort_is_empty_and_status_has_the_current() -> None:
-    assert list(messages.JointStateMessage().fill(SAMPLE, JOINTS).effort) == []
-    assert list(messages.JointStateMessage().fill(SAMPLE, JOINTS, {}).effort) == []
+    assert list(fill(SAMPLE, JOINTS).effort) == []
+    assert list(fill(SAMPLE, JOINTS, {}).effort) == []
     status = messages.gimbal_status(controller(SAMPLE), JOINTS)
     assert [a.current for a in status.axes] == [1.5, -0.25]
     assert all(math.isnan(a.effort) for a in status.axes)
@@ -46,7 +51,7 @@ def test_without_torque_constants_effort_is_empty_and_status_has_the_current() -
 
 def test_effort_is_current_times_the_joints_torque_constant() -> None:
     constants = {'pan': 0.8, 'tilt': 2.0}
-    msg = messages.JointStateMessage().fill(SAMPLE, JOINTS, constants)
+    msg = fill(SAMPLE, JOINTS, constants)
     assert list(msg.name) == JOINTS
     assert list(msg.effort) == pytest.approx([1.5 * 0.8, -0.25 * 2.0])
     status = messages.gimbal_status(controller(SAMPLE), JOINTS, constants)
@@ -56,7 +61,7 @@ def test_effort_is_current_times_the_joints_torque_constant() -> None:
 
 def test_a_device_without_current_gives_no_effort_whatever_the_constants() -> None:
     sample = JointSample({'pan': 0.1, 'tilt': -0.2})
-    assert list(messages.JointStateMessage().fill(sample, JOINTS, {'pan': 1.0, 'tilt': 1.0}).effort) == []
+    assert list(fill(sample, JOINTS, {'pan': 1.0, 'tilt': 1.0}).effort) == []
     status = messages.gimbal_status(controller(sample), JOINTS, {'pan': 1.0, 'tilt': 1.0})
     assert all(math.isnan(a.current) and math.isnan(a.effort) for a in status.axes)
 
@@ -64,7 +69,7 @@ def test_a_device_without_current_gives_no_effort_whatever_the_constants() -> No
 def test_a_joint_without_a_current_reading_is_nan_in_an_effort_of_full_length() -> None:
     """sensor_msgs/JointState: effort is empty or one entry per name."""
     sample = JointSample({'pan': 0.1, 'tilt': -0.2}, currents={'tilt': 0.5})
-    effort = list(messages.JointStateMessage().fill(sample, JOINTS, {'pan': 1.0, 'tilt': 3.0}).effort)
+    effort = list(fill(sample, JOINTS, {'pan': 1.0, 'tilt': 3.0}).effort)
     assert len(effort) == 2 and math.isnan(effort[0]) and effort[1] == pytest.approx(1.5)
 
 
