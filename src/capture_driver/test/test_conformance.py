@@ -8,9 +8,10 @@ import pytest
 
 pytest.importorskip('gimbal_msgs', reason='needs the colcon-built workspace (make build)')
 
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Imu, JointState
 from std_srvs.srv import Trigger
 
+from gimbal_driver_testing import wait_for
 from gimbal_driver_testing.conformance import ConformanceRig, DriverConformance
 from gimbal_driver_testing.silent_request_conformance import SilentRequest
 from gimbal_driver_testing.stop_conformance import request_name
@@ -64,17 +65,32 @@ class TestCaptureConformance(DriverConformance):
             self, rig: ConformanceRig) -> None:
         """~/stop while SCN_StopScan takes its documented 500 ms: the axes are told to stop
         first (device motion before scans), they rest, and ~/stop says so."""
-        joint = self.jog[0]
-        with self.device_fault(rig):
-            self.start_jog(rig)
-            rig.sim.delay('SCN_StopScan', STOP_SCAN_LATE_S)
-            mark = rig.sim.mark()
-            reply = rig.ros.call(Trigger, self.srv('stop'), Trigger.Request(), timeout=60.0)
-            self.wait_stopped(rig, joint, 'the axes to rest with SCN_StopScan answered late')
-            names = [request_name(r) for r in rig.sim.requests()[mark:]]
-            assert 'SCN_StopScan' in names, names
-            first_axis_stop = next((i for i, n in enumerate(names) if n in AXIS_STOP), None)
-            assert first_axis_stop is not None, f'the axes were never told to stop: {names}'
-            assert first_axis_stop < names.index('SCN_StopScan'), (
-                f'the scan stop went before the axes were told to stop: {names}')
-            assert reply.success, reply.message
+        timeout = rig.ros.get_parameter(self.node_name, 'command_timeout')
+        # no dead-man stop in between: the only stop is ~/stop's
+        assert rig.ros.set_parameter(self.node_name, 'command_timeout', 60.0).successful
+        try:
+            with self.device_fault(rig):
+                # one jog, whole at the simulator once the axis moves: what follows the
+                # mark is ~/stop's alone
+                joint, velocity = self.jog
+                rig.ros.publish('joint_command', JointState(name=[joint], velocity=[velocity]))
+                wait_for(lambda: rig.sim.moving(joint), 20.0, f'{joint} to start jogging')
+                rig.sim.delay('SCN_StopScan', STOP_SCAN_LATE_S)
+                mark = rig.sim.mark()
+                reply = rig.ros.call(Trigger, self.srv('stop'), Trigger.Request(),
+                                     timeout=60.0)
+                self.check_stopped_axes_first(rig, mark, reply)
+        finally:
+            assert rig.ros.set_parameter(self.node_name, 'command_timeout', timeout).successful
+
+    def check_stopped_axes_first(self, rig: ConformanceRig, mark: int,
+                                 reply: Trigger.Response) -> None:
+        """At rest, the axes told to stop before the scan stop went out, ~/stop says so."""
+        self.wait_stopped(rig, self.jog[0], 'the axes to rest with SCN_StopScan answered late')
+        names = [request_name(r) for r in rig.sim.requests()[mark:]]
+        assert 'SCN_StopScan' in names, names
+        first_axis_stop = next((i for i, n in enumerate(names) if n in AXIS_STOP), None)
+        assert first_axis_stop is not None, f'the axes were never told to stop: {names}'
+        assert first_axis_stop < names.index('SCN_StopScan'), (
+            f'the scan stop went before the axes were told to stop: {names}')
+        assert reply.success, reply.message

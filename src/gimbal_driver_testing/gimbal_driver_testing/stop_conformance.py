@@ -4,7 +4,7 @@ transport, client and node.
 * a stop with one step answered late (the simulators' ``delay``, beyond the request
   timeout) still stops the axis: each message of the stop in turn;
 * a stop the device takes and drops (``ignore``: the stop message answered as always, not
-  acted on, for longer than the axis needs to brake) is sent again, and the axis comes to
+  acted on, for 1 s longer than the axis needs to brake) is sent again, and the axis comes to
   rest: the dead-man stop of a jog, read from the simulator's receive log;
 * ``~/stop`` never answers success while an axis still moves, names the axis, and answers
   success once the axis rests.
@@ -16,7 +16,8 @@ the one that stops a jogging axis (``SimHandle.stop_request``). The checks are b
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import math
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
 import pytest
@@ -31,7 +32,7 @@ from gimbal_driver_testing.ros import joint_positions
 LATE_S = 2.0
 #: s beyond its braking time (speed / stop_deceleration + stop_margin) the device drops the
 #: stop: at least one resend falls inside, and ~/stop's wait ends inside
-IGNORE_EXTRA_S = 1.5
+IGNORE_EXTRA_S = 1.0
 #: s the axis gets to rest once the device takes the stop again (a generous outer bound)
 REST_TIMEOUT_S = 30.0
 
@@ -45,6 +46,7 @@ class StopConformance(ConformanceHelpers):
     """Mixed into :class:`~gimbal_driver_testing.conformance.DriverConformance`."""
 
     jog: tuple[str, float]
+    joints: Sequence[str]
 
     # ------------------------------------------------------------------ helpers
     def stop_names(self, rig: ConformanceRig) -> tuple[tuple[str, ...], str]:
@@ -62,9 +64,15 @@ class StopConformance(ConformanceHelpers):
         return speed / deceleration + margin
 
     def start_jog(self, rig: ConformanceRig) -> None:
+        """Jog until the simulator shows the axis moving, the jog fed all the while: the
+        dead-man stop comes ``command_timeout`` after this returns, not before."""
         joint, velocity = self.jog
-        rig.ros.publish('joint_command', JointState(name=[joint], velocity=[velocity]))
-        wait_for(lambda: rig.sim.moving(joint), 20.0, f'{joint} to start jogging')
+
+        def jogging() -> bool:
+            rig.ros.publish('joint_command', JointState(name=[joint], velocity=[velocity]))
+            return rig.sim.moving(joint)
+
+        wait_for(jogging, 20.0, f'{joint} to start jogging', interval=0.05)
 
     def logged_since(self, rig: ConformanceRig, mark: int, name: str) -> list[int]:
         """Indices (from ``mark``) of the receive-log entries of request ``name``."""
@@ -74,9 +82,18 @@ class StopConformance(ConformanceHelpers):
     @contextmanager
     def device_fault(self, rig: ConformanceRig) -> Iterator[None]:
         """Afterwards: the faults cleared, the axis at rest and back where it was (the
-        jogs of these tests run it far; the next test's jog must not meet a limit)."""
+        jogs of these tests run it far; the next test's jog must not meet a limit). The
+        jog starts from the middle of the joint's range, so it meets no limit either."""
         joint = self.jog[0]
         here = joint_positions(rig.ros.wait_for_message('joint_states', JointState))[joint]
+        index = list(self.joints).index(joint)
+        middle = (rig.ros.get_parameter(self.node_name, 'position_min')[index]
+                  + rig.ros.get_parameter(self.node_name, 'position_max')[index]) / 2
+        if not math.isfinite(middle):  # an endless axis: from where it is
+            middle = here
+        rig.ros.publish('joint_command', JointState(name=[joint], position=[middle]))
+        self.wait_positions(rig.ros, {joint: middle})
+        self.wait_stopped(rig, joint, 'the axis to rest at the middle of its range')
         try:
             yield
         finally:
@@ -106,26 +123,32 @@ class StopConformance(ConformanceHelpers):
             self, rig: ConformanceRig) -> None:
         _, jog_stop = self.stop_names(rig)
         joint = self.jog[0]
+        window = self.braking_time(rig) + IGNORE_EXTRA_S
         with self.device_fault(rig):
             self.start_jog(rig)
-            window = self.braking_time(rig) + IGNORE_EXTRA_S
-            rig.sim.ignore(jog_stop, window)
-            mark = rig.sim.mark()
+            rig.sim.ignore(jog_stop, window)  # at once: before the dead-man stop
+            mark, logged = rig.sim.mark(), len(rig.node.output())
             # no further joint_command: the dead-man stop goes out and the device drops it
+            wait_for(lambda: 'expired' in rig.node.output()[logged:], 20.0,
+                     'the dead-man stop')
             wait_for(lambda: self.logged_since(rig, mark, jog_stop), 20.0,
                      f'the dead-man stop ({jog_stop}) to reach the simulator')
-            assert rig.sim.moving(joint), 'the ignored stop stopped the axis'
+            assert rig.sim.moving(joint), (
+                f'the ignored stop stopped the axis: {rig.sim.requests()[mark:]}')
             self.wait_stopped(rig, joint, 'the stop sent again once the device takes it')
             sent = self.logged_since(rig, mark, jog_stop)
             assert len(sent) >= 2, f'the stop was never sent again: {rig.sim.requests()[mark:]}'
+            output = rig.node.output()[logged:]
+            assert output.count('stop not confirmed') == 1, output  # once per episode
 
     @pytest.mark.ros
     def test_stop_never_answers_success_while_an_axis_moves(self, rig: ConformanceRig) -> None:
         _, jog_stop = self.stop_names(rig)
         joint = self.jog[0]
+        window = self.braking_time(rig) + IGNORE_EXTRA_S
         with self.device_fault(rig):
             self.start_jog(rig)
-            rig.sim.ignore(jog_stop, self.braking_time(rig) + IGNORE_EXTRA_S)
+            rig.sim.ignore(jog_stop, window)  # at once: before the dead-man stop
             reply = rig.ros.call(Trigger, self.srv('stop'), Trigger.Request(), timeout=60.0)
             still = rig.sim.moving(joint)
             assert not (reply.success and still), f'success while {joint} moves: {reply.message}'
