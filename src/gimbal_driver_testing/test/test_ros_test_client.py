@@ -16,6 +16,7 @@ from rclpy.action import ActionServer, GoalResponse  # noqa: E402
 from rclpy.callback_groups import ReentrantCallbackGroup  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
 from std_srvs.srv import Trigger  # noqa: E402
 
 from gimbal_driver_testing import DomainLease, wait_for  # noqa: E402
@@ -169,22 +170,20 @@ def test_unsubscribing_beside_a_busy_spin_keeps_the_client_spinning() -> None:
     wait set raised InvalidHandle out of the spin, and the client went deaf for the rest of a
     module (docs/testing.md, the Capture node tests): unsubscribe now destroys it on the spin
     thread. 300 rounds beside a 1 kHz publisher ended the old spin within a few hundred."""
-    from std_msgs.msg import String
-
     with DomainLease() as domain:
         client = ros_testing.RosTestClient(domain)
         try:
-            publisher = client.node.create_publisher(String, 'chatter', 10)
-            timer = client.node.create_timer(0.001, lambda: publisher.publish(String(data='x')))
+            publisher = client.node.create_publisher(JointState, 'chatter', 10)
+            timer = client.node.create_timer(0.001, lambda: publisher.publish(JointState()))
             for _ in range(300):
-                client.subscribe('chatter', String)
+                client.subscribe('chatter', JointState)
                 client.unsubscribe('chatter')
             client.node.destroy_timer(timer)
             client.check_spinning()
             # and it still receives
-            received = client.subscribe('chatter', String)
-            publisher.publish(String(data='after'))
-            wait_for(lambda: any(m.data == 'after' for m in received), 10.0, 'the message')
+            received = client.subscribe('chatter', JointState)
+            publisher.publish(JointState(name=['after']))
+            wait_for(lambda: any(m.name == ['after'] for m in received), 10.0, 'the message')
         finally:
             client.close()
 
@@ -193,8 +192,6 @@ def test_unsubscribing_beside_a_busy_spin_keeps_the_client_spinning() -> None:
 def test_an_error_out_of_a_spin_is_kept_and_named_by_a_timed_out_wait() -> None:
     """A callback that raises no longer ends the spin thread silently: the spin goes on, and
     a wait that times out says what the executor raised."""
-    from std_msgs.msg import String
-
     def broken() -> None:
         raise ValueError('a broken callback')
 
@@ -206,7 +203,7 @@ def test_an_error_out_of_a_spin_is_kept_and_named_by_a_timed_out_wait() -> None:
             assert 'a broken callback' in client.spin_errors[0]
             with pytest.raises(TimeoutError,
                                match=r'(?s)executor raised 1 time.*a broken callback'):
-                client.wait_for_message('nothing_here', String, timeout=0.5)
+                client.wait_for_message('nothing_here', JointState, timeout=0.5)
             client.spin_errors.clear()
             task = client.executor.create_task(lambda: 7)  # the thread goes on spinning
             wait_for(task.done, 10.0, 'a task after the error')
