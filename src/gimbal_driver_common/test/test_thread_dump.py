@@ -17,14 +17,14 @@ from gimbal_driver_testing import (
 )
 
 HANGS = '''
-import faulthandler, signal, sys, threading, time
+import faulthandler, signal, sys, threading
 if sys.argv[1] == 'dumps':
     faulthandler.register(signal.SIGUSR2, file=sys.stderr, all_threads=True)
 def stuck_in_a_wait_for_the_device():
     threading.Event().wait()
 threading.Thread(target=stuck_in_a_wait_for_the_device, daemon=True).start()
 print('up', flush=True)
-time.sleep(600)
+threading.Event().wait(600)  # hung until the test ends it
 '''
 
 
