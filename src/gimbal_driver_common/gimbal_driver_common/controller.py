@@ -42,7 +42,7 @@ from gimbal_driver_common.errors import (
 )
 from gimbal_driver_common.joint_command import validate_joint_command
 from gimbal_driver_common.motion_watch import MotionWatch
-from gimbal_driver_common.periodic import Periodic
+from gimbal_driver_common.periodic import PacedJob, Periodic
 from gimbal_driver_common.rejections import CommandRejections
 from gimbal_driver_common.stop_watch import StopWatch
 from gimbal_driver_common.watchdog import JogWatchdog
@@ -56,6 +56,8 @@ MOVING_SPEED = 1e-3
 STREAM_WAIT_S = 0.05
 #: s between two looks of the housekeeping thread at the stops not yet confirmed
 STOP_CHECK_S = 0.05
+#: s between two looks while no stop waits (the first stop switches to STOP_CHECK_S)
+STOP_CHECK_IDLE_S = 0.5
 #: s a shutdown waits beyond the deceleration time for the axes to rest before closing
 SHUTDOWN_CONFIRM_S = 1.0
 #: how often the jog watchdog checks while no joint jogs (or it is disabled)
@@ -132,11 +134,13 @@ class GimbalController:
         #: refused joint_commands, counted and logged by reason (the node keeps one across
         #: configure/cleanup and passes it in)
         self.rejections = rejections or CommandRejections(log)
-        #: the watchdog's check runs often only while a jog runs (:meth:`_pace_watchdog`)
-        self._watchdog_lock = threading.Lock()
-        self._watchdog_fast = False
-        self.periodic.add(self._watchdog_period(), self._check_watchdog)
-        self.periodic.add(STOP_CHECK_S, self.confirm_stops)
+        #: the housekeeping jobs run often only while they have work (:class:`PacedJob`):
+        #: the watchdog's check while a joint jogs, the stop confirmation while a stop waits
+        self.watchdog_job = PacedJob(self.periodic, self.watchdog.check,
+                                     lambda: bool(self.watchdog.jogging),
+                                     self._watchdog_period, WATCHDOG_IDLE_PERIOD_S)
+        self.stop_job = PacedJob(self.periodic, self.confirm_stops, self.stop_watch.waiting,
+                                 lambda: STOP_CHECK_S, STOP_CHECK_IDLE_S)
         self.halt_hooks: list[Callable[[], None]] = []  # stop and halt call these first (policies)
         self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
         self.commands = CommandPath(device, self.rejections, self.record_targets,
@@ -191,8 +195,8 @@ class GimbalController:
         # else the reason it is not connected (say, why configure failed) stays readable
         self._close_device()
         self.link_state = LinkState.NOT_CONFIGURED
-        self.periodic.remove(self._check_watchdog)
-        self.periodic.remove(self.confirm_stops)
+        self.watchdog_job.remove()
+        self.stop_job.remove()
         for _, job in self._background:
             self.sensors.remove(job)
         self._background = []
@@ -235,35 +239,13 @@ class GimbalController:
     def set_command_timeout(self, timeout: float) -> None:
         self.config.command_timeout = timeout
         self.watchdog.timeout_s = timeout
-        with self._watchdog_lock:
-            self.periodic.set_period(self._check_watchdog, self._watchdog_period())
+        self.watchdog_job.repace()
 
     def _watchdog_period(self) -> float:
-        """Check jogs 4 times per timeout (at least every 50 ms) while a jog runs; slowly
-        (every WATCHDOG_IDLE_PERIOD_S) with no jog to watch or the watchdog disabled."""
+        """Check jogs 4 times per timeout (at least every 50 ms) while a jog runs; 0 (the
+        idle period) with the watchdog disabled."""
         timeout = self.config.command_timeout
-        if timeout > 0 and self._watchdog_fast:
-            return min(0.05, timeout / 4)
-        return WATCHDOG_IDLE_PERIOD_S
-
-    def _check_watchdog(self) -> None:
-        self.watchdog.check()
-        self._pace_watchdog()
-
-    def _pace_watchdog(self) -> None:
-        """The check's period: fast while a joint jogs, slow once none does.
-
-        An idle driver's housekeeping thread woke 20 times a second (command_timeout 0.5)
-        to find no jog. The first jog switches to the fast period (from the command's
-        thread) and the check that finds none left switches back; both decide under one
-        lock from the watchdog's own state, so a jog fed while the check switches to slow
-        is seen by one of them and never waits the slow period.
-        """
-        with self._watchdog_lock:
-            fast = bool(self.watchdog.jogging)
-            if fast != self._watchdog_fast:
-                self._watchdog_fast = fast
-                self.periodic.set_period(self._check_watchdog, self._watchdog_period())
+        return min(0.05, timeout / 4) if timeout > 0 else 0.0
 
     # ------------------------------------------------------------- refusals
     def refusal(self, joints: Sequence[str] | None = None) -> str | None:
@@ -331,7 +313,7 @@ class GimbalController:
         jogs = [j for j, v in plan.jogs.items() if v != 0.0]
         if jogs:
             self.watchdog.feed(jogs)
-            self._pace_watchdog()
+            self.watchdog_job.pace()
         self.stop_watch.superseded(movers)
         self.commands.submit(plan.moves, plan.jogs)
 
@@ -445,6 +427,7 @@ class GimbalController:
                 steps.run(scans.stop)
 
         self.stop_watch.stopped(self.config.joint_names if joints is None else joints)
+        self.stop_job.pace()  # the confirmation looks often from now until the axes rest
         try:
             self.commands.send(joints, send, urgent=True)  # ahead of every queued read
         finally:

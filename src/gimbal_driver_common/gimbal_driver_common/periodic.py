@@ -79,3 +79,51 @@ class Periodic:
                     self._on_error(f'periodic {getattr(callback, "__name__", callback)}: {exc!r}')
             if self._wake.wait(max(0.0, next_due - time.monotonic())):
                 self._wake.clear()
+
+
+class PacedJob:
+    """A :class:`Periodic` job that runs often only while it has work.
+
+    An idle driver's housekeeping thread woke 20 times a second to find no jog to watch
+    and no stop to confirm. ``busy`` says whether there is work. Whoever starts work calls
+    :meth:`pace` (the fast period from then on) and the run that finds none left switches
+    back to ``idle``; both decide under one lock from ``busy`` itself, so work started
+    while a run switches to slow is seen by one of them and never waits the slow period.
+    """
+
+    def __init__(self, periodic: Periodic, callback: Callable[[], object],
+                 busy: Callable[[], bool], fast: Callable[[], float], idle: float) -> None:
+        """``fast`` is read at each switch (a parameter may change it); <= 0: always idle."""
+        self.periodic = periodic
+        self._callback = callback
+        self._busy = busy
+        self._fast_period = fast
+        self.idle = idle
+        self._lock = threading.Lock()
+        self._fast = False
+        periodic.add(self.period(), self.run)
+
+    def period(self) -> float:
+        fast = self._fast_period()
+        return fast if self._fast and fast > 0 else self.idle
+
+    def run(self) -> None:
+        """The job as the housekeeping thread runs it: the work, then the pace."""
+        self._callback()
+        self.pace()
+
+    def pace(self) -> None:
+        """Fast while ``busy``, idle otherwise; the period changes only on a switch."""
+        with self._lock:
+            fast = bool(self._busy())
+            if fast != self._fast:
+                self._fast = fast
+                self.periodic.set_period(self.run, self.period())
+
+    def repace(self) -> None:
+        """The fast period itself changed: take it now."""
+        with self._lock:
+            self.periodic.set_period(self.run, self.period())
+
+    def remove(self) -> None:
+        self.periodic.remove(self.run)

@@ -148,6 +148,10 @@ class StopWatch:
         return sorted(found)
 
     # ------------------------------------------------------------ reading
+    def waiting(self) -> bool:
+        """Some stop waits for its axis (the housekeeping thread looks often only then)."""
+        return bool(self._episodes)
+
     def at_rest(self, joint: str) -> bool:
         """No stop of ``joint`` waits for confirmation."""
         with self._changed:

@@ -11,6 +11,8 @@ from collections.abc import Callable, Sequence
 import pytest
 
 from gimbal_driver_common.controller import (
+    STOP_CHECK_IDLE_S,
+    STOP_CHECK_S,
     WATCHDOG_IDLE_PERIOD_S,
     ControllerConfig,
     GimbalController,
@@ -378,18 +380,22 @@ def test_jog_stops_when_the_watchdog_expires(controller, device) -> None:
 
 
 class PeriodRecorder(Periodic):
-    """A Periodic that records every period set for a job (what the thread would wait)."""
+    """A Periodic that records every period set for each job (what the thread would wait)."""
 
     def __init__(self) -> None:
         super().__init__(name='housekeeping')
-        self.periods: list[float] = []
+        self.set: list[tuple[Callable[[], object], float]] = []
+
+    def periods(self, callback: Callable[[], object]) -> list[float]:
+        """The periods set for ``callback``'s job, in order."""
+        return [period for job, period in list(self.set) if job == callback]
 
     def add(self, period: float, callback: Callable[[], object]) -> None:
-        self.periods.append(period)
+        self.set.append((callback, period))
         super().add(period, callback)
 
     def set_period(self, callback: Callable[[], object], period: float) -> None:
-        self.periods.append(period)
+        self.set.append((callback, period))
         super().set_period(callback, period)
 
 
@@ -398,19 +404,44 @@ def test_the_watchdog_checks_often_only_while_a_jog_runs(device) -> None:
     find no jog: fast from the first jog, slow again once the dead-man stop ended it."""
     periodic = PeriodRecorder()
     ctl = GimbalController(device, config(), logging.getLogger('test'), periodic=periodic)
+
+    def periods() -> list[float]:
+        return periodic.periods(ctl.watchdog_job.run)
     try:
         ctl.open()
         ctl.activate()
-        assert periodic.periods == [WATCHDOG_IDLE_PERIOD_S]
+        assert periods() == [WATCHDOG_IDLE_PERIOD_S]
         ctl.command(['pan'], [], [0.5])
         fast = min(0.05, ctl.config.command_timeout / 4)
-        assert periodic.periods == [WATCHDOG_IDLE_PERIOD_S, fast]
+        assert periods() == [WATCHDOG_IDLE_PERIOD_S, fast]
         ctl.command(['pan'], [], [0.4])  # still jogging: no new period
-        assert periodic.periods == [WATCHDOG_IDLE_PERIOD_S, fast]
+        assert periods() == [WATCHDOG_IDLE_PERIOD_S, fast]
         wait_for(lambda: ('stop', ['pan']) in device.sent, 5.0, 'the dead-man stop')
-        wait_for(lambda: periodic.periods[-1] == WATCHDOG_IDLE_PERIOD_S, 5.0,
-                 'the slow period again')
-        assert periodic.periods == [WATCHDOG_IDLE_PERIOD_S, fast, WATCHDOG_IDLE_PERIOD_S]
+        wait_for(lambda: periods()[-1] == WATCHDOG_IDLE_PERIOD_S, 5.0, 'the slow period again')
+        assert periods() == [WATCHDOG_IDLE_PERIOD_S, fast, WATCHDOG_IDLE_PERIOD_S]
+    finally:
+        ctl.shutdown()
+        periodic.stop()
+        ctl.sensors.stop()
+
+
+def test_the_stop_confirmation_looks_often_only_while_a_stop_waits(device) -> None:
+    """No stop waiting: every STOP_CHECK_IDLE_S; from the stop (the dead-man stop here) until
+    its axis rests: every STOP_CHECK_S; then slow again."""
+    periodic = PeriodRecorder()
+    ctl = GimbalController(device, config(), logging.getLogger('test'), periodic=periodic)
+
+    def periods() -> list[float]:
+        return periodic.periods(ctl.stop_job.run)
+    try:
+        ctl.open()
+        ctl.activate()
+        ctl.command(['pan'], [], [0.5])
+        assert periods() == [STOP_CHECK_IDLE_S]  # a jog is no stop
+        wait_for(lambda: ('stop', ['pan']) in device.sent, 5.0, 'the dead-man stop')
+        wait_for(lambda: ctl.stop_watch.at_rest('pan'), 5.0, 'the axis confirmed at rest')
+        wait_for(lambda: periods()[-1] == STOP_CHECK_IDLE_S, 5.0, 'the slow period again')
+        assert periods() == [STOP_CHECK_IDLE_S, STOP_CHECK_S, STOP_CHECK_IDLE_S]
     finally:
         ctl.shutdown()
         periodic.stop()

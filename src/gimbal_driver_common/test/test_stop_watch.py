@@ -13,6 +13,8 @@ from collections.abc import Sequence
 import pytest
 
 from gimbal_driver_common.controller import (
+    STOP_CHECK_IDLE_S,
+    STOP_CHECK_S,
     ControllerConfig,
     GimbalController,
     LinkState,
@@ -140,8 +142,8 @@ class Rig:
         sample = self.device.read()
         self.ctl.latest = sample
         self.ctl.stop_watch.observe(sample, self.clock())
-        self.ctl.watchdog.check()
-        self.ctl.confirm_stops()
+        self.ctl.watchdog_job.run()  # as the housekeeping thread runs them: paced
+        self.ctl.stop_job.run()
 
     def run(self, seconds: float) -> None:
         for _ in range(round(seconds / 0.02)):
@@ -201,6 +203,24 @@ def test_a_dropped_stop_is_sent_again_at_a_bounded_rate_until_the_axis_rests(rig
     sent = rig.device.stops()
     rig.run(2.0)
     assert rig.device.stops() == sent  # at rest: nothing more
+
+
+def test_the_confirmation_looks_often_from_the_stop_until_the_axis_rests(rig) -> None:
+    """Idle: the slow period; the stop switches to STOP_CHECK_S at once (before the
+    housekeeping thread's next look), and it stays fast through every resend until rest."""
+    assert rig.ctl.stop_job.period() == STOP_CHECK_IDLE_S
+    rig.jog('pan', 0.3)
+    assert rig.ctl.stop_job.period() == STOP_CHECK_IDLE_S  # a jog is no stop
+    rig.device.drop_stops = 3
+    rig.ctl.stop_joints(['pan'])
+    assert rig.ctl.stop_job.period() == STOP_CHECK_S
+    start = rig.clock()
+    while not rig.ctl.stop_watch.at_rest('pan'):
+        assert rig.clock() - start < 60.0, 'the axis never came to rest'
+        assert rig.ctl.stop_job.period() == STOP_CHECK_S
+        rig.tick()
+    assert rig.device.stops() == 4  # three dropped, sent again until one was taken
+    assert rig.ctl.stop_job.period() == STOP_CHECK_IDLE_S
 
 
 def test_an_unconfirmed_stop_reads_error_and_is_logged_once_per_episode(rig) -> None:
