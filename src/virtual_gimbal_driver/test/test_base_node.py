@@ -7,6 +7,8 @@ the simulator over its own TCP protocol.
 
 from __future__ import annotations
 
+import time
+
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
@@ -90,13 +92,20 @@ def test_publishes_joint_states_status_and_diagnostics(rig) -> None:
     assert all(s.hardware_id == 'VG-0001' for s in diag.status)
 
 
+def stamp_of(msg: JointState) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
 def test_move_to_reaches_target_and_joint_states_show_it(rig) -> None:
     ros, port, _, _ = rig
     result, _status, feedback = move(ros, ['pan', 'tilt'], [0.5, -0.3])
+    done = time.time()  # the node stamps joint_states on this (the system) clock
     assert result.success, result.message
     assert result.positions == pytest.approx([0.5, -0.3], abs=0.011)
     assert feedback, 'MoveTo publishes feedback while moving'
-    msg = ros.wait_for_message('joint_states', JointState)
+    # the first sample read after the result: a loaded machine delivers older joint_states
+    # (from before the move) after the result, and "received after" does not exclude them
+    msg = ros.wait_for_message('joint_states', JointState, lambda m: stamp_of(m) >= done)
     assert joint_positions(msg)['pan'] == pytest.approx(0.5, abs=0.011)
     assert device_state(port)[0] == pytest.approx(0.5, abs=0.011)
     result, _, _ = move(ros, ['pan'], [-0.2], relative=True)
