@@ -128,6 +128,10 @@ class StopConformance(ConformanceHelpers):
             self.start_jog(rig)
             rig.sim.ignore(jog_stop, window)  # at once: before the dead-man stop
             mark, logged = rig.sim.mark(), len(rig.node.output())
+            # one more jog once the ignore is armed: the dead-man stop counts from it (on a
+            # loaded machine the ignore could come after the one of start_jog's last jog:
+            # that stop was taken, before the mark, and never sent again)
+            rig.ros.publish('joint_command', JointState(name=[joint], velocity=[self.jog[1]]))
             # no further joint_command: the dead-man stop goes out and the device drops it
             wait_for(lambda: 'expired' in rig.node.output()[logged:], 20.0,
                      'the dead-man stop')
