@@ -41,7 +41,7 @@ def srv(name: str) -> str:
 
 
 @pytest.fixture(scope='module')
-def rig(capture_rig):
+def pedestal(capture_rig):
     with capture_rig(
             ['--time-scale', '4'],
             ['publish_rate:=20.0', 'reconnect_period:=0.3', 'diagnostics_period:=0.25',
@@ -53,6 +53,25 @@ def rig(capture_rig):
              'fix_rate:=4.0', 'gyro_drift_time:=2.0', 'command_timeout:=3.0'],
             node_log_tail=4000) as (started, control_port):
         yield started.ros, control_port
+
+
+@pytest.fixture
+def rig(pedestal):
+    """The module's node and simulator, with every drive on and no fault at the start of
+    each test: a test that fails half-way (or a keep-alive expiry, which switches the
+    drives off) does not fail the tests after it with "drive is off"."""
+    ros, control_port = pedestal
+    axes = sim_state(control_port)['axes'].values()
+    if any(a['faulted'] for a in axes):
+        reply = ros.call(Trigger, srv('reset_faults'), Trigger.Request())
+        assert reply.success, reply.message
+    elif not all(a['axis_on'] for a in axes):
+        reply = ros.call(SetBool, srv('enable'), SetBool.Request(data=True))
+        assert reply.success, reply.message
+    ros.wait_for_message(f'/{NODE}/status', GimbalStatus, lambda m: not set(
+        axis_states(m).values()) & {AxisState.STATE_DISABLED, AxisState.STATE_FAULT},
+        timeout=15)
+    return pedestal
 
 
 def command(ros, name: str, axis: int = 0, args=()) -> DeviceCommand.Response:

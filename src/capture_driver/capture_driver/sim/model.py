@@ -40,6 +40,11 @@ if TYPE_CHECKING:
 
 LOG = logging.getLogger('capture_sim')
 
+#: s the physics thread may wake later than its period before the simulator counts itself
+#: as not having run (a loaded machine): the host's packets then wait unread in the socket,
+#: so that time is not the host's silence and does not run the keep-alive out
+STALL_S = 0.25
+
 
 class PedestalModel(CommandHandlers):
     """A 2- or 3-axis Capture pedestal with controller; thread-safe."""
@@ -148,7 +153,13 @@ class PedestalModel(CommandHandlers):
 
     def _run(self, rate_hz: float) -> None:
         period = 1.0 / rate_hz
+        woke = time.monotonic()
         while not self._stop.wait(period):
+            now = time.monotonic()
+            stalled, woke = now - woke - period, now
+            if stalled > STALL_S:
+                with self.lock:
+                    self.last_command += stalled
             self.advance()
 
     def advance(self) -> None:
@@ -309,8 +320,10 @@ class PedestalModel(CommandHandlers):
     def handle(self, frame: Frame, session: CaptureSession) -> bytes:
         """Execute one request; return the reply bytes (data packet, ACK or NACK)."""
         with self.lock:
-            self.advance()
+            # received now: the keep-alive is checked with this packet counted (it may have
+            # waited unread while the simulator did not run)
             self.last_command = time.monotonic()
+            self.advance()
             self.requests.append(frame)
             if len(self.requests) > 5000:
                 del self.requests[:1000]
