@@ -3,20 +3,25 @@
 Discovery on localhost does not separate the processes of one host: a test that leased the
 domain a robot's nodes run on would publish ``/joint_command`` to them. Before the ROS test
 client first publishes on a topic, calls a service or sends an action goal, it reads the ROS
-graph and refuses (:class:`ForeignNodesError`) while a node of a process this test did not
-start is on the domain.
+graph and refuses (:class:`ForeignNodesError`) while a node of a process outside the test
+run is on the domain.
 
 Which process a node belongs to is read from the GUID of its endpoints (every rclpy and
-rclcpp node publishes ``/rosout`` and ``/parameter_events``): Fast DDS, the RMW of ROS 2
-Jazzy, writes the vendor id ``01.0f`` in bytes 0-1 of the GUID prefix and the low 16 bits
-of the process id (little-endian) in bytes 4-5. A node is this test's when that process is
-this one, one it started (:data:`gimbal_driver_testing.STARTED_PIDS`) or a descendant; an
-endpoint whose process no longer exists is the discovery trace of a stopped node (removed
-after its lease) and counts as no one's. An endpoint of another DDS vendor cannot be told
-apart and counts as foreign. Only 16 bits of the pid are there: where ``pid_max`` is above
-65536, an unrelated live process can share them with a stopped node's (then the refusal
-names that node), or with a foreign node's (then it is missed), so the domain pool is the
-first guard and this one the second.
+rclcpp node publishes ``/rosout`` and ``/parameter_events``), never from its name (two
+processes can both run a ``/gimbal_test_client``): Fast DDS, the RMW of ROS 2 Jazzy, writes
+the vendor id ``01.0f`` in bytes 0-1 of the GUID prefix and the low 16 bits of the process
+id (little-endian) in bytes 4-5. A node is the test run's when that process is the run's
+root (:func:`run_root`: the pytest-xdist controller, or the pytest process itself), one
+this process started (:data:`gimbal_driver_testing.STARTED_PIDS`) or a descendant of
+either: the parallel workers and what they started are the run's own, since a participant
+of a sibling worker's earlier lease may still be seen for a moment after its lease ended;
+a process outside that tree, e.g. a robot's nodes, is foreign. An endpoint whose process
+no longer exists is the discovery trace of a stopped node (removed after its lease) and
+counts as no one's. An endpoint of another DDS vendor cannot be told apart and counts as
+foreign. Only 16 bits of the pid are there: where ``pid_max`` is above 65536, an unrelated
+live process can share them with a stopped node's (then the refusal names that node), or
+with a foreign node's (then it is missed), so the domain pool is the first guard and this
+one the second.
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ FAST_DDS_VENDOR = b'\x01\x0f'
 
 
 class ForeignNodesError(RuntimeError):
-    """Nodes of processes the test did not start are on its domain."""
+    """Nodes of processes outside the test run are on its domain."""
 
 
 def participant_pid_bits(gid: Iterable[int]) -> int | None:
@@ -60,6 +65,14 @@ def live_processes(proc: Path = Path('/proc')) -> dict[int, int]:
     return parents
 
 
+def run_root(environ: Mapping[str, str] = os.environ) -> int:
+    """The root process of this test run: the pytest-xdist controller when this is one of
+    its workers (``PYTEST_XDIST_WORKER``; execnet starts each worker as its child), else
+    this process. Nothing above it counts: the shell or ``make`` that started the run may
+    also have started a live system."""
+    return os.getppid() if environ.get('PYTEST_XDIST_WORKER') else os.getpid()
+
+
 def own_pids(parents: Mapping[int, int], me: int, started: Iterable[int]) -> set[int]:
     """``me``, the processes it started and every live descendant of either."""
     own = {me, *started}
@@ -75,7 +88,8 @@ def own_pids(parents: Mapping[int, int], me: int, started: Iterable[int]) -> set
 
 def foreign_nodes(endpoints: Iterable[tuple[str, Iterable[int]]],
                   parents: Mapping[int, int], own: set[int]) -> list[str]:
-    """The node names among ``(node, gid)`` endpoints whose live process is not ``own``."""
+    """The nodes among ``(node, gid)`` endpoints whose live process is not ``own``, each
+    with that process (the low 16 bits of its pid)."""
     own_bits = {pid & 0xFFFF for pid in own}
     live_bits = {pid & 0xFFFF for pid in parents}
     foreign: set[str] = set()
@@ -84,7 +98,7 @@ def foreign_nodes(endpoints: Iterable[tuple[str, Iterable[int]]],
         if bits is None:
             foreign.add(f'{node} (not a Fast DDS participant: its process cannot be told)')
         elif bits in live_bits and bits not in own_bits:
-            foreign.add(node)
+            foreign.add(f'{node} (pid {bits})')
     return sorted(foreign)
 
 
@@ -101,13 +115,13 @@ def graph_endpoints(node: Any) -> list[tuple[str, list[int]]]:
 
 def refuse_foreign_nodes(node: Any, domain_id: int, what: str) -> None:
     """Raise :class:`ForeignNodesError` before ``what`` while ``node`` sees a node of a
-    process this test did not start."""
+    process outside this test run."""
     parents = live_processes()
     foreign = foreign_nodes(graph_endpoints(node), parents,
-                            own_pids(parents, os.getpid(), STARTED_PIDS))
+                            own_pids(parents, run_root(), STARTED_PIDS))
     if foreign:
         raise ForeignNodesError(
-            f'refusing to {what} in ROS domain {domain_id}: nodes this test did not start '
-            f'are on it ({", ".join(foreign)}); a live system may use this domain. Give '
-            f'the tests other domains with {DOMAINS_VARIABLE} (docs/testing.md, "Beside a '
-            'live system")')
+            f'refusing to {what} in ROS domain {domain_id}: nodes of processes outside '
+            f'this test run are on it ({", ".join(foreign)}); a live system may use this '
+            f'domain. Give the tests other domains with {DOMAINS_VARIABLE} (docs/testing.md, '
+            '"Beside a live system")')

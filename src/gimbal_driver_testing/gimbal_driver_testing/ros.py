@@ -114,8 +114,9 @@ class RosTestClient:
 
     It commands only what the test started: before the first publish on a topic, the first
     call of a service that is not read-only and each action goal it reads the graph and
-    raises :class:`~gimbal_driver_testing.graph_guard.ForeignNodesError` while a node of
-    another process is on the domain (:mod:`gimbal_driver_testing.graph_guard`)."""
+    raises :class:`~gimbal_driver_testing.graph_guard.ForeignNodesError` while a node of a
+    process outside the test run is on the domain (:mod:`gimbal_driver_testing.graph_guard`).
+    """
 
     def __init__(self, domain_id: int, name: str = 'gimbal_test_client') -> None:
         self.domain_id = domain_id
@@ -177,8 +178,15 @@ class RosTestClient:
         raise exc
 
     def close(self) -> None:
+        """Leave the domain. The action clients go first: ``destroy_node`` leaves them, and
+        each holds the rcl node, so the DDS participant lived on after the lease was
+        released until a garbage collection, and the next test on the domain saw it (in
+        another worker: a ForeignNodesError naming this client)."""
         self._closing.set()
         self.executor.shutdown(timeout_sec=1.0)
+        for client in self._clients.values():
+            if isinstance(client, ActionClient):
+                client.destroy()
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)
         self._thread.join(timeout=2.0)

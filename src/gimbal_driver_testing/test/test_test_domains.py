@@ -1,6 +1,7 @@
 """Test domains never collide with a live system: the pool comes from GIMBAL_TEST_DOMAINS
 (default DEFAULT_DOMAINS, within what Fast DDS accepts), and the ROS test client refuses to
-command a domain where a node of a process the test did not start is seen."""
+command a domain where a node of a process outside the test run is seen, and a closed
+client leaves the domain."""
 
 from __future__ import annotations
 
@@ -9,9 +10,14 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 from pathlib import Path
 
 import pytest
+import rclpy
+from rclpy.action import ActionServer
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import String
 
 import gimbal_driver_testing
@@ -31,8 +37,10 @@ from gimbal_driver_testing.graph_guard import (
     live_processes,
     own_pids,
     participant_pid_bits,
+    run_root,
 )
 from gimbal_driver_testing.ros import RosTestClient
+from gimbal_msgs.action import MoveTo
 
 
 def test_the_default_pool_keeps_off_live_and_shell_domains() -> None:
@@ -113,8 +121,33 @@ def test_a_node_is_foreign_when_its_live_process_is_not_the_tests() -> None:
                  ('/robot/gimbal', fast_dds_gid(300)), ('/stopped', fast_dds_gid(400)),
                  ('/cyclone', [0x01, 0x10, *([0] * 14)])]
     assert foreign_nodes(endpoints, parents, own) == [
-        '/cyclone (not a Fast DDS participant: its process cannot be told)', '/robot/gimbal']
+        '/cyclone (not a Fast DDS participant: its process cannot be told)',
+        '/robot/gimbal (pid 300)']
     assert foreign_nodes(endpoints[:2] + endpoints[3:4], parents, own) == []
+
+
+def test_the_workers_of_one_run_are_its_own_and_nothing_else_is() -> None:
+    """Under pytest-xdist the run's root is the controller: a sibling worker's client, with
+    the same node name as this one's, is the run's; a robot's node beside the run and a
+    process re-parented away from it are not. Identity is the GUID's pid, not the name."""
+    parents = {1: 0, 50: 1, 90: 50, 100: 90, 101: 90, 201: 101, 300: 50, 400: 1}
+    # 50: the shell, 90: the controller, 100/101: workers, 201: a node worker 101 started,
+    # 300: a robot launched from the same shell, 400: a daemon forked off by a test
+    own = own_pids(parents, me=90, started=set())
+    assert own == {90, 100, 101, 201}
+    endpoints = [('/gimbal_test_client', fast_dds_gid(100)),
+                 ('/gimbal_test_client', fast_dds_gid(101)),
+                 ('/kessler_kos_driver', fast_dds_gid(201)),
+                 ('/gimbal_test_client', fast_dds_gid(300)),
+                 ('/daemon', fast_dds_gid(400))]
+    assert foreign_nodes(endpoints, parents, own) == ['/daemon (pid 400)',
+                                                      '/gimbal_test_client (pid 300)']
+
+
+def test_the_run_root_is_the_xdist_controller_in_a_worker() -> None:
+    assert run_root({'PYTEST_XDIST_WORKER': 'gw3'}) == os.getppid()
+    assert run_root({}) == os.getpid()
+    assert os.getpid() in own_pids(live_processes(), run_root(), set())
 
 
 def test_live_processes_reads_this_process_and_its_parent() -> None:
@@ -140,7 +173,7 @@ LISTENER = textwrap.dedent('''
 
 @pytest.mark.ros
 def test_the_client_refuses_to_publish_beside_a_node_it_did_not_start(tmp_path: Path) -> None:
-    """A node of a process outside the test (forked off and re-parented) on the leased
+    """A node of a process outside the test run (forked off and re-parented) on the leased
     domain: the first publish raises, naming the node and the variable, and nothing is
     published; a node the test started is commanded as before."""
     output = tmp_path / 'listener.out'
@@ -151,7 +184,7 @@ def test_the_client_refuses_to_publish_beside_a_node_it_did_not_start(tmp_path: 
                         'the outside listener')
         outside = int(line.split()[1])
         try:
-            assert outside not in own_pids(live_processes(), os.getpid(),
+            assert outside not in own_pids(live_processes(), run_root(),
                                            gimbal_driver_testing.STARTED_PIDS)
             with RosTestClient(domain) as ros:
                 with pytest.raises(ForeignNodesError) as raised:
@@ -181,3 +214,36 @@ def test_the_client_commands_a_node_the_test_started() -> None:
         with RosTestClient(domain) as ros:
             ros.publish('/joint_command_probe', String(data='move'))
             listener.wait_for_output('got move', 30)
+
+
+@pytest.mark.ros
+def test_a_closed_client_leaves_the_domain_also_after_an_action() -> None:
+    """An action client holds the rcl node, so a client that had sent a goal stayed a DDS
+    participant after close() (until a garbage collection), on a domain whose lease it had
+    released: the next test there, in another worker, saw it. Once closed it is gone."""
+    with DomainLease() as domain:
+        context = Context()
+        rclpy.init(context=context, domain_id=domain)
+        try:
+            server = rclpy.create_node('probe_action_server', context=context)
+            ActionServer(server, MoveTo, '/probe_move',
+                         lambda handle: (handle.succeed(), MoveTo.Result(success=True))[1])
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(server)
+            spin = threading.Thread(target=executor.spin, daemon=True)
+            spin.start()
+            client = RosTestClient(domain, 'closing_client')
+            try:
+                _, status, _ = client.run_action(MoveTo, '/probe_move', MoveTo.Goal())
+                assert status == 4   # succeeded
+                wait_for(lambda: 'closing_client' in server.get_node_names(), 30,
+                         'the server to see the client')
+            finally:
+                client.close()
+            wait_for(lambda: 'closing_client' not in server.get_node_names(), 30,
+                     'the closed client to leave the domain')
+            executor.shutdown(timeout_sec=5.0)
+            spin.join(timeout=5.0)
+            server.destroy_node()
+        finally:
+            rclpy.shutdown(context=context)
