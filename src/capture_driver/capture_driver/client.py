@@ -87,8 +87,11 @@ class CaptureClient(CaptureLink):
             if self.connected and self.keepalive_on and (
                 time.monotonic() - self.last_activity >= self.keepalive_period
             ):
+                # asked directly, not as an optional poll: the ping is the supervision, and
+                # the polls' back-off (1 s, doubling) after one lost answer would leave an
+                # idle link silent past the controller's keepalive_count periods
                 with contextlib.suppress(CaptureError):
-                    self.polls.optional('COM_IsKeepAliveOn')
+                    self.request('COM_IsKeepAliveOn', optional=True)
 
     # ------------------------------------------- the parts under their old names
     @property

@@ -321,6 +321,28 @@ def test_silent_device_closes_the_link(sim):
     c.close()
 
 
+def test_a_lost_keepalive_answer_is_asked_again_without_a_back_off(sim):
+    """The idle link's ping is the controller's supervision: one lost answer must not hold
+    the next ping for the optional polls' back-off (1 s), past the 3 x 0.3 s the controller
+    allows before it powers the axes off."""
+    c = tcp_client(sim, keepalive_period=0.3, timeout=0.1)
+    c.connect()
+    c.start()
+    ping = COMMANDS['COM_IsKeepAliveOn'].opcode
+
+    def pings() -> int:
+        return sum(1 for frame in list(sim.model.requests) if frame.opcode == ping)
+
+    try:
+        wait_for(lambda: pings() >= 1, 10.0, 'a keep-alive ping')
+        sim.model.lose_replies(1)
+        lost = pings()
+        wait_for(lambda: pings() >= lost + 3, 10.0, 'pings after the lost answer')
+        assert sim.model.keepalive_on and sim.model.axes[1].axis_on
+    finally:
+        c.stop()
+
+
 def test_keepalive_keeps_the_axes_on_and_expiry_stops_them(sim):
     c = tcp_client(sim, keepalive_period=0.2)
     c.connect()
