@@ -6,7 +6,7 @@ import contextlib
 import logging
 import math
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 import pytest
 
@@ -399,17 +399,28 @@ class PeriodRecorder(Periodic):
         super().set_period(callback, period)
 
 
-def test_the_watchdog_checks_often_only_while_a_jog_runs(device) -> None:
-    """An idle node's housekeeping thread does not wake 4 times per command_timeout to
-    find no jog: fast from the first jog, slow again once the dead-man stop ended it."""
+@contextlib.contextmanager
+def recorded_periods(device: Device) -> Iterator[tuple[GimbalController, PeriodRecorder]]:
+    """An active controller whose housekeeping periods are recorded."""
     periodic = PeriodRecorder()
     ctl = GimbalController(device, config(), logging.getLogger('test'), periodic=periodic)
-
-    def periods() -> list[float]:
-        return periodic.periods(ctl.watchdog_job.run)
     try:
         ctl.open()
         ctl.activate()
+        yield ctl, periodic
+    finally:
+        ctl.shutdown()
+        periodic.stop()
+        ctl.sensors.stop()
+
+
+def test_the_watchdog_checks_often_only_while_a_jog_runs(device) -> None:
+    """An idle node's housekeeping thread does not wake 4 times per command_timeout to
+    find no jog: fast from the first jog, slow again once the dead-man stop ended it."""
+    with recorded_periods(device) as (ctl, periodic):
+        def periods() -> list[float]:
+            return periodic.periods(ctl.watchdog_job.run)
+
         assert periods() == [WATCHDOG_IDLE_PERIOD_S]
         ctl.command(['pan'], [], [0.5])
         fast = min(0.05, ctl.config.command_timeout / 4)
@@ -419,33 +430,21 @@ def test_the_watchdog_checks_often_only_while_a_jog_runs(device) -> None:
         wait_for(lambda: ('stop', ['pan']) in device.sent, 5.0, 'the dead-man stop')
         wait_for(lambda: periods()[-1] == WATCHDOG_IDLE_PERIOD_S, 5.0, 'the slow period again')
         assert periods() == [WATCHDOG_IDLE_PERIOD_S, fast, WATCHDOG_IDLE_PERIOD_S]
-    finally:
-        ctl.shutdown()
-        periodic.stop()
-        ctl.sensors.stop()
 
 
 def test_the_stop_confirmation_looks_often_only_while_a_stop_waits(device) -> None:
     """No stop waiting: every STOP_CHECK_IDLE_S; from the stop (the dead-man stop here) until
     its axis rests: every STOP_CHECK_S; then slow again."""
-    periodic = PeriodRecorder()
-    ctl = GimbalController(device, config(), logging.getLogger('test'), periodic=periodic)
+    with recorded_periods(device) as (ctl, periodic):
+        def periods() -> list[float]:
+            return periodic.periods(ctl.stop_job.run)
 
-    def periods() -> list[float]:
-        return periodic.periods(ctl.stop_job.run)
-    try:
-        ctl.open()
-        ctl.activate()
         ctl.command(['pan'], [], [0.5])
         assert periods() == [STOP_CHECK_IDLE_S]  # a jog is no stop
         wait_for(lambda: ('stop', ['pan']) in device.sent, 5.0, 'the dead-man stop')
         wait_for(lambda: ctl.stop_watch.at_rest('pan'), 5.0, 'the axis confirmed at rest')
         wait_for(lambda: periods()[-1] == STOP_CHECK_IDLE_S, 5.0, 'the slow period again')
         assert periods() == [STOP_CHECK_IDLE_S, STOP_CHECK_S, STOP_CHECK_IDLE_S]
-    finally:
-        ctl.shutdown()
-        periodic.stop()
-        ctl.sensors.stop()
 
 
 def test_a_joint_command_never_waits_for_the_device_reply(controller, device) -> None:
