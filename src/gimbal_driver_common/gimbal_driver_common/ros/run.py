@@ -60,6 +60,18 @@ class InlineCallbackGroup(MutuallyExclusiveCallbackGroup):
     inline = True
 
 
+def dump_threads(signum: int, frame: object) -> None:
+    """Write every thread's stack to stderr (the node's log), on :data:`THREAD_DUMP_SIGNAL`.
+
+    A Python-level handler, so it runs in the main thread holding the GIL while every other
+    thread stands still. ``faulthandler.register`` dumps from the C signal handler instead,
+    reading the other threads' frames while they run: a node under test died in the middle
+    of such a dump under load (docs/testing.md). The main thread waits on an Event
+    (:func:`run_driver`), so the handler runs at once.
+    """
+    faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+
+
 def run_driver(node_class: NodeClass, args: Sequence[str] | None = None) -> int:
     """Entry point body for a driver executable: construct, autostart, spin, stop cleanly.
 
@@ -69,7 +81,7 @@ def run_driver(node_class: NodeClass, args: Sequence[str] | None = None) -> int:
     a blocking rcl_wait) lets the Python signal handler run at once.
     """
     # first, so that a process that hangs anywhere later can still say where
-    faulthandler.register(THREAD_DUMP_SIGNAL, file=sys.stderr, all_threads=True)
+    signal.signal(THREAD_DUMP_SIGNAL, dump_threads)
     rclpy.init(args=None if args is None else list(args),
                signal_handler_options=SignalHandlerOptions.NO)
     # The device thread must not wait the default 5 ms for the GIL while a receive thread
