@@ -67,7 +67,10 @@ class KosNotifications:
             elif isinstance(message, MotorPosition):
                 motor = state.motors.get(message.motor_address)
                 if motor is not None and math.isfinite(message.position):
-                    motor.position, motor.velocity, motor.stamp = message.position, 0.0, now
+                    # "sent after a motor has become idle" (spec, MotorPosition), and
+                    # "after any attempt ... to change the motor position": a position
+                    # report, not taken as a speed of 0 (an emulator may send it at once)
+                    motor.report(message.position, now)
                 state.completed(position_key(message.motor_address))
                 callback = self.on_motor_update
             elif isinstance(message, MotorCalibrated):
@@ -131,9 +134,7 @@ class KosNotifications:
                             entry.address)
                 continue
             motor = self.state.motors.setdefault(entry.address, MotorState(entry.address))
-            if motor.stamp and now > motor.stamp:
-                motor.velocity = (entry.position - motor.position) / (now - motor.stamp)
-            motor.position = entry.position
+            motor.report(entry.position, now)
             motor.begin_position = entry.begin_position
             motor.end_position = entry.end_position
             motor.max_setup_speed = entry.max_setup_speed
@@ -141,7 +142,6 @@ class KosNotifications:
             motor.max_acceleration = entry.max_acceleration
             motor.is_fiz = entry.is_fiz
             motor.online = True
-            motor.stamp = now
         for address, motor in self.state.motors.items():
             if address not in seen:
                 motor.online = False   # MotorInfo lists the connected motors only
@@ -161,4 +161,4 @@ class KosNotifications:
         for address, position in note.positions.items():
             motor = self.state.motors.get(address)
             if motor is not None and math.isfinite(position):
-                motor.position, motor.stamp = position, now
+                motor.report(position, now)

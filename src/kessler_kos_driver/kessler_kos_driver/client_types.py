@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import socket
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 from gimbal_driver_common import errors
@@ -44,11 +45,21 @@ class CommandRejected(KosError, errors.DeviceRefused):
     """A command refused before sending (limits, unknown motor) or by the device."""
 
 
+#: s: the shortest span of position reports a speed is taken over. kOS reports positions,
+#: not speeds, and a report is timed when it is read, not when the device measured it: two
+#: reports read in one burst (a loaded machine, a delayed TCP segment) span microseconds,
+#: and their difference over that read as tens of rad/s, or as rest when the device had
+#: not moved between them. The stop confirmation took that rest as the axis's, and a
+#: dropped stop went unnoticed (2026-12-02 CI). Over 0.1 s the reading jitter is a few
+#: per cent of the span; the speed lags the motion by about half of it.
+VELOCITY_SPAN_S = 0.1
+
+
 @dataclass
 class MotorState:
     address: int
     position: float = 0.0          # rotations
-    velocity: float = 0.0          # rotations/s (estimated from successive reports)
+    velocity: float = 0.0          # rotations/s (over VELOCITY_SPAN_S of reports: report)
     begin_position: float = 0.0
     end_position: float = 0.0
     max_setup_speed: float = 0.0
@@ -58,6 +69,20 @@ class MotorState:
     online: bool = True
     stamp: float = 0.0             # time.time() of the last position report
     last_error: int | None = None
+    #: (time, position) of the reports of the last VELOCITY_SPAN_S and one before
+    recent: deque[tuple[float, float]] = field(default_factory=deque, repr=False,
+                                             compare=False)
+
+    def report(self, position: float, now: float) -> None:
+        """A position the device reported, read at ``now``: the speed is the travel since
+        the newest report at least :data:`VELOCITY_SPAN_S` older (none yet: unchanged)."""
+        recent = self.recent
+        while len(recent) > 1 and now - recent[1][0] >= VELOCITY_SPAN_S:
+            recent.popleft()
+        if recent and now - recent[0][0] >= VELOCITY_SPAN_S:
+            self.velocity = (position - recent[0][1]) / (now - recent[0][0])
+        recent.append((now, position))
+        self.position, self.stamp = position, now
 
     @property
     def calibrated(self) -> bool:
