@@ -33,33 +33,22 @@ from typing import TypeVar
 from gimbal_driver_common.command_path import CommandPath
 from gimbal_driver_common.config import ControllerConfig, Logger
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
-from gimbal_driver_common.errors import (
-    DeviceRefused,
-    EverySteps,
-    GimbalError,
-    LinkError,
-    device_boundary,
-)
+from gimbal_driver_common.errors import DeviceRefused, GimbalError, LinkError, device_boundary
 from gimbal_driver_common.joint_command import validate_joint_command
 from gimbal_driver_common.motion_watch import MotionWatch
 from gimbal_driver_common.periodic import PacedJob, Periodic
 from gimbal_driver_common.rejections import CommandRejections
-from gimbal_driver_common.stop_watch import StopWatch
+from gimbal_driver_common.stopping import STOP_CHECK_IDLE_S, STOP_CHECK_S, Stopping
 from gimbal_driver_common.watchdog import JogWatchdog
 
 T = TypeVar('T')
-__all__ = ['ControllerConfig', 'GimbalController', 'LinkState', 'Logger', 'is_moving']
+__all__ = ['STOP_CHECK_IDLE_S', 'STOP_CHECK_S', 'ControllerConfig', 'GimbalController',
+           'LinkState', 'Logger', 'is_moving']
 
 #: a joint without a device "moving" bit is moving when faster than this (rad/s or m/s)
 MOVING_SPEED = 1e-3
 #: longest a streamed device's thread waits for data before checking the link again
 STREAM_WAIT_S = 0.05
-#: s between two looks of the housekeeping thread at the stops not yet confirmed
-STOP_CHECK_S = 0.05
-#: s between two looks while no stop waits (the first stop switches to STOP_CHECK_S)
-STOP_CHECK_IDLE_S = 0.5
-#: s a shutdown waits beyond the deceleration time for the axes to rest before closing
-SHUTDOWN_CONFIRM_S = 1.0
 #: how often the jog watchdog checks while no joint jogs (or it is disabled)
 WATCHDOG_IDLE_PERIOD_S = 0.5
 
@@ -114,11 +103,6 @@ class GimbalController:
         #: accepted commands that show no motion (motion_start_timeout): diagnostics, goals
         self.motion_watch = MotionWatch(lambda: self.config.motion_start_timeout,
                                         lambda: self.config.goal_tolerance, log)
-        #: stops not yet confirmed by the axis (stop_deceleration, stop_margin): resent
-        #: from the housekeeping thread until the axis is at rest; diagnostics, ~/stop
-        self.stop_watch = StopWatch(lambda: self.config.stop_deceleration,
-                                    lambda: self.config.stop_margin, is_moving, log,
-                                    clock=clock)
         self._targets_lock = threading.Lock()
         #: bumped by every stop and halt (:meth:`bump_motion_generation`): a running move
         #: or scan sees it and ends
@@ -126,25 +110,31 @@ class GimbalController:
         #: :meth:`shutdown` began: what a move that ends now was stopped by
         self.shutting_down = False
         self._generation_lock = threading.Lock()
-        self.watchdog = JogWatchdog(config.command_timeout, self._on_jog_expired, clock=clock,
-                                    settled=self.stop_watch.at_rest)
         self.periodic = periodic or Periodic(on_error=log.error)
         #: jobs that do device I/O (sensor topics): never on the watchdog's thread
         self.sensors = sensors or Periodic(on_error=log.error, name='sensors')
         #: refused joint_commands, counted and logged by reason (the node keeps one across
         #: configure/cleanup and passes it in)
         self.rejections = rejections or CommandRejections(log)
-        #: the housekeeping jobs run often only while they have work (:class:`PacedJob`):
-        #: the watchdog's check while a joint jogs, the stop confirmation while a stop waits
-        self.watchdog_job = PacedJob(self.periodic, self.watchdog.check,
-                                     lambda: bool(self.watchdog.jogging),
-                                     self._watchdog_period, WATCHDOG_IDLE_PERIOD_S)
-        self.stop_job = PacedJob(self.periodic, self.confirm_stops, self.stop_watch.waiting,
-                                 lambda: STOP_CHECK_S, STOP_CHECK_IDLE_S)
         self.halt_hooks: list[Callable[[], None]] = []  # stop and halt call these first (policies)
         self.preempt_hooks: list[Callable[[], None]] = []  # a joint_command calls these
         self.commands = CommandPath(device, self.rejections, self.record_targets,
                                     self._send_refusal, self.motion_watch.jogged)
+        #: every stop, and its confirmation by the axes (:mod:`~.stopping`)
+        self.stops = Stopping(device, config, log, self.commands, self.motion_watch,
+                              self.periodic, is_moving, lambda: self.connected,
+                              self._throttle, clock)
+        #: stops not yet confirmed by the axis (stop_deceleration, stop_margin): resent
+        #: from the housekeeping thread until the axis is at rest; diagnostics, ~/stop
+        self.stop_watch = self.stops.watch
+        #: the stop confirmation: runs often only while a stop waits (:class:`PacedJob`)
+        self.stop_job = self.stops.job
+        self.watchdog = JogWatchdog(config.command_timeout, self._on_jog_expired, clock=clock,
+                                    settled=self.stop_watch.at_rest)
+        #: the watchdog's check: runs often only while a joint jogs
+        self.watchdog_job = PacedJob(self.periodic, self.watchdog.check,
+                                     lambda: bool(self.watchdog.jogging),
+                                     self._watchdog_period, WATCHDOG_IDLE_PERIOD_S)
         self._stopping = threading.Event()
         self._wake = threading.Event()
         self._threads: list[threading.Thread] = []
@@ -206,7 +196,7 @@ class GimbalController:
         self.shutting_down = True  # before the halt: the goals it ends say why
         if self.active:
             self.halt(why)
-            self._confirm_before_close(why)
+            self.stops.confirm_before_close(why)
         self.active = False
         self.close()
 
@@ -216,20 +206,10 @@ class GimbalController:
         if not self.connected:
             return
         try:
-            self._stop_device(None)
+            self.stops.send(None)
             self.log.info(f'{why}: stop sent to every axis')
         except GimbalError as exc:
             self.log.error(f'{why}: stopping the axes failed: {exc}')
-
-    def _confirm_before_close(self, why: str) -> None:
-        """Before the link closes (nothing could send the stop again after it): wait for
-        the axes to rest, the housekeeping thread resending meanwhile; log what did not."""
-        joints = self.config.joint_names
-        timeout = self.stop_watch.settle_time(*joints) + SHUTDOWN_CONFIRM_S
-        moving = self.stop_watch.wait(joints, timeout) if self.connected else []
-        if moving:
-            self.log.error(f'{why}: {self.stop_watch.still_moving(moving)}; closing the '
-                           'link anyway')
 
     # ---------------------------------------------------------- parameters
     def set_publish_rate(self, rate: float) -> None:
@@ -353,50 +333,20 @@ class GimbalController:
         self.record_targets({joint: move[0] for joint, move in moves.items()})
 
     def stop(self) -> str:
-        """~/stop: cancel jogs, moves, scans and queued commands, stop every axis, then
-        wait (woken by samples) until every axis is at rest, at most its deceleration
-        time plus ``stop_margin``. Raises naming the axes still moving and what was sent;
-        with every axis at rest it answers, naming a step that failed if one did."""
+        """~/stop: cancel jogs, moves, scans and queued commands, stop every axis and
+        answer once every axis is at rest (:meth:`Stopping.stop_all`)."""
         self._cancel_motion()
         self.require_connected('nothing to stop')
-        joints = self.config.joint_names
-        timeout = self.stop_watch.settle_time(*joints)
-        failed: GimbalError | None = None
-        try:
-            self._stop_device(None)
-        except GimbalError as exc:
-            failed = exc
-        moving = self.stop_watch.wait(joints, timeout)
-        if moving:
-            sent = f' (the device answered: {failed})' if failed else ''
-            raise DeviceRefused(f'{self.stop_watch.still_moving(moving)}{sent}; the stop is '
-                                'sent again until they rest', reason='stop not confirmed')
-        if failed is not None:
-            return f'all axes stopped and at rest; but a step of the stop failed: {failed}'
-        return 'all axes stopped and at rest; scans, moves and jogs cancelled'
+        return self.stops.stop_all()
 
     def stop_joints(self, joints: Sequence[str] | None) -> None:
         """Stop some joints (a cancelled move or homing, the dead-man stop); logs instead
         of raising: the stop watch sends it again until the axes rest."""
-        try:
-            self._stop_device(joints)
-        except GimbalError as exc:
-            self.log.error(f'stop failed: {exc}')
+        self.stops.send_logged(joints)
 
     def confirm_stops(self) -> None:
-        """Housekeeping: send the whole stop again to the axes still moving past their
-        deceleration time (:class:`~gimbal_driver_common.stop_watch.StopWatch`)."""
-        if not self.connected:
-            return
-        due = self.stop_watch.due()
-        if not due:
-            return
-        everything = set(due) >= set(self.config.joint_names)
-        try:
-            self._stop_device(None if everything else due)
-        except GimbalError as exc:
-            if self._throttle('stop resend', 5.0):
-                self.log.error(f'sending the stop again failed: {exc}')
+        """Housekeeping: send the stop again to the axes still moving past their time."""
+        self.stops.confirm()
 
     def require_connected(self, what: str) -> None:
         if not self.connected:
@@ -414,25 +364,6 @@ class GimbalController:
         for hook in self.halt_hooks:
             hook()
         self.bump_motion_generation()
-
-    def _stop_device(self, joints: Sequence[str] | None) -> None:
-        """Write every step of the stop, device motion first, then its scans; a step that
-        fails skips no other. Raises after all were sent, with every failure."""
-        steps = EverySteps()
-
-        def send() -> None:
-            steps.run(self.device.stop, None if joints is None else list(joints))
-            scans = self.device.capabilities.scans
-            if scans is not None and joints is None:
-                steps.run(scans.stop)
-
-        self.stop_watch.stopped(self.config.joint_names if joints is None else joints)
-        self.stop_job.pace()  # the confirmation looks often from now until the axes rest
-        try:
-            self.commands.send(joints, send, urgent=True)  # ahead of every queued read
-        finally:
-            self.motion_watch.withdraw(joints)
-        steps.raise_errors()
 
     def _on_jog_expired(self, joints: list[str]) -> None:
         self.log.warning(

@@ -167,7 +167,7 @@ def test_a_failing_step_skips_no_other_and_every_failure_is_reported(rig) -> Non
     rig.device.fail = {'stop': DeviceTimeout('MOT_SetSpeedMode: no reply'),
                        'scan_stop': DeviceRefused('scan stop NACK')}
     with pytest.raises(GimbalError) as raised:
-        rig.ctl._stop_device(None)
+        rig.ctl.stops.send(None)
     assert [kind for kind, _ in rig.device.sent] == ['stop', 'scan_stop']  # motion first
     assert 'MOT_SetSpeedMode: no reply' in str(raised.value)
     assert 'scan stop NACK' in str(raised.value)
