@@ -24,6 +24,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
+from confirmation_cost import confirmation_cost  # noqa: E402
 from driver_bench import generic_run  # noqa: E402
 from harness import (  # noqa: E402
     ROOT,
@@ -72,6 +73,9 @@ def main() -> int:
         results['reference'] = {
             'loopback_tcp_rtt_us': loopback_rtt_us(),
             'rclpy_joint_state_pubsub_100hz': rclpy_reference(domain),
+            # what the stop confirmation costs each sample and each joint_command, beside
+            # the JointState fill each sample costs anyway (confirmation_cost.py)
+            'stop_confirmation': confirmation_cost(),
         }
         for name in args.names or list(registered):
             print(f'bench: {name} ...', file=sys.stderr, flush=True)
