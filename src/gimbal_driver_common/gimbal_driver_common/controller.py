@@ -423,7 +423,7 @@ class GimbalController:
         def send() -> None:
             steps.run(self.device.stop, None if joints is None else list(joints))
             scans = self.device.capabilities.scans
-            if scans is not None and joints is None:
+            if scans is not None and joints is None and not scans.stopped_by_device_stop:
                 steps.run(scans.stop)
 
         self.stop_watch.stopped(self.config.joint_names if joints is None else joints)
