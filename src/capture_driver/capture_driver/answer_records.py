@@ -23,6 +23,8 @@ class Exchange:
 
     waitings: list[Waiting] = field(default_factory=list)
     byte: bool = False
+    #: a stop's: never preempted by another stop
+    urgent: bool = False
     #: owns every byte that comes while it is in flight (a stop written over late answers)
     whole: bool = False
     received: list[ReplyByte] = field(default_factory=list)

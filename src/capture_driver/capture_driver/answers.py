@@ -41,8 +41,9 @@ request could own it; the rule, which a newcomer can check against :meth:`delive
 - A motion set-up (:meth:`AnswerBook.motion_first`) does not wait behind a read either: a
   read in flight without its answer yet, and every getter that ended without one, are
   data-answered from then on (a getter is answered by data, a NACK or nothing: its NACK
-  is held by the NACK rule, an ACK is never its own), and other threads' byte-answered
-  reads wait until the set-up ends.
+  is held by the NACK rule, an ACK is never its own; not a getter the device has ACKed on
+  this link), and other threads' byte-answered reads wait until the set-up ends. A stop
+  never preempts another stop.
 """
 
 from __future__ import annotations
@@ -88,6 +89,9 @@ class AnswerBook:
         self._byte: Exchange | None = None
         #: (opcode, axis) of getters answered with data, or left unanswered, on this link
         self._data_keys: set[tuple[int, int]] = set()
+        #: (opcode, axis) of getters the device answered with an ACK: never trusted to
+        #: answer data or nothing (:meth:`_trust`)
+        self._acked_keys: set[tuple[int, int]] = set()
         self.stale = 0
         self.nacks = 0
         self.greetings = 0
@@ -104,6 +108,7 @@ class AnswerBook:
         self.fail_all(error)
         with self._cond:
             self._data_keys.clear()
+            self._acked_keys.clear()
 
     def write(self, requests: Sequence[Request], write: Callable[[bytes], None], *,
               urgent: bool = False, block: bool = True, timeout: float = 0.0,
@@ -131,7 +136,7 @@ class AnswerBook:
 
             if not urgent and not self._wait_until(allowed, block, timeout):
                 return None
-            exchange = Exchange(byte=byte)
+            exchange = Exchange(byte=byte, urgent=urgent)
             if byte:
                 self._take_over(exchange)
             now = self._clock()
@@ -165,6 +170,7 @@ class AnswerBook:
             targets = [w for w in (exchange.waitings if exchange is not None else [])
                        if not w.expect_data]
             targets += [w for w in self._flight if w.holds_lock]
+            targets = [w for w in targets if not w.exchange.urgent]  # another stop: not cut
             self._cut_short([w for w in dict.fromkeys(targets)
                              if w.answer is None and not w.done and w in self._flight])
 
@@ -186,9 +192,8 @@ class AnswerBook:
             exchange = self._byte
             reads = [w for w in (exchange.waitings if exchange is not None else [])
                      if w.answer is None and not w.done]
-            if exchange is not None and all(w.expect_data for w in reads):
-                for waiting in reads:
-                    self._trust(waiting)
+            if exchange is not None and all(w.expect_data for w in reads) and all(
+                    [self._trust(w) for w in reads]):
                 self._byte = None
             for waiting in self._late:
                 if waiting.expect_data:
@@ -203,11 +208,15 @@ class AnswerBook:
                     del self._motions[me]
                 self._cond.notify_all()
 
-    def _trust(self, waiting: Waiting) -> None:
+    def _trust(self, waiting: Waiting) -> bool:
         """A getter answers data or nothing from now on, as one left unanswered: its late
-        NACK is held by the NACK rule, an ACK is never its own."""
+        NACK is held by the NACK rule, an ACK is never its own. Not one the device has
+        answered with an ACK on this link (False: it stays byte-answered)."""
+        if waiting.key in self._acked_keys:
+            return False
         waiting.data_answered = True
         self._data_keys.add(waiting.key)
+        return True
 
     def _held_back(self, requests: Sequence[Request], byte: bool) -> bool:
         """Whether a byte-answered write must not go out now: a stop preempted the link,
@@ -290,6 +299,9 @@ class AnswerBook:
             self._drop([waiting])
             if waiting.answer is None and waiting.error is not None:
                 raise waiting.error
+            if waiting.expect_data and isinstance(waiting.answer, ReplyByte) and (
+                    waiting.answer.is_ack):
+                self._acked_keys.add(waiting.key)  # a getter this device answers by ACK
             if waiting.answer is None:
                 self._give_held_doubtfully(waiting)
             if waiting.answer is None and waiting.ended_at is None:

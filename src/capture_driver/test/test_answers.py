@@ -386,3 +386,31 @@ def test_a_motion_set_up_does_not_wait_for_the_late_window_of_a_read() -> None:
         book.deliver(data('IMU_GetRoll', 0))  # the read's late data: stale, not the step's
         book.deliver(ACK)
         assert book.wait(mode, clock.now) == ACK
+
+
+def test_a_stop_does_not_preempt_another_stop_in_flight() -> None:
+    """Two stops at once (the dead-man stop, a resent one, ~/stop): the second does not cut
+    the first's answers short; both are written."""
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    first = book.write(STOP, wire, urgent=True, holds_lock=True) or []
+    book.preempt()
+    assert not any(w.done for w in first) and book.preempted == 0
+    assert book.write(STOP, wire, urgent=True, block=False) is not None
+    book.preempt_done()
+    assert len(wire.writes) == 2
+
+
+def test_a_read_the_device_answered_with_an_ack_still_holds_up_a_motion_set_up() -> None:
+    """A getter this device answers with an ACK (a controller that acknowledges what it does
+    not know) could own the set-up's ACK: it is not trusted, and the setter waits."""
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    [pn] = book.write([getter('COM_GetPn', 0)], wire, timeout=1.0)
+    book.deliver(ACK)
+    assert book.wait(pn, clock.now) == ACK
+    [again] = book.write([getter('COM_GetPn', 0)], wire, timeout=1.0) or []
+    with book.motion_first():
+        assert book.write([setter('MOT_SetSpeedMode', 1)], wire, block=False,
+                          holds_lock=True) is None
+    assert not again.data_answered
