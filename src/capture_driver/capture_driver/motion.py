@@ -292,7 +292,10 @@ class MotionRequests:
         would drop the rest of one write; still none is skipped.) Each answer waits
         its own time (the request timeout; SCN_StopScan its 500 ms plus
         :data:`~.link.ANSWER_MARGIN_S`). Whether the axes came to rest is the core's to
-        confirm from the joint samples; these answers say only what the device said.
+        confirm from the joint samples; these answers say only what the device said. An
+        axis is remembered in speed mode (the next jog leaves MOT_SetSpeedMode out) only
+        when each of its steps is known ACKed: one refused while a scan ran (0xA6), or
+        answered only as a whole, gets the whole set-up again.
         """
         link = self._link
         with link.link_lock:
@@ -312,10 +315,15 @@ class MotionRequests:
                     [waiting] = link.write([request], urgent=True) or []
                     waitings.append(waiting)
                     answers.append(link.answer(waiting, self._deadline(waiting)))
-            for axis in axes:
-                self._setups.known[axis] = ('speed', None, 0.0, False)
+            exchange = waitings[0].exchange if waitings else None
+            for axis in axes:  # in speed mode only where each step is known ACKed
+                steps = [a for w, a in zip(waitings, answers, strict=True)
+                         if w.frame.axis == axis and w.name in dict(AXIS_STOP)]
+                if not (exchange is not None and exchange.whole) and len(steps) == len(
+                        AXIS_STOP) and all(isinstance(a, ReplyByte) and a.is_ack
+                                           for a in steps):
+                    self._setups.known[axis] = ('speed', None, 0.0, False)
         result = StopAnswers(len(waitings))
-        exchange = waitings[0].exchange if waitings else None
         if all(answer is None for answer in answers) and waitings:
             link.count_timeout('stop')
         if exchange is not None and exchange.whole:
