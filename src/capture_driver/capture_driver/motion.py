@@ -252,8 +252,9 @@ class MotionRequests:
         set-up of the axis left it in speed mode (a jog or a stop) and nothing else was
         commanded since: a stream of jog commands costs 2 round trips each, not 4.
 
-        A sensor read the device has not answered yet does not hold it up: the set-up
-        preempts it (:meth:`~.answers.AnswerBook.motion_first`), as a move's does.
+        A sensor read the device has not answered yet does not hold it up: for the set-up
+        it is taken as answered by data or nothing (:meth:`~.answers.AnswerBook.motion_first`),
+        as for a move's.
         """
         with self._link.link_lock, self._link.answers.motion_first():
             known = self._setups.known.pop(axis, None)
