@@ -28,85 +28,50 @@ request could own it; the rule, which a newcomer can check against :meth:`delive
   every byte that comes until its own answers are counted (:attr:`Exchange.received`,
   :attr:`Exchange.doubt`): whether its steps were refused is read from the whole, never
   from a byte given by guess.
+- A stop also *preempts* what it would wait for (:meth:`AnswerBook.preempt`, called by the
+  link lock before the stop waits for it): the requests written under the link lock and
+  the setters of the exchange in flight (a posted stream move) end at once, their waiters
+  raising :class:`~.errors.Preempted`; until the stop's hold ends no other byte-answered
+  request is written (the holder's next step raises the same, a writer without the lock
+  waits). So the stop's bytes are the next on the wire, never behind an answer. A
+  preempted setter is late by the rule above (the stop owns its byte as a whole); a
+  preempted getter keeps only its named data and is data-answered from then on, as one
+  left unanswered is. A getter written without the lock is not preempted: superseded, it
+  still takes its data.
+- A motion set-up (:meth:`AnswerBook.motion_first`) does not wait behind a read either: a
+  read in flight without its answer yet, and every getter that ended without one, are
+  data-answered from then on (a getter is answered by data, a NACK or nothing: its NACK
+  is held by the NACK rule, an ACK is never its own; not a getter the device has ACKed on
+  this link), and other threads' byte-answered reads wait until the set-up ends. A stop
+  never preempts another stop.
 """
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator, Sequence
 
+from .answer_records import (
+    Exchange,
+    Held,
+    Item,
+    Request,
+    Waiting,
+    frame_key,
+    is_greeting,
+    label,
+)
+from .errors import Preempted
 from .protocol import Frame, ReplyByte
 
-#: a request to write: (command name for messages, its frame, True when it takes data)
-Request = tuple[str, Frame, bool]
-Item = Frame | ReplyByte
+__all__ = ['LATE_WINDOW_S', 'AnswerBook', 'Exchange', 'Held', 'Item', 'Request', 'Waiting',
+           'frame_key', 'is_greeting', 'label']
 
 #: how long after a request gave up its answer may still come (later, it is taken as lost):
 #: the longest answer time the document names (SCN_StopScan, 500 ms, 4.3.9)
 LATE_WINDOW_S = 0.5
-
-
-def is_greeting(item: Frame) -> bool:
-    """The controller's COM_Connect packet (section 6.1): sent on its own, never an answer."""
-    return 0x0700 <= item.opcode <= 0x07FF and not item.data
-
-
-@dataclass(eq=False)
-class Exchange:
-    """One write: its requests, and for a byte-answered one the bytes it owns."""
-
-    waitings: list[Waiting] = field(default_factory=list)
-    byte: bool = False
-    #: owns every byte that comes while it is in flight (a stop written over late answers)
-    whole: bool = False
-    received: list[ReplyByte] = field(default_factory=list)
-    #: bytes that came while a NACK its next request may own is held (None: counting)
-    pending: list[ReplyByte] | None = None
-    #: why the bytes of this exchange cannot be given one by one ('' when they can)
-    doubt: str = ''
-
-
-@dataclass(eq=False)
-class Waiting:
-    """One written request until it has its answer (or gives up)."""
-
-    name: str
-    frame: Frame
-    expect_data: bool
-    #: a getter that answers data or nothing (see the module docstring); setters: False
-    data_answered: bool
-    written_at: float = 0.0
-    seq: int = 0
-    exchange: Exchange = field(default_factory=Exchange)
-    #: what answered it: its data packet or a reply byte (None: nothing yet)
-    answer: Item | None = None
-    #: the first answer of the wrong kind that came while it alone waited
-    unexpected: str = ''
-    #: why its answer is not certainly its own ('' when it is)
-    doubt: str = ''
-    #: a stop went out while it waited: a byte can no longer be told to be its own (a
-    #: setter gives up at once; a getter still takes its data)
-    superseded: bool = False
-    error: BaseException | None = None
-    done: bool = False
-    #: when its wait ended without an answer (its late answer may come until + window)
-    ended_at: float | None = None
-
-    @property
-    def key(self) -> tuple[int, int]:
-        return frame_key(self.frame)
-
-
-@dataclass(eq=False)
-class Held:
-    """A NACK more than one request could own, until one candidate is left."""
-
-    byte: ReplyByte
-    candidates: list[Waiting]
-    #: the batch whose counting waits for it (its later bytes are its ``pending``)
-    batch: Exchange | None = None
 
 
 class AnswerBook:
@@ -124,9 +89,18 @@ class AnswerBook:
         self._byte: Exchange | None = None
         #: (opcode, axis) of getters answered with data, or left unanswered, on this link
         self._data_keys: set[tuple[int, int]] = set()
+        #: (opcode, axis) of getters the device answered with an ACK: never trusted to
+        #: answer data or nothing (:meth:`_trust`)
+        self._acked_keys: set[tuple[int, int]] = set()
         self.stale = 0
         self.nacks = 0
         self.greetings = 0
+        #: stops that preempted the link and have not ended their hold yet
+        self._stops = 0
+        #: threads running a motion set-up (their own requests go; others' reads wait)
+        self._motions: dict[int, int] = {}
+        #: requests preempted (counted for diagnostics and tests)
+        self.preempted = 0
 
     # ------------------------------------------------------------ the writers
     def reset(self, error: BaseException) -> None:
@@ -134,20 +108,27 @@ class AnswerBook:
         self.fail_all(error)
         with self._cond:
             self._data_keys.clear()
+            self._acked_keys.clear()
 
     def write(self, requests: Sequence[Request], write: Callable[[bytes], None], *,
               urgent: bool = False, block: bool = True, timeout: float = 0.0,
-              ) -> list[Waiting] | None:
+              holds_lock: bool = False) -> list[Waiting] | None:
         """Register ``requests`` as one exchange and write them (``write``, in one call,
         under the book's lock so that write order is the book's order) once the rules
         allow; None when ``block`` is False and they do not allow it now, or ``timeout``
-        s passed. ``urgent`` (a stop) goes out at once."""
+        s passed. ``urgent`` (a stop) goes out at once. ``holds_lock``: the writer holds
+        the link lock, so a stop would wait for this request: a stop preempts it."""
         with self._cond:
             byte = any(not (expect_data and frame_key(frame) in self._data_keys)
                        for _, frame, expect_data in requests)
             keys = {frame_key(frame) for _, frame, expect_data in requests if expect_data}
 
             def allowed() -> bool:
+                if not urgent and self._held_back(requests, byte):
+                    if block and holds_lock and self._stops:  # the holder's next step
+                        raise Preempted(f'{label(requests[0])}: not written, preempted '
+                                        'by a stop')
+                    return False
                 self._expire()
                 if any(w.expect_data and w.key in keys for w in self._late):
                     return False  # its late data would be taken for the new one's
@@ -155,7 +136,7 @@ class AnswerBook:
 
             if not urgent and not self._wait_until(allowed, block, timeout):
                 return None
-            exchange = Exchange(byte=byte)
+            exchange = Exchange(byte=byte, urgent=urgent)
             if byte:
                 self._take_over(exchange)
             now = self._clock()
@@ -164,7 +145,8 @@ class AnswerBook:
                 exchange.waitings.append(Waiting(
                     name, frame, expect_data,
                     data_answered=expect_data and frame_key(frame) in self._data_keys,
-                    written_at=now, seq=self._seq, exchange=exchange))
+                    written_at=now, seq=self._seq, exchange=exchange,
+                    holds_lock=holds_lock))
             self._flight.extend(exchange.waitings)
             try:
                 write(b''.join(frame.encode() for _, frame, _ in requests))
@@ -174,6 +156,98 @@ class AnswerBook:
                     self._byte = None
                 raise
             return exchange.waitings
+
+    # ----------------------------------------------------------- preemption
+    def preempt(self) -> None:
+        """A stop needs the link now: the requests it would wait for end at once, their
+        waiters raising :class:`Preempted` (those written under the link lock, and the
+        setters of the byte-answered exchange in flight: a posted stream move). Until
+        :meth:`preempt_done` no other byte-answered request is written: one under the
+        lock raises the same, one without it waits. The stop (``urgent``) goes at once."""
+        with self._cond:
+            self._stops += 1
+            exchange = self._byte
+            targets = [w for w in (exchange.waitings if exchange is not None else [])
+                       if not w.expect_data]
+            targets += [w for w in self._flight if w.holds_lock]
+            targets = [w for w in targets if not w.exchange.urgent]  # another stop: not cut
+            self._cut_short([w for w in dict.fromkeys(targets)
+                             if w.answer is None and not w.done and w in self._flight])
+
+    def preempt_done(self) -> None:
+        """The stop that preempted has ended its hold: requests go in turn again."""
+        with self._cond:
+            self._stops = max(0, self._stops - 1)
+            self._cond.notify_all()
+
+    @contextlib.contextmanager
+    def motion_first(self) -> Iterator[None]:
+        """``with book.motion_first():`` a motion set-up, on the thread that holds the link
+        lock: a read in flight without its answer yet, and every getter that ended without
+        one, are data-answered from now on (they no longer hold up a byte-answered
+        exchange), and other threads' byte-answered reads wait until it ends."""
+        me = threading.get_ident()
+        with self._cond:
+            self._motions[me] = self._motions.get(me, 0) + 1
+            exchange = self._byte
+            reads = [w for w in (exchange.waitings if exchange is not None else [])
+                     if w.answer is None and not w.done]
+            if exchange is not None and all(w.expect_data for w in reads) and all(
+                    [self._trust(w) for w in reads]):
+                self._byte = None
+            for waiting in self._late:
+                if waiting.expect_data:
+                    self._trust(waiting)
+            self._cond.notify_all()
+        try:
+            yield
+        finally:
+            with self._cond:
+                self._motions[me] -= 1
+                if not self._motions[me]:
+                    del self._motions[me]
+                self._cond.notify_all()
+
+    def _trust(self, waiting: Waiting) -> bool:
+        """A getter answers data or nothing from now on, as one left unanswered: its late
+        NACK is held by the NACK rule, an ACK is never its own. Not one the device has
+        answered with an ACK on this link (False: it stays byte-answered)."""
+        if waiting.key in self._acked_keys:
+            return False
+        waiting.data_answered = True
+        self._data_keys.add(waiting.key)
+        return True
+
+    def _held_back(self, requests: Sequence[Request], byte: bool) -> bool:
+        """Whether a byte-answered write must not go out now: a stop preempted the link,
+        or another thread's motion set-up runs and this is a read."""
+        if not byte:
+            return False
+        if self._stops:
+            return True
+        others = set(self._motions) - {threading.get_ident()}
+        return bool(others) and all(expect_data for _, _, expect_data in requests)
+
+    def _cut_short(self, targets: list[Waiting]) -> None:
+        """End ``targets`` now: they raise :class:`Preempted` and are late by rule (a
+        setter's byte is the stop's to count; a getter keeps only its named data)."""
+        now = self._clock()
+        for waiting in targets:
+            waiting.error = Preempted(f'{label((waiting.name, waiting.frame, False))}: '
+                                      'preempted by a stop (its late answer is counted by '
+                                      'rule, never given to another request)')
+            waiting.superseded = waiting.done = True
+            waiting.ended_at = now
+            if waiting.expect_data:
+                self._trust(waiting)
+            self._late.append(waiting)
+            self.preempted += 1
+        self._flight = [w for w in self._flight if w not in targets]
+        exchange = self._byte
+        if exchange is not None and all(w.answer is not None or w.done
+                                        for w in exchange.waitings):
+            self._byte = None
+        self._cond.notify_all()
 
     def _wait_until(self, allowed: Callable[[], bool], block: bool, timeout: float) -> bool:
         """Wait (up to ``timeout``) until ``allowed``; woken by every answer and by the
@@ -225,6 +299,9 @@ class AnswerBook:
             self._drop([waiting])
             if waiting.answer is None and waiting.error is not None:
                 raise waiting.error
+            if waiting.expect_data and isinstance(waiting.answer, ReplyByte) and (
+                    waiting.answer.is_ack):
+                self._acked_keys.add(waiting.key)  # a getter this device answers by ACK
             if waiting.answer is None:
                 self._give_held_doubtfully(waiting)
             if waiting.answer is None and waiting.ended_at is None:
@@ -441,7 +518,3 @@ class AnswerBook:
     def _resolve_one(waiting: Waiting, item: Item) -> None:
         waiting.answer = item
         waiting.done = True
-
-
-def frame_key(frame: Frame) -> tuple[int, int]:
-    return frame.opcode, frame.axis

@@ -173,6 +173,8 @@ class CaptureScans(DeviceScans):
     """The device's zigzag, snake and square scans (SCN_*); limits in motor degrees."""
 
     patterns = tuple(sorted(SCAN_COMMANDS))
+    #: ``CaptureDevice.stop(None)`` ends with SCN_StopScan: the core's whole stop is one
+    stopped_by_device_stop = True
 
     def __init__(self, device: CaptureDevice) -> None:
         self.device = device

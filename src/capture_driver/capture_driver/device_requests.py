@@ -19,6 +19,7 @@ from .errors import (
     DeviceNack,
     DeviceTimeout,
     NotSupported,
+    Preempted,
     WrongReply,
 )
 from .protocol import (
@@ -137,6 +138,8 @@ class Polls:
         opcode = f'0x{command(name).opcode:04X}'
         try:
             value = self._link.request(name, axis, optional=True)
+        except Preempted:
+            raise  # a stop or a motion command needed the link: not the device's silence
         except DeviceTimeout:
             self.went_unanswered(name, axis)
             raise

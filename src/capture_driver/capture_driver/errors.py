@@ -30,6 +30,15 @@ class BackingOff(DeviceTimeout, unanswered.BackingOff):
     back-off (:attr:`CaptureClient.unanswered`)."""
 
 
+class Preempted(DeviceTimeout):
+    """Ended before its answer because a stop (or a motion command, for a read) needed the
+    link (:meth:`~.answers.AnswerBook.preempt`): nothing of it is retried, its late answer
+    is counted by the answer book's rule, never given to another request. Not silence:
+    it does not count toward calling the device silent, nor back a poll off."""
+
+    reason = 'preempted by a stop'
+
+
 class WrongReply(CaptureError, errors.DeviceRefused):
     """The controller answered, but with the other kind of reply: an ACK byte where the
     request takes a data packet, a data packet where it takes an ACK, or data that does not

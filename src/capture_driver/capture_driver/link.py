@@ -9,13 +9,18 @@ setter, a getter not yet answered with data, a stop's batch) is in flight, and a
 request gives up the next one waits until its late answer came or the late window
 passed. Callers write their requests and wait for their own answers; nobody reads the
 link but the reader. So the joint poll's getters go out while a setter or a slow sensor
-read waits, and a stop goes out at once. Setters go one sequence at a time: they hold the
-device's link lock (:class:`~gimbal_driver_common.link_lock.LinkLock`, which the adapter
-passes in; a client made alone makes its own), and so does the core's command path for
-its sends; a stream move posted without waiting (:meth:`MotionRequests.post_moves`) is
-settled by that lock before the next setter. A controller that drops what it queues
-(batched reads that come back incomplete, see :mod:`.batch`) is driven one request at a
-time instead: then every request holds the lock (:attr:`CaptureLink.overlap` off).
+read waits, and a stop goes out at once: asking for the link lock, it preempts the
+exchange of the lock's holder (the lock's ``preempt`` hook,
+:meth:`.answers.AnswerBook.preempt`: that waiter raises :class:`~.errors.Preempted`, the
+holder gives the lock up, a late answer is the stop's to count); a motion set-up does not
+wait behind a sensor read either (:meth:`.answers.AnswerBook.motion_first`). Setters go
+one sequence at a time: they hold the device's link lock
+(:class:`~gimbal_driver_common.link_lock.LinkLock`, which the adapter passes in; a client
+made alone makes its own), and so does the core's command path for its sends; a stream
+move posted without waiting (:meth:`MotionRequests.post_moves`) is settled by that lock
+before the next setter. A controller that drops what it queues (batched reads that come
+back incomplete, see :mod:`.batch`) is driven one request at a time instead: then every
+request holds the lock (:attr:`CaptureLink.overlap` off).
 
 A getter is answered by its data packet, a setter by a single ACK byte; a NACK byte raises
 :class:`DeviceNack` carrying the spec's meaning and advice. A reply of the other kind (an
@@ -61,7 +66,14 @@ from gimbal_driver_common.transport import ByteStream, TransportError
 from gimbal_driver_common.unanswered import Unanswered
 
 from .answers import AnswerBook, Request, Waiting, is_greeting
-from .errors import CaptureError, DeviceNack, DeviceTimeout, NotConnected, WrongReply
+from .errors import (
+    CaptureError,
+    DeviceNack,
+    DeviceTimeout,
+    NotConnected,
+    Preempted,
+    WrongReply,
+)
 from .protocol import (
     Frame,
     ProtocolError,
@@ -143,6 +155,9 @@ class CaptureLink(Protocol):
         self._decoder = StreamDecoder()
         self._last_input = 0.0
         self.answers = AnswerBook()
+        # a stop asking for the lock ends the exchange in flight at once (see .answers)
+        self._lock.preempt = self.answers.preempt
+        self._lock.preempt_done = self.answers.preempt_done
         self._greeting: Frame | None = None
         self._greeted = threading.Event()
         self._connected = False
@@ -389,6 +404,8 @@ class CaptureLink(Protocol):
                 if exc.code == ReplyCode.WRONG_CHECKSUM and attempt == 1 and not exc.doubt:
                     continue
                 raise
+            except Preempted:
+                raise  # a stop needs the link: not sent again before it
             except (DeviceTimeout, WrongReply) as exc:
                 # A getter changes nothing, so it is retried once (a reply of the wrong kind
                 # is named only when the device gives it twice: noise can look like an ACK
@@ -423,7 +440,7 @@ class CaptureLink(Protocol):
         try:
             waitings = self.answers.write(
                 requests, session.write, urgent=urgent or self._lock.held_urgently(), block=block,
-                timeout=2 * self.timeout + 1.0)
+                timeout=2 * self.timeout + 1.0, holds_lock=self._lock.held())
         except LinkError as exc:
             raise NotConnected(f'{requests[0][0]}: link lost ({exc})') from exc
         # time spent waiting for the link to resynchronise is not the device's silence

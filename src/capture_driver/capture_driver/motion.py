@@ -23,6 +23,7 @@ from .errors import (
     DeviceNack,
     DeviceTimeout,
     NotConnected,
+    Preempted,
 )
 from .link import AxisSetups, CaptureLink, answer_time
 from .protocol import (
@@ -101,7 +102,7 @@ class MotionRequests:
         commanded on the link forgets the armed TUM, and the next move sends it first again.
         """
         speed = abs(speed_deg_s)
-        with self._link.link_lock:
+        with self._link.link_lock, self._link.answers.motion_first():
             known = self._setups.known.pop(axis, None)
             if known is not None and known[0] != 'absolute':
                 known = None  # another mode: the whole set-up goes out
@@ -187,14 +188,22 @@ class MotionRequests:
         False: an ACK was lost (or a NACK says the packet was not executed, 0xF6), so the
         caller sends the moves again with :meth:`move_absolute` (the axes' set-up is
         forgotten: the whole 7.1 sequence goes out). Run under the link lock before its
-        next setter."""
+        next setter. Under a stop's hold (:meth:`LinkLock.urgent`) it writes nothing: a
+        preempted post counts as written, and no TUM is armed (the next move sends it)."""
         with self._link.link_lock:
             if self._link.stream is not posted.stream:
                 for axis in posted.moves:
                     self._setups.known.pop(axis, None)
                 raise NotConnected(f'stream move: link closed before its ACKs came '
                                    f'({self._link.last_error})')
-            error, resend = self._posted_answers(posted)
+            try:
+                error, resend = self._posted_answers(posted)
+            except Preempted:
+                # a stop cut its answers short: they are the stop's to count, and the move
+                # was written; the next move sends the whole set-up again
+                for axis in posted.moves:
+                    self._setups.known.pop(axis, None)
+                return True
             if error is not None or resend:
                 for axis in posted.moves:
                     self._setups.known.pop(axis, None)
@@ -202,6 +211,8 @@ class MotionRequests:
                 raise error
             if resend:
                 return False
+            if self._link.link_lock.held_urgently():
+                return True  # a stop's hold writes nothing before the stop: no TUM now
             for axis, (_, speed, acceleration) in posted.moves.items():
                 if self._setups.known.get(axis) == ('absolute', acceleration, abs(speed), False):
                     self._setups.known[axis] = ('absolute', acceleration, abs(speed),
@@ -240,8 +251,12 @@ class MotionRequests:
         Speed mode and an unchanged acceleration are left out when this client's last
         set-up of the axis left it in speed mode (a jog or a stop) and nothing else was
         commanded since: a stream of jog commands costs 2 round trips each, not 4.
+
+        A sensor read the device has not answered yet does not hold it up: for the set-up
+        it is taken as answered by data or nothing (:meth:`~.answers.AnswerBook.motion_first`),
+        as for a move's.
         """
-        with self._link.link_lock:
+        with self._link.link_lock, self._link.answers.motion_first():
             known = self._setups.known.pop(axis, None)
             if known is not None and known[0] != 'speed':
                 known = None  # another mode: the whole set-up goes out
@@ -278,7 +293,10 @@ class MotionRequests:
         would drop the rest of one write; still none is skipped.) Each answer waits
         its own time (the request timeout; SCN_StopScan its 500 ms plus
         :data:`~.link.ANSWER_MARGIN_S`). Whether the axes came to rest is the core's to
-        confirm from the joint samples; these answers say only what the device said.
+        confirm from the joint samples; these answers say only what the device said. An
+        axis is remembered in speed mode (the next jog leaves MOT_SetSpeedMode out) only
+        when each of its steps is known ACKed: one refused while a scan ran (0xA6), or
+        answered only as a whole, gets the whole set-up again.
         """
         link = self._link
         with link.link_lock:
@@ -298,10 +316,15 @@ class MotionRequests:
                     [waiting] = link.write([request], urgent=True) or []
                     waitings.append(waiting)
                     answers.append(link.answer(waiting, self._deadline(waiting)))
-            for axis in axes:
-                self._setups.known[axis] = ('speed', None, 0.0, False)
+            exchange = waitings[0].exchange if waitings else None
+            for axis in axes:  # in speed mode only where each step is known ACKed
+                steps = [a for w, a in zip(waitings, answers, strict=True)
+                         if w.frame.axis == axis and w.name in dict(AXIS_STOP)]
+                if not (exchange is not None and exchange.whole) and len(steps) == len(
+                        AXIS_STOP) and all(isinstance(a, ReplyByte) and a.is_ack
+                                           for a in steps):
+                    self._setups.known[axis] = ('speed', None, 0.0, False)
         result = StopAnswers(len(waitings))
-        exchange = waitings[0].exchange if waitings else None
         if all(answer is None for answer in answers) and waitings:
             link.count_timeout('stop')
         if exchange is not None and exchange.whole:

@@ -3,9 +3,12 @@ when requests may overlap (capture_driver/answers.py)."""
 
 from __future__ import annotations
 
+import threading
+
 import pytest
 
 from capture_driver.answers import LATE_WINDOW_S, AnswerBook, Waiting
+from capture_driver.errors import Preempted
 from capture_driver.protocol import Frame, ReplyByte, ReplyCode, command
 
 ACK, NACK = ReplyByte(ReplyCode.ACK), ReplyByte(ReplyCode.INVALID_COMMAND)
@@ -269,3 +272,145 @@ def test_a_writer_held_by_a_late_answer_goes_out_when_the_window_ends_without_an
     [update] = book.write([setter('MOT_Update', 1)], wire, timeout=1.0)
     assert book.wait(update, 0.0) is None
     assert book.write([setter('MOT_Update', 1)], wire, timeout=30.0) is not None
+
+
+STOP = [setter('MOT_SetSpeedMode', 1), setter('MOT_SetSpeed', 1, 0.0), setter('MOT_Update', 1)]
+
+
+def in_another_thread(call):
+    """What ``call`` returns when run by another thread (one that holds no motion set-up)."""
+    result: list[object] = []
+    thread = threading.Thread(target=lambda: result.append(call()), daemon=True)
+    thread.start()
+    thread.join(10.0)
+    return result[0]
+
+
+def test_a_stop_preempts_the_setter_of_the_lock_holder_and_owns_its_late_byte() -> None:
+    """Issue 44 item 1: a stop never waits for the exchange in flight. ``preempt`` (the link
+    lock's hook, before the stop waits for the lock) ends the holder's setter at once, with
+    Preempted, not at its timeout; the holder's next step is not written, a writer without
+    the lock waits its turn; the stop goes out at once and counts the preempted setter's
+    late ACK with its own, as a whole. After the stop the late window holds, as after any
+    request that ended without its answer."""
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    [acc] = book.write([setter('MOT_SetAcceleration', 1, 50.0)], wire, timeout=1.0,
+                       holds_lock=True)
+    book.preempt()
+    with pytest.raises(Preempted, match=r'MOT_SetAcceleration \(axis 1\): preempted by a stop'):
+        book.wait(acc, clock.now + 60.0)  # ends at once: it was preempted
+    with pytest.raises(Preempted, match=r'MOT_SetSpeed \(axis 1\): not written'):
+        book.write([setter('MOT_SetSpeed', 1, 5.0)], wire, timeout=1.0, holds_lock=True)
+    assert book.write([getter('COM_GetPn', 0)], wire, block=False) is None
+    assert len(wire.writes) == 1
+    stop = book.write(STOP, wire, urgent=True, block=False) or []
+    assert len(stop) == 3 and len(wire.writes) == 2  # the next bytes on the wire
+    for byte in (ACK, ACK, ACK, ACK):  # the late ACK of the preempted setter, then the stop's
+        book.deliver(byte)
+    assert [book.wait(w, clock.now) for w in stop] == [ACK, ACK, ACK]
+    exchange = stop[0].exchange
+    assert exchange.whole and 'MOT_SetAcceleration' in exchange.doubt
+    assert exchange.received == [ACK, ACK, ACK, ACK]
+    book.preempt_done()
+    assert book.write([setter('MOT_SetSpeed', 1, 5.0)], wire, block=False) is None
+    clock.now += LATE_WINDOW_S
+    assert book.write([setter('MOT_SetSpeed', 1, 5.0)], wire, block=False) is not None
+    assert book.preempted == 1
+
+
+def test_a_stop_preempts_a_getter_under_the_lock_whose_late_data_is_then_stale() -> None:
+    """A getter written under the link lock (one a stop would wait for) is preempted too;
+    its data, named, is counted stale when it comes, never given to a later read."""
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    [roll] = book.write([getter('IMU_GetRoll', 0)], wire, timeout=1.0, holds_lock=True)
+    book.preempt()
+    with pytest.raises(Preempted, match='IMU_GetRoll: preempted by a stop'):
+        book.wait(roll, clock.now + 60.0)
+    book.write(STOP, wire, urgent=True, block=False)
+    assert not book.deliver(data('IMU_GetRoll', 0))  # its own late data: stale
+    book.preempt_done()
+    [again] = book.write([getter('IMU_GetRoll', 0)], wire, block=False) or []
+    assert again.data_answered  # answers data or nothing: it overlaps from now on
+
+
+def test_a_stop_does_not_preempt_a_read_written_without_the_lock() -> None:
+    """A read nobody holds the lock for does not hold up the stop: superseded, it still
+    takes its named data."""
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    [pn] = book.write([getter('COM_GetPn', 0)], wire, timeout=1.0)
+    book.preempt()
+    book.write(STOP, wire, urgent=True, block=False)
+    book.deliver(data('COM_GetPn', 0))
+    assert isinstance(book.wait(pn, clock.now), Frame) and book.preempted == 0
+    book.preempt_done()
+
+
+def test_a_motion_set_up_goes_out_over_a_read_not_answered_yet() -> None:
+    """Issue 44 (the conformance gap ('jog', 'IMU_GetRoll')): a read the device has not
+    answered yet no longer holds up a motion set-up. Inside ``motion_first`` the read is
+    data-answered (data, a NACK or nothing: an ACK is never its own), the set-up's setter is
+    written at once, another thread's unknown read waits until the set-up ends, and a
+    NACK either could own is held until the other is answered."""
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    [roll] = book.write([getter('IMU_GetRoll', 0)], wire, timeout=1.0)
+    assert book.write([setter('MOT_SetSpeedMode', 1)], wire, block=False) is None  # before
+    with book.motion_first():
+        [mode] = book.write([setter('MOT_SetSpeedMode', 1)], wire, block=False,
+                            holds_lock=True) or []
+        assert in_another_thread(
+            lambda: book.write([getter('COM_GetPn', 0)], wire, block=False)) is None
+        book.deliver(NACK)  # the read's or the setter's: held, nobody's yet
+        assert not mode.done and not roll.done
+        book.deliver(ACK)  # the setter's: a read is never answered by an ACK
+        assert book.wait(mode, clock.now) == ACK and not mode.doubt
+        assert book.wait(roll, clock.now) == NACK  # the held NACK: the read's
+    assert in_another_thread(
+        lambda: book.write([getter('COM_GetPn', 0)], wire, block=False)) is not None
+
+
+def test_a_motion_set_up_does_not_wait_for_the_late_window_of_a_read() -> None:
+    """A read that timed out may still be answered: the next setter waits for its late
+    window, but a motion set-up does not (its late NACK is held, its data is named)."""
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    [roll] = book.write([getter('IMU_GetRoll', 0)], wire, timeout=1.0)
+    assert book.wait(roll, clock.now) is None
+    assert book.write([setter('MOT_SetSpeedMode', 1)], wire, block=False) is None
+    with book.motion_first():
+        [mode] = book.write([setter('MOT_SetSpeedMode', 1)], wire, block=False,
+                            holds_lock=True) or []
+        book.deliver(data('IMU_GetRoll', 0))  # the read's late data: stale, not the step's
+        book.deliver(ACK)
+        assert book.wait(mode, clock.now) == ACK
+
+
+def test_a_stop_does_not_preempt_another_stop_in_flight() -> None:
+    """Two stops at once (the dead-man stop, a resent one, ~/stop): the second does not cut
+    the first's answers short; both are written."""
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    first = book.write(STOP, wire, urgent=True, holds_lock=True) or []
+    book.preempt()
+    assert not any(w.done for w in first) and book.preempted == 0
+    assert book.write(STOP, wire, urgent=True, block=False) is not None
+    book.preempt_done()
+    assert len(wire.writes) == 2
+
+
+def test_a_read_the_device_answered_with_an_ack_still_holds_up_a_motion_set_up() -> None:
+    """A getter this device answers with an ACK (a controller that acknowledges what it does
+    not know) could own the set-up's ACK: it is not trusted, and the setter waits."""
+    clock = Clock()
+    book, wire = AnswerBook(clock), Wire()
+    [pn] = book.write([getter('COM_GetPn', 0)], wire, timeout=1.0)
+    book.deliver(ACK)
+    assert book.wait(pn, clock.now) == ACK
+    [again] = book.write([getter('COM_GetPn', 0)], wire, timeout=1.0) or []
+    with book.motion_first():
+        assert book.write([setter('MOT_SetSpeedMode', 1)], wire, block=False,
+                          holds_lock=True) is None
+    assert not again.data_answered

@@ -270,6 +270,11 @@ def test_device_scan_converts_limits_and_stop_ends_it(tcp_rig):
     log = [BY_OPCODE[f.opcode].name for f in list(tcp_rig.sim.model.requests)[before:]
            if f.opcode in BY_OPCODE]
     assert log.index('MOT_Update') < log.index('SCN_StopScan')
+    assert log.count('SCN_StopScan') == 1  # the whole stop once (stopped_by_device_stop)
+    # the axes refused their steps while scanning: the next jog sets speed mode itself
+    tcp_rig.device.jog({'pan': 0.3})  # the adapter's own jog: no dead-man stop ends it
+    wait_for(lambda: tcp_rig.sim_axis(1).velocity != 0.0, 10.0, 'the jog after the scan')
+    ctl.stop()
     with pytest.raises(InvalidRequest, match='zigzag'):
         motion.start_scan(ScanRequest('sector', -0.2, 0.2, 0.0, 0.0, 0.3, 0.1, 0.0))
 

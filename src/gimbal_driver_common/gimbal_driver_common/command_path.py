@@ -8,8 +8,9 @@ packets). Everything else, and the answers of a post, is the command thread's: i
 settles a posted write (``Device.settle``), sends again the moves whose answers were
 lost unless a stop or a newer move for the joint went out since, and sends the queue
 with ``Device.move`` and ``Device.jog``. Any other send (move_to, a stop) settles a
-posted write first, so a stop goes after the send in flight and nothing stale follows
-it. The caller never waits for a device answer nor behind another send: the one
+posted write first, so nothing stale follows it; a stop preempts the exchange in flight
+where the device can (``LinkLock.preempt``) and under its hold sends nothing again before
+itself. The caller never waits for a device answer nor behind another send: the one
 non-blocking try is here, on the device's link lock (:attr:`CommandPath.link_lock`, the
 :class:`~gimbal_driver_common.link_lock.LinkLock` the ``Device`` base owns). A
 request/reply client takes that same lock around each exchange (its poll, sensors and
@@ -139,8 +140,9 @@ class CommandPath:
              urgent: bool = False) -> None:
         """Run another send (move_to, a stop) now: the queued commands of ``joints``
         (None: all) are dropped, a posted write is settled first and not sent again for
-        them. ``urgent`` (a stop): next on the link after the exchange in flight, ahead of
-        every queued read. The caller's own refusals raise (device_boundary)."""
+        them. ``urgent`` (a stop): the exchange in flight preempted where the device can
+        (``LinkLock.preempt``), ahead of every queued read. The caller's own refusals
+        raise (device_boundary)."""
         self.drop(joints)  # before the lock's settle, which would send them again
         with self.link_lock.urgent() if urgent else self.link_lock:
             self.drop(joints)  # and what the caller queued meanwhile
@@ -180,7 +182,9 @@ class CommandPath:
     def _settle_posted(self) -> None:
         """Read a posted write's answers (the lock's ``before_use``: every holder, from any
         thread, runs it before its own exchange); send its moves again when answers
-        were lost, unless superseded (a stop, a newer move or a queued one)."""
+        were lost, unless superseded (a stop, a newer move or a queued one). Under a
+        stop's hold they are queued for the command thread instead: nothing waits for
+        an answer before the stop goes out."""
         posted, self._posted = self._posted, None
         if posted is None:
             return
@@ -192,6 +196,12 @@ class CommandPath:
             return
         with self._queue_lock:
             live = {j: m for j, m in posted.moves.items() if j not in self._pending}
+            if not answered and live and self.link_lock.held_urgently():
+                # a stop's hold writes nothing before the stop: the moves go after it
+                for joint, (target, speed) in live.items():
+                    self._pending[joint] = ('move', target, speed)
+                self.ready.set()
+                return
         if not answered and live:
             try:
                 with device_boundary():

@@ -137,6 +137,10 @@ class DeviceScans(abc.ABC):
     """Scans the device runs itself; patterns it does not know run driver-side."""
 
     patterns: Sequence[str] = ()
+    #: True when the device's whole stop (``Device.stop(None)``) already ends its scans:
+    #: a stop of every axis (~/stop, a resent stop) then does not call :meth:`stop` after
+    #: it, which would send the same stop twice (Capture's stop ends with SCN_StopScan)
+    stopped_by_device_stop: bool = False
 
     @abc.abstractmethod
     def start(self, request: ScanRequest) -> str:

@@ -52,6 +52,11 @@ class FairRLock:
         gate.acquire()  # released by the holder that hands the lock to this thread
         return True
 
+    def held(self) -> bool:
+        """Whether the calling thread holds the lock."""
+        with self._mutex:
+            return self._owner == threading.get_ident()
+
     def held_urgently(self) -> bool:
         """Whether the calling thread holds the lock and took it urgently."""
         with self._mutex:

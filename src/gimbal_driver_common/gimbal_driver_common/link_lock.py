@@ -19,8 +19,13 @@ only when nothing is posted.
 
 Fair (:class:`~gimbal_driver_common.fair_lock.FairRLock`): a command stream sent back to
 back does not starve the joint poll. A stop (``~/stop``, the dead-man stop, a cancelled
-goal's stop) holds it with :meth:`LinkLock.urgent`: it goes next after the exchange in
-flight, ahead of every queued read.
+goal's stop) holds it with :meth:`LinkLock.urgent`: ahead of every queued exchange, and it
+does not wait for the one in flight either when the device can cut that short: the lock
+first calls ``preempt`` (Capture: the answer book ends the exchange in flight at once, its
+waiter fails "preempted by a stop", no request of the holder goes out before the stop, and
+a late answer is the stop's to count by rule), then ``preempt_done`` when the stop's hold
+ends. The core's defaults do nothing: a device that sets neither has a stop wait for the
+exchange in flight, as a write-only device never has one.
 """
 
 from __future__ import annotations
@@ -40,6 +45,11 @@ class LinkLock:
         #: it to settle a posted write (it must take the write off before reading its
         #: answers: the reading holds this lock again)
         self.before_use: Callable[[], None] = lambda: None
+        #: run by :meth:`urgent` before it waits for the lock: the device ends the exchange
+        #: in flight now (its waiter fails) so that the holder gives the lock up at once;
+        #: ``preempt_done`` runs when that stop's hold ends (set together, by the client)
+        self.preempt: Callable[[], None] = lambda: None
+        self.preempt_done: Callable[[], None] = lambda: None
 
     def __enter__(self) -> LinkLock:
         self.hold()
@@ -60,12 +70,22 @@ class LinkLock:
 
     @contextlib.contextmanager
     def urgent(self) -> Iterator[LinkLock]:
-        """``with lock.urgent():`` a stop's exchange, next after the one in flight."""
-        self.hold(urgent=True)
+        """``with lock.urgent():`` a stop's exchange: the one in flight preempted
+        (``preempt``), then ahead of every queued exchange."""
+        self.preempt()
         try:
-            yield self
+            self.hold(urgent=True)
+            try:
+                yield self
+            finally:
+                self._lock.release()
         finally:
-            self._lock.release()
+            self.preempt_done()
+
+    def held(self) -> bool:
+        """Whether the calling thread holds the lock (a request it writes is one a stop
+        would wait for: the client lets the stop preempt it)."""
+        return self._lock.held()
 
     def held_urgently(self) -> bool:
         """Whether the calling thread holds the lock for a stop (:meth:`urgent`): a

@@ -61,7 +61,7 @@ class Stopping:
         def send() -> None:
             steps.run(device.stop, None if joints is None else list(joints))
             scans = device.capabilities.scans
-            if scans is not None and joints is None:
+            if scans is not None and joints is None and not scans.stopped_by_device_stop:
                 steps.run(scans.stop)
 
         self.watch.stopped(self.config.joint_names if joints is None else joints)

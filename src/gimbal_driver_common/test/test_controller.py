@@ -629,6 +629,21 @@ def test_a_stop_supersedes_a_posted_move_whose_answer_was_lost(posting) -> None:
     assert 'pan' not in controller.commanded_targets
 
 
+def test_a_stops_hold_sends_no_lost_posted_move_before_the_stop(posting) -> None:
+    """A stop of pan settles a posted pan + tilt move whose answers were lost: tilt's move
+    goes out again, but after the stop, from the command thread; nothing waits for an
+    answer under the stop's hold before the stop is written."""
+    controller, device = posting
+    device.lose_answers = 1
+    with command_thread_asleep(controller):
+        controller.command(['pan', 'tilt'], [0.2, 0.3], [])
+        controller.stop_joints(['pan'])
+        assert device.kinds() == ['post', 'stop']
+    wait_for(lambda: ('move', {'tilt': (0.3, None)}) in device.sent, 2.0, 'the resend')
+    assert device.kinds() == ['post', 'stop', 'move']
+    assert device.move_threads == ['commands']
+
+
 def test_a_newer_queued_move_is_sent_instead_of_a_lost_posted_one(posting) -> None:
     controller, device = posting
     device.lose_answers = 1

@@ -63,3 +63,38 @@ def test_a_settle_that_raises_gives_the_lock_back() -> None:
     done.set()
     thread.join(5.0)
     assert not thread.is_alive()
+
+
+def test_a_stop_preempts_the_holder_before_it_waits_and_ends_the_preemption_after() -> None:
+    """``urgent`` calls ``preempt`` first, so a device can end the exchange in flight (its
+    holder gives the lock up at once, not at a timeout), and ``preempt_done`` after the
+    stop's hold; a device that sets neither has the stop wait for the holder."""
+    lock, events = LinkLock(), []
+    thread, _, done = holder(lock)
+
+    def preempt() -> None:
+        events.append('preempt')
+        done.set()  # the device ends the holder's exchange: it gives the lock up
+
+    lock.preempt = preempt
+    lock.preempt_done = lambda: events.append('done')
+    with lock.urgent():
+        events.append('stop holds the lock')
+        assert lock.held() and lock.held_urgently()
+    thread.join(5.0)
+    assert events == ['preempt', 'stop holds the lock', 'done']
+    assert not lock.held()
+
+
+def test_the_preemption_ends_even_when_the_settle_under_a_stop_raises() -> None:
+    lock, events = LinkLock(), []
+    lock.preempt = lambda: events.append('preempt')
+    lock.preempt_done = lambda: events.append('done')
+
+    def fail() -> None:
+        raise RuntimeError('link gone while settling')
+
+    lock.before_use = fail
+    with pytest.raises(RuntimeError), lock.urgent():
+        pass
+    assert events == ['preempt', 'done']

@@ -173,6 +173,20 @@ def test_a_failing_step_skips_no_other_and_every_failure_is_reported(rig) -> Non
     assert 'scan stop NACK' in str(raised.value)
 
 
+def test_a_device_whose_stop_ends_its_scans_is_sent_its_stop_once(rig) -> None:
+    """Capture's whole stop ends with SCN_StopScan: a scans object that says so
+    (``stopped_by_device_stop``) is not stopped again after it; a partial stop and a
+    device that does not say so are as before."""
+    scans = rig.device.capabilities.scans = Scans(rig.device)
+    scans.stopped_by_device_stop = True
+    rig.ctl.stops.send(None)
+    assert [kind for kind, _ in rig.device.sent] == ['stop']  # once: not again as scans
+    scans.stopped_by_device_stop = False
+    rig.ctl.stops.send(None)
+    rig.ctl.stops.send(['pan'])  # a partial stop never stops scans
+    assert [kind for kind, _ in rig.device.sent] == ['stop', 'stop', 'scan_stop', 'stop']
+
+
 def test_the_device_is_stopped_even_when_the_scan_stop_fails(rig) -> None:
     rig.device.capabilities.scans = Scans(rig.device)
     rig.device.fail = {'scan_stop': DeviceTimeout('SCN_StopScan: no reply')}
