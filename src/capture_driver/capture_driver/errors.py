@@ -30,7 +30,7 @@ class BackingOff(DeviceTimeout, unanswered.BackingOff):
     back-off (:attr:`CaptureClient.unanswered`)."""
 
 
-class Preempted(DeviceTimeout):
+class Preempted(DeviceTimeout, errors.Preempted):
     """Ended before its answer because a stop (or a motion command, for a read) needed the
     link (:meth:`~.answers.AnswerBook.preempt`): nothing of it is retried, its late answer
     is counted by the answer book's rule, never given to another request. Not silence:

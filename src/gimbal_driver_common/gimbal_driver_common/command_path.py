@@ -27,13 +27,50 @@ import time
 from collections.abc import Callable, Sequence
 
 from gimbal_driver_common.device import Device, Moves, PostedWrite
-from gimbal_driver_common.errors import DeviceRefused, GimbalError, device_boundary
+from gimbal_driver_common.errors import DeviceRefused, GimbalError, Preempted, device_boundary
 from gimbal_driver_common.rejections import CommandRejections
 
 __all__ = ['CommandPath', 'yield_core']
 
 #: joint -> ('move', target, speed) or ('jog', velocity, None)
 Pending = dict[str, tuple[str, float, float | None]]
+
+
+class StopLedger:
+    """The stops sent, numbered, so that a send a stop preempted (:class:`Preempted`)
+    can tell whether a stop since it began covered its joints: then it stays undone;
+    else (the dead-man stop of another joint) it goes out again after the stop."""
+
+    #: stops remembered; a send that began before the oldest counts as stopped
+    KEPT = 64
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._count = 0
+        self._stops: list[tuple[int, frozenset[str] | None]] = []
+
+    def mark(self) -> int:
+        """Where a send begins: :meth:`stopped_since` looks at the stops after it."""
+        return self._count
+
+    def record(self, joints: Sequence[str] | None) -> None:
+        with self._lock:
+            self._count += 1
+            self._stops.append((self._count, None if joints is None else frozenset(joints)))
+            del self._stops[:-self.KEPT]
+
+    def stopped_since(self, mark: int) -> frozenset[str] | None:
+        """The joints stopped after ``mark`` (None: every joint)."""
+        with self._lock:
+            if self._stops and self._stops[0][0] > mark + 1:
+                return None  # older than what is kept: take it as stopped
+            covered: set[str] = set()
+            for number, joints in self._stops:
+                if number > mark:
+                    if joints is None:
+                        return None
+                    covered |= joints
+            return frozenset(covered)
 
 
 def yield_core() -> None:
@@ -81,6 +118,9 @@ class CommandPath:
         self._posted: PostedWrite | None = None
         self.ready = threading.Event()
         self._stopping = threading.Event()
+        #: the stops sent: a move or jog a stop preempted goes out again after it when
+        #: the stop did not cover its joints
+        self.stops = StopLedger()
 
     # ------------------------------------------------------------ the caller
     def submit(self, moves: Moves, jogs: dict[str, float]) -> None:
@@ -144,9 +184,25 @@ class CommandPath:
         (``LinkLock.preempt``), ahead of every queued read. The caller's own refusals
         raise (device_boundary)."""
         self.drop(joints)  # before the lock's settle, which would send them again
-        with self.link_lock.urgent() if urgent else self.link_lock:
-            self.drop(joints)  # and what the caller queued meanwhile
-            with device_boundary():
+        if urgent:
+            self.stops.record(joints)
+            with self.link_lock.urgent():
+                self.drop(joints)  # and what the caller queued meanwhile
+                with device_boundary():
+                    request()
+            return
+        mark = self.stops.mark()
+        try:
+            with self.link_lock:
+                self.drop(joints)
+                with device_boundary():
+                    request()
+        except Preempted:
+            stopped = self.stops.stopped_since(mark)
+            if stopped is None or joints is None or stopped & set(joints):
+                raise
+            # a stop of other joints went first: this send once more, after it
+            with self.link_lock, device_boundary():
                 request()
 
     def drop(self, joints: Sequence[str] | None) -> None:
@@ -222,18 +278,38 @@ class CommandPath:
             self.rejections.record(DeviceRefused(refusal, reason='device not connected'))
             return
         moves, jogs = _split(pending)
+        mark = self.stops.mark()
         try:
             with device_boundary():
                 if moves:
                     self.device.move(moves)
                 if jogs:
                     self.device.jog(jogs)
+        except Preempted as exc:
+            if not self._requeue_preempted(pending, mark):
+                self.rejections.record(exc, sent=True)
+            return
         except GimbalError as exc:
             self.rejections.record(exc, sent=True)
             return
         if jogs:
             self._record_jogs(jogs)
         self._record_targets({joint: move[0] for joint, move in moves.items()})
+
+
+    def _requeue_preempted(self, pending: Pending, mark: int) -> bool:
+        """A stop preempted these commands: queue again, for after it, those of joints
+        it did not stop and no newer command replaced. True when any was."""
+        stopped = self.stops.stopped_since(mark)
+        if stopped is None:
+            return False
+        with self._queue_lock:
+            again = {j: c for j, c in pending.items()
+                     if j not in stopped and j not in self._pending}
+            self._pending.update(again)
+        if again:
+            self.ready.set()
+        return bool(again)
 
 
 def _split(pending: Pending) -> tuple[Moves, dict[str, float]]:

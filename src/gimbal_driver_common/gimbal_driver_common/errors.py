@@ -42,6 +42,15 @@ class DeviceTimeout(GimbalError, TimeoutError):
     reason = 'no answer from the device'
 
 
+class Preempted(DeviceTimeout):
+    """Ended before its answer because a stop needed the link at once
+    (``LinkLock.preempt``): not the device's silence. The command path sends a preempted
+    move or jog again after the stop, once, where the stop did not cover its joints
+    (:class:`~gimbal_driver_common.command_path.CommandPath`)."""
+
+    reason = 'preempted by a stop'
+
+
 class DeviceRefused(GimbalError):
     """The device, or the driver on its behalf, refused: NACK, off/faulted axis, busy."""
 
