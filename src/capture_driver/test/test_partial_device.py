@@ -32,13 +32,13 @@ from gimbal_driver_testing import ManualClock, wait_for
 LOG = logging.getLogger('test_partial_device')
 POLL = [(name, axis) for axis in (1, 2) for name in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')]
 THIRD_PARTY = {'known_commands': ['third-party'], 'ack_unknown': True}
+PARTIAL = {'known_commands': ['partial']}
 #: s: the client's timeout while a test needs the simulator's answer. The simulator runs in
 #: the test's process: each round trip hands the GIL from thread to thread several times,
 #: and on a loaded core the thread holding it may be preempted, so every other thread waits
 #: for it to run again (a getter pinned to one core beside 8 busy processes and one busy
 #: thread: 0.2 ms median, 106 ms at worst; docs/testing.md)
 ANSWER_TIMEOUT_S = 5.0
-PARTIAL = {'known_commands': ['partial']}
 
 
 @pytest.fixture
