@@ -369,7 +369,8 @@ def start_processes(targets: list[DemoTarget], domain: int, stop: threading.Even
         from demo_targets import common_parameters
 
         params = parameter_arguments({**common_parameters(target),
-                                      **target.spec.parameters(target.workdir, target.port)})
+                                      **target.spec.parameters(target.workdir, target.port),
+                                      **target.spec.demo.node_parameters})
         target.node = ManagedProcess.ros(
             target.spec.package, target.spec.node_executable, domain,
             ['--ros-args', '-r', f'__ns:={target.namespace}', *params])

@@ -29,7 +29,10 @@ SPEC = DriverSpec(
         jog_velocity=0.3,
         scan={'pattern': 'snake', 'pan_min': -0.2, 'pan_max': 0.2, 'tilt_min': 0.0,
               'tilt_max': 0.2, 'speed': 0.5, 'tilt_step': 0.1},
-        extra_steps=(('home', ''),)),
+        extra_steps=(('home', ''),),
+        # the simulator's answers waited for on a busy machine: MOT_Homing, a setter, is not
+        # sent twice, and one answered after the default 0.5 s failed the demo's homing
+        node_parameters={'request_timeout': 2.0}),
     soak=SoakSettings(extra_services={'set_stabilization': 'std_srvs/srv/SetBool',
                                       'command': 'gimbal_msgs/srv/DeviceCommand'}),
     bench=BenchSettings(module='capture'),

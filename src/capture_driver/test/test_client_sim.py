@@ -304,8 +304,9 @@ def _reopens(c: CaptureClient) -> bool:
 
 
 def test_silent_device_closes_the_link(sim):
-    c = tcp_client(sim, timeout=0.1, max_timeouts=2)
+    c = tcp_client(sim, max_timeouts=2)
     c.connect()
+    c.timeout = 0.1  # short where nothing is to come: the answers before and after get theirs
     sim.set_silent(True)
     # a getter and its retry unanswered: max_timeouts request timeouts of silence. A retry
     # held past its write bound on a loaded machine raises DeviceTimeout ('the link stayed
@@ -316,6 +317,7 @@ def test_silent_device_closes_the_link(sim):
                 c.request('MOT_GetLoadPosition', 1)
     assert not c.connected
     sim.set_silent(False)
+    c.timeout = REQUEST_TIMEOUT
     c.connect()
     assert c.read_axis(1)[0] == 0.0
     c.close()
@@ -325,8 +327,9 @@ def test_a_lost_keepalive_answer_is_asked_again_without_a_back_off(sim):
     """The idle link's ping is the controller's supervision: one lost answer must not hold
     the next ping for the optional polls' back-off (1 s), past the 3 x 0.3 s the controller
     allows before it powers the axes off."""
-    c = tcp_client(sim, keepalive_period=0.3, timeout=0.1)
+    c = tcp_client(sim, keepalive_period=0.3)
     c.connect()
+    c.timeout = 0.1  # the lost answer's wait (a ping answered late counts as lost: the same)
     c.start()
     ping = COMMANDS['COM_IsKeepAliveOn'].opcode
 
@@ -768,14 +771,16 @@ def test_batched_reads_off_reads_one_at_a_time(sim):
 
 
 def test_silent_device_during_batched_reads_closes_the_link(sim):
-    c = tcp_client(sim, timeout=0.1, max_timeouts=3)
+    c = tcp_client(sim, max_timeouts=3)
     c.connect()
+    c.timeout = 0.1
     sim.set_silent(True)
     # the silent batch counts once, then the first read alone and its retry: link closed
     with pytest.raises(NotConnected, match='device silent'):
         c.read_many(POLL)
     assert not c.connected and c.stats['timeouts'] == 3
     sim.set_silent(False)
+    c.timeout = REQUEST_TIMEOUT
     c.connect()
     assert c.read_many(POLL) == [0.0] * 4
     c.close()

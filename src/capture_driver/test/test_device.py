@@ -135,7 +135,15 @@ def test_poll_reads_batched_or_falls_back_and_says_so_without_a_warning(sim, dro
                  f'link.reads = {expected}')
         sim.model.set_pose(1, -5.0)
         rig.wait_positions({'pan': math.radians(5.0)})  # still polling
-        assert _device_part(rig).level == Level.OK
+        # OK while it says how it reads: a status register answered after its 0.5 s on a
+        # loaded machine (the simulator shares this process) is named unanswered at WARN
+        # until it is asked again after its back-off (issue 45), a WARN of that read, not
+        # of the way the poll reads; the way it reads never leaves OK
+        try:
+            wait_for(lambda: _device_part(rig).level == Level.OK, 30.0, 'device status OK')
+        except TimeoutError:
+            raise AssertionError(f'device status: {_device_part(rig).message}') from None
+        assert dict(_device_part(rig).values).get('link.reads') == expected
         assert rig.device.client.batching is not drops_queued
     finally:
         rig.close()

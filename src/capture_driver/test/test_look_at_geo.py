@@ -23,6 +23,14 @@ class TestCaptureLookAtGeo(LookAtGeoSuite):
     driver = 'capture'
     pose = TestPose(GeoPoint(32.1040, 34.8915, 65.43), heading=30.0)  # level: heading only
 
+    def node_parameters(self) -> list[str]:
+        """The suite's, with every answer of the simulator waited for (nothing here is
+        meant to go unanswered): the simulator shares the test process with the ROS
+        client, and on a loaded machine a GPS_PositionReady read answered after the
+        default 0.5 s made a refusal name the timeout instead of the missing fix, and its
+        back-off the next goal's (issue 45, docs/testing.md)."""
+        return [*super().node_parameters(), 'request_timeout:=5.0']
+
     def apply_pose(self, rig: ConformanceRig, pose: TestPose) -> None:
         self.set_site(rig, None)
         position = pose.position

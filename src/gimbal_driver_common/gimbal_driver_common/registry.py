@@ -53,13 +53,17 @@ class DemoSettings:
     ``scan``: the ``gimbal_msgs/srv/StartScan`` request fields of the scan step (None: no
     scan). ``extra_steps``: ``(label, 'module:function')``; a function takes the demo target
     and the ROS client and returns a one-line result (it raises on failure). The label
-    ``home`` with no reference runs the common ``~/home`` action.
+    ``home`` with no reference runs the common ``~/home`` action. ``node_parameters``: what
+    the demo's node gets on top of the spec's ``node_parameters`` (the demo runs every
+    simulator and node on one machine, and nothing in it is meant to go unanswered: a
+    request timeout that waits for a busy machine's answer).
     """
 
     jog_velocity: float = 0.2
     jog_joint: str = ''   # '' = the first joint
     scan: Mapping[str, Any] | None = None
     extra_steps: tuple[tuple[str, str], ...] = ()
+    node_parameters: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -85,6 +85,10 @@ class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionSta
     scan_joint: str = 'pan'
     #: a word the connection diagnostic's ERROR message uses for a dropped link
     link_lost_text: str = 'disconnected'
+    #: node parameters under which every answer the simulator gives counts, for a case
+    #: that needs them all and tests no timeout: the simulator shares the test process,
+    #: and on a loaded core an answer can come after a driver's default timeout
+    answer_parameters: tuple[str, ...] = ()
 
     # ------------------------------------------------------------------ hooks
     def check_jog_running(self, rig: ConformanceRig) -> None:

@@ -44,6 +44,7 @@ class TopicInterfaceConformance(ConformanceHelpers):
     small_move: dict[str, float]
     jog: tuple[str, float]
     joints: tuple[str, ...]
+    answer_parameters: tuple[str, ...]
 
     def ros2_control_example(self) -> TopicSystemConfig:
         """The package's installed example block, config/<package>.ros2_control.xacro."""
@@ -62,7 +63,9 @@ class TopicInterfaceConformance(ConformanceHelpers):
         namespace = self.spec.namespace
         assert config.plugin == PLUGIN
         assert config.joint_states_topic == f'{namespace}/joint_states' != '/joint_states'
-        rig.start_node(namespace=namespace)
+        # every command must take effect: none refused for an answer a loaded machine
+        # delivered after the driver's default timeout
+        rig.start_node(*self.answer_parameters, namespace=namespace)
         ros, names = rig.ros, config.joint_names
         stand_in = TopicSystemStandIn(ros.node, config)
         wait_for(stand_in.subscribed, 20.0, f'the node on {config.joint_commands_topic}')
