@@ -165,8 +165,8 @@ class CaptureClient(CaptureLink):
     def reset_faults(self, axis: int) -> None:
         self.device_requests.reset_faults(axis)
 
-    def registers(self, axis: int | None) -> dict[str, int]:
-        return self.device_requests.registers(axis)
+    def registers(self, axis: int | None, also: Sequence[str] = ()) -> dict[str, Any]:
+        return self.device_requests.registers(axis, also)
 
     def error_strings(self, csr: int) -> dict[str, str]:
         return self.device_requests.error_strings(csr)
