@@ -15,7 +15,6 @@ gyro drift, ``~/command``) are the part :attr:`CaptureDevice.functions`
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
 import threading
@@ -46,7 +45,7 @@ from .capabilities import (
 )
 from .client import CaptureClient
 from .device_requests import IDENTITY_GETTERS, Identity
-from .errors import REQUEST_ERRORS, NotSupported
+from .errors import REQUEST_ERRORS
 from .functions import CaptureFunctions
 from .motion import PostedMoves
 from .programs import DevicePrograms
@@ -274,17 +273,22 @@ class CaptureDevice(Device):
         for joint in self.joint_names:
             axis = self.axis(joint)
             try:
-                status['axes'][joint] = client.registers(axis)
-                with contextlib.suppress(NotSupported):  # no current in ~/status
-                    status['current'][joint] = client.poll('MOT_GetMotorCurrent', axis) / 1000.0
+                # the current in the registers' batch: one round trip an axis (a device
+                # without it has no current in ~/status)
+                registers = client.registers(axis, also=('MOT_GetMotorCurrent',))
+                current = registers.pop('MOT_GetMotorCurrent', None)
+                status['axes'][joint] = registers
+                if current is not None:
+                    status['current'][joint] = current / 1000.0
             except REQUEST_ERRORS as exc:
                 status['problems'].append(f'{joint}: {exc}')
         try:
-            system = client.registers(None)
+            system = client.registers(None, also=('MOT_GetEmgStopAxes',))
+            emergency_stop = system.pop('MOT_GetEmgStopAxes', None)
             status['system'] = system
             status['errors'] = client.error_strings(system.get('CSR', 0))
-            with contextlib.suppress(NotSupported):
-                status['emergency_stop'] = bool(client.poll('MOT_GetEmgStopAxes'))
+            if emergency_stop is not None:
+                status['emergency_stop'] = bool(emergency_stop)
         except REQUEST_ERRORS as exc:
             status['problems'].append(f'system: {exc}')
         status['refusals'] = {joint: self._axis_refusal(joint, registers)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -241,15 +242,18 @@ class DeviceRequests:
         self._polls.run('MOT_ResetFaults', axis)
         self._polls.run('MOT_AxisOn', axis)
 
-    def registers(self, axis: int | None) -> dict[str, int]:
+    def registers(self, axis: int | None, also: Sequence[str] = ()) -> dict[str, Any]:
         """Raw per-axis registers (``axis``) or system registers (``None``): those the
         device reports; a register getter it does not answer with data is left out and
-        not asked again (:meth:`poll`)."""
-        wanted = [register for register in REGISTERS.values()
+        not asked again (:meth:`poll`). ``also``: more getters of the same axis read in
+        the same batch, under their own names, as optional as the registers (one round
+        trip for the status refresh instead of one per getter)."""
+        wanted = [(register.name, register.command) for register in REGISTERS.values()
                   if register.per_axis == (axis is not None)]
-        values = self._batch.read_many([(register.command, axis) for register in wanted],
-                                optional=True)
-        return {register.name: value for register, value in zip(wanted, values, strict=True)
+        wanted += [(name, name) for name in also]
+        values = self._batch.read_many([(getter, axis) for _, getter in wanted],
+                                       optional=True)
+        return {name: value for (name, _), value in zip(wanted, values, strict=True)
                 if value is not None}
 
     def error_strings(self, csr: int) -> dict[str, str]:

@@ -28,6 +28,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
+from functools import partial
 from typing import TypeVar
 
 from gimbal_driver_common.command_path import CommandPath
@@ -397,16 +398,16 @@ class GimbalController:
                     if not self.device.link_healthy():
                         raise LinkError('the client reports its link is down')
                     read_at = self.clock()
-                    sample = self.device.read()
+                    sample = None
+                    if not self.device.request_read(partial(self._take_sample,
+                                                            read_at=read_at)):
+                        sample = self.device.read()
             except GimbalError as exc:
                 self._on_link_lost(exc)
                 continue
             if sample is not None and not (self.device.streamed and sample.stamp == last_stamp):
-                self.latest, last_stamp = sample, sample.stamp
-                self.motion_watch.observe(sample)
-                self.stop_watch.observe(sample, read_at)
-                if self.active:
-                    self.on_sample(sample)
+                last_stamp = sample.stamp
+                if self._take_sample(sample, read_at):
                     last_publish = time.monotonic()
             if self.device.streamed:
                 continue
@@ -415,6 +416,19 @@ class GimbalController:
             if delay < -period:  # fell behind (slow device): do not burst to catch up
                 next_tick, delay = time.monotonic(), 0.0
             self._sleep(max(delay, 0.0))
+
+    def _take_sample(self, sample: JointSample, read_at: float) -> bool:
+        """A new sample, read from ``read_at`` on: the watches see it, the node publishes it
+        while active (True). On the device thread, or on the link's reader thread for a
+        device that polls without waiting (:meth:`Device.request_read`): one thread a
+        device, so samples are taken in order."""
+        self.latest = sample
+        self.motion_watch.observe(sample)
+        self.stop_watch.observe(sample, read_at)
+        if not self.active:
+            return False
+        self.on_sample(sample)
+        return True
 
     def _sleep(self, timeout: float) -> bool:
         """Sleep up to ``timeout``; True when woken early (stopping or publish_rate changed)."""

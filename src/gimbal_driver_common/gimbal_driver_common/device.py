@@ -324,6 +324,16 @@ class Device(abc.ABC):
         Raise :class:`~gimbal_driver_common.errors.LinkError` when the link is lost.
         """
 
+    def request_read(self, deliver: Callable[[JointSample], object]) -> bool:
+        """The joint poll without waiting for its answer, for a request/reply device whose
+        reader thread can take the sample: write the request now and have the reader call
+        ``deliver(sample)`` with it (the controller's device thread then wakes once a
+        sample, for the request, instead of again for the answer the reader hands over).
+        True: asked, or a request in flight is still waiting for its answer; False (this
+        default): the controller polls with :meth:`read`. Raise as :meth:`read` does, here
+        or at the next call for an answer that failed."""
+        return False
+
     def background_reads(self) -> list[tuple[float, Callable[[], None]]]:
         """Reads besides the joint sample that may wait for the device (registers, a
         status the driver keeps): ``(period s, job)``. The controller runs them on its

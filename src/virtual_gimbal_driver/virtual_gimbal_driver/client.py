@@ -7,7 +7,9 @@ splits what arrives into lines and gives each reply to the request whose tag it 
 Callers write their request and wait for their own answer, so requests overlap: a slow or
 silent one (a HOME the device takes long to acknowledge) holds up nothing else, and a
 stop goes out at once. :meth:`VirtualGimbalClient.post` writes requests whose replies
-:meth:`VirtualGimbalClient.settle` takes later (the core's command path).
+:meth:`VirtualGimbalClient.settle` takes later (the core's command path);
+:meth:`VirtualGimbalClient.ask` writes one whose reply the reader hands to a callback (the
+joint poll: the sample is taken on the reader thread, with no thread woken to wait for it).
 
 It logs through :mod:`logging` (``virtual_gimbal_driver.client``), as every driver's
 library code does; the node's log bridge (``gimbal_driver_common.ros.log_bridge``) takes
@@ -75,6 +77,8 @@ class VirtualGimbalClient(Protocol):
         self._lock = threading.Lock()
         #: tags written and not answered yet (a reply naming another is discarded)
         self._waiting: set[int] = set()
+        #: what the reader calls with the reply to an :meth:`ask`, by tag
+        self._callbacks: dict[int, Callable[[Reply], None]] = {}
 
     def open(self) -> None:
         self.close()
@@ -82,6 +86,7 @@ class VirtualGimbalClient(Protocol):
         self._buffer = b''
         with self._lock:
             self._waiting.clear()
+            self._callbacks.clear()
         self._session = Session(StreamLink(self.stream), self, 'vgimbal',
                                 read_timeout=0.05).start()
 
@@ -137,20 +142,52 @@ class VirtualGimbalClient(Protocol):
         if refused is not None:
             raise refused
 
+    def ask(self, line: str, on_reply: Callable[[Reply], None]) -> int:
+        """Write ``line`` without waiting: the reader thread calls ``on_reply`` with its
+        reply (an ERR line too) when it comes. Returns the tag, for :meth:`forget`
+        when the reply is given up."""
+        session = self._live()
+        tag = self._tag()
+        with self._lock:
+            self._callbacks[tag] = on_reply
+        try:
+            session.write((tagged(line, tag) + '\n').encode())
+        except BaseException:
+            self.forget(tag)
+            raise
+        return tag
+
+    def forget(self, tag: int) -> None:
+        """Give up the reply to an :meth:`ask`: if it still comes, it is discarded."""
+        with self._lock:
+            self._callbacks.pop(tag, None)
+            self._waiting.discard(tag)
+
     # ------------------------------------------------- the reader (Protocol)
     def data_received(self, data: bytes) -> None:
         self._buffer += data
         while b'\n' in self._buffer:
             raw, self._buffer = self._buffer.split(b'\n', 1)
             text, tag = split_tag(raw.decode('ascii', 'replace'))
+            callback = None
             with self._lock:
                 asked = tag is not None and tag in self._waiting
-            if not asked:
+                if asked and tag is not None:
+                    callback = self._callbacks.pop(tag, None)
+                    if callback is not None:
+                        self._waiting.discard(tag)
+            if not asked or tag is None:
                 LOG.warning('discarded a line that no request asked for (noise, or a reply '
                             'after its timeout): %r', raw[:SHOWN_BYTES])
                 continue
+            if callback is not None:
+                try:
+                    callback(Reply(text, tag))
+                except Exception:  # a handler bug must not end the session
+                    LOG.exception('error while handling the reply %r', raw[:SHOWN_BYTES])
+                continue
             session = self._session
-            if session is not None and tag is not None:
+            if session is not None:
                 session.dispatch(Reply(text, tag))
         if len(self._buffer) > MAX_LINE:
             LOG.warning('discarded %d bytes without a newline', len(self._buffer))
@@ -182,7 +219,12 @@ class VirtualGimbalClient(Protocol):
 
     @staticmethod
     def _checked(line: str, reply: Reply) -> str:
+        return VirtualGimbalClient.checked(line, reply.text)
+
+    @staticmethod
+    def checked(line: str, text: str) -> str:
+        """The reply ``text`` to ``line``; DeviceRefused for an ERR line."""
         try:
-            return check_reply(line, reply.text)
+            return check_reply(line, text)
         except Refused as exc:
             raise DeviceRefused(str(exc)) from None

@@ -21,10 +21,10 @@ from gimbal_driver_common.device import (
     StatusReport,
 )
 from gimbal_driver_common.diagnostics import Level, RegisterFlag, StatusPart, decode_register
-from gimbal_driver_common.errors import DeviceTimeout
+from gimbal_driver_common.errors import DeviceTimeout, GimbalError
 from gimbal_driver_common.unanswered import ConnectReads
 
-from .client import Posted, VirtualGimbalClient
+from .client import Posted, Reply, VirtualGimbalClient
 from .protocol import (
     FAULT_OVERTEMP,
     JOINTS,
@@ -55,6 +55,12 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
         self._faults = 0
         self._latest: JointSample | None = None
         self._missed_polls = 0
+        #: the joint poll in flight (:meth:`request_read`): its tag and when it was written,
+        #: what takes its sample, and a failed reply the next request raises
+        self._poll_lock = threading.Lock()
+        self._poll: tuple[int, float] | None = None
+        self._deliver: Callable[[JointSample], object] = lambda sample: None
+        self._poll_error: GimbalError | None = None
         self.capabilities.homing = self
         self.capabilities.status = self
 
@@ -71,7 +77,8 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
             identity = parse_identity(reply)
             info = DeviceInfo(identity.model, identity.serial_number,
                               identity.firmware_version)
-        self._missed_polls = 0
+        with self._poll_lock:
+            self._missed_polls, self._poll, self._poll_error = 0, None, None
         self._read_joints()  # the joint data: required
         return info
 
@@ -97,8 +104,55 @@ class VirtualGimbalDevice(Device, Homing, StatusReport):
         self._missed_polls = 0
         return sample
 
+    def request_read(self, deliver: Callable[[JointSample], object]) -> bool:
+        """The joint poll without waiting (the controller's device thread): GET written
+        now, its sample handed to ``deliver`` by the reader thread (:meth:`_poll_answered`).
+        A GET still unanswered is not asked again before its ``request_timeout``; then it
+        counts as :meth:`read` counts one (skipped, WARN; :data:`MISSED_POLLS_LOST` in a row
+        lose the link), and a reply that failed (ERR, not a POS line) is raised here."""
+        with self._poll_lock:
+            self._deliver = deliver
+            failed, self._poll_error = self._poll_error, None
+            if failed is not None:
+                raise failed
+            if self._poll is not None:
+                tag, written_at = self._poll
+                timeout = self.client.timeout
+                if time.monotonic() - written_at < timeout:
+                    return True  # the GET in flight may still be answered
+                self.client.forget(tag)
+                self._poll = None
+                self._missed_polls += 1
+                exc = DeviceTimeout(f'no reply to GET within {timeout:g} s')
+                if self._missed_polls >= MISSED_POLLS_LOST:
+                    raise DeviceTimeout(f'{exc} ({self._missed_polls} polls in a row)')
+                LOG.warning('poll skipped: %s (the link counts as lost after %d in a row)',
+                            exc, MISSED_POLLS_LOST)
+            written_at = time.monotonic()
+            self._poll = (self.client.ask('GET', self._poll_answered), written_at)
+        return True
+
+    def _poll_answered(self, reply: Reply) -> None:
+        """The reply to :meth:`request_read`'s GET, on the reader thread."""
+        try:
+            sample = self._joints(VirtualGimbalClient.checked('GET', reply.text))
+        except GimbalError as exc:
+            sample, error = None, exc
+        with self._poll_lock:
+            if self._poll is not None and self._poll[0] == reply.tag:
+                self._poll = None
+            if sample is None:
+                self._poll_error = error
+                return
+            self._missed_polls = 0
+            deliver = self._deliver
+        deliver(sample)
+
     def _read_joints(self) -> JointSample:
-        reply = parse_position(self.client.request('GET'))
+        return self._joints(self.client.request('GET'))
+
+    def _joints(self, text: str) -> JointSample:
+        reply = parse_position(text)
         self._faults = reply.faults
         self._latest = JointSample(positions=reply.positions, velocities=reply.velocities,
                                    moving=reply.moving)
