@@ -438,8 +438,8 @@ class GimbalDriverNode(LifecycleNode):
     # ---------------------------------------------------------- topics
     def _publish_joint_state(self, sample: JointSample) -> None:
         if self.context.ok():
-            self._joint_pub.publish(self._joint_message.publishable(
-                sample, self.joint_names, self.torque_constants))
+            self._joint_pub.publish(self._joint_message.fill(sample, self.joint_names,
+                                                             self.torque_constants))
             self._joint_rate.tick()
 
     def _publish_diagnostics(self) -> None:

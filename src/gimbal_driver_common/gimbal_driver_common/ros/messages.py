@@ -14,7 +14,6 @@ from gimbal_driver_common.controller import GimbalController, LinkState
 from gimbal_driver_common.device import DeviceInfo, JointSample
 from gimbal_driver_common.diagnostics import FrequencyMonitor, Level, StatusPart
 from gimbal_driver_common.ros.diagnostics import to_message
-from gimbal_driver_common.ros.serialized import JointStateLayout
 from gimbal_msgs.msg import AxisState, GimbalStatus
 
 
@@ -42,14 +41,10 @@ class JointStateMessage:
     setter) cost the device thread about 45 us a sample at 50 Hz on the bench machine;
     refilled, the names are set only when they change and the values go in as
     ``array.array('d')``, which the setters take without checking each element.
-    :meth:`publishable` goes further: the serialized message of the sample's shape, patched
-    in place (:mod:`gimbal_driver_common.ros.serialized`).
     """
 
     def __init__(self) -> None:
         self.msg = JointState()
-        self._shape: tuple[tuple[str, ...], int] | None = None
-        self._layout: JointStateLayout | None = None
 
     def fill(self, sample: JointSample, joint_names: list[str],
              torque_constants: Mapping[str, float] | None = None) -> JointState:
@@ -68,27 +63,6 @@ class JointStateMessage:
         if efforts or msg.effort:
             msg.effort = array('d', efforts)
         return msg
-
-    def publishable(self, sample: JointSample, joint_names: list[str],
-                    torque_constants: Mapping[str, float] | None = None) -> JointState | bytes:
-        """What ``Publisher.publish`` takes for ``sample``: the serialized message (the
-        same content as :meth:`fill`), or the filled message where the middleware's
-        format could not be laid out."""
-        positions, velocities = sample.positions, sample.velocities
-        names = tuple(n for n in joint_names if n in positions)
-        efforts = torques(sample, list(names), torque_constants) if torque_constants else []
-        shape = (names, len(efforts))
-        if shape != self._shape:
-            self._shape = shape
-            self._layout = JointStateLayout.build(names, len(efforts))
-        layout = self._layout
-        if layout is None:
-            return self.fill(sample, joint_names, torque_constants)
-        values = [[positions[n] for n in names],
-                  [velocities.get(n, math.nan) for n in names]]
-        if efforts:
-            values.append(efforts)
-        return layout.write(sample.stamp, *values)
 
 
 def diagnostic_parts(
