@@ -6,7 +6,8 @@ else) and the axis runs on. The controller tells a :class:`StopWatch` each stop 
 (:meth:`stopped`), each new motion command (:meth:`superseded`) and each joint sample
 (:meth:`observe`, with the time its read began). Each stopped axis has an *episode* until
 a sample read after the stop shows it at rest (the one "moving" rule,
-``controller.is_moving``). An axis still moving when its deceleration time has passed
+``controller.is_moving``, on a known state: the device's bit or a finite speed; an
+unknown speed is no rest). An axis still moving when its deceleration time has passed
 (its speed over ``stop_deceleration``, plus ``stop_margin``) is *unconfirmed*: it is
 logged once per episode, diagnostics read ERROR for it, and :meth:`due` hands it back to
 the controller to send the whole stop again, at most once per :data:`RESEND_PERIOD_S`,
@@ -117,7 +118,8 @@ class StopWatch:
                 speed = self._speed(sample, joint)
                 if math.isfinite(speed):
                     episode.speed = speed
-                if read_at >= episode.since and not self._moving(sample, joint):
+                if (read_at >= episode.since and self._known(sample, joint)
+                        and not self._moving(sample, joint)):
                     del self._episodes[joint]
                     if episode.unconfirmed:
                         self._log.info(f'{joint}: at rest after the stop was sent '
@@ -191,6 +193,16 @@ class StopWatch:
                     self._changed.wait(left)
                 else:
                     wait(self._changed, left)
+
+    @staticmethod
+    def _known(sample: JointSample, joint: str) -> bool:
+        """The sample says whether ``joint`` moves: the device's own bit, or a finite speed.
+        A speed the device did not give (NaN: a stale or missing report) is no rest; the
+        moving rule alone reads it as below the threshold."""
+        if joint in sample.moving:
+            return True
+        value = sample.velocities.get(joint)
+        return value is not None and math.isfinite(value)
 
     @staticmethod
     def _speed(sample: JointSample | None, joint: str) -> float:

@@ -18,6 +18,7 @@ from gimbal_driver_common.controller import (
     ControllerConfig,
     GimbalController,
     LinkState,
+    is_moving,
 )
 from gimbal_driver_common.device import Device, DeviceInfo, DeviceScans, JointSample, Moves
 from gimbal_driver_common.errors import DeviceRefused, DeviceTimeout, GimbalError
@@ -304,6 +305,22 @@ def test_a_sample_read_before_the_stop_confirms_nothing() -> None:
     watch.observe(JointSample({'pan': 0.0}, {'pan': 0.0}), read_at)  # began before the stop
     assert not watch.at_rest('pan')
     watch.observe(JointSample({'pan': 0.0}, {'pan': 0.0}), clock())
+    assert watch.at_rest('pan')
+
+
+def test_an_unknown_speed_confirms_nothing() -> None:
+    """A sample whose speed the device did not give (NaN: a stale or missing report) and
+    that has no moving bit says nothing of rest: the moving rule alone reads NaN as slow."""
+    clock = ManualClock()
+    watch = StopWatch(lambda: DECELERATION, lambda: MARGIN, is_moving,
+                      logging.getLogger('test'), clock=clock)
+    watch.observe(JointSample({'pan': 0.0}, {'pan': 0.3}), clock())
+    watch.stopped(['pan'])
+    watch.observe(JointSample({'pan': 0.1}, {'pan': math.nan}), clock())
+    watch.observe(JointSample({'pan': 0.1}, {}), clock())
+    assert not watch.at_rest('pan')
+    watch.observe(JointSample({'pan': 0.1}, {'pan': math.nan}, moving={'pan': False}),
+                  clock())  # the device's own bit
     assert watch.at_rest('pan')
 
 
