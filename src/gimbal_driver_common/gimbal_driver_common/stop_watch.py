@@ -6,8 +6,8 @@ else) and the axis runs on. The controller tells a :class:`StopWatch` each stop 
 (:meth:`stopped`), each new motion command (:meth:`superseded`) and each joint sample
 (:meth:`observe`, with the time its read began). Each stopped axis has an *episode* until
 a sample read after the stop shows it at rest (the one "moving" rule,
-``controller.is_moving``, on a known state: the device's bit or a finite speed; an
-unknown speed is no rest). An axis still moving when its deceleration time has passed
+``controller.is_moving``, on a known state: a NaN speed without the device's bit is no
+rest). An axis still moving when its deceleration time has passed
 (its speed over ``stop_deceleration``, plus ``stop_margin``) is *unconfirmed*: it is
 logged once per episode, diagnostics read ERROR for it, and :meth:`due` hands it back to
 the controller to send the whole stop again, at most once per :data:`RESEND_PERIOD_S`,
@@ -196,13 +196,14 @@ class StopWatch:
 
     @staticmethod
     def _known(sample: JointSample, joint: str) -> bool:
-        """The sample says whether ``joint`` moves: the device's own bit, or a finite speed.
-        A speed the device did not give (NaN: a stale or missing report) is no rest; the
-        moving rule alone reads it as below the threshold."""
+        """The sample says whether ``joint`` moves: the device's own bit, or a speed that
+        is not NaN. A NaN speed (the device's report of it stale or missing: the turret)
+        is no rest; the moving rule alone reads it as below the threshold. A device that
+        reports no speed at all (no entry) is read by the moving rule, as before."""
         if joint in sample.moving:
             return True
         value = sample.velocities.get(joint)
-        return value is not None and math.isfinite(value)
+        return value is None or not math.isnan(value)
 
     @staticmethod
     def _speed(sample: JointSample | None, joint: str) -> float:
