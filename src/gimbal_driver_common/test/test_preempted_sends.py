@@ -107,8 +107,8 @@ def test_a_stop_of_the_same_joint_leaves_the_preempted_command_undone(rig) -> No
     assert device.kinds() == ['preempted', 'stop', 'move']  # tilt's never again
 
 
-def test_a_move_to_preempted_by_a_stop_of_another_joint_goes_out_after_it(rig) -> None:
-    ctl, device = rig
+def move_to_in_thread(ctl: GimbalController) -> tuple[threading.Thread, list]:
+    """``send_moves`` of tilt (what ~/move_to does) in a thread; what it ended with."""
     done: list[BaseException | None] = []
 
     def move_to() -> None:
@@ -120,6 +120,12 @@ def test_a_move_to_preempted_by_a_stop_of_another_joint_goes_out_after_it(rig) -
 
     thread = threading.Thread(target=move_to)
     thread.start()
+    return thread, done
+
+
+def test_a_move_to_preempted_by_a_stop_of_another_joint_goes_out_after_it(rig) -> None:
+    ctl, device = rig
+    thread, done = move_to_in_thread(ctl)
     wait_for(device.in_flight.is_set, TIMEOUT, 'the move in flight')
     ctl.stop_joints(['pan'])
     thread.join(TIMEOUT)
@@ -129,17 +135,7 @@ def test_a_move_to_preempted_by_a_stop_of_another_joint_goes_out_after_it(rig) -
 
 def test_a_move_to_preempted_by_the_whole_stop_raises(rig) -> None:
     ctl, device = rig
-    done: list[BaseException | None] = []
-
-    def move_to() -> None:
-        try:
-            ctl.send_moves({'tilt': (0.4, None)})
-            done.append(None)
-        except BaseException as exc:  # noqa: BLE001 - the test reads it
-            done.append(exc)
-
-    thread = threading.Thread(target=move_to)
-    thread.start()
+    thread, done = move_to_in_thread(ctl)
     wait_for(device.in_flight.is_set, TIMEOUT, 'the move in flight')
     ctl.stops.send(None)
     thread.join(TIMEOUT)
