@@ -143,6 +143,12 @@ class LateReplies(Generic[T]):
                 out.append(heapq.heappop(self._heap)[2])
         return out
 
+    def clear(self) -> None:
+        """Drop every held reply (``clear``: a shared bus's late answer must not answer the
+        next node's request of the same name)."""
+        with self._lock:
+            self._heap.clear()
+
     def __len__(self) -> int:
         with self._lock:
             return len(self._heap)
