@@ -305,7 +305,8 @@ def add_note(results: dict, note: str) -> None:
 
 
 def explain_latency(results: dict, cause: str, label: str = '') -> None:
-    """A note when sim_to_subscriber p99 misses the 5 ms target: the driver's structural
+    """A note when sim_to_subscriber p99 is over 5 ms (the figure first set on one machine;
+    the target is a ratio to the same run's rclpy pub/sub p99): the driver's structural
     cause, then the share of the machine (the same run's rclpy reference shows it)."""
     latency = results.get('sim_to_subscriber', {})
     if latency.get('p99_ms', 0.0) < 5.0:
@@ -313,8 +314,8 @@ def explain_latency(results: dict, cause: str, label: str = '') -> None:
     first = results.get('sim_to_subscriber_first_publication', {})
     where = f' at {label}' if label else ''
     add_note(results, (
-        f'sim_to_subscriber{where} p50/p99 {latency["p50_ms"]}/{latency["p99_ms"]} ms misses '
-        f'p99 < 5 ms (first publication of each device report: {first.get("p50_ms")}/'
+        f'sim_to_subscriber{where} p50/p99 {latency["p50_ms"]}/{latency["p99_ms"]} ms is over '
+        f'5 ms (first publication of each device report: {first.get("p50_ms")}/'
         f'{first.get("p99_ms")} ms; device reports {results.get("device_reports_hz")} Hz). '
         f'{cause} What exceeds that is scheduling delay on a machine shared with other '
         'processes: compare the bare rclpy pub/sub p99 of the same run (reference).'))
@@ -322,12 +323,12 @@ def explain_latency(results: dict, cause: str, label: str = '') -> None:
 
 def check_targets(results: dict, rate_target_hz: float | None = None) -> None:
     """``results['targets']``: each target (bench/README.md, "Targets") with the measured
-    value, met or not, and the margin (positive = better than the target)."""
+    value, met or not, and the margin (positive = better than the target). The
+    ``sim_to_subscriber`` p99 target is a ratio to the same run's rclpy reference, added
+    with it (``run.py add_machine_relative_figures``)."""
     checks: dict[str, tuple[float | None, float, bool]] = {
         'codec decode >= 100,000 frames/s': (
             results.get('codec', {}).get('decode_frames_per_s'), 100_000.0, True),
-        'sim_to_subscriber p99 < 5 ms': (
-            results.get('sim_to_subscriber', {}).get('p99_ms'), 5.0, False),
         'node CPU < 10 % at the default rate': (results.get('cpu_percent'), 10.0, False),
     }
     if rate_target_hz is not None:

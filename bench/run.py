@@ -128,11 +128,17 @@ def add_cpu_ratio_targets(results: dict) -> None:
             'margin': round(CPU_RATIO_TARGET - ratio, 3)}
 
 
+#: ``sim_to_subscriber`` p99 at most this multiple of the bare rclpy pub/sub p99 of the run
+LATENCY_P99_RATIO_TARGET = 2.0
+
+
 def add_machine_relative_figures(results: dict) -> None:
-    """The absolute targets set on one machine, each beside a figure of this machine from
-    the same run: ``sim_to_subscriber`` p99 (target 5 ms) as a ratio to the bare rclpy
-    pub/sub p99 of the run's reference; the codec's decode rate (target 100,000 frames/s)
-    as a ratio to :func:`driver_bench.machine_decode_rate` (in ``codec``)."""
+    """The figures whose targets depend on the machine, against a figure of this machine
+    from the same run: ``sim_to_subscriber`` p99 as a ratio to the bare rclpy pub/sub p99
+    of the run's reference, the target ``LATENCY_P99_RATIO_TARGET`` (it was 5 ms, set on
+    one machine: a loaded or slower machine missed it by its own scheduling, not the
+    driver's); the codec's decode rate (target 100,000 frames/s) beside
+    :func:`driver_bench.machine_decode_rate` (in ``codec``)."""
     reference = results.get('reference', {}).get('rclpy_joint_state_pubsub_100hz', {})
     floor = reference.get('latency', {}).get('p99_ms')
     for data in results.values():
@@ -140,8 +146,13 @@ def add_machine_relative_figures(results: dict) -> None:
             continue
         latency = data.get('sim_to_subscriber', {})
         if latency.get('p99_ms') is not None:
-            data['sim_to_subscriber_p99_vs_rclpy_pubsub_p99'] = round(
-                latency['p99_ms'] / floor, 2)
+            ratio = round(latency['p99_ms'] / floor, 2)
+            data['sim_to_subscriber_p99_vs_rclpy_pubsub_p99'] = ratio
+            data.setdefault('targets', {})[
+                f'sim_to_subscriber p99 <= {LATENCY_P99_RATIO_TARGET:g}x the rclpy pub/sub '
+                'p99 of the run'] = {
+                'measured': ratio, 'met': ratio <= LATENCY_P99_RATIO_TARGET,
+                'margin': round(LATENCY_P99_RATIO_TARGET - ratio, 3)}
 
 
 def markdown(results: dict) -> str:
@@ -170,7 +181,7 @@ def markdown(results: dict) -> str:
                         f'{latency["p99_ms"]} ms | rclpy pub/sub {ref["latency"]["p50_ms"]} / '
                         f'{ref["latency"]["p99_ms"]} ms (p99 ratio '
                         f'{data.get("sim_to_subscriber_p99_vs_rclpy_pubsub_p99")}) | '
-                        f'p99 < 5 ms |')
+                        f'p99 ≤ {LATENCY_P99_RATIO_TARGET:g}x the rclpy pub/sub p99 |')
         rows += stream_rows(name, data)
         if 'joint_states_hz' in data:
             # the window of joint_states_hz: Capture's is the 100 Hz one (at_100hz)

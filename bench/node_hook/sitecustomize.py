@@ -77,7 +77,9 @@ def _install() -> None:
             path = Path(thread_dir, f'threads_{os.getpid()}.json')
             while True:
                 names = {t.native_id: t.name for t in threading.enumerate() if t.native_id}
-                path.write_text(json.dumps(names))
+                partial = path.with_suffix('.part')  # whole or not at all: the bench reads
+                partial.write_text(json.dumps(names))  # it while this thread writes
+                partial.replace(path)
                 time.sleep(0.5)
 
         threading.Thread(target=write_thread_names, name='bench-thread-names',

@@ -3,6 +3,7 @@ requests are named (no ROS, no I/O)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from .protocol import Frame, ReplyByte
@@ -32,6 +33,9 @@ class Exchange:
     pending: list[ReplyByte] | None = None
     #: why the bytes of this exchange cannot be given one by one ('' when they can)
     doubt: str = ''
+    #: called once, on the reader thread, when every request of it has its answer (a
+    #: read that does not wait: :meth:`~.batch.BatchedReads.ask_many`)
+    on_answered: Callable[[list[Waiting]], None] | None = None
 
 
 @dataclass(eq=False)

@@ -112,12 +112,16 @@ class AnswerBook:
 
     def write(self, requests: Sequence[Request], write: Callable[[bytes], None], *,
               urgent: bool = False, block: bool = True, timeout: float = 0.0,
-              holds_lock: bool = False) -> list[Waiting] | None:
+              holds_lock: bool = False,
+              on_answered: Callable[[list[Waiting]], None] | None = None,
+              ) -> list[Waiting] | None:
         """Register ``requests`` as one exchange and write them (``write``, in one call,
         under the book's lock so that write order is the book's order) once the rules
         allow; None when ``block`` is False and they do not allow it now, or ``timeout``
         s passed. ``urgent`` (a stop) goes out at once. ``holds_lock``: the writer holds
-        the link lock, so a stop would wait for this request: a stop preempts it."""
+        the link lock, so a stop would wait for this request: a stop preempts it.
+        ``on_answered(waitings)``: called on the reader thread once every one of them
+        has its answer (never when one gives up or the link goes: the writer's to see)."""
         with self._cond:
             byte = any(not (expect_data and frame_key(frame) in self._data_keys)
                        for _, frame, expect_data in requests)
@@ -136,7 +140,7 @@ class AnswerBook:
 
             if not urgent and not self._wait_until(allowed, block, timeout):
                 return None
-            exchange = Exchange(byte=byte, urgent=urgent)
+            exchange = Exchange(byte=byte, urgent=urgent, on_answered=on_answered)
             if byte:
                 self._take_over(exchange)
             now = self._clock()
@@ -348,6 +352,12 @@ class AnswerBook:
             self._late = [w for w in self._late if w not in waitings]
             self._cond.notify_all()
 
+    def answer_with_data(self, frames: Sequence[Frame]) -> bool:
+        """Every one of these getters is data-answered on this link: written, none takes
+        a byte-answered exchange's place (their answer is their data, or nothing)."""
+        with self._cond:
+            return all(frame_key(frame) in self._data_keys for frame in frames)
+
     def in_flight(self) -> list[str]:
         """The names of the requests waiting for an answer (diagnostics, tests)."""
         with self._cond:
@@ -402,8 +412,22 @@ class AnswerBook:
             if not taken:
                 self.stale += 1
             self._resolve()
+            answered = self._answered_exchanges()
             self._cond.notify_all()
-            return taken
+        for exchange, on_answered in answered:  # outside the lock: they take answers
+            on_answered(exchange.waitings)
+        return taken
+
+    def _answered_exchanges(self) -> list[tuple[Exchange, Callable[[list[Waiting]], None]]]:
+        """Exchanges with an ``on_answered`` whose requests all have their answer now."""
+        answered = []
+        for exchange in {id(w.exchange): w.exchange for w in self._flight}.values():
+            on_answered = exchange.on_answered
+            if on_answered is not None and all(w.done and w.answer is not None
+                                               for w in exchange.waitings):
+                exchange.on_answered = None
+                answered.append((exchange, on_answered))
+        return answered
 
     def _deliver_data(self, item: Frame) -> bool:
         if is_greeting(item):

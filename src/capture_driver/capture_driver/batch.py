@@ -8,19 +8,40 @@ from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Sequence
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
+from .answer_records import Waiting
 from .device_requests import Polls, request_key
 from .errors import DeviceTimeout, NotSupported, WrongReply
 from .link import CaptureLink
-from .protocol import Frame, ProtocolError, ReplyByte, command
+from .protocol import Command, Frame, ProtocolError, ReplyByte, command
 
 LOG = logging.getLogger('capture_driver.batch')
 
 #: batched reads in a row that came back incomplete before :meth:`CaptureClient.read_many`
 #: falls back to one request at a time for the connection
 BATCH_FAILURES = 3
+
+
+@dataclass(eq=False)
+class AskedBatch:
+    """A batch :meth:`BatchedReads.ask_many` wrote and has not handed on yet."""
+
+    frames: list[tuple[Command, int | None, Frame]]
+    on_values: Callable[[list[Any]], object]
+    waitings: list[Waiting] = field(default_factory=list)
+    #: when its last getter gives up (monotonic s); until then its answers may come
+    deadline: float = float('inf')
+    #: its answers, when each came but not all as plain data (settled by the asker)
+    answers: list[Frame | ReplyByte | None] | None = None
+
+    def due(self) -> bool:
+        return time.monotonic() >= self.deadline
 
 
 class BatchedReads:
@@ -34,10 +55,15 @@ class BatchedReads:
         self.batch_reads = batch_reads
         self.batching = batch_reads
         self._failures = 0
+        #: the batch :meth:`ask_many` wrote, until its values are handed on
+        self._asked: AskedBatch | None = None
+        self._asked_lock = threading.Lock()
         link.connect_hooks.append(self._new_connection)
 
     def _new_connection(self) -> None:
         self.batching, self._failures = self.batch_reads, 0
+        with self._asked_lock:
+            self._asked = None  # the old link's: it answers nothing any more
 
     def read_many(self, reads: Sequence[tuple[str, int | None]],
                   optional: bool = False) -> list[Any]:
@@ -59,55 +85,145 @@ class BatchedReads:
         An ACK byte names neither opcode nor axis: in a batch it only says that one of the
         reads got no data, and that read is then named by asking it alone.
         """
+        frames = self._frames(reads)
+        link = self._link
+        with contextlib.ExitStack() as held:
+            held_lock = not link.overlap
+            if held_lock:
+                held.enter_context(link.link_lock)
+            asked = [i for i, (cmd, axis, _) in enumerate(frames)
+                     if not (optional and self._left_out(cmd.name, axis))]
+            answers: list[Frame | ReplyByte | None] = [None] * len(asked)
+            batched = self.batching and len(asked) >= 2
+            if batched:
+                waitings = link.write([(frames[i][0].name, frames[i][2], True)
+                                       for i in asked]) or []
+                answers = self._collect(waitings)
+                if not link.overlap and not held_lock:  # this batch ended the overlap:
+                    held.enter_context(link.link_lock)  # its reads alone go one at a time
+            return self._values(frames, asked, answers, batched, optional)
+
+    @property
+    def asked(self) -> AskedBatch | None:
+        """The batch :meth:`ask_many` wrote and has not handed on (diagnostics, tests)."""
+        with self._asked_lock:
+            return self._asked
+
+    def ask_many(self, reads: Sequence[tuple[str, int | None]],
+                 on_values: Callable[[list[Any]], object]) -> bool:
+        """:meth:`read_many` (not optional) without waiting: the getters written now, and
+        ``on_values(values)`` called by the reader thread once each has its data (the
+        caller's thread wakes once a poll, for the write, not again for the answer).
+        True: asked, or an earlier ask still waits for its answers; False: ask with
+        :meth:`read_many` (not batching, not overlapping, or a getter not known to answer
+        with data yet: its answer could be a byte). Whatever is not plain data (a NACK,
+        an ACK, data that does not decode) or does not come by its deadline is settled
+        here, at the next call, with :meth:`read_many`'s rules (asked again alone, the
+        timeout counted), and ``on_values`` called from this thread; raises as
+        :meth:`read_many` does."""
+        link = self._link
+        with self._asked_lock:
+            asked, self._asked = self._asked, None
+            if asked is not None and asked.answers is None and not asked.due():
+                self._asked = asked
+                return True  # its answers may still come
+        if asked is not None:  # answered but not plainly, or past its deadline
+            if asked.answers is not None:
+                answers = asked.answers
+                self.count_batch(complete=True)  # each answered, a byte too: as _collect
+            else:
+                answers = self._collect(asked.waitings)
+            with contextlib.ExitStack() as held:
+                if not link.overlap:
+                    held.enter_context(link.link_lock)
+                on_values(self._values(asked.frames, list(range(len(asked.frames))),
+                                       answers, True, False))
+            return True
+        frames = self._frames(reads)
+        if not (self.batching and link.overlap and len(frames) >= 2
+                and link.answers.answer_with_data([frame for _, _, frame in frames])):
+            return False
+        ask = AskedBatch(frames, on_values)
+        with self._asked_lock:
+            self._asked = ask
+        try:
+            waitings = link.write([(cmd.name, frame, True) for cmd, _, frame in frames],
+                                  on_answered=partial(self._answered, ask))
+        except BaseException:
+            with self._asked_lock:
+                self._asked = None
+            raise
+        ask.waitings = waitings or []
+        ask.deadline = max(link.deadline(w, link.timeout) for w in ask.waitings)
+        return True
+
+    def _answered(self, ask: AskedBatch, waitings: list[Waiting]) -> None:
+        """Every getter of ``ask`` has its answer (on the reader thread): plain data is
+        handed on here; anything else is left to :meth:`ask_many`'s next call."""
+        with self._asked_lock:
+            if self._asked is not ask:
+                return  # settled by the asking thread already
+            answers = [self._link.answer(w, 0.0) for w in waitings]
+            values: list[Any] = []
+            for (cmd, _, frame), answer in zip(ask.frames, answers, strict=True):
+                if not isinstance(answer, Frame):
+                    break
+                try:
+                    values.append(self._link.decode(cmd.name, frame, answer))
+                except WrongReply:
+                    break
+            if len(values) < len(ask.frames):
+                ask.answers = answers
+                return
+            self._asked = None
+        self.count_batch(complete=True)
+        ask.on_values(values)
+
+    def _frames(self, reads: Sequence[tuple[str, int | None]]
+                ) -> list[tuple[Command, int | None, Frame]]:
         frames = []
         for name, axis in reads:
             cmd = command(name)
             if not cmd.replies_with_data:
                 raise ProtocolError(f'{name} is not a getter: only getters are batched')
             frames.append((cmd, axis, cmd.frame(axis, None, self._link.group)))
+        return frames
+
+    def _values(self, frames: list[tuple[Command, int | None, Frame]], asked: list[int],
+                answers: list[Frame | ReplyByte | None], batched: bool,
+                optional: bool) -> list[Any]:
+        """The values of a batch's answers; a read not answered with data is asked again
+        alone (optional ones by :meth:`Polls.poll`'s rules)."""
         link = self._link
-        with contextlib.ExitStack() as held:
-            held_lock = not link.overlap
-            if held_lock:
-                held.enter_context(link.link_lock)
-            values: list[Any] = [None] * len(frames)
-            asked = [i for i, (cmd, axis, _) in enumerate(frames)
-                     if not (optional and self._left_out(cmd.name, axis))]
-            answers: list[Frame | ReplyByte | None] = [None] * len(asked)
-            batched = self.batching and len(asked) >= 2
-            if batched:
-                answers = self._transact_batch([(frames[i][0].name, frames[i][2])
-                                                for i in asked])
-                if not link.overlap and not held_lock:  # this batch ended the overlap:
-                    held.enter_context(link.link_lock)  # its reads alone go one at a time
-            # only the first read answered: what a controller that drops queued requests
-            # does, not one silent read (with two reads the two look alike)
-            dropped_queue = (batched and answers[0] is not None
-                             and all(answer is None for answer in answers[1:]))
-            for i, answer in zip(asked, answers, strict=True):
-                cmd, axis, frame = frames[i]
-                if isinstance(answer, Frame):
-                    with contextlib.suppress(WrongReply):  # undecodable: asked alone below
-                        values[i] = link.decode(cmd.name, frame, answer)
-                        if optional:
-                            self._polls.answered(cmd.name, axis)
-                        continue
-                if optional and batched and answer is None and answers.count(None) == 1 and (
-                        not dropped_queue):
-                    # the one read of the batch with nothing at all while the device answered
-                    # the rest: silent, not ambiguous (a controller that drops what it queues
-                    # loses every read after the first); asked again after its back-off, not
-                    # at once alone
-                    self._polls.went_unanswered(cmd.name, axis)
+        values: list[Any] = [None] * len(frames)
+        # only the first read answered: what a controller that drops queued requests
+        # does, not one silent read (with two reads the two look alike)
+        dropped_queue = (batched and answers[0] is not None
+                         and all(answer is None for answer in answers[1:]))
+        for i, answer in zip(asked, answers, strict=True):
+            cmd, axis, frame = frames[i]
+            if isinstance(answer, Frame):
+                with contextlib.suppress(WrongReply):  # undecodable: asked alone below
+                    values[i] = link.decode(cmd.name, frame, answer)
+                    if optional:
+                        self._polls.answered(cmd.name, axis)
                     continue
-                # NACKed, answered without data or unanswered: once more, on its own
-                if not optional:
-                    values[i] = link.request_locked(cmd.name, axis, None)
-                    continue
-                # None: not asked again (unsupported), or not now (unanswered: back-off)
-                with contextlib.suppress(NotSupported, DeviceTimeout):
-                    values[i] = self._polls.poll(cmd.name, axis)
-            return values
+            if optional and batched and answer is None and answers.count(None) == 1 and (
+                    not dropped_queue):
+                # the one read of the batch with nothing at all while the device answered
+                # the rest: silent, not ambiguous (a controller that drops what it queues
+                # loses every read after the first); asked again after its back-off, not
+                # at once alone
+                self._polls.went_unanswered(cmd.name, axis)
+                continue
+            # NACKed, answered without data or unanswered: once more, on its own
+            if not optional:
+                values[i] = link.request_locked(cmd.name, axis, None)
+                continue
+            # None: not asked again (unsupported), or not now (unanswered: back-off)
+            with contextlib.suppress(NotSupported, DeviceTimeout):
+                values[i] = self._polls.poll(cmd.name, axis)
+        return values
 
     def _left_out(self, name: str, axis: int | None) -> bool:
         """An optional read not to send now: the device does not know it, or it went
@@ -115,13 +231,11 @@ class BatchedReads:
         return (name in self._link.unsupported
                 or self._link.unanswered.waiting(request_key(name, axis)) is not None)
 
-    def _transact_batch(self, frames: list[tuple[str, Frame]]
-                        ) -> list[Frame | ReplyByte | None]:
-        """Write ``frames`` in one go; the answer to each within :attr:`timeout`: its data,
-        a reply byte (a NACK or an ACK went to it: which read it belongs to, the byte does
+    def _collect(self, waitings: list[Waiting]) -> list[Frame | ReplyByte | None]:
+        """The answer to each of a batch's getters within :attr:`timeout`: its data, a
+        reply byte (a NACK or an ACK went to it: which read it belongs to, the byte does
         not say, so a read that got one is asked alone), or None (nothing)."""
         link = self._link
-        waitings = link.write([(name, frame, True) for name, frame in frames]) or []
         answers = [link.answer(waiting, link.deadline(waiting, link.timeout))
                    for waiting in waitings]
         if len(answers) >= 2 and answers[0] is not None and all(

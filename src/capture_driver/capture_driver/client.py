@@ -122,6 +122,10 @@ class CaptureClient(CaptureLink):
                   optional: bool = False) -> list[Any]:
         return self.batch.read_many(reads, optional)
 
+    def ask_many(self, reads: Sequence[tuple[str, int | None]],
+                 on_values: Callable[[list[Any]], object]) -> bool:
+        return self.batch.ask_many(reads, on_values)
+
     def explain_nack(self, exc: DeviceNack) -> DeviceNack:
         return self.polls.explain_nack(exc)
 

@@ -34,6 +34,7 @@ from gimbal_driver_common.device import (
 from gimbal_driver_common.diagnostics import Level
 from gimbal_driver_common.errors import DeviceRefused
 from gimbal_driver_common.joint_command import check_positions
+from gimbal_driver_common.periodic import Period
 from gimbal_driver_common.transport import ByteStream, SerialStream, TcpStream
 
 from .capabilities import (
@@ -55,9 +56,6 @@ LOG = logging.getLogger('capture_driver.device')
 
 #: what ``hardware_id``, diagnostics and ~/status say for an identity the device did not give
 UNKNOWN = 'unknown'
-#: how often the sensors thread checks whether the registers are due (``status_period``,
-#: or at once after :meth:`CaptureDevice.expire_status`)
-STATUS_TICK_S = 0.05
 
 
 @dataclass
@@ -151,7 +149,6 @@ class CaptureDevice(Device):
             link_lock=self.link_lock)
         self._status: dict[str, Any] = {}
         self._status_lock = threading.Lock()
-        self._next_status = 0.0
         self._warned: dict[str, float] = {}
         #: the identity the device gave at the last open (what it did not: ``problems``)
         self.identity = Identity()
@@ -208,7 +205,6 @@ class CaptureDevice(Device):
         functions.probe(self.log.warning)
         self.programs.clear()
         self.programs.scanning = bool(client.optional('SCN_IsScanOn'))
-        self._next_status = 0.0
         client.start()
         self.log.info(
             f'Capture controller on {client.description}: IMU '
@@ -227,15 +223,13 @@ class CaptureDevice(Device):
         return self.settings.link_description()
 
     # ------------------------------------------------------------ poll
-    def background_reads(self) -> list[tuple[float, Callable[[], None]]]:
+    def background_reads(self) -> list[tuple[Period, Callable[[], None]]]:
         """The registers, on the controller's sensors thread (not in the joint poll: a
         register the device answers late or never does not hold up joint_states): every
-        ``status_period``, and at once after :meth:`expire_status`."""
-        return [(STATUS_TICK_S, self._refresh_status_when_due)]
-
-    def _refresh_status_when_due(self) -> None:
-        if time.monotonic() >= self._next_status:
-            self.refresh_status()
+        ``status_period`` (read at each run: a run-time parameter), and at once after
+        :meth:`expire_status`. The thread sleeps between (it ticked at 20 Hz to look
+        whether the registers were due: a wake-up costs about what a quick job does)."""
+        return [(lambda: self.settings.status_period, self.refresh_status)]
 
     def read(self) -> JointSample | None:
         """Load position and speed of every axis (the registers are a background read).
@@ -244,15 +238,33 @@ class CaptureDevice(Device):
         (the SRL motion-complete bit is read only every ``status_period``), so the
         controller's one rule applies.
         """
-        joints = self.joint_names
         try:
             # one write for every axis: see CaptureClient.read_many
-            values = self.client.read_many([
-                (name, self.axis(joint)) for joint in joints
-                for name in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')])
+            return self._sample(self.client.read_many(self._poll_reads()))
         except REQUEST_ERRORS as exc:  # an answer of the wrong kind too: the link stays
             self._warn('poll', f'poll skipped: {exc}', 5.0)
             return None
+
+    def request_read(self, deliver: Callable[[JointSample], object]) -> bool:
+        """:meth:`read` without waiting for the answers (``CaptureClient.ask_many``):
+        the reader thread hands the sample to ``deliver`` (the device thread wakes once a
+        poll instead of twice); until each getter is known to answer with data, and
+        whenever the client reads one request at a time, :meth:`read` does it (False)."""
+        def take(values: list[Any]) -> None:
+            deliver(self._sample(values))
+
+        try:
+            return self.client.ask_many(self._poll_reads(), take)
+        except REQUEST_ERRORS as exc:  # settled here: as read() does
+            self._warn('poll', f'poll skipped: {exc}', 5.0)
+            return True
+
+    def _poll_reads(self) -> list[tuple[str, int | None]]:
+        return [(name, self.axis(joint)) for joint in self.joint_names
+                for name in ('MOT_GetLoadPosition', 'MOT_GetMotorSpeed')]
+
+    def _sample(self, values: list[Any]) -> JointSample:
+        joints = self.joint_names
         positions = {joint: self.from_device(joint, values[2 * i])
                      for i, joint in enumerate(joints)}
         velocities = {joint: self.from_device(joint, values[2 * i + 1])
@@ -268,7 +280,6 @@ class CaptureDevice(Device):
         """Registers, currents (A) and error strings, cached for diagnostics, ~/status and
         the axis refusals; also tells which device programs (scan, loops) run."""
         client = self.client
-        self._next_status = time.monotonic() + self.settings.status_period
         status: dict[str, Any] = {'axes': {}, 'current': {}, 'problems': []}
         for joint in self.joint_names:
             axis = self.axis(joint)
@@ -302,9 +313,9 @@ class CaptureDevice(Device):
             return self._status
 
     def expire_status(self) -> None:
-        """Read the registers at once (after a command that changes them): on the sensors
-        thread's next tick (:data:`STATUS_TICK_S`)."""
-        self._next_status = 0.0
+        """Read the registers at once (after a command that changes them), on the sensors
+        thread."""
+        self.read_background_now()
 
     # ---------------------------------------------------------- motion
     def move(self, moves: Moves) -> None:

@@ -426,11 +426,13 @@ class CaptureLink(Protocol):
                                    'data') from None
 
     def write(self, requests: Sequence[Request], block: bool = True,
-              urgent: bool = False) -> list[Waiting] | None:
+              urgent: bool = False,
+              on_answered: Callable[[list[Waiting]], None] | None = None,
+              ) -> list[Waiting] | None:
         """Write ``requests`` in one write, registered for their answers (see
         :class:`~.answers.AnswerBook` for when they may go out); None when ``block`` is
         False and they may not go out now. A stop (``urgent``, or the link lock held
-        urgently) goes out at once."""
+        urgently) goes out at once. ``on_answered``: see :meth:`AnswerBook.write`."""
         session = self._session
         if session is None or not session.alive:
             lost = session.error if session is not None else None
@@ -440,7 +442,8 @@ class CaptureLink(Protocol):
         try:
             waitings = self.answers.write(
                 requests, session.write, urgent=urgent or self._lock.held_urgently(), block=block,
-                timeout=2 * self.timeout + 1.0, holds_lock=self._lock.held())
+                timeout=2 * self.timeout + 1.0, holds_lock=self._lock.held(),
+                on_answered=on_answered)
         except LinkError as exc:
             raise NotConnected(f'{requests[0][0]}: link lost ({exc})') from exc
         # time spent waiting for the link to resynchronise is not the device's silence

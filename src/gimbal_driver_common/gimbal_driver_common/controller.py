@@ -37,7 +37,7 @@ from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
 from gimbal_driver_common.errors import DeviceRefused, GimbalError, LinkError, device_boundary
 from gimbal_driver_common.joint_command import validate_joint_command
 from gimbal_driver_common.motion_watch import MotionWatch
-from gimbal_driver_common.periodic import PacedJob, Periodic
+from gimbal_driver_common.periodic import PacedJob, Period, Periodic
 from gimbal_driver_common.rejections import CommandRejections
 from gimbal_driver_common.stopping import STOP_CHECK_IDLE_S, STOP_CHECK_S, Stopping
 from gimbal_driver_common.watchdog import JogWatchdog
@@ -141,7 +141,7 @@ class GimbalController:
         self._threads: list[threading.Thread] = []
         self._warned: dict[str, float] = {}
         #: the device's background reads as the sensors thread runs them
-        self._background: list[tuple[float, Callable[[], None]]] = []
+        self._background: list[tuple[Period, Callable[[], None]]] = []
 
     @property
     def connected(self) -> bool:
@@ -156,6 +156,8 @@ class GimbalController:
                             for period, job in self.device.background_reads()]
         for period, job in self._background:
             self.sensors.add(period, job)
+        self.device.on_background_wake(self._run_background_now)
+        self._run_background_now()
         self._stopping.clear()
         self.commands.reopen()
         self._threads = [
@@ -437,6 +439,10 @@ class GimbalController:
             self._wake.clear()
         return woken
 
+    def _run_background_now(self) -> None:
+        for _, job in self._background:
+            self.sensors.trigger(job)
+
     def _background_job(self, job: Callable[[], None]) -> Callable[[], None]:
         """``job`` run only while connected; a device error is logged (at most every 10 s
         per kind), a lost link is the device thread's to notice."""
@@ -467,6 +473,7 @@ class GimbalController:
         if reconnect:  # counted before the state says connected: the two are read together
             self.reconnects += 1
         self.link_state, self.link_error = LinkState.CONNECTED, ''
+        self._run_background_now()  # what a new connection reads, read first
         self.log.info(
             f'connected to {self.device_info.model or "device"} '
             f'(serial {self.device_info.serial_number or "?"}, '

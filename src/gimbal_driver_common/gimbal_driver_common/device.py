@@ -31,6 +31,7 @@ from gimbal_driver_common.config import ControllerConfig, Logger
 from gimbal_driver_common.diagnostics import StatusPart
 from gimbal_driver_common.errors import Unsupported
 from gimbal_driver_common.link_lock import LinkLock
+from gimbal_driver_common.periodic import Period
 from gimbal_driver_common.scan import ScanRequest
 
 if TYPE_CHECKING:  # the geodesy (pymap3d) is loaded only by the adapters that report a pose
@@ -294,6 +295,7 @@ class Device(abc.ABC):
         self.link_lock = LinkLock()
         self._data_arrived = threading.Event()
         self._on_targets: Callable[[dict[str, float]], None] = lambda targets: None
+        self._run_background: Callable[[], None] = lambda: None
 
     def attach(self, config: ControllerConfig, log: Logger,
                on_targets: Callable[[dict[str, float]], None] | None = None) -> None:
@@ -302,6 +304,15 @@ class Device(abc.ABC):
         self.config, self.log = config, log
         if on_targets is not None:
             self._on_targets = on_targets
+
+    def read_background_now(self) -> None:
+        """Have the controller run :meth:`background_reads` at once (then on their
+        periods again): a command changed what they read. Nothing before :meth:`open`."""
+        self._run_background()
+
+    def on_background_wake(self, run: Callable[[], None]) -> None:
+        """The controller's way to run the background reads at once (its sensors thread)."""
+        self._run_background = run
 
     def report_targets(self, targets: dict[str, float]) -> None:
         """Targets the device took on its own (a device preset, a geo-pointing, levelling,
@@ -334,9 +345,11 @@ class Device(abc.ABC):
         or at the next call for an answer that failed."""
         return False
 
-    def background_reads(self) -> list[tuple[float, Callable[[], None]]]:
+    def background_reads(self) -> list[tuple[Period, Callable[[], None]]]:
         """Reads besides the joint sample that may wait for the device (registers, a
-        status the driver keeps): ``(period s, job)``. The controller runs them on its
+        status the driver keeps): ``(period s, job)``, the period a number or a function
+        read at each run (a run-time parameter); :meth:`read_background_now` runs them
+        at once. The controller runs them on its
         ``sensors`` thread while the link is up, never in the joint poll, so one slow or
         silent answer does not hold up joint_states. Each job handles its own device
         errors; a lost link ends it (the controller skips it until reconnected)."""

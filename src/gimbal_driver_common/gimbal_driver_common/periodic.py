@@ -3,13 +3,31 @@
 Every wake-up of an rclpy executor rebuilds its wait set in Python
 and competes for the GIL with the device thread; measured as CPU and
 joint_states latency. So the jog watchdog, diagnostics and ~/status run here.
+
+Jobs run on a common grid (multiples of their period on the monotonic clock, after
+the first run), so jobs whose periods divide each other run in one wake-up: a thread
+wakes as often as its fastest job, not once per job. A wake-up costs about as much CPU
+as the quick job it runs (bench/README.md, "Fewer wake-ups").
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable
+
+#: a job's period in s, or a function giving it (read at each run: a run-time parameter)
+Period = float | Callable[[], float]
+
+
+def period_of(period: Period) -> float:
+    return period() if callable(period) else period
+
+
+def next_on_grid(period: float, after: float) -> float:
+    """The first multiple of ``period`` later than ``after`` (monotonic s)."""
+    return (math.floor(after / period) + 1.0) * period if period > 0 else after
 
 
 class Periodic:
@@ -25,21 +43,24 @@ class Periodic:
         self._wake = threading.Event()
         self._stopped = threading.Event()
         self._thread: threading.Thread | None = None
+        #: times the thread woke and ran jobs (tests, benchmarks)
+        self.wakeups = 0
 
-    def add(self, period: float, callback: Callable[[], object]) -> None:
+    def add(self, period: Period, callback: Callable[[], object]) -> None:
+        """Run ``callback`` every ``period`` s, first ``period`` s from now."""
         with self._lock:
-            self._jobs.append([period, time.monotonic() + period, callback])
+            self._jobs.append([period, time.monotonic() + period_of(period), callback])
             if self._thread is None:
                 self._thread = threading.Thread(target=self._run, name=self._name, daemon=True)
                 self._thread.start()
         self._wake.set()
 
-    def set_period(self, callback: Callable[[], object], period: float) -> None:
+    def set_period(self, callback: Callable[[], object], period: Period) -> None:
         """Change a job's period; it next runs ``period`` s from now."""
         with self._lock:
             for job in self._jobs:
                 if job[2] == callback:
-                    job[0], job[1] = period, time.monotonic() + period
+                    job[0], job[1] = period, time.monotonic() + period_of(period)
         self._wake.set()
 
     def trigger(self, callback: Callable[[], object]) -> None:
@@ -68,8 +89,9 @@ class Periodic:
             with self._lock:
                 due = [job for job in self._jobs if job[1] <= now]
                 for job in due:
-                    job[1] = max(job[1] + job[0], now)
+                    job[1] = next_on_grid(period_of(job[0]), max(job[1], now))
                 next_due = min((job[1] for job in self._jobs), default=now + 1.0)
+                self.wakeups += bool(due)
             for _, _, callback in due:
                 if self._stopped.is_set():
                     return

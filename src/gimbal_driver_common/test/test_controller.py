@@ -1079,3 +1079,31 @@ def test_a_stop_goes_ahead_of_the_reads_queued_for_the_link(controller, device, 
     wait_for(lambda: device.kinds().count('read') == 2, 2.0, 'both reads done')
     kinds = [kind for kind in device.kinds() if kind in ('stop', 'read')]
     assert kinds[0] == 'stop', device.sent
+
+
+def test_periodic_jobs_whose_periods_divide_each_other_share_wake_ups() -> None:
+    """After each job's first run, jobs run on a common grid: the thread wakes as often
+    as its fastest job, not once per job (each wake-up costs about what a quick job
+    does). A late thread only merges more runs into one wake-up."""
+    from gimbal_driver_common.periodic import Periodic
+
+    periodic = Periodic()
+    fast_runs = threading.Semaphore(0)
+    try:
+        periodic.add(0.02, fast_runs.release)
+        periodic.add(0.04, lambda: None)
+        periodic.add(lambda: 0.08, lambda: None)  # a period read at each run
+        for _ in range(30):
+            assert fast_runs.acquire(timeout=10.0)
+        # each job's first run is one period after add, off the grid: up to 2 extra
+        assert periodic.wakeups <= 30 + 2 + 1
+    finally:
+        periodic.stop()
+
+
+def test_next_on_grid_is_the_next_multiple_of_the_period() -> None:
+    from gimbal_driver_common.periodic import next_on_grid
+
+    assert next_on_grid(0.5, 10.2) == pytest.approx(10.5)
+    assert next_on_grid(0.5, 10.5) == pytest.approx(11.0)  # later than, not at
+    assert next_on_grid(0.1, 0.0) == pytest.approx(0.1)
