@@ -485,3 +485,21 @@ def test_a_register_that_never_answers_holds_up_neither_the_poll_nor_a_jog(tcp_r
     assert 'ERR_OperationRegister' in device.client.answers.in_flight()  # still waiting
     ctl.stop()
     sim.model.request_faults.clear()
+
+
+def test_registers_are_read_at_open_and_at_once_after_expire_status(sim):
+    """The sensors thread sleeps for status_period between register reads (no tick that
+    looks whether they are due): with an hour's period they are still read when the link
+    opens, and at once after a command that changes them (``expire_status``)."""
+    device = CaptureDevice(make_settings(sim, status_period=3600.0))
+    ctl = GimbalController(device, make_config(), LOG)
+    ctl.open()
+    ctl.activate()
+    try:
+        wait_for(lambda: device.status_snapshot(), 10.0, 'the registers read at open')
+        assert ctl.refusal(['pan']) is None
+        sim.model.inject_fault(1, 'over_current')
+        device.expire_status()
+        wait_for(lambda: ctl.refusal(['pan']) is not None, 10.0, 'the fault read at once')
+    finally:
+        ctl.shutdown()
