@@ -16,7 +16,10 @@ ends an episode.
 
 :meth:`wait` lets ``~/stop`` answer the truth: it blocks, woken by samples (never by a
 polling sleep), until the axes are at rest or their deceleration time plus the margin has
-passed, and returns the axes still moving.
+passed, and returns the axes still moving: an axis whose stop a newer motion command
+ended while it waited is among them (it moves by that command; found in a loaded run: a
+jog published just before ``~/stop`` reached the node just after it, and ``~/stop``
+answered success while the jog ran).
 """
 
 from __future__ import annotations
@@ -68,6 +71,8 @@ class StopWatch:
         self._changed = threading.Condition()
         self._episodes: dict[str, StopEpisode] = {}
         self._latest: JointSample | None = None
+        #: per joint, how many of its stop episodes a newer motion command ended
+        self._overridden: dict[str, int] = {}
 
     # ------------------------------------------------------------ stops
     def settle_time(self, *joints: str) -> float:
@@ -101,7 +106,8 @@ class StopWatch:
             return
         with self._changed:
             for joint in list(self._episodes) if joints is None else joints:
-                self._episodes.pop(joint, None)
+                if self._episodes.pop(joint, None) is not None:
+                    self._overridden[joint] = self._overridden.get(joint, 0) + 1
             self._changed.notify_all()
 
     # ----------------------------------------------------------- samples
@@ -171,11 +177,13 @@ class StopWatch:
             return {j: StopEpisode(**vars(e)) for j, e in self._episodes.items()}
 
     def still_moving(self, joints: Sequence[str]) -> str:
-        """"stop not confirmed: pan still moving at 0.300 rad/s, stop sent twice; ..." """
+        """"stop not confirmed: pan still moving at 0.300 rad/s, stop sent twice; tilt
+        moved by a newer motion command" """
         episodes = self.episodes()
         parts = [f'{j} {episodes[j].describe().removeprefix("stop not confirmed: ")}'
-                 for j in joints if j in episodes]
-        return 'stop not confirmed: ' + ('; '.join(parts) or ', '.join(joints))
+                 if j in episodes else f'{j} moved by a newer motion command'
+                 for j in joints]
+        return 'stop not confirmed: ' + '; '.join(parts)
 
     def wait(self, joints: Sequence[str], timeout: float,
              wait: Callable[[threading.Condition, float], object] | None = None) -> list[str]:
@@ -184,10 +192,12 @@ class StopWatch:
         on an injected clock)."""
         deadline = self._clock() + timeout
         with self._changed:
+            overridden = {j: self._overridden.get(j, 0) for j in joints}
             while True:
-                moving = [j for j in joints if j in self._episodes]
+                moving = [j for j in joints if j in self._episodes
+                          or self._overridden.get(j, 0) != overridden[j]]
                 left = deadline - self._clock()
-                if not moving or left <= 0:
+                if not moving or left <= 0 or all(j not in self._episodes for j in moving):
                     return moving
                 if wait is None:
                     self._changed.wait(left)

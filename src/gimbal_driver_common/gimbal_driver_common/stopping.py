@@ -110,8 +110,9 @@ class Stopping:
         moving = self.watch.wait(joints, timeout)
         if moving:
             sent = f' (the device answered: {failed})' if failed else ''
-            raise DeviceRefused(f'{self.watch.still_moving(moving)}{sent}; the stop is '
-                                'sent again until they rest', reason='stop not confirmed')
+            raise DeviceRefused(f'{self.watch.still_moving(moving)}{sent}; an axis still '
+                                'stopping gets the stop again until it rests',
+                                reason='stop not confirmed')
         if failed is not None:
             return f'all axes stopped and at rest; but a step of the stop failed: {failed}'
         return 'all axes stopped and at rest; scans, moves and jogs cancelled'

@@ -344,6 +344,38 @@ def test_wait_returns_the_axes_still_moving_after_their_time() -> None:
     assert watch.wait(['pan', 'tilt'], watch.settle_time('pan'), samples) == ['pan']
 
 
+def test_an_axis_a_newer_command_moves_during_the_wait_is_not_at_rest() -> None:
+    """A jog published just before ``~/stop`` can reach the node just after it (two
+    topics, no order between them): the jog ends the stop's episode, and the wait must not
+    read that as rest (a loaded run answered ``~/stop`` success while the jog ran)."""
+    clock = ManualClock()
+    watch = StopWatch(lambda: DECELERATION, lambda: MARGIN,
+                      lambda sample, joint: bool(sample and sample.velocities.get(joint)),
+                      logging.getLogger('test'), clock=clock)
+    watch.observe(JointSample({'pan': 0.0, 'tilt': 0.0}, {'pan': 0.3, 'tilt': 0.3}), clock())
+    watch.stopped(['pan', 'tilt'])
+    woken: list[float] = []
+
+    def newer_jog_then_rest(condition: threading.Condition, left: float) -> None:
+        woken.append(left)
+        clock.now += 0.05
+        condition.release()
+        try:
+            if len(woken) == 1:
+                watch.superseded(['pan'])  # the late jog: pan moves by it
+            watch.observe(JointSample({'pan': 0.0, 'tilt': 0.0}, {'pan': 0.3, 'tilt': 0.0}),
+                          clock())
+        finally:
+            condition.acquire()
+
+    moving = watch.wait(['pan', 'tilt'], watch.settle_time('pan'), newer_jog_then_rest)
+    assert moving == ['pan']
+    assert len(woken) == 1  # returned once tilt rested: pan waits for no stop of its own
+    assert watch.still_moving(moving) == 'stop not confirmed: pan moved by a newer motion command'
+    # a wait that begins after the newer command reads only its own stops
+    assert watch.wait(['pan', 'tilt'], 1.0, newer_jog_then_rest) == []
+
+
 # --------------------------------------------------------------- ~/stop tells the truth
 class ThreadedRig:
     """The controller with its threads, on the real clock (the service's wait)."""
