@@ -66,9 +66,11 @@ class Waiting:
     #: when its wait ended without an answer (its late answer may come until + window)
     ended_at: float | None = None
 
-    @property
-    def key(self) -> tuple[int, int]:
-        return frame_key(self.frame)
+    #: (opcode, axis): read many times per answer, so computed once
+    key: tuple[int, int] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.key = frame_key(self.frame)
 
 
 @dataclass(eq=False)

@@ -101,6 +101,8 @@ class AnswerBook:
         self._motions: dict[int, int] = {}
         #: requests preempted (counted for diagnostics and tests)
         self.preempted = 0
+        #: exchanges with an ``on_answered`` not called yet
+        self._watched: list[Exchange] = []
 
     # ------------------------------------------------------------ the writers
     def reset(self, error: BaseException) -> None:
@@ -141,6 +143,8 @@ class AnswerBook:
             if not urgent and not self._wait_until(allowed, block, timeout):
                 return None
             exchange = Exchange(byte=byte, urgent=urgent, on_answered=on_answered)
+            if on_answered is not None:
+                self._watched.append(exchange)
             if byte:
                 self._take_over(exchange)
             now = self._clock()
@@ -156,6 +160,8 @@ class AnswerBook:
                 write(b''.join(frame.encode() for _, frame, _ in requests))
             except BaseException:
                 self._drop(exchange.waitings)
+                if exchange in self._watched:
+                    self._watched.remove(exchange)
                 if self._byte is exchange:
                     self._byte = None
                 raise
@@ -384,6 +390,7 @@ class AnswerBook:
             self._flight.clear()  # nothing of that link answers anything any more
             self._late.clear()
             self._held.clear()
+            self._watched.clear()
             self._byte = None
             self._cond.notify_all()
 
@@ -405,29 +412,42 @@ class AnswerBook:
     def deliver(self, item: Item) -> bool:
         """Give ``item`` to the request it answers; False when none did (stale: a reply
         that came after its request gave up, or noise that decoded; counted)."""
+        return self.deliver_all([item]) == 1
+
+    def deliver_all(self, items: Sequence[Item]) -> int:
+        """:meth:`deliver` each of ``items`` (what one read of the link decoded) in order,
+        under one hold of the lock; how many were taken. An exchange's ``on_answered`` is
+        called after, outside the lock."""
+        taken = 0
         with self._cond:
             self._expire()
-            taken = (self._deliver_byte(item) if isinstance(item, ReplyByte)
-                     else self._deliver_data(item))
-            if not taken:
-                self.stale += 1
-            self._resolve()
-            answered = self._answered_exchanges()
+            for item in items:
+                if (self._deliver_byte(item) if isinstance(item, ReplyByte)
+                        else self._deliver_data(item)):
+                    taken += 1
+                else:
+                    self.stale += 1
+                self._resolve()
+            answered = [exchange for exchange in self._watched
+                        if all(w.done and w.answer is not None for w in exchange.waitings)]
+            for exchange in answered:
+                self._watched.remove(exchange)
             self._cond.notify_all()
-        for exchange, on_answered in answered:  # outside the lock: they take answers
-            on_answered(exchange.waitings)
+        for exchange in answered:  # outside the lock: they take their answers
+            if exchange.on_answered is not None:
+                exchange.on_answered(exchange.waitings)
         return taken
 
-    def _answered_exchanges(self) -> list[tuple[Exchange, Callable[[list[Waiting]], None]]]:
-        """Exchanges with an ``on_answered`` whose requests all have their answer now."""
-        answered = []
-        for exchange in {id(w.exchange): w.exchange for w in self._flight}.values():
-            on_answered = exchange.on_answered
-            if on_answered is not None and all(w.done and w.answer is not None
-                                               for w in exchange.waitings):
-                exchange.on_answered = None
-                answered.append((exchange, on_answered))
-        return answered
+    def take(self, waitings: Sequence[Waiting]) -> list[Item | None]:
+        """The answers of ``waitings`` that ``on_answered`` reported, which leave the book
+        (:meth:`wait` for each, under one hold of the lock)."""
+        with self._cond:
+            if all(w.done and w.answer is not None and w.error is None for w in waitings):
+                self._drop(list(waitings))
+                for waiting in waitings:
+                    self._end_exchange(waiting.exchange)
+                return [w.answer for w in waitings]
+        return [self.wait(w, 0.0) for w in waitings]
 
     def _deliver_data(self, item: Frame) -> bool:
         if is_greeting(item):

@@ -55,6 +55,8 @@ class BatchedReads:
         self.batch_reads = batch_reads
         self.batching = batch_reads
         self._failures = 0
+        self._last_frames: tuple[object, list[tuple[Command, int | None, Frame]]] = (
+            None, [])
         #: the batch :meth:`ask_many` wrote, until its values are handed on
         self._asked: AskedBatch | None = None
         self._asked_lock = threading.Lock()
@@ -163,7 +165,7 @@ class BatchedReads:
         with self._asked_lock:
             if self._asked is not ask:
                 return  # settled by the asking thread already
-            answers = [self._link.answer(w, 0.0) for w in waitings]
+            answers = self._link.answers.take(waitings)
             values: list[Any] = []
             for (cmd, _, frame), answer in zip(ask.frames, answers, strict=True):
                 if not isinstance(answer, Frame):
@@ -181,12 +183,19 @@ class BatchedReads:
 
     def _frames(self, reads: Sequence[tuple[str, int | None]]
                 ) -> list[tuple[Command, int | None, Frame]]:
+        """Each read's command, axis and frame; the frames of the last reads asked are
+        kept (frames are immutable: the joint poll asks the same four at every tick)."""
+        key = (tuple(reads), self._link.group)
+        last = self._last_frames  # one read: other threads ask other reads
+        if last[0] == key:
+            return last[1]
         frames = []
         for name, axis in reads:
             cmd = command(name)
             if not cmd.replies_with_data:
                 raise ProtocolError(f'{name} is not a getter: only getters are batched')
             frames.append((cmd, axis, cmd.frame(axis, None, self._link.group)))
+        self._last_frames = (key, frames)
         return frames
 
     def _values(self, frames: list[tuple[Command, int | None, Frame]], asked: list[int],

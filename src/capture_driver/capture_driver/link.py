@@ -348,6 +348,7 @@ class CaptureLink(Protocol):
         self.answers.fail_all(NotConnected(f'link lost ({error})'))
 
     def _take(self, items: Sequence[object]) -> None:
+        answers: list[Frame | ReplyByte] = []
         for item in items:
             if not isinstance(item, Frame | ReplyByte):
                 continue  # garbage: counted by the decoder
@@ -358,8 +359,9 @@ class CaptureLink(Protocol):
                 else:
                     LOG.info('controller re-sent its greeting (0x%04X)', item.opcode)
                 continue
-            if self.answers.deliver(item):
-                self._last_answer = time.monotonic()  # the device answers: not silent
+            answers.append(item)
+        if answers and self.answers.deliver_all(answers):
+            self._last_answer = time.monotonic()  # the device answers: not silent
 
     # ------------------------------------------------------------- requests
     def request(self, name: str, axis: int | None = None, value: Any = None,

@@ -70,6 +70,15 @@ class Frame:
             raise FrameError(f'{len(self.data)} data bytes exceed the maximum of {MAX_DATA_SIZE}')
 
     def encode(self) -> bytes:
+        """The packet's bytes, computed once (the joint poll writes the same four frames at
+        every tick; a frozen dataclass keeps them with ``object.__setattr__``)."""
+        wire: bytes | None = self.__dict__.get('wire')
+        if wire is None:
+            wire = self._encode()
+            object.__setattr__(self, 'wire', wire)
+        return wire
+
+    def _encode(self) -> bytes:
         body = bytes(
             (
                 len(self.data) + HEADER_SIZE,
