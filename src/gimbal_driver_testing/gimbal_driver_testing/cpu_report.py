@@ -45,6 +45,8 @@ def process_name(args: object) -> str:
         rest = words[1:]
         if rest[0] == '-m' and len(rest) > 1:
             return f'python -m {rest[1]}'
+        if rest[0].startswith('-m') and len(rest[0]) > 2:  # python -mpytest
+            return f'python -m {rest[0][2:]}'
         return f'python {Path(rest[0]).name}'
     return name
 

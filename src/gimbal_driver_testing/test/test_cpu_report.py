@@ -59,6 +59,7 @@ def test_without_the_variable_nothing_is_written(pytester: pytest.Pytester,
     (['/venv/bin/python3', '-m', 'capture_driver.sim', '--port', '1'],
      'python -m capture_driver.sim'),
     (['/venv/bin/python', '/repo/scripts/soak.py', 'capture'], 'python soak.py'),
+    (['/venv/bin/python', '-mpytest', '-q'], 'python -m pytest'),
     ('/bin/true', 'true'),
     ([], '?'),
 ])
