@@ -110,7 +110,9 @@ class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionSta
 
     @pytest.fixture
     def rig(self, conformance_rig: ConformanceRig) -> ConformanceRig:
-        """The class rig with its shared node running."""
+        """The class rig with its shared node running. A test that (re)starts the node it
+        tests takes ``conformance_rig`` instead: the shared node restarted for it would be
+        stopped again at once, a node start (about 1 s of CPU) for nothing."""
         conformance_rig.shared_node()
         return conformance_rig
 

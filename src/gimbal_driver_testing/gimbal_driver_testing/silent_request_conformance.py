@@ -349,10 +349,12 @@ class SilentRequestConformance(ConformanceHelpers):
 
     # ------------------------------------------------------------------- tests
     @pytest.mark.ros
-    def test_a_silent_request_costs_only_itself(self, rig: ConformanceRig, silent) -> None:
-        request, mode = silent
+    def test_a_silent_request_costs_only_itself(self, conformance_rig: ConformanceRig,
+                                                silent) -> None:
+        rig, (request, mode) = conformance_rig, silent
         if request.periodic and mode == 'mute':
             # on the suite's own node, whose timeout sets the back-off
+            rig.shared_node()
             log, window = self.request_log(rig), self.wait_window(rig, request, mode)
             with self.silenced(rig, request, mode):
                 mark = log.mark()
@@ -419,18 +421,18 @@ class SilentRequestConformance(ConformanceHelpers):
         return [(t, r) for t, r in log.since(mark) if rig.sim.motion(r)]
 
     @pytest.mark.ros
-    def test_stop_goes_out_while_a_silent_request_waits(self, rig: ConformanceRig,
-                                                       silent) -> None:
-        request, mode = silent
+    def test_stop_goes_out_while_a_silent_request_waits(
+            self, conformance_rig: ConformanceRig, silent) -> None:
+        rig, (request, mode) = conformance_rig, silent
         self.holding_node(rig, request)
         with self.waiting_request(rig, request, mode) as (log, index, ended):
             rig.ros.call(Trigger, self.srv('stop'), Trigger.Request())
             self.sent_while_waiting(rig, log, index, ended, '~/stop')
 
     @pytest.mark.ros
-    def test_a_jog_goes_out_while_a_silent_request_waits(self, rig: ConformanceRig,
-                                                        silent) -> None:
-        request, mode = silent
+    def test_a_jog_goes_out_while_a_silent_request_waits(
+            self, conformance_rig: ConformanceRig, silent) -> None:
+        rig, (request, mode) = conformance_rig, silent
         joint, velocity = self.jog
         self.holding_node(rig, request)
         self.from_a_position_move(rig, joint)
@@ -447,8 +449,8 @@ class SilentRequestConformance(ConformanceHelpers):
 
     @pytest.mark.ros
     def test_a_silent_best_effort_read_never_keeps_the_node_from_connecting(
-            self, rig: ConformanceRig, silent) -> None:
-        request, mode = silent
+            self, conformance_rig: ConformanceRig, silent) -> None:
+        rig, (request, mode) = conformance_rig, silent
         log = self.request_log(rig)
         mark = log.mark()
         rig.stop_node()
@@ -466,8 +468,9 @@ class SilentRequestConformance(ConformanceHelpers):
         rig.stop_node()
 
     @pytest.mark.ros
-    def test_a_silent_required_request_names_itself(self, rig: ConformanceRig) -> None:
-        name, text = self.required_request
+    def test_a_silent_required_request_names_itself(
+            self, conformance_rig: ConformanceRig) -> None:
+        rig, (name, text) = conformance_rig, self.required_request
         if not name:
             pytest.skip(f'{self.driver}: no request the connection hangs on')
         rig.stop_node()
