@@ -3,47 +3,26 @@
 The link's reader thread decodes everything the controller sends and hands each item to
 :class:`AnswerBook`. A data packet names its opcode and axis (section 3); a reply byte
 (ACK, NACK) names nothing. The book gives an answer to a request only when no other
-request could own it; the rule, which a newcomer can check against :meth:`deliver`:
+request could own it. The rules (ARCHITECTURE.md, "Reply ownership (Capture)", rules 1-6,
+each a test in ``test/test_answers.py``), in short:
 
-- *Data-answered* getters (answered with data on this connection, or left unanswered:
-  they answer data or nothing) overlap everything. Data goes to the getter of its opcode
-  and axis. A getter is not written while an earlier one of its opcode and axis gave up
-  and its data may still come (until that data comes, counted stale, or
-  :data:`LATE_WINDOW_S` passes): a retried getter never takes its first attempt's late
-  data.
-- Every other request is *byte-answered* (a setter, a getter not known yet or known to
-  answer with a byte). At most one byte-answered *exchange* is in flight: one request,
-  or one batch written in one call whose bytes are counted in order and owned by the
-  batch as a whole (a stop's steps, a posted stream move). A byte goes to that exchange.
-- After a byte-answered request ends without its answer, its byte may still come: the
-  link is resynchronised before the next byte-answered exchange goes out, by that late
-  byte arriving (counted stale) or :data:`LATE_WINDOW_S` passing.
-- A NACK may answer any packet (0xF6 checksum, 0x16 pedestal, 0xE6 execution, 0xB6 motor,
-  and 0xA6/0x76 for a getter refused in a mode): while a data-answered getter or a late
-  request could own it, it is *held* and given once only one candidate is left (the
-  others answered with data, or expired); a candidate whose wait ends first gets it with
-  :attr:`Waiting.doubt` saying whose it may be.
-- A stop (``urgent``) never waits: it goes out at once. A byte-answered exchange in
-  flight then gives up (:attr:`Waiting.superseded`) and the stop's batch owns, as a whole,
-  every byte that comes until its own answers are counted (:attr:`Exchange.received`,
-  :attr:`Exchange.doubt`): whether its steps were refused is read from the whole, never
-  from a byte given by guess.
-- A stop also *preempts* what it would wait for (:meth:`AnswerBook.preempt`, called by the
-  link lock before the stop waits for it): the requests written under the link lock and
-  the setters of the exchange in flight (a posted stream move) end at once, their waiters
-  raising :class:`~.errors.Preempted`; until the stop's hold ends no other byte-answered
-  request is written (the holder's next step raises the same, a writer without the lock
-  waits). So the stop's bytes are the next on the wire, never behind an answer. A
-  preempted setter is late by the rule above (the stop owns its byte as a whole); a
-  preempted getter keeps only its named data and is data-answered from then on, as one
-  left unanswered is. A getter written without the lock is not preempted: superseded, it
-  still takes its data.
-- A motion set-up (:meth:`AnswerBook.motion_first`) does not wait behind a read either: a
-  read in flight without its answer yet, and every getter that ended without one, are
-  data-answered from then on (a getter is answered by data, a NACK or nothing: its NACK
-  is held by the NACK rule, an ACK is never its own; not a getter the device has ACKed on
-  this link), and other threads' byte-answered reads wait until the set-up ends. A stop
-  never preempts another stop.
+1. data-answered getters overlap everything, their data going to the getter of its opcode
+   and axis; at most one byte-answered exchange (a setter, a getter not known to answer
+   with data, or one batch whose bytes it owns as a whole) is in flight;
+2. after a request gives up, the next byte-answered exchange, and the next getter of its
+   opcode and axis, wait for its late answer or :data:`LATE_WINDOW_S`;
+3. a NACK more than one request could own is held until one candidate is left, or given
+   with :attr:`Waiting.doubt` naming the others;
+4. a stop (``urgent``) never waits, and owns as a whole every byte that comes while it is
+   in flight;
+5. a stop preempts what it would wait for (:meth:`AnswerBook.preempt`): the requests
+   written under the link lock and the setters of the exchange in flight end at once
+   (:class:`~.errors.Preempted`), and nothing byte-answered is written until its hold ends;
+6. a motion set-up (:meth:`AnswerBook.motion_first`) does not wait behind a read: reads
+   without an answer become data-answered, other threads' byte-answered reads wait.
+
+A read that does not wait (``on_answered``: the joint poll, ``batch.BatchedReads.ask_many``)
+is told on the reader thread once each of its requests has its answer, by the same rules.
 """
 
 from __future__ import annotations
