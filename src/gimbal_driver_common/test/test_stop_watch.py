@@ -293,11 +293,16 @@ def test_a_motion_policy_ends_the_confirmation(rig) -> None:
     assert rig.ctl.stop_watch.at_rest('pan')
 
 
+def velocity_watch(clock: ManualClock) -> StopWatch:
+    """A watch on ``clock`` whose moving rule is a non-zero velocity."""
+    return StopWatch(lambda: DECELERATION, lambda: MARGIN,
+                     lambda sample, joint: bool(sample and sample.velocities.get(joint)),
+                     logging.getLogger('test'), clock=clock)
+
+
 def test_a_sample_read_before_the_stop_confirms_nothing() -> None:
     clock = ManualClock()
-    watch = StopWatch(lambda: DECELERATION, lambda: MARGIN,
-                      lambda sample, joint: bool(sample and sample.velocities.get(joint)),
-                      logging.getLogger('test'), clock=clock)
+    watch = velocity_watch(clock)
     watch.observe(JointSample({'pan': 0.0}, {'pan': 0.3}), clock())
     read_at = clock()
     clock.now += 0.01
@@ -325,9 +330,7 @@ def test_an_unknown_speed_confirms_nothing() -> None:
 
 def test_wait_returns_the_axes_still_moving_after_their_time() -> None:
     clock = ManualClock()
-    watch = StopWatch(lambda: DECELERATION, lambda: MARGIN,
-                      lambda sample, joint: bool(sample and sample.velocities.get(joint)),
-                      logging.getLogger('test'), clock=clock)
+    watch = velocity_watch(clock)
     watch.observe(JointSample({'pan': 0.0, 'tilt': 0.0}, {'pan': 0.3, 'tilt': 0.0}), clock())
     watch.stopped(['pan', 'tilt'])
     assert watch.settle_time('pan') == pytest.approx(0.3 / DECELERATION + MARGIN)
@@ -349,9 +352,7 @@ def test_an_axis_a_newer_command_moves_during_the_wait_is_not_at_rest() -> None:
     topics, no order between them): the jog ends the stop's episode, and the wait must not
     read that as rest (a loaded run answered ``~/stop`` success while the jog ran)."""
     clock = ManualClock()
-    watch = StopWatch(lambda: DECELERATION, lambda: MARGIN,
-                      lambda sample, joint: bool(sample and sample.velocities.get(joint)),
-                      logging.getLogger('test'), clock=clock)
+    watch = velocity_watch(clock)
     watch.observe(JointSample({'pan': 0.0, 'tilt': 0.0}, {'pan': 0.3, 'tilt': 0.3}), clock())
     watch.stopped(['pan', 'tilt'])
     woken: list[float] = []
