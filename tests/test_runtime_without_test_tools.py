@@ -1,6 +1,10 @@
 """Nothing test-only at run time: every registered simulator, node and the probe start and
 work with pytest, hypothesis, geographiclib and the test support package blocked from
-import, as on a robot that installed the drivers without their test dependencies.
+import, as on a robot that installed the drivers without their test dependencies. And a
+node imports at start-up nothing a feature needs only when used (``AT_FIRST_USE``: pymap3d
+at the first geographic aim; lxml and urdf_parser_py never, the URDF is read with the
+standard library), each of which costs every node memory (bench/README.md, "What a node
+imports").
 
 Each child process gets a ``sitecustomize`` module on its ``PYTHONPATH`` (site imports it at
 start-up) that puts a finder first on ``sys.meta_path``: it raises ImportError for the
@@ -35,6 +39,8 @@ pytestmark = pytest.mark.ros
 
 #: what a robot does not install: the test libraries and the test support
 BLOCKED = ('pytest', '_pytest', 'hypothesis', 'geographiclib', 'gimbal_driver_testing')
+#: imported by a node only when a feature is used, never at start-up (logged, not blocked)
+AT_FIRST_USE = ('pymap3d', 'dateutil', 'lxml', 'urdf_parser_py')
 
 SITECUSTOMIZE = textwrap.dedent('''
     """Blocks the test-only packages from import (tests/test_runtime_without_test_tools.py)."""
@@ -42,6 +48,7 @@ SITECUSTOMIZE = textwrap.dedent('''
     import sys
 
     BLOCKED = {blocked!r}
+    AT_FIRST_USE = {at_first_use!r}
     LOG = os.environ['GIMBAL_BLOCKED_IMPORTS_LOG']
 
 
@@ -55,12 +62,14 @@ SITECUSTOMIZE = textwrap.dedent('''
             if name.split('.')[0] in BLOCKED:
                 note(f'refused {{name}}')
                 raise ImportError(f'{{name}} is blocked: a test-only package')
+            if name in AT_FIRST_USE:
+                note(f'imported {{name}}')
             return None
 
 
     sys.meta_path.insert(0, BlockTestTools())
     note('installed ' + ' '.join(sys.argv[:1]))
-''').format(blocked=BLOCKED)
+''').format(blocked=BLOCKED, at_first_use=AT_FIRST_USE)
 
 
 @pytest.fixture
@@ -95,6 +104,12 @@ def test_the_block_works(blocked_env: dict[str, str]) -> None:
                             env=env, capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert log_of(blocked_env).count('installed') == len(BLOCKED) + 1
+    result = subprocess.run([sys.executable, '-c', 'import pymap3d, lxml.etree'], env=env,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    noted = [line.split(' ', 1)[1] for line in log_of(blocked_env).splitlines()
+             if ' imported ' in line]
+    assert {'imported pymap3d', 'imported lxml'} <= set(noted), noted
 
 
 @pytest.mark.parametrize('spec', drivers(), ids=lambda spec: spec.name)
@@ -133,6 +148,9 @@ def test_simulator_probe_and_node_start_without_test_tools(
             assert node.running, node.output()[-3000:]
             assert installed_in(blocked_env, node)
             assert 'Traceback' not in node.output(), node.output()[-3000:]
+            pid = node.process.pid
+            assert [line for line in log_of(blocked_env).splitlines()
+                    if line.startswith(f'{pid} imported ')] == [], 'imported at start-up'
         finally:
             if node is not None:
                 node.stop()

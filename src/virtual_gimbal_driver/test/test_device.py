@@ -11,6 +11,7 @@ import logging
 import math
 import socket
 import threading
+import tracemalloc
 
 import pytest
 
@@ -21,6 +22,7 @@ from gimbal_driver_testing import wait_for
 from virtual_gimbal_driver.client import VirtualGimbalClient
 from virtual_gimbal_driver.device import MISSED_POLLS_LOST, VirtualGimbalDevice
 from virtual_gimbal_driver.protocol import (
+    MAX_TAG,
     move_request,
     parse_position,
     split_tag,
@@ -337,3 +339,29 @@ def test_polls_unanswered_in_a_row_lose_the_link(caplog):
                 'in a row))') in caplog.text
     finally:
         rig.close()
+
+
+def test_request_tags_wrap_at_max_tag_and_hold_no_history() -> None:
+    """Tags run 1..MAX_TAG and round again, and handing one out keeps nothing: the client
+    once drew them from an itertools.cycle, which stores every value it gives until it
+    wraps (65,535 ints: 2.6 MB grown by one a poll, 22 minutes at 50 Hz)."""
+    client = VirtualGimbalClient('127.0.0.1', 9)  # never connected: tags need no link
+
+    def one_tag() -> int:
+        tag = client._tag()
+        client._done([tag])
+        return tag
+
+    tracemalloc.start()
+    try:
+        warm = [one_tag() for _ in range(100)]
+        before, _ = tracemalloc.get_traced_memory()
+        for _ in range(30_000):
+            one_tag()
+        grown = tracemalloc.get_traced_memory()[0] - before
+    finally:
+        tracemalloc.stop()
+    assert warm[:3] == [1, 2, 3]
+    assert grown < 64_000, f'{grown} bytes kept by 30,000 tags'
+    tags = [one_tag() for _ in range(MAX_TAG - 30_100 + 2)]
+    assert tags[-3:] == [MAX_TAG, 1, 2]
