@@ -1,10 +1,10 @@
 """Pan and tilt angles that point a URDF chain's camera/tool frame at a point (no ROS).
 
-The chain is read from the device's URDF (:mod:`gimbal_driver_common.urdf_chain`: the
-links and joints of the URDF, read with the standard library's ElementTree): base link ->
-[prismatic/other joints] -> pan -> tilt -> the aim frame, whose +x axis is the line of
-sight (REP-103 body frame: x forward, z up). Every offset between the joints counts, so a
-camera mounted beside or above the tilt axis still looks exactly at the point.
+The chain is read from the device's URDF with ``urdf_parser_py`` (PyPI: urdfdom-py, the
+parser ROS itself ships): base link -> [prismatic/other joints] -> pan -> tilt -> the aim
+frame, whose +x axis is the line of sight (REP-103 body frame: x forward, z up). Every
+offset between the joints counts, so a camera mounted beside or above the tilt axis still
+looks exactly at the point.
 
 The two revolute (or continuous) joints of the chain are pan (first from the base) and
 tilt (second); any other movable joint (the Kessler slider) is held where it is. The
@@ -20,9 +20,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from urdf_parser_py.urdf import URDF
 
 from gimbal_driver_common.orientation import wrap_angle
-from gimbal_driver_common.urdf_chain import Description, UrdfError, read_description
 
 #: joint types whose position is a rotation about ``axis``
 REVOLUTE_TYPES = ('revolute', 'continuous')
@@ -93,22 +93,19 @@ def _origin(xyz: Sequence[float] | None, rpy: Sequence[float] | None) -> np.ndar
 class AimingChain:
     """The pan/tilt chain of a device description and its aiming solution."""
 
-    def __init__(self, robot: Description, aim_frame: str = DEFAULT_AIM_FRAME) -> None:
-        links = set(robot.links)
+    def __init__(self, robot: URDF, aim_frame: str = DEFAULT_AIM_FRAME) -> None:
+        links = {link.name for link in robot.links}
         if aim_frame not in links:
             raise KinematicsError(
                 f'the description has no link {aim_frame!r} to aim (links: {sorted(links)})'
             )
         self.robot_name: str = robot.name
-        try:
-            self.base_frame: str = robot.root()
-            names = robot.chain(self.base_frame, aim_frame)
-        except UrdfError as exc:
-            raise KinematicsError(str(exc)) from exc
+        self.base_frame: str = robot.get_root()
         self.aim_frame = aim_frame
+        joints_by_name = {joint.name: joint for joint in robot.joints}
         self.joints: list[ChainJoint] = []
-        for name in names:
-            joint = robot.joints[name]
+        for name in robot.get_chain(self.base_frame, aim_frame, joints=True, links=False):
+            joint = joints_by_name[name]
             origin = joint.origin
             axis = np.array(joint.axis if joint.axis is not None else (1.0, 0.0, 0.0), float)
             if joint.type in MOVABLE_TYPES:
@@ -142,8 +139,8 @@ class AimingChain:
     @classmethod
     def from_xml(cls, xml: str, aim_frame: str = DEFAULT_AIM_FRAME) -> AimingChain:
         try:
-            robot = read_description(xml)
-        except UrdfError as exc:
+            robot = URDF.from_xml_string(xml)
+        except Exception as exc:  # the parser raises assorted types
             raise KinematicsError(f'cannot parse the URDF: {exc}') from exc
         return cls(robot, aim_frame)
 

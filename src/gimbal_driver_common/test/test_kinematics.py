@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytest.importorskip('urdf_parser_py', reason='needs urdfdom-py (make build)')
 from gimbal_driver_common.kinematics import (
     AimingChain,
     KinematicsError,
