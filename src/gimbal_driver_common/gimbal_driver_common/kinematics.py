@@ -18,11 +18,14 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from urdf_parser_py.urdf import URDF
 
 from gimbal_driver_common.orientation import wrap_angle
+
+if TYPE_CHECKING:  # the parser (and lxml with it) is loaded by the first chain read
+    from urdf_parser_py.urdf import URDF
 
 #: joint types whose position is a rotation about ``axis``
 REVOLUTE_TYPES = ('revolute', 'continuous')
@@ -138,6 +141,10 @@ class AimingChain:
 
     @classmethod
     def from_xml(cls, xml: str, aim_frame: str = DEFAULT_AIM_FRAME) -> AimingChain:
+        # imported here: 1.3 MB of every node's memory with lxml, for a feature some never
+        # use (bench/README.md, "What a node imports")
+        from urdf_parser_py.urdf import URDF
+
         try:
             robot = URDF.from_xml_string(xml)
         except Exception as exc:  # the parser raises assorted types

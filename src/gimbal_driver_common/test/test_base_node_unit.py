@@ -159,6 +159,22 @@ def test_look_at_with_a_usable_description_still_waits_for_an_active_node(contex
     assert 'not active' in message
 
 
+def test_look_at_parses_the_description_at_the_first_goal_not_at_start(context,
+                                                                       tmp_path) -> None:
+    """URDF parsing only when a feature needs it (issue 47 item 2): a description that is
+    there but does not parse lets the node start, and the first aiming goal names why."""
+    broken = tmp_path / 'broken.urdf'
+    broken.write_text('<robot name="rig"><link name="base_link"></robot>')
+    node = make(context, description_file=str(broken))
+    try:
+        assert node.look_at_server.aiming_error == ''  # not read yet
+        with pytest.raises(LookAtRefused, match='cannot parse the URDF'):
+            node.look_at_server.plan_look_at(LookAt.Goal())
+        assert 'cannot parse the URDF' in node.look_at_server.aiming_error
+    finally:
+        node.destroy_node()
+
+
 def test_axis_state_code_in_axis_details() -> None:
     """A ROS-free adapter gives an AxisStateCode (no gimbal_msgs import); ~/status has it."""
     import logging

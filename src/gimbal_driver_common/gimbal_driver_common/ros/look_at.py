@@ -14,6 +14,7 @@ drivers' sign conversions (Capture joint_directions, U-Camera pan) stay in the d
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
@@ -108,19 +109,42 @@ class LookAtServer:
             'look_at_frame', DEFAULT_AIM_FRAME,
             'link of the description whose +x axis ~/look_at points at the target',
         )
-        self.aiming_chain: AimingChain | None = None
+        #: the chain, read at the first aiming goal (None: not yet, or it failed)
+        self._chain: AimingChain | None = None
+        self._chain_read = False
+        self._chain_lock = threading.Lock()
         self.aiming_error = ''
+        # the description is parsed at the first aiming goal, not here (issue 47 item 2:
+        # URDF parsing only when a feature needs it); here only that it is there
         try:
-            self.aiming_chain = self._load_aiming_chain()
-            node.get_logger().info(
-                f'~/look_at: {self.aiming_chain.base_frame} -> {self.look_at_frame} from '
-                f'{self.description_path()} (pan {self.aiming_chain.pan_joint!r}, '
-                f'tilt {self.aiming_chain.tilt_joint!r})'
-            )
+            path = self.description_path()
+            if not Path(path).is_file():
+                raise KinematicsError(f'cannot read the description {path}: no such file')
+            node.get_logger().info(f'~/look_at: aims {self.look_at_frame} of {path} (read at '
+                                   'the first aiming goal)')
         except KinematicsError as exc:
             self.aiming_error = str(exc)
+            self._chain_read = True
             node.get_logger().warning(f'~/look_at unavailable: {exc}')
         node.create_accepting_action_server(LookAt, '~/look_at', self._execute_look_at)
+
+    @property
+    def aiming_chain(self) -> AimingChain | None:
+        """The chain of the description (read once, at the first use); None when it
+        cannot be read (:attr:`aiming_error` says why)."""
+        with self._chain_lock:
+            if not self._chain_read:
+                self._chain_read = True
+                try:
+                    chain = self._chain = self._load_aiming_chain()
+                    self._node.get_logger().info(
+                        f'~/look_at: {chain.base_frame} -> {self.look_at_frame} from '
+                        f'{self.description_path()} (pan {chain.pan_joint!r}, '
+                        f'tilt {chain.tilt_joint!r})')
+                except KinematicsError as exc:
+                    self.aiming_error = str(exc)
+                    self._node.get_logger().warning(f'~/look_at unavailable: {exc}')
+            return self._chain
 
     def description_path(self) -> str:
         """The URDF file look_at uses: the parameter, else the package's installed one."""
