@@ -477,7 +477,7 @@ def delivery_by_phase(records: list[dict], joint_states: list[list[float]]) -> d
     """publish -> callback grouped by the command's phase in the node's cycle: the time
     since the node last started publishing joint_states. A command stream at the node's own
     rate keeps one phase for the whole run, so a slow phase shows as a slow p50."""
-    starts = sorted(start for start, _ in joint_states)
+    starts = sorted(entry[0] for entry in joint_states)
     if not starts:
         return {}
     buckets: dict[str, list[float]] = {}

@@ -213,7 +213,7 @@ def node_figures(
             # figures come from one window of the same machine
             reference_rate = parameters.get('publish_rate') if cpu_reference else None
             with (reference_publisher(ros, domain, float(reference_rate)) if reference_rate
-                  else contextlib.nullcontext((None, None))) as (reference, _):
+                  else contextlib.nullcontext((None, None))) as (reference, beside):
                 # let the start-up transient pass (DDS discovery of this subscriber slows
                 # the node and the simulator for a second or two on a loaded machine)
                 time.sleep(settle_seconds)
@@ -231,6 +231,9 @@ def node_figures(
                 results['cpu_percent'] = cpu[0]
                 if reference:
                     results['rclpy_publisher_cpu_percent_at_publish_rate'] = cpu[1]
+                    # the bare pair's latency in the same window, to the same subscriber
+                    results['rclpy_pubsub_beside'] = percentiles(
+                        window_latencies(beside, start_wall, end_wall))
             if observe is not None:
                 results.update(observe(start, end))
             results['joint_states_hz'] = received_rate(states)
@@ -261,6 +264,12 @@ def node_figures(
             add_note(results, f'node exited with code {code} (-9: still running 5 s after '
                      'SIGINT and 3 s after SIGTERM, killed)')
     return results
+
+
+def window_latencies(probe: JointStateProbe, start: float, end: float) -> list[float]:
+    """Stamp-to-arrival latencies of the messages stamped in the window (wall time)."""
+    with probe._lock:
+        return [arrival - stamp for arrival, stamp, _ in probe.arrivals if start <= stamp <= end]
 
 
 def received_rate(states: JointStateProbe) -> float:

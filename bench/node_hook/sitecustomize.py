@@ -10,7 +10,8 @@ one of these variables is set, and Python imports this module at start-up:
   Splits the command path into rclpy delivery, the driver's work before its first byte
   (validation, the client lock) and the protocol's own round trips. Each joint_states
   publication (start, end) is recorded too, to relate a command's delay to its phase in
-  the node's device cycle.
+  the node's device cycle, and the sample's stamp, to split ``sim_to_subscriber`` into the
+  node's share and the delivery's.
 * ``BENCH_EXECUTOR=events``: ``run_driver`` spins ``rclpy.experimental.EventsExecutor``
   instead of ``InlineGroupExecutor(num_threads=4)`` (an experiment; see bench/HISTORY.md,
   "EventsExecutor experiment").
@@ -140,14 +141,14 @@ def _install() -> None:
     base_node.GimbalDriverNode._on_joint_command = traced_on_joint_command
 
     publish_joint_state = base_node.GimbalDriverNode._publish_joint_state
-    joint_states: list[tuple[float, float]] = []
+    joint_states: list[tuple[float, float, float]] = []
 
     def traced_publish_joint_state(self, sample):
         start = time.time()
         try:
             return publish_joint_state(self, sample)
         finally:
-            joint_states.append((start, time.time()))
+            joint_states.append((start, time.time(), sample.stamp))
 
     base_node.GimbalDriverNode._publish_joint_state = traced_publish_joint_state
 

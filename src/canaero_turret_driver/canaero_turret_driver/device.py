@@ -211,11 +211,12 @@ class TurretDevice(Device):
             self.notify_data()  # wake the controller's device thread: it sees the link down
 
     def _on_sample(self, sample: Sample) -> None:
-        """Wake the controller once both axes of a broadcast cycle are in.
+        """Hand the controller the sample once both axes of a broadcast cycle are in.
 
-        Runs on the client's receive thread. Yaw and pitch positions are separate frames;
-        waking on the first would publish it and then hold the second for a publish
-        period. If one axis goes quiet, the controller's wait times out and reads anyway.
+        Runs on the client's receive thread, where the controller reads and publishes the
+        sample. Yaw and pitch positions are separate frames; publishing on the first
+        would hold the second back for a publish period. If one axis goes quiet, the
+        controller's device thread reads anyway once the stream is quiet.
         """
         if sample.key not in POSITION_KEYS:
             return

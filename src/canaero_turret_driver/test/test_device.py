@@ -92,8 +92,11 @@ def test_connect_identity_and_streamed_samples(rig):
     assert rig.device.expected_rate(50.0) == pytest.approx(50.0)
     assert rig.device.expected_rate(10.0) == pytest.approx(10.0)  # never above publish_rate
     wait_for(lambda: rig.samples >= 10, 30, "joint samples from the broadcasts")
-    sample = rig.controller.latest
-    assert set(sample.positions) == set(JOINTS) and set(sample.currents) == set(JOINTS)
+    # the currents come every 200 ms (not asked for by TIS), after the first positions
+    sample = wait_for(lambda: (latest := rig.controller.latest) is not None
+                      and set(latest.currents) == set(JOINTS) and latest, 30,
+                      "a sample with both motor currents")
+    assert set(sample.positions) == set(JOINTS)
     assert sample.currents["yaw"] > 0.0  # motor current, A
     assert sample.moving == {"yaw": False, "pitch": False}  # status bytes: target reached
 

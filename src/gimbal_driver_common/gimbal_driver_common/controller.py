@@ -40,6 +40,7 @@ from gimbal_driver_common.motion_watch import MotionWatch
 from gimbal_driver_common.periodic import PacedJob, Period, Periodic
 from gimbal_driver_common.rejections import CommandRejections
 from gimbal_driver_common.stopping import STOP_CHECK_IDLE_S, STOP_CHECK_S, Stopping
+from gimbal_driver_common.streamed_samples import StreamedSamples
 from gimbal_driver_common.watchdog import JogWatchdog
 
 T = TypeVar('T')
@@ -142,6 +143,13 @@ class GimbalController:
         self._warned: dict[str, float] = {}
         #: the device's background reads as the sensors thread runs them
         self._background: list[tuple[Period, Callable[[], None]]] = []
+        #: a streamed device's samples, taken on its receive thread
+        self.streamed_samples = StreamedSamples(
+            device, self._take_sample,
+            lambda: self.connected and not self._stopping.is_set(),
+            lambda: 1.0 / self.config.publish_rate, clock)
+        if device.streamed:
+            device.on_stream_data(self.streamed_samples.on_data)
 
     @property
     def connected(self) -> bool:
@@ -377,10 +385,9 @@ class GimbalController:
 
     # ------------------------------------------------------ device thread
     def _device_loop(self) -> None:
-        """Supervise the link; poll at publish_rate (or publish each streamed sample)."""
+        """Supervise the link; poll at publish_rate (a streamed device's samples are taken
+        on its receive thread: :mod:`~.streamed_samples`)."""
         next_tick = time.monotonic()
-        last_publish = -math.inf
-        last_stamp: float | None = None
         while not self._stopping.is_set():
             period = 1.0 / self.config.publish_rate
             if not self.connected:
@@ -388,13 +395,19 @@ class GimbalController:
                 next_tick = time.monotonic()
                 continue
             if self.device.streamed:
-                # each new sample as it arrives, at most publish_rate (10 % slack for jitter):
-                # wait for data first, then hold back only a sample that came too soon, so a
-                # device streaming at publish_rate wakes this thread once per sample, not twice
-                self.device.wait_for_data(STREAM_WAIT_S)
-                hold = last_publish + 0.9 * period - time.monotonic()
+                # woken because the receive thread declined (a sample too soon, the link
+                # down, a read raised), or the stream was quiet: take it here once due,
+                # where a lost link is handled
+                if not self.streamed_samples.wait(STREAM_WAIT_S):
+                    continue
+                hold = self.streamed_samples.hold()
                 if hold > 0 and self._sleep(hold):
                     continue
+                try:
+                    self.streamed_samples.take()
+                except GimbalError as exc:
+                    self._on_link_lost(exc)
+                continue
             try:
                 with device_boundary():
                     if not self.device.link_healthy():
@@ -407,12 +420,8 @@ class GimbalController:
             except GimbalError as exc:
                 self._on_link_lost(exc)
                 continue
-            if sample is not None and not (self.device.streamed and sample.stamp == last_stamp):
-                last_stamp = sample.stamp
-                if self._take_sample(sample, read_at):
-                    last_publish = time.monotonic()
-            if self.device.streamed:
-                continue
+            if sample is not None:
+                self._take_sample(sample, read_at)
             next_tick += period
             delay = next_tick - time.monotonic()
             if delay < -period:  # fell behind (slow device): do not burst to catch up
@@ -422,8 +431,8 @@ class GimbalController:
     def _take_sample(self, sample: JointSample, read_at: float) -> bool:
         """A new sample, read from ``read_at`` on: the watches see it, the node publishes it
         while active (True). On the device thread, or on the link's reader thread for a
-        device that polls without waiting (:meth:`Device.request_read`): one thread a
-        device, so samples are taken in order."""
+        device that polls without waiting (:meth:`Device.request_read`) or streams
+        (:mod:`~.streamed_samples`, under its lock): samples are taken in order."""
         self.latest = sample
         self.motion_watch.observe(sample)
         self.stop_watch.observe(sample, read_at)

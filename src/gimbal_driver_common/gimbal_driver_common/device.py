@@ -281,7 +281,7 @@ class Device(abc.ABC):
     """One device, in SI units and REP-103 signs."""
 
     #: True when :meth:`read` returns data a receive thread streams in: the controller
-    #: then publishes on :meth:`wait_for_data` instead of on a fixed polling tick.
+    #: then takes each sample on :meth:`notify_data` instead of on a fixed polling tick.
     streamed: bool = False
 
     def __init__(self) -> None:
@@ -294,6 +294,7 @@ class Device(abc.ABC):
         #: the adapter hands it to its client, the command path sends under it
         self.link_lock = LinkLock()
         self._data_arrived = threading.Event()
+        self._on_data: Callable[[], bool] = lambda: False
         self._on_targets: Callable[[dict[str, float]], None] = lambda targets: None
         self._run_background: Callable[[], None] = lambda: None
 
@@ -412,9 +413,17 @@ class Device(abc.ABC):
         """For clients that watch their own link: False (or raise with the reason) when down."""
         return True
 
+    def on_stream_data(self, take: Callable[[], bool]) -> None:
+        """The controller's taker of a streamed sample (:mod:`~.streamed_samples`):
+        :meth:`notify_data` calls it; False wakes :meth:`wait_for_data` instead."""
+        self._on_data = take
+
     def notify_data(self) -> None:
-        """A streamed device's receive thread calls this on each new sample."""
-        self._data_arrived.set()
+        """A streamed device's receive thread calls this on each new sample (the sample
+        is read and published on that thread), and when its link drops (the controller's
+        device thread wakes and finds out)."""
+        if not self._on_data():
+            self._data_arrived.set()
 
     def wait_for_data(self, timeout: float) -> bool:
         """Block until :meth:`notify_data` was called (True) or ``timeout`` passed."""

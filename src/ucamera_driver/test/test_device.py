@@ -102,7 +102,7 @@ def test_connect_reads_identity_and_streams(rig: Rig) -> None:
     assert info.hardware_id == f"ucamera-{version.serial_number}"
     assert rig.device.description() == f"serial://{rig.sim.port_name}?baudrate=115200"
     assert rig.device.streamed
-    assert rig.device.wait_for_data(2.0)  # each angles report wakes the controller
+    # each angles report is taken on the client's reader thread (streamed_samples)
     wait_for(lambda: rig.controller.latest is not None, what="a joint sample")
     assert set(rig.controller.latest.positions) == set(JOINTS)
     wait_for(lambda: any(isinstance(p, ZoomReport) for p in list(rig.reports)),
