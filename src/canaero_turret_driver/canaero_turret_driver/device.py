@@ -25,6 +25,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from gimbal_driver_common.config import Logger
+from gimbal_driver_common.controller import MOVING_SPEED
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves, PostedWrite
 from gimbal_driver_common.errors import InvalidRequest, LinkError
 from gimbal_driver_common.unanswered import ConnectReads
@@ -230,8 +231,9 @@ class TurretDevice(Device):
         """Positions, velocities, motor currents and the status bytes' target bits.
 
         None while a position is missing or stale: a stale position is never published
-        as current. `moving` comes from the status byte (target not reached, or jog);
-        without a status byte the controller's speed rule applies.
+        as current. `moving` comes from the status byte (target not reached, or jog), or
+        the velocity report over the controller's speed threshold (the status byte may be
+        older); without a status byte the controller's speed rule applies.
         """
         client = self.client
         positions: dict[str, float] = {}
@@ -254,7 +256,13 @@ class TurretDevice(Device):
                 currents[joint] = current
             status = client.latest(f"{axis}_status")
             if status is not None:
-                moving[joint] = AxisStatus.decode(status.integer).target != TargetState.REACHED
+                # the status byte comes every 100 ms by default, the velocity every 20 ms
+                # (TIS): a "target reached" sent before a jog began must not read as at
+                # rest while the velocity report shows the axis turning (a ~/stop called
+                # just after a jog started answered success while pitch moved, in CI)
+                reached = AxisStatus.decode(status.integer).target == TargetState.REACHED
+                turning = velocity is not None and abs(velocity) > MOVING_SPEED
+                moving[joint] = not reached or turning
         self._latest = JointSample(positions, velocities, currents, stamp, moving)
         return self._latest
 
