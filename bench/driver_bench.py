@@ -233,7 +233,7 @@ def node_figures(
                     results['rclpy_publisher_cpu_percent_at_publish_rate'] = cpu[1]
                     # the bare pair's latency in the same window, to the same subscriber
                     results['rclpy_pubsub_beside'] = percentiles(
-                        window_latencies(beside, start_wall, end_wall))
+                        beside.stamp_latencies(start_wall, end_wall))
             if observe is not None:
                 results.update(observe(start, end))
             results['joint_states_hz'] = received_rate(states)
@@ -264,12 +264,6 @@ def node_figures(
             add_note(results, f'node exited with code {code} (-9: still running 5 s after '
                      'SIGINT and 3 s after SIGTERM, killed)')
     return results
-
-
-def window_latencies(probe: JointStateProbe, start: float, end: float) -> list[float]:
-    """Stamp-to-arrival latencies of the messages stamped in the window (wall time)."""
-    with probe._lock:
-        return [arrival - stamp for arrival, stamp, _ in probe.arrivals if start <= stamp <= end]
 
 
 def received_rate(states: JointStateProbe) -> float:

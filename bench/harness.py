@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import math
 import os
 import socket
 import statistics
@@ -239,9 +240,11 @@ class JointStateProbe:
         with self._lock:
             self.arrivals.clear()
 
-    def stamp_latencies(self) -> list[float]:
+    def stamp_latencies(self, since: float = 0.0, until: float = math.inf) -> list[float]:
+        """Stamp-to-arrival latencies, of the messages stamped in [since, until] (wall time)."""
         with self._lock:
-            return [arrival - stamp for arrival, stamp, _ in self.arrivals if stamp > 0]
+            return [arrival - stamp for arrival, stamp, _ in self.arrivals
+                    if stamp > 0 and since <= stamp <= until]
 
     def achieved_rate(self, seconds: float) -> float:
         self.clear()
