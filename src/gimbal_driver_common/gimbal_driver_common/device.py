@@ -426,9 +426,13 @@ class Device(abc.ABC):
             self._data_arrived.set()
 
     def wait_for_data(self, timeout: float) -> bool:
-        """Block until :meth:`notify_data` was called (True) or ``timeout`` passed."""
+        """Block until :meth:`notify_data` was called (True) or ``timeout`` passed.
+
+        Cleared only when it fired: a notice that comes between a wait's timeout and a
+        clear would be lost, and the declined sample left until the next one."""
         arrived = self._data_arrived.wait(timeout)
-        self._data_arrived.clear()
+        if arrived:
+            self._data_arrived.clear()
         return arrived
 
     def expected_rate(self, publish_rate: float) -> float:

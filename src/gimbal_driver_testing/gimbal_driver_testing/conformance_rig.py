@@ -53,6 +53,11 @@ def frequency_level_fits(status: DiagnosticStatus) -> bool:
     return measured > 0 and (status.level[0] == level or edge)
 
 
+def measured_hz(status: DiagnosticStatus) -> float:
+    """The rate a ``joint_states frequency`` status measured (its ``measured_hz`` value)."""
+    return float({kv.key: kv.value for kv in status.values}.get('measured_hz', 0.0))
+
+
 def command_counts(status: DiagnosticStatus) -> dict[str, int]:
     """The counts of a ``joint_command`` diagnostics part, by key."""
     return {kv.key: int(kv.value) for kv in status.values}
