@@ -44,6 +44,7 @@ from gimbal_driver_common.policies import HomingSuperseded, Motion
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.scan import ScanRequest
 from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.controller_rig import running_controller
 
 JOINTS = ['pan', 'tilt']
 
@@ -207,14 +208,8 @@ def device() -> FakeDevice:
 
 @pytest.fixture
 def controller(device):
-    ctl = GimbalController(device, config(), logging.getLogger('test'))
-    ctl.open()
-    ctl.activate()
-    wait_for(lambda: ctl.latest is not None, 2.0, 'a first sample')
-    yield ctl
-    ctl.shutdown()
-    ctl.periodic.stop()
-    ctl.sensors.stop()
+    with running_controller(device, config()) as ctl:
+        yield ctl
 
 
 @pytest.fixture

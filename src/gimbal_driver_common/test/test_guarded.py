@@ -27,6 +27,7 @@ from gimbal_driver_common.policies import Motion
 from gimbal_driver_common.presets import PresetStore
 from gimbal_driver_common.scan import ScanRequest
 from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.controller_rig import running_controller
 
 #: s a run may take to end once it should; reached only when the policy misses the end
 ENDS_WITHIN = 5.0
@@ -103,16 +104,10 @@ def device() -> RestingDevice:
 @pytest.fixture
 def controller(device: RestingDevice) -> Iterator[GimbalController]:
     limits = {joint: JointLimits(-1.0, 1.0, 2.0) for joint in ('pan', 'tilt')}
-    ctl = GimbalController(device, ControllerConfig(['pan', 'tilt'], limits, publish_rate=200.0,
-                                                    reconnect_period=0.01),
-                           logging.getLogger('test_guarded'))
-    ctl.open()
-    ctl.activate()
-    wait_for(lambda: ctl.latest is not None, ENDS_WITHIN, 'a first sample')
-    yield ctl
-    ctl.shutdown()
-    ctl.periodic.stop()
-    ctl.sensors.stop()
+    config = ControllerConfig(['pan', 'tilt'], limits, publish_rate=200.0,
+                              reconnect_period=0.01)
+    with running_controller(device, config, logging.getLogger('test_guarded')) as ctl:
+        yield ctl
 
 
 @pytest.fixture

@@ -3,6 +3,7 @@ reported (diagnostics, one log line, a running goal ends at once), and nothing e
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
@@ -17,6 +18,7 @@ from gimbal_driver_common.policies import Motion
 from gimbal_driver_common.sim_control import SimControl
 from gimbal_driver_common.sim_motion import AxisMotion
 from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.controller_rig import running_controller
 
 JOINTS = ['pan', 'tilt']
 #: the watch's timeout in these tests (s)
@@ -78,17 +80,14 @@ class Lines(logging.Handler):
         return [line for line in self.lines if 'commanded but not moving' in line]
 
 
-def make(device: AxisDevice, log: logging.Logger, **overrides) -> GimbalController:
+def running(device: AxisDevice, log: logging.Logger,
+            **overrides) -> contextlib.AbstractContextManager[GimbalController]:
     values = dict(joint_names=list(JOINTS),
                   limits={j: JointLimits(-1.0, 1.0, 2.0) for j in JOINTS},
                   publish_rate=200.0, command_timeout=0.0, reconnect_period=0.01,
                   goal_tolerance=0.01, move_timeout=20.0, motion_start_timeout=TIMEOUT)
     values.update(overrides)
-    ctl = GimbalController(device, ControllerConfig(**values), log)
-    ctl.open()
-    ctl.activate()
-    wait_for(lambda: ctl.latest is not None, 2.0, 'a first sample')
-    return ctl
+    return running_controller(device, ControllerConfig(**values), log)
 
 
 @pytest.fixture
@@ -105,11 +104,8 @@ def lines():
 def rig(lines):
     log, handler = lines
     device = AxisDevice()
-    ctl = make(device, log)
-    yield ctl, device, handler
-    ctl.shutdown()
-    ctl.periodic.stop()
-    ctl.sensors.stop()
+    with running(device, log) as ctl:
+        yield ctl, device, handler
 
 
 def test_an_ignored_move_ends_the_goal_at_once_with_the_reason(rig) -> None:
@@ -234,25 +230,19 @@ def test_moves_and_jogs_that_move_are_never_reported(lines) -> None:
     log, handler = lines
     # slow: 0.05 rad/s at 0.1 rad/s^2 moves far less than the goal tolerance per timeout
     device = AxisDevice(speed=0.05, acceleration=0.1)
-    ctl = make(device, log)
-    try:
+    with running(device, log) as ctl:
         ctl.command(['pan'], [0.05], [])
         ctl.command(['tilt'], [], [0.03])
         time.sleep(6 * TIMEOUT)   # several timeouts while both axes creep
         assert ctl.motion_watch.stalled() == {}
         assert handler.stalls() == []
         assert device.axes['pan'].position > 0.0 and device.axes['tilt'].position > 0.0
-    finally:
-        ctl.shutdown()
-        ctl.periodic.stop()
-        ctl.sensors.stop()
 
 
 def test_an_axis_at_its_target_or_a_disabled_watch_is_never_reported(lines) -> None:
     log, handler = lines
     device = AxisDevice()
-    ctl = make(device, log)
-    try:
+    with running(device, log) as ctl:
         device.ignore(True)
         ctl.command(['pan'], [0.005], [])   # within goal_tolerance of 0.0
         time.sleep(4 * TIMEOUT)
@@ -262,10 +252,6 @@ def test_an_axis_at_its_target_or_a_disabled_watch_is_never_reported(lines) -> N
         time.sleep(4 * TIMEOUT)
         assert ctl.motion_watch.stalled() == {}
         assert handler.stalls() == []
-    finally:
-        ctl.shutdown()
-        ctl.periodic.stop()
-        ctl.sensors.stop()
 
 
 def test_the_simulators_ignore_motion_verb_drops_commands_of_axes_at_rest() -> None:

@@ -6,7 +6,6 @@ it, against the real controller, command path and link lock (no ROS)."""
 
 from __future__ import annotations
 
-import logging
 import threading
 from collections.abc import Iterator, Sequence
 
@@ -17,6 +16,7 @@ from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
 from gimbal_driver_common.errors import Preempted
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.controller_rig import running_controller
 
 JOINTS = ('pan', 'tilt')
 TIMEOUT = 10.0
@@ -73,16 +73,11 @@ class AnsweringLate(Device):
 def rig() -> Iterator[tuple[GimbalController, AnsweringLate]]:
     device = AnsweringLate()
     limits = {j: JointLimits(-1.0, 1.0, 2.0) for j in JOINTS}
-    ctl = GimbalController(device, ControllerConfig(
+    config = ControllerConfig(
         joint_names=list(JOINTS), limits=limits, publish_rate=200.0, command_timeout=0.5,
-        reconnect_period=0.01, goal_tolerance=0.01, move_timeout=2.0),
-        logging.getLogger('test'))
-    ctl.open()
-    ctl.activate()
-    yield ctl, device
-    ctl.shutdown()
-    ctl.periodic.stop()
-    ctl.sensors.stop()
+        reconnect_period=0.01, goal_tolerance=0.01, move_timeout=2.0)
+    with running_controller(device, config, first_sample=False) as ctl:
+        yield ctl, device
 
 
 def test_a_stop_of_another_joint_sends_the_preempted_joint_command_again(rig) -> None:

@@ -4,7 +4,6 @@ controller takes it there (watches, publication) as it takes a sample from ``rea
 
 from __future__ import annotations
 
-import logging
 import queue
 import threading
 from collections.abc import Callable, Sequence
@@ -16,6 +15,7 @@ from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
 from gimbal_driver_common.errors import DeviceTimeout
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.controller_rig import running_controller
 
 JOINTS = ['pan', 'tilt']
 
@@ -75,16 +75,13 @@ class ReaderPolledDevice(Device):
 def rig():
     device = ReaderPolledDevice()
     published: list[tuple[str, JointSample]] = []
-    ctl = GimbalController(device, config(), logging.getLogger('test'),
-                           on_sample=lambda s: published.append(
-                               (threading.current_thread().name, s)))
-    ctl.open()
-    ctl.activate()
-    yield ctl, device, published
-    ctl.shutdown()
-    ctl.periodic.stop()
-    ctl.sensors.stop()
-    device.requests.put(None)
+    try:
+        with running_controller(device, config(), first_sample=False,
+                                on_sample=lambda s: published.append(
+                                    (threading.current_thread().name, s))) as ctl:
+            yield ctl, device, published
+    finally:
+        device.requests.put(None)
 
 
 def test_the_reader_threads_sample_is_taken_and_published_there(rig) -> None:

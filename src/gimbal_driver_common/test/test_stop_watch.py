@@ -9,6 +9,7 @@ import logging
 import math
 import threading
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import pytest
 
@@ -28,6 +29,7 @@ from gimbal_driver_common.ros.messages import with_axis_parts
 from gimbal_driver_common.scan import ScanRequest
 from gimbal_driver_common.stop_watch import RESEND_PERIOD_S, StopWatch
 from gimbal_driver_testing import ManualClock, wait_for
+from gimbal_driver_testing.controller_rig import running_controller
 
 JOINTS = ['pan', 'tilt']
 DECELERATION = 1.0   # rad/s^2 the controller is configured with
@@ -378,29 +380,22 @@ def test_an_axis_a_newer_command_moves_during_the_wait_is_not_at_rest() -> None:
 
 
 # --------------------------------------------------------------- ~/stop tells the truth
-class ThreadedRig:
+class ThreadedRig(NamedTuple):
     """The controller with its threads, on the real clock (the service's wait)."""
 
-    def __init__(self) -> None:
-        self.device = JogAxes()
-        self.ctl = GimbalController(self.device, config(stop_margin=0.2),
-                                    logging.getLogger('test_stop_truth'))
-        self.ctl.open()
-        self.ctl.activate()
-        wait_for(lambda: self.ctl.latest is not None, 5.0, 'a first sample')
-
-    def close(self) -> None:
-        self.device.drop_stops = 0
-        self.ctl.shutdown()
-        self.ctl.periodic.stop()
-        self.ctl.sensors.stop()
+    ctl: GimbalController
+    device: JogAxes
 
 
 @pytest.fixture
 def threaded():
-    rig = ThreadedRig()
-    yield rig
-    rig.close()
+    device = JogAxes()
+    with running_controller(device, config(stop_margin=0.2),
+                            logging.getLogger('test_stop_truth')) as ctl:
+        try:
+            yield ThreadedRig(ctl, device)
+        finally:
+            device.drop_stops = 0   # the shutdown's stop is taken
 
 
 def test_stop_answers_success_only_at_rest(threaded) -> None:

@@ -4,19 +4,19 @@ controller's device thread reads only when the stream is quiet or the link fails
 
 from __future__ import annotations
 
-import logging
 import queue
 import threading
 from collections.abc import Sequence
 
 import pytest
 
-from gimbal_driver_common.controller import ControllerConfig, GimbalController
+from gimbal_driver_common.controller import ControllerConfig
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample, Moves
 from gimbal_driver_common.errors import LinkError
 from gimbal_driver_common.joint_command import JointLimits
 from gimbal_driver_common.streamed_samples import StreamedSamples
 from gimbal_driver_testing import wait_for
+from gimbal_driver_testing.controller_rig import running_controller
 
 JOINTS = ['pan', 'tilt']
 
@@ -169,16 +169,13 @@ def config(rate: float) -> ControllerConfig:
 def rig():
     device = StreamingDevice()
     published: list[tuple[str, JointSample]] = []
-    ctl = GimbalController(device, config(50.0), logging.getLogger('test'),
-                           on_sample=lambda s: published.append(
-                               (threading.current_thread().name, s)))
-    ctl.open()
-    ctl.activate()
-    yield ctl, device, published
-    ctl.shutdown()
-    ctl.periodic.stop()
-    ctl.sensors.stop()
-    device.frames.put(None)
+    try:
+        with running_controller(device, config(50.0), first_sample=False,
+                                on_sample=lambda s: published.append(
+                                    (threading.current_thread().name, s))) as ctl:
+            yield ctl, device, published
+    finally:
+        device.frames.put(None)
 
 
 def test_a_streamed_sample_is_published_on_the_receive_thread(rig) -> None:
