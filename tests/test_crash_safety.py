@@ -5,8 +5,8 @@ registry's ``SimHandle``: the test sees every request its device model receives)
 axis slowly toward a far target and is killed with SIGKILL part way. A new node is then
 started: it must come up active, its joint_states must resume with the live positions (from
 where the killed node's last sample was, short of the target, no jump to zero or to the
-target, successive samples no faster than the axis moves, never back), and ~/stop and a new
-move that converges must work.
+target, successive samples never back and never off the path to the target), and ~/stop
+and a new move that converges must work.
 
 What happens to the running move depends on the device (``SimHandle.takeover``): the
 virtual gimbal, the turret and Kessler run it on and the new node sends no motion command of
@@ -37,8 +37,9 @@ pytestmark = pytest.mark.ros
 
 #: seconds of travel the first node's move makes before it is killed
 TRAVEL_BEFORE_KILL_S = 1.5
-#: a sample may advance by this many times the commanded speed per second between stamps
-#: (the Kessler simulator runs at time_scale 2; a jump to the target is far beyond)
+#: the new node's first sample may be ahead of the killed node's last by this many times
+#: the commanded speed per second since the kill (the Kessler simulator runs at
+#: time_scale 2; a jump to the target is far beyond)
 STEP_FACTOR = 3.0
 TOLERANCE = 0.02  # rad
 
@@ -99,14 +100,21 @@ def test_new_node_takes_over_a_device_in_motion_after_sigkill(driver: DriverSpec
                 advance, since_kill)
             if device.moving(joint):  # then it was when that sample was taken
                 assert (far - joint_positions(states[count])[joint]) * direction > TOLERANCE
-            # no jump: successive samples advance at most at the axis speed, never back
+            # no jump: successive samples, in stamp order, never go back and stay on the
+            # path from the killed node's last sample to the target. Not a speed per stamp
+            # gap: a stamp is when the node's receive thread read the report, and one
+            # starved for 0.55 s on one core made a 57 ms gap of 0.55 s of travel
+            # (docs/testing.md, "Found by the whole pinned run of 2026-12-03").
             wait_for(lambda: len(states) > count + 10, 30, '10 joint_states')
             samples = list(states)[count:]
             for before, after in itertools.pairwise(samples):
-                gap = max(stamp_s(after) - stamp_s(before), 0.0)
+                assert stamp_s(after) > stamp_s(before), (stamp_s(before), stamp_s(after))
                 step = (joint_positions(after)[joint] - joint_positions(before)[joint]) \
                     * direction
-                assert -TOLERANCE <= step <= STEP_FACTOR * slow * gap + TOLERANCE, (step, gap)
+                assert step >= -TOLERANCE, step
+            for sample in samples:
+                along = (joint_positions(sample)[joint] - last_before) * direction
+                assert -TOLERANCE < along <= (far - last_before) * direction + TOLERANCE, along
             if device.takeover is Takeover.RUNS_ON:
                 # the device still runs the old move: the new node sent nothing that moves
                 # or stops an axis on its own
