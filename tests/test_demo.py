@@ -47,6 +47,12 @@ def processes_in_domain(domain: str) -> list[str]:
     return found
 
 
+#: an outer deadline for the whole demo (it ends as soon as it is done: about 2 min, pinned
+#: to one core): its steps' own deadlines are up to 60 s (docs/testing.md)
+DEMO_DEADLINE_S = 420
+
+
+@pytest.mark.timeout(DEMO_DEADLINE_S + 120)
 def test_demo_drives_every_driver_and_records_a_bag(tmp_path, check_rosbag2):
     if not (ROOT / 'install' / 'setup.bash').exists():
         pytest.skip('the workspace is not built (make build)')
@@ -63,11 +69,11 @@ def test_demo_drives_every_driver_and_records_a_bag(tmp_path, check_rosbag2):
     demo = subprocess.Popen(['bash', '-c', command], cwd=ROOT, env=env, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     try:
-        out, _ = demo.communicate(timeout=150)
+        out, _ = demo.communicate(timeout=DEMO_DEADLINE_S)
     except subprocess.TimeoutExpired:
         demo.send_signal(signal.SIGINT)  # the demo stops its processes on Ctrl-C
         out, _ = demo.communicate(timeout=60)
-        pytest.fail(f'the demo did not finish within 150 s:\n{out[-6000:]}')
+        pytest.fail(f'the demo did not finish within {DEMO_DEADLINE_S} s:\n{out[-6000:]}')
     ended = time.time_ns()
     assert demo.returncode == 0, out[-6000:]
     for node, _ in expected.values():

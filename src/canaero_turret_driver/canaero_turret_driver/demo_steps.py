@@ -13,6 +13,6 @@ def cover_and_fix(target: Any, ros: Any) -> str:
     reply = ros.call(SetBool, target.ns('set_cover'), SetBool.Request(data=True))
     if not reply.success:
         raise RuntimeError(reply.message)
-    fix = ros.wait_for_message(target.ns('fix'), NavSatFix, timeout=10)
+    fix = ros.wait_for_message(target.ns('fix'), NavSatFix, timeout=60)  # an outer deadline
     return (f'set_cover true: {reply.message}; GNSS fix {fix.latitude:.4f}, '
             f'{fix.longitude:.4f}, {fix.altitude:.1f} m')
