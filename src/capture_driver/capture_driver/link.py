@@ -448,8 +448,11 @@ class CaptureLink(Protocol):
                 on_answered=on_answered)
         except LinkError as exc:
             raise NotConnected(f'{requests[0][0]}: link lost ({exc})') from exc
-        # time spent waiting for the link to resynchronise is not the device's silence
-        self._last_answer += time.monotonic() - started
+        # time spent waiting for the link to resynchronise is not the device's silence, up
+        # to the moment the request was written: from then on its wait counts (written_at
+        # starts its deadline), however long the write call itself took (a starved thread)
+        written = waitings[0].written_at if waitings else time.monotonic()
+        self._last_answer += max(0.0, written - started)
         if waitings is None:
             if block:
                 raise DeviceTimeout(f'{requests[0][0]}: the link stayed busy')

@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import math
 import threading
+import time
 from typing import Any
 
 import pytest
@@ -783,6 +784,43 @@ def test_silent_device_during_batched_reads_closes_the_link(sim):
     c.timeout = REQUEST_TIMEOUT
     c.connect()
     assert c.read_many(POLL) == [0.0] * 4
+    c.close()
+
+
+
+class SlowWrites(CountingWrites):
+    """Each write returns ``seconds`` after the bytes went out: a writer thread that
+    waited for a core (a pinned run) after its request was written."""
+
+    def __init__(self, factory, seconds: float) -> None:
+        super().__init__(factory)
+        self.seconds = seconds
+
+    def __call__(self):
+        stream = super().__call__()
+        write = stream.write
+
+        def slow(data: bytes) -> None:
+            write(data)
+            time.sleep(self.seconds)
+
+        stream.write = slow
+        return stream
+
+
+def test_a_slow_write_still_counts_as_silence_once_the_request_is_out(sim):
+    # The time a write call takes after its request was written is part of that
+    # request's wait (its deadline runs from then): it is the device's silence, not the
+    # link's resynchronisation. It once was not, and the link stayed open after three
+    # timeouts on one core (docs/testing.md, the whole pinned run of 2026-12-03).
+    c = CaptureClient(SlowWrites(lambda: TcpStream('127.0.0.1', sim.tcp.port), 0.03),
+                      timeout=REQUEST_TIMEOUT, max_timeouts=3)
+    c.connect()
+    c.timeout = 0.1
+    sim.set_silent(True)
+    with pytest.raises(NotConnected, match='device silent'):
+        c.read_many(POLL)
+    assert not c.connected and c.stats['timeouts'] == 3
     c.close()
 
 
