@@ -13,4 +13,9 @@ ruff check .
 echo "test: mypy"
 mypy  # mypy.ini: every package under src/ (found by itself), not the tests
 echo "test: pytest"
+# pytest rewrites the asserts of every test module in every xdist worker, and with
+# PYTHONDONTWRITEBYTECODE set (this machine's shells) it keeps no cache of the result: each
+# worker spent about 4 s of CPU on it (docs/testing.md "Where the time goes"). Unset for the
+# run, the first worker writes the cache (__pycache__, ignored by git) and the rest read it.
+unset PYTHONDONTWRITEBYTECODE
 python -m pytest -n "${PYTEST_WORKERS:-8}" src tests "$@"
