@@ -23,10 +23,11 @@ purpose, and no key may resolve to pip (the build farm refuses pip keys).
 from __future__ import annotations
 
 import ast
+import functools
 import re
 import sys
 import xml.etree.ElementTree as ET
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 
 import pytest
@@ -131,22 +132,33 @@ def kind_of(relative: Path) -> tuple[str, ...]:
     return RUN
 
 
-def imports(path: Path) -> Iterator[str]:
-    """Dotted names of the absolute imports of one file, string imports included."""
+def imports(path: Path) -> tuple[str, ...]:
+    """Dotted names of the absolute imports of one file, string imports included. Parsed
+    once per content (the closure walk reads each module again for every test file: the
+    module's tests took 9.8 s of CPU parsing the same files)."""
+    stat = path.stat()
+    return parsed_imports(path, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.cache
+def parsed_imports(path: Path, mtime_ns: int, size: int) -> tuple[str, ...]:
+    """:func:`imports` of ``path`` as it is at ``mtime_ns`` and ``size``."""
     tree = ast.parse(path.read_text(encoding='utf-8'), str(path))
+    names: list[str] = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            yield from (alias.name for alias in node.names)
+            names.extend(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            yield node.module
-            yield from (f'{node.module}.{alias.name}' for alias in node.names)
+            names.append(node.module)
+            names.extend(f'{node.module}.{alias.name}' for alias in node.names)
         elif (isinstance(node, ast.Call) and node.args
               and getattr(node.func, 'attr', getattr(node.func, 'id', None))
               in ('importorskip', 'import_module', '__import__')):
             if isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str):
-                yield node.args[0].value
+                names.append(node.args[0].value)
             else:
-                yield '<dynamic>'
+                names.append('<dynamic>')
+    return tuple(names)
 
 
 def rosdep_key(module: str) -> str | None:

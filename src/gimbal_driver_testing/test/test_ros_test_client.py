@@ -85,7 +85,13 @@ class SlowFirstAcceptServer:
             return self.executed == self.goals
 
     def close(self) -> None:
+        """Leave the domain (once; again is a no-op). The action server goes first: it holds
+        the rcl node, which ``destroy_node`` leaves to it, so the DDS participant stayed
+        until a garbage collection (as :meth:`RosTestClient.close` found for its clients)."""
+        if not self.context.ok():
+            return
         self.executor.shutdown(timeout_sec=1.0)
+        self.server.destroy()
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)
 
@@ -115,6 +121,12 @@ def test_a_goal_accepted_at_once_is_sent_once() -> None:
         try:
             result, _, _ = client.run_action(MoveTo, '/move_to', MoveTo.Goal(), timeout=20.0)
             assert (server.goals, result.message) == (1, 'goal 1')
+            # A closed server leaves the domain before its lease goes: its action server
+            # held the rcl node after destroy_node, and a test run beside this one that
+            # leased the domain next refused to publish there (docs/testing.md).
+            server.close()
+            client.wait_for(lambda: 'slow_accept_server' not in client.node.get_node_names(),
+                            30.0, 'the closed server to leave the domain')
         finally:
             client.close()
             server.close()

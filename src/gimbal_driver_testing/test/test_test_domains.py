@@ -226,8 +226,9 @@ def test_a_closed_client_leaves_the_domain_also_after_an_action() -> None:
         rclpy.init(context=context, domain_id=domain)
         try:
             server = rclpy.create_node('probe_action_server', context=context)
-            ActionServer(server, MoveTo, '/probe_move',
-                         lambda handle: (handle.succeed(), MoveTo.Result(success=True))[1])
+            action = ActionServer(
+                server, MoveTo, '/probe_move',
+                lambda handle: (handle.succeed(), MoveTo.Result(success=True))[1])
             executor = SingleThreadedExecutor(context=context)
             executor.add_node(server)
             spin = threading.Thread(target=executor.spin, daemon=True)
@@ -244,6 +245,7 @@ def test_a_closed_client_leaves_the_domain_also_after_an_action() -> None:
                      'the closed client to leave the domain')
             executor.shutdown(timeout_sec=5.0)
             spin.join(timeout=5.0)
+            action.destroy()  # it holds the rcl node: the server would stay on the domain
             server.destroy_node()
         finally:
             rclpy.shutdown(context=context)
