@@ -2,8 +2,9 @@
 # Set up from nothing if needed, lint, type-check, and run every test of every package.
 # Extra arguments go to pytest (e.g. -k capture, -m "not ros").
 # The tests run side by side in PYTEST_WORKERS processes (pytest-xdist, default 8): they
-# mostly wait on simulators, nodes and DDS, and each leases its own ROS domain and ports,
-# so 8 workers on 2 cores finish in about 4.5 minutes (docs/testing.md, "Where the time goes").
+# mostly wait on simulators, nodes and DDS, and each leases its own ROS domain and ports.
+# 8 workers on a quiet 2-core machine: pytest about 5.3 minutes, bound by CPU now
+# (docs/testing.md, "Where the time goes").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup_env.sh
