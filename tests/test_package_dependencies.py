@@ -49,6 +49,7 @@ ROSDEP_KEYS: dict[str, tuple[str, str]] = {
     'python3-geographiclib': ('python3-geographiclib', 'rosdep/python.yaml'),
     'python3-pytest': ('python3-pytest', 'rosdep/python.yaml'),
     'python3-pytest-timeout': ('python3-pytest-timeout', 'rosdep/python.yaml'),
+    'python3-pytest-xdist': ('python3-pytest-xdist', 'rosdep/python.yaml'),
     'python3-hypothesis': ('python3-hypothesis', 'rosdep/python.yaml'),
     'python3-setuptools': ('python3-setuptools', 'rosdep/python.yaml'),
 }
@@ -77,6 +78,7 @@ MODULE_KEYS: dict[str, str] = {
     'pymap3d': 'python3-pymap3d',
     'geographiclib': 'python3-geographiclib',
     'pytest': 'python3-pytest',
+    'xdist': 'python3-pytest-xdist',
     'hypothesis': 'python3-hypothesis',
     'setuptools': 'python3-setuptools',
     'urdf_parser_py': 'urdfdom_py',
@@ -101,7 +103,8 @@ CYCLES: set[tuple[str, str]] = {('gimbal_driver_common', 'gimbal_driver_testing'
 #: the package that holds the test support; the one allowed to exec-depend on TEST_ONLY_KEYS
 TEST_SUPPORT = 'gimbal_driver_testing'
 #: keys only tests need: a robot installing a runtime package must not get them
-TEST_ONLY_KEYS = frozenset({'python3-pytest', 'python3-pytest-timeout', 'python3-hypothesis',
+TEST_ONLY_KEYS = frozenset({'python3-pytest', 'python3-pytest-timeout', 'python3-pytest-xdist',
+                            'python3-hypothesis',
                             'python3-geographiclib', TEST_SUPPORT})
 
 RUN = ('depend', 'exec_depend')

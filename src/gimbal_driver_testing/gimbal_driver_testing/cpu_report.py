@@ -59,6 +59,7 @@ class _Meter:
         self.started: Counter[str] = Counter()
         self.start = (0.0, 0.0)
         self.wall = 0.0
+        self.began_at = 0.0
         sys.addaudithook(self._audit)
 
     def _audit(self, event: str, args: tuple) -> None:
@@ -69,7 +70,7 @@ class _Meter:
         if module != self.module:
             self.flush()
             self.module, self.tests, self.started = module, 0, Counter()
-            self.start, self.wall = _cpu(), time.monotonic()
+            self.start, self.wall, self.began_at = _cpu(), time.monotonic(), time.time()
         self.tests += 1
 
     def flush(self) -> None:
@@ -82,6 +83,7 @@ class _Meter:
             'children_s': round(children - self.start[1], 2),
             'wall_s': round(time.monotonic() - self.wall, 1),
             'started': dict(self.started), 'pid': os.getpid(),
+            'began_at': round(self.began_at, 2), 'ended_at': round(time.time(), 2),
         }
         with open(self.path, 'a', encoding='utf-8') as out:
             out.write(json.dumps(line) + '\n')

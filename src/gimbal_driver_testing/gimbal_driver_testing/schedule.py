@@ -1,0 +1,219 @@
+"""pytest plugin: under pytest-xdist, the tests that mostly wait for long go out first.
+
+xdist's default ``load`` scheduling hands the collection out in its order, in chunks of
+consecutive tests. The suite's longest tests (a soak per driver, 40 s each; the generated
+driver's build and conformance suite, about 2 minutes; the demo, 35 s) are collected last
+(``tests/``), so they started in a run's last minute, and the run ended with two or three
+workers waiting on them while the others had finished (docs/testing.md, "Where the time
+goes"). The node-id prefixes in the ``long_tests`` ini option name those tests: they go out
+first, in the order listed, each to a worker of its own, on at most half of the workers at
+a time (the rest keep the CPU-bound tests going beside them). Every other test goes out as
+``load`` hands it out: consecutive chunks, refilled when a worker runs low, so a class's or a
+module's tests mostly stay on one worker and its rig starts once there.
+
+The scheduler keeps to xdist's scheduling protocol (``xdist.scheduler.protocol.Scheduling``,
+the contract of its ``pytest_xdist_make_scheduler`` hook), so this module imports nothing of
+xdist, and without xdist, or with another ``--dist``, the hook returns nothing and xdist's
+own scheduler runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, Protocol
+
+import pytest
+
+LONG_TESTS_INI = 'long_tests'
+
+
+class Worker(Protocol):
+    """What the scheduler uses of xdist's ``WorkerController``."""
+
+    shutting_down: bool
+
+    def send_runtest_some(self, indices: Sequence[int]) -> None: ...
+
+    def shutdown(self) -> None: ...
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addini(LONG_TESTS_INI, 'node-id prefixes of tests that mostly wait for long: under '
+                  'pytest-xdist they go out first, each to a worker of its own '
+                  '(gimbal_driver_testing.schedule)', type='linelist', default=[])
+
+
+def worker_count(tx_specs: Sequence[str]) -> int:
+    """How many workers xdist starts for its ``--tx`` specs (``-n 8`` is ``8*popen``), as
+    xdist's own ``parse_tx_spec_config`` counts them."""
+    count = 0
+    for spec in tx_specs:
+        times, star, _ = spec.partition('*')
+        count += int(times) if star and times.isdigit() else 1
+    return count
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> LongTestsFirst | None:
+    prefixes = tuple(config.getini(LONG_TESTS_INI))
+    if not prefixes or config.getoption('dist') != 'load':
+        return None
+    return LongTestsFirst(worker_count(config.getoption('tx')), prefixes, config)
+
+
+class LongTestsFirst:
+    """xdist ``load`` scheduling, with the tests named by ``long_prefixes`` sent first.
+
+    A long test goes to a worker with at most one test queued (a worker runs a test once it
+    knows the next one, so the last one it holds waits for more or for its shutdown), and
+    at most ``max(1, workers // 2)`` are out at once while other tests are left.
+    """
+
+    def __init__(self, expected_workers: int, long_prefixes: Sequence[str],
+                 config: pytest.Config | None = None) -> None:
+        self.expected_workers = expected_workers
+        self.long_prefixes = tuple(long_prefixes)
+        self.config = config
+        self.node2collection: dict[Any, list[str]] = {}
+        self.node2pending: dict[Any, list[int]] = {}
+        self.collection: list[str] | None = None
+        #: every other test not yet sent, in collection order
+        self.pending: list[int] = []
+        #: the long tests not yet sent, in the order of ``long_prefixes``
+        self.long_pending: list[int] = []
+        self.long_tests: frozenset[int] = frozenset()
+
+    # the scheduling protocol
+
+    @property
+    def nodes(self) -> list[Any]:
+        return list(self.node2pending)
+
+    @property
+    def collection_is_completed(self) -> bool:
+        return len(self.node2collection) >= self.expected_workers
+
+    @property
+    def tests_finished(self) -> bool:
+        if not self.collection_is_completed or self.pending or self.long_pending:
+            return False
+        return all(len(queued) < 2 for queued in self.node2pending.values())
+
+    @property
+    def has_pending(self) -> bool:
+        return bool(self.pending or self.long_pending
+                    or any(self.node2pending.values()))
+
+    def add_node(self, node: Worker) -> None:
+        assert node not in self.node2pending
+        self.node2pending[node] = []
+
+    def add_node_collection(self, node: Worker, collection: Sequence[str]) -> None:
+        if self.collection is not None and list(collection) != self.collection:
+            self.collection_differs(node)
+            return
+        self.node2collection[node] = list(collection)
+
+    def mark_test_complete(self, node: Worker, item_index: int, duration: float = 0) -> None:
+        self.node2pending[node].remove(item_index)
+        self.check_schedule(node, duration)
+
+    def mark_test_pending(self, item: str) -> None:
+        assert self.collection is not None
+        self.pending.insert(0, self.collection.index(item))
+        for node in self.nodes:
+            self.check_schedule(node)
+
+    def remove_pending_tests_from_node(self, node: Worker, indices: Sequence[int]) -> None:
+        raise NotImplementedError('only work stealing takes tests back')
+
+    def remove_node(self, node: Worker) -> str | None:
+        """A worker that ended: its queued tests go to the others; the one it was running
+        (the first queued) is the crashed one, as xdist's schedulers report it."""
+        queued = self.node2pending.pop(node)
+        if not queued:
+            return None
+        assert self.collection is not None
+        crashed = self.collection[queued.pop(0)]
+        self.pending.extend(queued)
+        for other in self.nodes:
+            self.check_schedule(other)
+        return crashed
+
+    def schedule(self) -> None:
+        if self.collection is not None:
+            for node in self.nodes:
+                self.check_schedule(node)
+            return
+        collections = list(self.node2collection.values())
+        if any(collection != collections[0] for collection in collections[1:]):
+            self.collection_differs(next(iter(self.node2collection)))
+            return
+        self.collection = collections[0]
+        rank = {prefix: n for n, prefix in enumerate(self.long_prefixes)}
+        long_tests = {index: rank[prefix] for index, nodeid in enumerate(self.collection)
+                      for prefix in self.long_prefixes if nodeid.startswith(prefix)}
+        self.long_tests = frozenset(long_tests)
+        self.long_pending = sorted(long_tests, key=lambda index: (long_tests[index], index))
+        self.pending = [i for i in range(len(self.collection)) if i not in long_tests]
+        chunk = max(2, len(self.collection) // max(1, len(self.nodes)) // 4)
+        for node in self.nodes:
+            if not self.send_long_test(node):
+                self.send(node, self.take(chunk))
+        if not self.pending and not self.long_pending:
+            for node in self.nodes:
+                node.shutdown()
+
+    # the policy
+
+    @property
+    def long_limit(self) -> int:
+        return max(1, len(self.node2pending) // 2)
+
+    def long_tests_out(self) -> int:
+        return sum(index in self.long_tests
+                   for queued in self.node2pending.values() for index in queued)
+
+    def check_schedule(self, node: Worker, duration: float = 0) -> None:
+        """Give ``node`` more tests if it runs low, as xdist's ``load`` does: a long test
+        first if one is left and may go out, else a chunk of the others."""
+        if node.shutting_down:
+            return
+        if not self.send_long_test(node) and self.pending:
+            queued = self.node2pending[node]
+            per_node = len(self.pending) // len(self.node2pending)
+            low, high = max(2, per_node // 4), max(2, per_node // 2)
+            # xdist's heuristic: a worker on long tests that still has two waits for them
+            if len(queued) < low and not (duration >= 0.1 and len(queued) >= 2):
+                self.send(node, self.take(high - len(queued)))
+        if not self.pending and not self.long_pending:
+            node.shutdown()
+
+    def send_long_test(self, node: Worker) -> bool:
+        """Send ``node`` the next long test if it has at most one test queued and the limit
+        allows; once the other tests are all out, there is no limit (nothing is left to keep
+        going beside them, and a worker holding its last test would wait for it)."""
+        queued = self.node2pending[node]
+        if not self.long_pending or len(queued) > 1:
+            return False
+        if self.pending and self.long_tests_out() >= self.long_limit:
+            return False
+        self.send(node, [self.long_pending.pop(0), *self.take(1 - len(queued))])
+        return True
+
+    def take(self, count: int) -> list[int]:
+        taken, self.pending[:count] = self.pending[:count], []
+        return taken
+
+    def send(self, node: Worker, indices: list[int]) -> None:
+        if indices:
+            self.node2pending[node].extend(indices)
+            node.send_runtest_some(indices)
+
+    def collection_differs(self, node: Worker) -> None:
+        """Fail the run as xdist does when its workers collected different tests."""
+        if self.config is not None:
+            self.config.hook.pytest_collectreport(report=pytest.CollectReport(
+                nodeid=str(getattr(getattr(node, 'gateway', None), 'id', node)),
+                outcome='failed', longrepr='the xdist workers collected different tests',
+                result=[]))

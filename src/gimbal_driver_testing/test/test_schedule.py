@@ -1,0 +1,188 @@
+"""The xdist scheduler that sends the long tests first (gimbal_driver_testing.schedule):
+against stand-in workers that run what they are sent as xdist's do, and through xdist."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import pytest
+
+from gimbal_driver_testing.schedule import LongTestsFirst, worker_count
+
+pytest_plugins = ['pytester']
+
+LONG = ('tests/test_new_driver.py::test_builds', 'tests/test_soak.py::')
+
+
+class StandInWorker:
+    """A worker as xdist's remote end treats what it is sent: it runs its queued tests in
+    order, and the last one only once it has another or has been told to shut down (pytest
+    needs the next item to tear fixtures down)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.shutting_down = False
+        self.queued: list[int] = []
+        self.ran: list[int] = []
+
+    def send_runtest_some(self, indices: Sequence[int]) -> None:
+        assert not self.shutting_down, f'{self.name} was sent tests after its shutdown'
+        self.queued.extend(indices)
+
+    def shutdown(self) -> None:
+        self.shutting_down = True
+
+    def can_run(self) -> bool:
+        return len(self.queued) > 1 or (len(self.queued) == 1 and self.shutting_down)
+
+
+def collection() -> list[str]:
+    return ([f'src/a/test/test_conformance.py::TestA::test_{n}' for n in range(40)]
+            + [f'src/b/test/test_node.py::test_{n}' for n in range(20)]
+            + ['tests/test_new_driver.py::test_copy', 'tests/test_new_driver.py::test_builds']
+            + [f'tests/test_soak.py::test_soak[{d}]' for d in ('a', 'b', 'c')]
+            + [f'tests/test_threads.py::test_{n}' for n in range(10)])
+
+
+def started(workers: int) -> tuple[LongTestsFirst, list[StandInWorker]]:
+    scheduler = LongTestsFirst(workers, LONG)
+    nodes = [StandInWorker(f'gw{n}') for n in range(workers)]
+    for node in nodes:
+        scheduler.add_node(node)
+    for node in nodes:
+        assert not scheduler.collection_is_completed
+        scheduler.add_node_collection(node, collection())
+    assert scheduler.collection_is_completed
+    scheduler.schedule()
+    return scheduler, nodes
+
+
+def run_to_the_end(scheduler: LongTestsFirst, nodes: list[StandInWorker],
+                   long_out: list[tuple[bool, int]] | None = None) -> None:
+    """Let the workers run one test each in turn, reporting each to the scheduler, until
+    none can run; ``long_out`` gets, after each report, whether other tests were left to
+    send and how many long tests were queued."""
+    while any(node.can_run() for node in nodes):
+        for node in nodes:
+            if node.can_run():
+                index = node.queued.pop(0)
+                node.ran.append(index)
+                scheduler.mark_test_complete(node, index, duration=0.01)
+                if long_out is not None:
+                    long_out.append((bool(scheduler.pending), scheduler.long_tests_out()))
+
+
+def names(indices: list[int]) -> list[str]:
+    every = collection()
+    return [every[i] for i in indices]
+
+
+@pytest.mark.parametrize('workers', [1, 2, 4, 8])
+def test_every_test_runs_once_and_every_worker_is_shut_down(workers: int) -> None:
+    scheduler, nodes = started(workers)
+    run_to_the_end(scheduler, nodes)
+    ran = sorted(i for node in nodes for i in node.ran)
+    assert ran == list(range(len(collection())))
+    assert all(node.shutting_down and not node.queued for node in nodes)
+    assert scheduler.tests_finished
+    assert not scheduler.has_pending
+
+
+def test_the_long_tests_go_first_each_to_a_worker_of_its_own_in_the_listed_order() -> None:
+    scheduler, nodes = started(8)
+    firsts = [node.queued[0] for node in nodes[:4]]
+    # the limit is half of the workers: new_driver's build, then the soaks in their order
+    assert names(firsts) == ['tests/test_new_driver.py::test_builds',
+                             'tests/test_soak.py::test_soak[a]',
+                             'tests/test_soak.py::test_soak[b]',
+                             'tests/test_soak.py::test_soak[c]']
+    # each has one other test behind it (so it starts at once), and the other workers
+    # start on the rest in collection order, in chunks
+    assert [node.queued[1] for node in nodes[:4]] == [0, 1, 2, 3]
+    assert nodes[4].queued[:2] == [4, 5]
+    assert nodes[5].queued[0] == 4 + len(nodes[4].queued)
+    long_out: list[tuple[bool, int]] = []
+    run_to_the_end(scheduler, nodes, long_out)
+    assert max(out for others_left, out in long_out if others_left) <= 4
+    # test_copy is not long: only the node-id prefixes listed are
+    assert all(not name.startswith('tests/test_new_driver.py::test_copy')
+               for node in nodes[:4] for name in names(node.ran[:1]))
+
+
+def test_no_more_long_tests_than_half_the_workers_while_other_tests_are_left() -> None:
+    scheduler, nodes = started(2)
+    assert names([nodes[0].queued[0]]) == ['tests/test_new_driver.py::test_builds']
+    assert not any(i in scheduler.long_tests for i in nodes[1].queued)
+    long_out: list[tuple[bool, int]] = []
+    run_to_the_end(scheduler, nodes, long_out)
+    assert {out for others_left, out in long_out if others_left} == {0, 1}
+    ran_long = [i for node in nodes for i in node.ran if i in scheduler.long_tests]
+    assert sorted(ran_long) == sorted(scheduler.long_tests)
+
+
+def test_without_long_tests_it_hands_out_consecutive_chunks_as_load_does() -> None:
+    scheduler = LongTestsFirst(2, ('tests/no_such_test.py',))
+    nodes = [StandInWorker('gw0'), StandInWorker('gw1')]
+    for node in nodes:
+        scheduler.add_node(node)
+        scheduler.add_node_collection(node, collection())
+    scheduler.schedule()
+    chunk = len(collection()) // 2 // 4
+    assert nodes[0].queued == list(range(chunk))
+    assert nodes[1].queued == list(range(chunk, 2 * chunk))
+    run_to_the_end(scheduler, nodes)
+    assert sorted(nodes[0].ran + nodes[1].ran) == list(range(len(collection())))
+
+
+def test_a_crashed_worker_names_its_test_and_its_queue_goes_to_the_others() -> None:
+    scheduler, nodes = started(2)
+    crashed_node = nodes[0]
+    queued = list(crashed_node.queued)
+    assert scheduler.remove_node(crashed_node) == collection()[queued[0]]
+    run_to_the_end(scheduler, nodes[1:])
+    assert set(queued[1:]) <= set(nodes[1].ran)
+
+
+def test_workers_that_collected_different_tests_get_no_test() -> None:
+    scheduler = LongTestsFirst(2, LONG)
+    nodes = [StandInWorker('gw0'), StandInWorker('gw1')]
+    for node in nodes:
+        scheduler.add_node(node)
+    scheduler.add_node_collection(nodes[0], collection())
+    scheduler.add_node_collection(nodes[1], collection()[1:])
+    scheduler.schedule()
+    assert not nodes[0].queued and not nodes[1].queued
+    assert scheduler.tests_finished
+
+
+def test_worker_count_reads_xdist_tx_specs() -> None:
+    assert worker_count(['8*popen']) == 8
+    assert worker_count(['popen', '2*popen//python=python3']) == 3
+
+
+def test_through_xdist_the_long_tests_start_first_on_workers_of_their_own(
+        pytester: pytest.Pytester) -> None:
+    """Real xdist workers: each long test is the first its worker runs."""
+    pytest.importorskip('xdist', reason='needs pytest-xdist')
+    log = pytester.path / 'order.log'
+    record = (f'import os\ndef record(name):\n'
+              f'    with open({str(log)!r}, "a") as out:\n'
+              f'        out.write(os.environ["PYTEST_XDIST_WORKER"] + " " + name + "\\n")\n')
+    pytester.makepyfile(record_order=record)
+    pytester.makepyfile(test_a='\n'.join(
+        ['from record_order import record']
+        + [f'def test_{n}():\n    record("a{n}")' for n in range(12)]))
+    pytester.makepyfile(test_z_long='\n'.join(
+        ['from record_order import record']
+        + [f'def test_long_{n}():\n    record("long{n}")' for n in range(2)]))
+    pytester.makeini('[pytest]\nlong_tests =\n    test_z_long.py\n')
+    result = pytester.runpytest_subprocess(
+        '-n', '4', '-p', 'gimbal_driver_testing.schedule', '-p', 'no:cacheprovider')
+    result.assert_outcomes(passed=14)
+    first_by_worker: dict[str, str] = {}
+    for line in Path(log).read_text().splitlines():
+        worker, name = line.split()
+        first_by_worker.setdefault(worker, name)
+    assert sorted(n for n in first_by_worker.values() if n.startswith('long')) == [
+        'long0', 'long1']
