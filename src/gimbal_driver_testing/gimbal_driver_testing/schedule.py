@@ -5,11 +5,14 @@ consecutive tests. The suite's longest tests (a soak per driver, 40 s each; the 
 driver's build and conformance suite, about 2 minutes; the demo, 35 s) are collected last
 (``tests/``), so they started in a run's last minute, and the run ended with two or three
 workers waiting on them while the others had finished (docs/testing.md, "Where the time
-goes"). The node-id prefixes in the ``long_tests`` ini option name those tests: they go out
-first, in the order listed, each to a worker of its own, on at most half of the workers at
-a time (the rest keep the CPU-bound tests going beside them). Every other test goes out as
-``load`` hands it out: consecutive chunks, refilled when a worker runs low, so a class's or a
-module's tests mostly stay on one worker and its rig starts once there.
+goes"). The node-id prefixes in the ``long_tests`` ini option name those tests. What a line
+matches goes out in units of one parametrization (the ``[...]`` of the node ids: the
+property tests of one driver share that driver's module-scoped node, so they stay
+together), first, in the order listed, each unit to a worker of its own, on at most half
+of the workers at a time (the rest keep the CPU-bound tests going beside them). Every other
+test goes out as ``load`` hands it out: consecutive chunks, refilled when a worker runs
+low, so a class's or a module's tests mostly stay on one worker and its rig starts once
+there.
 
 The scheduler keeps to xdist's scheduling protocol (``xdist.scheduler.protocol.Scheduling``,
 the contract of its ``pytest_xdist_make_scheduler`` hook), so this module imports nothing of
@@ -53,6 +56,12 @@ def worker_count(tx_specs: Sequence[str]) -> int:
     return count
 
 
+def parametrization(nodeid: str) -> str:
+    """The ``[...]`` of a test's node id ('' for a test without parameters)."""
+    name = nodeid.rpartition('::')[2]
+    return name[name.index('['):] if name.endswith(']') and '[' in name else ''
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> LongTestsFirst | None:
     prefixes = tuple(config.getini(LONG_TESTS_INI))
@@ -64,9 +73,10 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> LongTests
 class LongTestsFirst:
     """xdist ``load`` scheduling, with the tests named by ``long_prefixes`` sent first.
 
-    A long test goes to a worker with at most one test queued (a worker runs a test once it
-    knows the next one, so the last one it holds waits for more or for its shutdown), and
-    at most ``max(1, workers // 2)`` are out at once while other tests are left.
+    A unit of long tests goes to a worker with at most one test queued (a worker runs a test
+    once it knows the next one, so the last one it holds waits for more or for its
+    shutdown), and at most ``max(1, workers // 2)`` workers have one while other tests are
+    left.
     """
 
     def __init__(self, expected_workers: int, long_prefixes: Sequence[str],
@@ -79,8 +89,8 @@ class LongTestsFirst:
         self.collection: list[str] | None = None
         #: every other test not yet sent, in collection order
         self.pending: list[int] = []
-        #: the long tests not yet sent, in the order of ``long_prefixes``
-        self.long_pending: list[int] = []
+        #: the units of long tests not yet sent, in the order of ``long_prefixes``
+        self.long_pending: list[list[int]] = []
         self.long_tests: frozenset[int] = frozenset()
 
     # the scheduling protocol
@@ -150,12 +160,15 @@ class LongTestsFirst:
             self.collection_differs(next(iter(self.node2collection)))
             return
         self.collection = collections[0]
-        rank = {prefix: n for n, prefix in enumerate(self.long_prefixes)}
-        long_tests = {index: rank[prefix] for index, nodeid in enumerate(self.collection)
-                      for prefix in self.long_prefixes if nodeid.startswith(prefix)}
-        self.long_tests = frozenset(long_tests)
-        self.long_pending = sorted(long_tests, key=lambda index: (long_tests[index], index))
-        self.pending = [i for i in range(len(self.collection)) if i not in long_tests]
+        units: dict[tuple[int, str], list[int]] = {}
+        for index, nodeid in enumerate(self.collection):
+            rank = next((n for n, prefix in enumerate(self.long_prefixes)
+                         if nodeid.startswith(prefix)), None)
+            if rank is not None:
+                units.setdefault((rank, parametrization(nodeid)), []).append(index)
+        self.long_pending = [units[key] for key in sorted(units, key=lambda k: (k[0], units[k]))]
+        self.long_tests = frozenset(i for unit in units.values() for i in unit)
+        self.pending = [i for i in range(len(self.collection)) if i not in self.long_tests]
         chunk = max(2, len(self.collection) // max(1, len(self.nodes)) // 4)
         for node in self.nodes:
             if not self.send_long_test(node):
@@ -171,8 +184,9 @@ class LongTestsFirst:
         return max(1, len(self.node2pending) // 2)
 
     def long_tests_out(self) -> int:
-        return sum(index in self.long_tests
-                   for queued in self.node2pending.values() for index in queued)
+        """How many workers have long tests queued."""
+        return sum(any(index in self.long_tests for index in queued)
+                   for queued in self.node2pending.values())
 
     def check_schedule(self, node: Worker, duration: float = 0) -> None:
         """Give ``node`` more tests if it runs low, as xdist's ``load`` does: a long test
@@ -190,18 +204,21 @@ class LongTestsFirst:
             node.shutdown()
 
     def send_long_test(self, node: Worker) -> bool:
-        """Send ``node`` the next long test if it has at most one test queued and the limit
-        allows; once the other tests are all out, there is no limit (nothing is left to keep
-        going beside them, and a worker holding its last test would wait for it)."""
+        """Send ``node`` the next unit of long tests if it has at most one test queued and
+        the limit allows; once the other tests are all out, there is no limit (nothing is
+        left to keep going beside them, and a worker holding its last test would wait)."""
         queued = self.node2pending[node]
         if not self.long_pending or len(queued) > 1:
             return False
         if self.pending and self.long_tests_out() >= self.long_limit:
             return False
-        self.send(node, [self.long_pending.pop(0), *self.take(1 - len(queued))])
+        unit = self.long_pending.pop(0)
+        self.send(node, [*unit, *self.take(2 - len(queued) - len(unit))])
         return True
 
     def take(self, count: int) -> list[int]:
+        """The next ``count`` other tests (none for a count below one)."""
+        count = max(0, count)
         taken, self.pending[:count] = self.pending[:count], []
         return taken
 

@@ -8,11 +8,12 @@ from pathlib import Path
 
 import pytest
 
-from gimbal_driver_testing.schedule import LongTestsFirst, worker_count
+from gimbal_driver_testing.schedule import LongTestsFirst, parametrization, worker_count
 
 pytest_plugins = ['pytester']
 
-LONG = ('tests/test_new_driver.py::test_builds', 'tests/test_soak.py::')
+LONG = ('tests/test_new_driver.py::test_builds', 'tests/test_properties.py::',
+        'tests/test_soak.py::')
 
 
 class StandInWorker:
@@ -41,6 +42,7 @@ def collection() -> list[str]:
     return ([f'src/a/test/test_conformance.py::TestA::test_{n}' for n in range(40)]
             + [f'src/b/test/test_node.py::test_{n}' for n in range(20)]
             + ['tests/test_new_driver.py::test_copy', 'tests/test_new_driver.py::test_builds']
+            + [f'tests/test_properties.py::test_{t}[{d}]' for d in ('a', 'b') for t in 'xyz']
             + [f'tests/test_soak.py::test_soak[{d}]' for d in ('a', 'b', 'c')]
             + [f'tests/test_threads.py::test_{n}' for n in range(10)])
 
@@ -91,17 +93,18 @@ def test_every_test_runs_once_and_every_worker_is_shut_down(workers: int) -> Non
 
 def test_the_long_tests_go_first_each_to_a_worker_of_its_own_in_the_listed_order() -> None:
     scheduler, nodes = started(8)
-    firsts = [node.queued[0] for node in nodes[:4]]
-    # the limit is half of the workers: new_driver's build, then the soaks in their order
-    assert names(firsts) == ['tests/test_new_driver.py::test_builds',
-                             'tests/test_soak.py::test_soak[a]',
-                             'tests/test_soak.py::test_soak[b]',
-                             'tests/test_soak.py::test_soak[c]']
-    # each has one other test behind it (so it starts at once), and the other workers
+    # the limit is half of the workers: new_driver's build, then each parametrization of
+    # the properties as one unit (a driver's tests share its node), then the first soak
+    assert names(nodes[0].queued) == ['tests/test_new_driver.py::test_builds',
+                                      'src/a/test/test_conformance.py::TestA::test_0']
+    assert names(nodes[1].queued) == [f'tests/test_properties.py::test_{t}[a]' for t in 'xyz']
+    assert names(nodes[2].queued) == [f'tests/test_properties.py::test_{t}[b]' for t in 'xyz']
+    assert names(nodes[3].queued) == ['tests/test_soak.py::test_soak[a]',
+                                      'src/a/test/test_conformance.py::TestA::test_1']
+    # a single long test has one other behind it (so it starts at once); the other workers
     # start on the rest in collection order, in chunks
-    assert [node.queued[1] for node in nodes[:4]] == [0, 1, 2, 3]
-    assert nodes[4].queued[:2] == [4, 5]
-    assert nodes[5].queued[0] == 4 + len(nodes[4].queued)
+    assert nodes[4].queued[:2] == [2, 3]
+    assert nodes[5].queued[0] == 2 + len(nodes[4].queued)
     long_out: list[tuple[bool, int]] = []
     run_to_the_end(scheduler, nodes, long_out)
     assert max(out for others_left, out in long_out if others_left) <= 4
@@ -156,6 +159,12 @@ def test_workers_that_collected_different_tests_get_no_test() -> None:
     assert scheduler.tests_finished
 
 
+def test_a_parametrization_is_the_brackets_of_the_test_name() -> None:
+    assert parametrization('tests/test_p.py::test_x[capture]') == '[capture]'
+    assert parametrization('a.py::TestA::test_y[a-1.5]') == '[a-1.5]'
+    assert parametrization('tests/test_demo.py::test_demo') == ''
+
+
 def test_worker_count_reads_xdist_tx_specs() -> None:
     assert worker_count(['8*popen']) == 8
     assert worker_count(['popen', '2*popen//python=python3']) == 3
@@ -163,7 +172,8 @@ def test_worker_count_reads_xdist_tx_specs() -> None:
 
 def test_through_xdist_the_long_tests_start_first_on_workers_of_their_own(
         pytester: pytest.Pytester) -> None:
-    """Real xdist workers: each long test is the first its worker runs."""
+    """Real xdist workers: each parametrization of the long test is the first test its
+    worker runs."""
     pytest.importorskip('xdist', reason='needs pytest-xdist')
     log = pytester.path / 'order.log'
     record = (f'import os\ndef record(name):\n'
@@ -173,9 +183,10 @@ def test_through_xdist_the_long_tests_start_first_on_workers_of_their_own(
     pytester.makepyfile(test_a='\n'.join(
         ['from record_order import record']
         + [f'def test_{n}():\n    record("a{n}")' for n in range(12)]))
-    pytester.makepyfile(test_z_long='\n'.join(
-        ['from record_order import record']
-        + [f'def test_long_{n}():\n    record("long{n}")' for n in range(2)]))
+    pytester.makepyfile(test_z_long='\n'.join([
+        'import pytest', 'from record_order import record',
+        '@pytest.mark.parametrize("n", [0, 1])', 'def test_long(n):',
+        '    record(f"long{n}")']))
     pytester.makeini('[pytest]\nlong_tests =\n    test_z_long.py\n')
     result = pytester.runpytest_subprocess(
         '-n', '4', '-p', 'gimbal_driver_testing.schedule', '-p', 'no:cacheprovider')
