@@ -175,8 +175,11 @@ def test_periphery_and_mode_services(rig):
         reply = ros.call(SetBool, f"/{NODE}/{name}", SetBool.Request(data=True))
         assert reply.success, reply.message
     wait_for(lambda: control.state()["cover_state"] == 1, 10, "the cover to open")
-    state = control.state()
-    assert state["fan_on"] and state["oes_heater_on"] and state["charging_on"]
+    # a command frame has no answer: the reply says it went out, and the simulator (another
+    # process) switches when it has read it. Reading its state once, right after the last
+    # reply, failed in a crowded run (charging still off): a wait, not a window
+    wait_for(lambda: all(control.state()[switch] for switch in
+                         ("fan_on", "oes_heater_on", "charging_on")), 10, "the switches on")
     reply = ros.call(SetMode, f"/{NODE}/set_actuator_mode", SetMode.Request(mode="yaw=free_run"))
     assert reply.success, reply.message
     wait_for(lambda: sim_axis(control, "yaw")["actuator_mode"] == 0, 5, "free run")

@@ -8,8 +8,10 @@ workers waiting on them while the others had finished (docs/testing.md, "Where t
 goes"). The node-id prefixes in the ``long_tests`` ini option name those tests. What a line
 matches goes out in units of one parametrization (the ``[...]`` of the node ids: the
 property tests of one driver share that driver's module-scoped node, so they stay
-together), first, in the order listed, each unit to a worker of its own, on at most half
-of the workers at a time (the rest keep the CPU-bound tests going beside them). Every other
+together), first, in the order listed, each unit to a worker of its own, on at most 3 in 8
+of the workers at a time (``LONG_SHARE``: the rest keep the CPU-bound tests going beside
+them; with half of the workers on them, the two cores stood 40 % idle for the run's first
+100 s, since the long tests mostly wait). Every other
 test goes out as ``load`` hands it out: consecutive chunks, refilled when a worker runs
 low, so a class's or a module's tests mostly stay on one worker and its rig starts once
 there.
@@ -22,12 +24,15 @@ own scheduler runs.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any, Protocol
 
 import pytest
 
 LONG_TESTS_INI = 'long_tests'
+#: the share of the workers (rounded up) that may run long tests at once while others are left
+LONG_SHARE = 3 / 8
 
 
 class Worker(Protocol):
@@ -75,8 +80,8 @@ class LongTestsFirst:
 
     A unit of long tests goes to a worker with at most one test queued (a worker runs a test
     once it knows the next one, so the last one it holds waits for more or for its
-    shutdown), and at most ``max(1, workers // 2)`` workers have one while other tests are
-    left.
+    shutdown), and at most ``ceil(workers * LONG_SHARE)`` workers have one while other
+    tests are left.
     """
 
     def __init__(self, expected_workers: int, long_prefixes: Sequence[str],
@@ -181,7 +186,7 @@ class LongTestsFirst:
 
     @property
     def long_limit(self) -> int:
-        return max(1, len(self.node2pending) // 2)
+        return max(1, math.ceil(len(self.node2pending) * LONG_SHARE))
 
     def long_tests_out(self) -> int:
         """How many workers have long tests queued."""
