@@ -3,7 +3,7 @@
 #   1. .venv with CPython 3.11 (the ROS 2 Jazzy wheels are cp311),
 #   2. pinned wheels from requirements.txt + constraints.txt (only when they changed),
 #   3. the wheels' CMake export paths re-pointed to this interpreter (idempotent),
-#   4. colcon build of src/ into build/ and install/.
+#   4. colcon build of src/ into build/ and install/ (skipped when src/ is unchanged).
 # Usage: scripts/setup_env.sh [--no-build]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -43,6 +43,26 @@ fi
 
 [ "${1:-}" = "--no-build" ] && exit 0
 
+# The build is skipped when nothing it reads changed since the last one this script made:
+# the same tracked and untracked (not ignored) files under src/ with the same contents, the
+# same colcon.meta and wheels, and colcon's latest build log still the one it wrote (a build
+# run by hand since, e.g. --symlink-install, is built over). Outside a git work tree it
+# always builds. colcon itself re-runs every package's setup.py however little changed
+# (11 s of a make test).
+build_state() {
+  git rev-parse --is-inside-work-tree > /dev/null 2>&1 || return 1
+  { git ls-files -s -- src colcon.meta; git diff --no-ext-diff --binary -- src colcon.meta
+    git ls-files -z --others --exclude-standard -- src | xargs -0 -r sha256sum
+    cat "$stamp"; readlink log/latest_build; } | sha256sum | cut -d' ' -f1
+}
+build_stamp=install/.setup_env_build
+if [ -f install/setup.bash ] && [ -f "$build_stamp" ] && state=$(build_state) &&
+   [ "$(cat "$build_stamp")" = "$state" ]; then
+  echo "setup: install/ up to date (src/ unchanged since the last build)"
+  exit 0
+fi
+rm -f "$build_stamp"
+
 # shellcheck source=scripts/ros_env.sh
 source scripts/ros_env.sh --no-workspace
 echo "setup: colcon build"
@@ -60,3 +80,5 @@ colcon build --base-paths src \
 echo "setup: byte-compiling install/"
 python -m compileall -q -j 0 install > /dev/null || {
   echo "setup: byte-compiling install/ failed" >&2; exit 1; }
+if state=$(build_state); then echo "$state" > "$build_stamp"; fi
+

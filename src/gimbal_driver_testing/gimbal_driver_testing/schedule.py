@@ -14,7 +14,11 @@ them; with half of the workers on them, the two cores stood 40 % idle for the ru
 100 s, since the long tests mostly wait). Every other
 test goes out as ``load`` hands it out: consecutive chunks, refilled when a worker runs
 low, so a class's or a module's tests mostly stay on one worker and its rig starts once
-there.
+there; but the classes and modules go out costliest first, by the worker seconds each took
+in a recorded run (the ``test_durations`` ini option names the file; ``pytest
+--record-test-durations`` writes it), so the run ends on cheap tests in small chunks, not on
+a driver's conformance class handed out late (one ran 80 s past the others). A class or
+module the file does not know goes after those it does, in collection order.
 
 The scheduler keeps to xdist's scheduling protocol (``xdist.scheduler.protocol.Scheduling``,
 the contract of its ``pytest_xdist_make_scheduler`` hook), so this module imports nothing of
@@ -24,13 +28,17 @@ own scheduler runs.
 
 from __future__ import annotations
 
+import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any, Protocol
 
 import pytest
 
 LONG_TESTS_INI = 'long_tests'
+DURATIONS_INI = 'test_durations'
+RECORD_OPTION = '--record-test-durations'
 #: the share of the workers (rounded up) that may run long tests at once while others are left
 LONG_SHARE = 3 / 8
 
@@ -49,6 +57,12 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addini(LONG_TESTS_INI, 'node-id prefixes of tests that mostly wait for long: under '
                   'pytest-xdist they go out first, each to a worker of its own '
                   '(gimbal_driver_testing.schedule)', type='linelist', default=[])
+    parser.addini(DURATIONS_INI, 'file (from the rootdir) of the worker seconds each test '
+                  'class or module took: under pytest-xdist the costliest go out first',
+                  default='')
+    parser.addoption(RECORD_OPTION, action='store_true',
+                     help=f'write the worker seconds of each test class or module to the '
+                     f'{DURATIONS_INI} file (under pytest-xdist)')
 
 
 def worker_count(tx_specs: Sequence[str]) -> int:
@@ -67,12 +81,50 @@ def parametrization(nodeid: str) -> str:
     return name[name.index('['):] if name.endswith(']') and '[' in name else ''
 
 
+def rig_of(nodeid: str) -> str:
+    """The class, or else the module, of a test: what its shared rig is scoped to."""
+    parts = nodeid.split('::')
+    return '::'.join(parts[:2]) if len(parts) > 2 else parts[0]
+
+
+def durations_path(config: pytest.Config) -> Path | None:
+    name = config.getini(DURATIONS_INI)
+    return config.rootpath / name if name else None
+
+
+def read_durations(path: Path | None) -> dict[str, float]:
+    """The recorded seconds per class or module; none if the file is missing or unreadable
+    (the order is then the collection's)."""
+    try:
+        data = json.loads(path.read_text(encoding='utf-8')) if path else {}
+    except (OSError, ValueError):
+        return {}
+    return {str(k): float(v) for k, v in data.items()} if isinstance(data, dict) else {}
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> LongTestsFirst | None:
     prefixes = tuple(config.getini(LONG_TESTS_INI))
-    if not prefixes or config.getoption('dist') != 'load':
+    if config.getoption('dist') != 'load' or not (prefixes or config.getini(DURATIONS_INI)):
         return None
-    return LongTestsFirst(worker_count(config.getoption('tx')), prefixes, config)
+    scheduler = LongTestsFirst(worker_count(config.getoption('tx')), prefixes, config,
+                               read_durations(durations_path(config)))
+    config.stash[SCHEDULER] = scheduler
+    return scheduler
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """With ``--record-test-durations``, write what this run measured (the controller)."""
+    config = session.config
+    scheduler = config.stash.get(SCHEDULER, None)
+    path = durations_path(config)
+    if scheduler is None or path is None or not config.getoption(RECORD_OPTION):
+        return
+    measured = {rig: round(seconds, 1) for rig, seconds in sorted(scheduler.measured.items())}
+    path.write_text(json.dumps(measured, indent=0) + '\n', encoding='utf-8')
+
+
+SCHEDULER = pytest.StashKey['LongTestsFirst']()
 
 
 class LongTestsFirst:
@@ -85,10 +137,15 @@ class LongTestsFirst:
     """
 
     def __init__(self, expected_workers: int, long_prefixes: Sequence[str],
-                 config: pytest.Config | None = None) -> None:
+                 config: pytest.Config | None = None,
+                 costs: Mapping[str, float] | None = None) -> None:
         self.expected_workers = expected_workers
         self.long_prefixes = tuple(long_prefixes)
         self.config = config
+        #: recorded seconds per class or module (``rig_of``), costliest sent first
+        self.costs = dict(costs or {})
+        #: the seconds each class or module took in this run
+        self.measured: dict[str, float] = {}
         self.node2collection: dict[Any, list[str]] = {}
         self.node2pending: dict[Any, list[int]] = {}
         self.collection: list[str] | None = None
@@ -131,6 +188,9 @@ class LongTestsFirst:
 
     def mark_test_complete(self, node: Worker, item_index: int, duration: float = 0) -> None:
         self.node2pending[node].remove(item_index)
+        if self.collection is not None:
+            rig = rig_of(self.collection[item_index])
+            self.measured[rig] = self.measured.get(rig, 0.0) + duration
         self.check_schedule(node, duration)
 
     def mark_test_pending(self, item: str) -> None:
@@ -173,7 +233,8 @@ class LongTestsFirst:
                 units.setdefault((rank, parametrization(nodeid)), []).append(index)
         self.long_pending = [units[key] for key in sorted(units, key=lambda k: (k[0], units[k]))]
         self.long_tests = frozenset(i for unit in units.values() for i in unit)
-        self.pending = [i for i in range(len(self.collection)) if i not in self.long_tests]
+        self.pending = self.costliest_first(
+            [i for i in range(len(self.collection)) if i not in self.long_tests])
         chunk = max(2, len(self.collection) // max(1, len(self.nodes)) // 4)
         for node in self.nodes:
             if not self.send_long_test(node):
@@ -183,6 +244,16 @@ class LongTestsFirst:
                 node.shutdown()
 
     # the policy
+
+    def costliest_first(self, indices: list[int]) -> list[int]:
+        """``indices`` by class or module, the costliest recorded first, each one's tests
+        together and in collection order; the ones not recorded last, in collection order."""
+        assert self.collection is not None
+        rigs = {index: rig_of(self.collection[index]) for index in indices}
+        first: dict[str, int] = {}
+        for index in indices:
+            first.setdefault(rigs[index], index)
+        return sorted(indices, key=lambda i: (-self.costs.get(rigs[i], 0.0), first[rigs[i]], i))
 
     @property
     def long_limit(self) -> int:

@@ -3,12 +3,19 @@ against stand-in workers that run what they are sent as xdist's do, and through 
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
 
-from gimbal_driver_testing.schedule import LongTestsFirst, parametrization, worker_count
+from gimbal_driver_testing.schedule import (
+    LongTestsFirst,
+    parametrization,
+    read_durations,
+    rig_of,
+    worker_count,
+)
 
 pytest_plugins = ['pytester']
 
@@ -157,6 +164,39 @@ def test_workers_that_collected_different_tests_get_no_test() -> None:
     assert scheduler.tests_finished
 
 
+def test_recorded_costs_send_the_costliest_class_or_module_first_each_kept_together() -> None:
+    costs = {'tests/test_threads.py': 30.0, 'src/b/test/test_node.py': 20.0,
+             'src/a/test/test_conformance.py::TestA': 5.0, 'gone/test_old.py': 99.0}
+    scheduler = LongTestsFirst(1, LONG, costs=costs)
+    node = StandInWorker('gw0')
+    scheduler.add_node(node)
+    scheduler.add_node_collection(node, collection())
+    scheduler.schedule()
+    run_to_the_end(scheduler, [node])
+    ran = [rig_of(name) for name in names(node.ran)]
+    # the long tests first, then by cost; test_copy's module was not recorded: last
+    others = [rig for rig in ran if rig not in ('tests/test_properties.py', 'tests/test_soak.py')
+              and not rig.startswith('tests/test_new_driver.py')]
+    assert others == (['tests/test_threads.py'] * 10 + ['src/b/test/test_node.py'] * 20
+                      + ['src/a/test/test_conformance.py::TestA'] * 40)
+    assert names(node.ran)[-1] == 'tests/test_new_driver.py::test_copy'
+    assert scheduler.measured['tests/test_threads.py'] == pytest.approx(0.1)
+
+
+def test_unreadable_durations_give_no_costs(tmp_path: Path) -> None:
+    assert read_durations(None) == {}
+    assert read_durations(tmp_path / 'missing.json') == {}
+    (tmp_path / 'bad.json').write_text('{not json')
+    assert read_durations(tmp_path / 'bad.json') == {}
+    (tmp_path / 'list.json').write_text('[1, 2]')
+    assert read_durations(tmp_path / 'list.json') == {}
+
+
+def test_a_rig_is_the_class_or_else_the_module() -> None:
+    assert rig_of('src/a/test/test_c.py::TestA::test_x[1]') == 'src/a/test/test_c.py::TestA'
+    assert rig_of('tests/test_soak.py::test_soak[capture]') == 'tests/test_soak.py'
+
+
 def test_a_parametrization_is_the_brackets_of_the_test_name() -> None:
     assert parametrization('tests/test_p.py::test_x[capture]') == '[capture]'
     assert parametrization('a.py::TestA::test_y[a-1.5]') == '[a-1.5]'
@@ -195,3 +235,27 @@ def test_through_xdist_the_long_tests_start_first_on_workers_of_their_own(
         first_by_worker.setdefault(worker, name)
     assert sorted(n for n in first_by_worker.values() if n.startswith('long')) == [
         'long0', 'long1']
+
+
+def test_through_xdist_a_recorded_run_orders_the_next(pytester: pytest.Pytester) -> None:
+    """``--record-test-durations`` writes each module's seconds; the next run sends the
+    costliest module first although it is collected last."""
+    pytest.importorskip('xdist', reason='needs pytest-xdist')
+    log = pytester.path / 'order.log'
+    pytester.makepyfile(record_order=(
+        f'def record(name):\n    with open({str(log)!r}, "a") as out:\n'
+        f'        out.write(name + "\\n")\n'))
+    pytester.makepyfile(test_a='from record_order import record\n' + ''.join(
+        f'def test_{n}():\n    record("a")\n' for n in range(6)))
+    pytester.makepyfile(test_z='import time\nfrom record_order import record\n' + ''.join(
+        f'def test_{n}():\n    record("z")\n    time.sleep(0.2)\n' for n in range(2)))
+    pytester.makeini('[pytest]\ntest_durations = durations.json\n')
+    arguments = ('-n', '1', '-p', 'gimbal_driver_testing.schedule', '-p', 'no:cacheprovider')
+    pytester.runpytest_subprocess(*arguments, '--record-test-durations').assert_outcomes(
+        passed=8)
+    recorded = json.loads((pytester.path / 'durations.json').read_text())
+    assert recorded['test_z.py'] > recorded['test_a.py']
+    assert log.read_text().split() == ['a'] * 6 + ['z'] * 2
+    log.unlink()
+    pytester.runpytest_subprocess(*arguments).assert_outcomes(passed=8)
+    assert log.read_text().split() == ['z'] * 2 + ['a'] * 6
