@@ -6,8 +6,8 @@ driver's build and conformance suite, about 2 minutes; the demo, 35 s) are colle
 (``tests/``), so they started in a run's last minute, and the run ended with two or three
 workers waiting on them while the others had finished (docs/testing.md, "Where the time
 goes"). The node-id prefixes in the ``long_tests`` ini option name those tests. What a line
-matches goes out in units of one parametrization (the ``[...]`` of the node ids: the
-property tests of one driver share that driver's module-scoped node, so they stay
+matches goes out in units of one parametrization (the ``[...]`` of the node ids: tests
+of one parametrization share its parametrized fixtures, a driver's node, so they stay
 together), first, in the order listed, each unit to a worker of its own, on at most 3 in 8
 of the workers at a time (``LONG_SHARE``: the rest keep the CPU-bound tests going beside
 them; with half of the workers on them, the two cores stood 40 % idle for the run's first
