@@ -146,6 +146,8 @@ class LongTestsFirst:
         self.costs = dict(costs or {})
         #: the seconds each class or module took in this run
         self.measured: dict[str, float] = {}
+        #: each other test's share of its class's or module's recorded cost
+        self.test_costs: dict[int, float] = {}
         self.node2collection: dict[Any, list[str]] = {}
         self.node2pending: dict[Any, list[int]] = {}
         self.collection: list[str] | None = None
@@ -251,8 +253,11 @@ class LongTestsFirst:
         assert self.collection is not None
         rigs = {index: rig_of(self.collection[index]) for index in indices}
         first: dict[str, int] = {}
+        tests: dict[str, int] = {}
         for index in indices:
             first.setdefault(rigs[index], index)
+            tests[rigs[index]] = tests.get(rigs[index], 0) + 1
+        self.test_costs = {i: self.costs.get(rigs[i], 0.0) / tests[rigs[i]] for i in indices}
         return sorted(indices, key=lambda i: (-self.costs.get(rigs[i], 0.0), first[rigs[i]], i))
 
     @property
@@ -275,7 +280,7 @@ class LongTestsFirst:
             low, high = max(2, per_node // 4), max(2, per_node // 2)
             # xdist's heuristic: a worker on long tests that still has two waits for them
             if len(queued) < low and not (duration >= 0.1 and len(queued) >= 2):
-                self.send(node, self.take(high - len(queued)))
+                self.send(node, self.take_chunk(high - len(queued), 2 - len(queued)))
         if not self.pending and not self.long_pending:
             node.shutdown()
 
@@ -291,6 +296,22 @@ class LongTestsFirst:
         unit = self.long_pending.pop(0)
         self.send(node, [*unit, *self.take(2 - len(queued) - len(unit))])
         return True
+
+    def take_chunk(self, count: int, at_least: int) -> list[int]:
+        """Up to ``count`` other tests, fewer where their recorded cost passes half of a
+        worker's share of what is left (xdist's ``load`` counts tests only, and a worker
+        that took a chunk of 25 tests worth 40 s near the end ran alone for 40 s after the
+        others had finished), but at least ``at_least`` (a worker runs its last queued test
+        only once it has another)."""
+        budget = sum(self.test_costs.get(i, 0.0) for i in self.pending) / len(
+            self.node2pending) / 2
+        spent, size = 0.0, 0
+        for index in self.pending[:count]:
+            spent += self.test_costs.get(index, 0.0)
+            if size >= max(1, at_least) and spent > budget:
+                break
+            size += 1
+        return self.take(size)
 
     def take(self, count: int) -> list[int]:
         """The next ``count`` other tests (none for a count below one)."""

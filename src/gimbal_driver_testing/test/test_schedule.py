@@ -183,6 +183,28 @@ def test_recorded_costs_send_the_costliest_class_or_module_first_each_kept_toget
     assert scheduler.measured['tests/test_threads.py'] == pytest.approx(0.1)
 
 
+def test_a_refill_holds_at_most_half_a_workers_share_of_the_recorded_cost() -> None:
+    costs = {'src/a/test/test_conformance.py::TestA': 40.0, 'src/b/test/test_node.py': 2.0}
+    scheduler = LongTestsFirst(2, (), costs=costs)
+    nodes = [StandInWorker('gw0'), StandInWorker('gw1')]
+    for node in nodes:
+        scheduler.add_node(node)
+        scheduler.add_node_collection(node, collection())
+    scheduler.schedule()
+    share = sum(scheduler.test_costs[i] for i in scheduler.pending) / 2 / 2
+    chunk = scheduler.take_chunk(100, 2)
+    assert len(chunk) >= 2
+    assert sum(scheduler.test_costs[i] for i in chunk) <= share + 1.0  # 1 s: one test
+    # what has no recorded cost is counted, as xdist counts: the rest goes in one chunk
+    unrecorded = [i for i in scheduler.pending if not scheduler.test_costs[i]]
+    scheduler.pending = list(unrecorded)
+    assert scheduler.take_chunk(len(unrecorded), 2) == unrecorded
+    # and a chunk never leaves a worker holding one test it cannot run
+    scheduler.pending = [0, 1, 2]
+    scheduler.test_costs = {0: 50.0, 1: 50.0, 2: 50.0}
+    assert scheduler.take_chunk(3, 2) == [0, 1]
+
+
 def test_unreadable_durations_give_no_costs(tmp_path: Path) -> None:
     assert read_durations(None) == {}
     assert read_durations(tmp_path / 'missing.json') == {}
