@@ -3,8 +3,9 @@
 # Extra arguments go to pytest (e.g. -k capture, -m "not ros").
 # The tests run side by side in PYTEST_WORKERS processes (pytest-xdist, default 8): they
 # mostly wait on simulators, nodes and DDS, and each leases its own ROS domain and ports.
-# 8 workers on a quiet 2-core machine: pytest about 5.3 minutes, bound by CPU now
-# (docs/testing.md, "Where the time goes").
+# 8 workers on a quiet 2-core machine: pytest 288-296 s, bound by CPU; the long tests and
+# the costliest classes go out first (gimbal_driver_testing/schedule.py; docs/testing.md,
+# "Where the time goes").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup_env.sh
