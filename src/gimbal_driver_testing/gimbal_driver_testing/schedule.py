@@ -5,20 +5,18 @@ consecutive tests. The suite's longest tests (a soak per driver, 40 s each; the 
 driver's build and conformance suite, about 2 minutes; the demo, 35 s) are collected last
 (``tests/``), so they started in a run's last minute, and the run ended with two or three
 workers waiting on them while the others had finished (docs/testing.md, "Where the time
-goes"). The node-id prefixes in the ``long_tests`` ini option name those tests. What a line
-matches goes out in units of one parametrization (the ``[...]`` of the node ids: tests
-of one parametrization share its parametrized fixtures, a driver's node, so they stay
-together), first, in the order listed, each unit to a worker of its own, on at most 3 in 8
-of the workers at a time (``LONG_SHARE``: the rest keep the CPU-bound tests going beside
-them; with half of the workers on them, the two cores stood 40 % idle for the run's first
-100 s, since the long tests mostly wait). Every other
-test goes out as ``load`` hands it out: consecutive chunks, refilled when a worker runs
-low, so a class's or a module's tests mostly stay on one worker and its rig starts once
-there; but the classes and modules go out costliest first, by the worker seconds each took
-in a recorded run (the ``test_durations`` ini option names the file; ``pytest
---record-test-durations`` writes it), so the run ends on cheap tests in small chunks, not on
-a driver's conformance class handed out late (one ran 80 s past the others). A class or
-module the file does not know goes after those it does, in collection order.
+goes"). The node-id prefixes in the ``long_tests`` ini option name those tests. They go out
+first, in the order listed, each to a worker of its own, on at most 3 in 8 of the workers
+at a time (``LONG_SHARE``: the rest keep the CPU-bound tests going beside them; with half
+of the workers on them, the two cores stood 40 % idle for the run's first 100 s, since the
+long tests mostly wait). Every other test goes out as ``load`` hands it out: consecutive
+chunks, refilled when a worker runs low, so a class's or a module's tests mostly stay on
+one worker and its rig starts once there; but the classes and modules go out costliest
+first, by the worker seconds each took in a recorded run (the ``test_durations`` ini option
+names the file; ``pytest --record-test-durations`` writes it), so the run ends on cheap
+tests in small chunks, not on a driver's conformance class handed out late (one ran 80 s
+past the others). A class or module the file does not know goes after those it does, in
+collection order.
 
 The scheduler keeps to xdist's scheduling protocol (``xdist.scheduler.protocol.Scheduling``,
 the contract of its ``pytest_xdist_make_scheduler`` hook), so this module imports nothing of
@@ -75,12 +73,6 @@ def worker_count(tx_specs: Sequence[str]) -> int:
     return count
 
 
-def parametrization(nodeid: str) -> str:
-    """The ``[...]`` of a test's node id ('' for a test without parameters)."""
-    name = nodeid.rpartition('::')[2]
-    return name[name.index('['):] if name.endswith(']') and '[' in name else ''
-
-
 def rig_of(nodeid: str) -> str:
     """The class, or else the module, of a test: what its shared rig is scoped to."""
     parts = nodeid.split('::')
@@ -130,7 +122,7 @@ SCHEDULER = pytest.StashKey['LongTestsFirst']()
 class LongTestsFirst:
     """xdist ``load`` scheduling, with the tests named by ``long_prefixes`` sent first.
 
-    A unit of long tests goes to a worker with at most one test queued (a worker runs a test
+    A long test goes to a worker with at most one test queued (a worker runs a test
     once it knows the next one, so the last one it holds waits for more or for its
     shutdown), and at most ``ceil(workers * LONG_SHARE)`` workers have one while other
     tests are left.
@@ -153,8 +145,8 @@ class LongTestsFirst:
         self.collection: list[str] | None = None
         #: every other test not yet sent, in collection order
         self.pending: list[int] = []
-        #: the units of long tests not yet sent, in the order of ``long_prefixes``
-        self.long_pending: list[list[int]] = []
+        #: the long tests not yet sent, in the order of ``long_prefixes``
+        self.long_pending: list[int] = []
         self.long_tests: frozenset[int] = frozenset()
 
     # the scheduling protocol
@@ -227,14 +219,13 @@ class LongTestsFirst:
             self.collection_differs(next(iter(self.node2collection)))
             return
         self.collection = collections[0]
-        units: dict[tuple[int, str], list[int]] = {}
+        rank: dict[int, int] = {}
         for index, nodeid in enumerate(self.collection):
-            rank = next((n for n, prefix in enumerate(self.long_prefixes)
-                         if nodeid.startswith(prefix)), None)
-            if rank is not None:
-                units.setdefault((rank, parametrization(nodeid)), []).append(index)
-        self.long_pending = [units[key] for key in sorted(units, key=lambda k: (k[0], units[k]))]
-        self.long_tests = frozenset(i for unit in units.values() for i in unit)
+            listed = [n for n, prefix in enumerate(self.long_prefixes) if nodeid.startswith(prefix)]
+            if listed:
+                rank[index] = listed[0]
+        self.long_pending = sorted(rank, key=lambda index: (rank[index], index))
+        self.long_tests = frozenset(rank)
         self.pending = self.costliest_first(
             [i for i in range(len(self.collection)) if i not in self.long_tests])
         chunk = max(2, len(self.collection) // max(1, len(self.nodes)) // 4)
@@ -285,7 +276,7 @@ class LongTestsFirst:
             node.shutdown()
 
     def send_long_test(self, node: Worker) -> bool:
-        """Send ``node`` the next unit of long tests if it has at most one test queued and
+        """Send ``node`` the next long test if it has at most one test queued and
         the limit allows; once the other tests are all out, there is no limit (nothing is
         left to keep going beside them, and a worker holding its last test would wait)."""
         queued = self.node2pending[node]
@@ -293,8 +284,7 @@ class LongTestsFirst:
             return False
         if self.pending and self.long_tests_out() >= self.long_limit:
             return False
-        unit = self.long_pending.pop(0)
-        self.send(node, [*unit, *self.take(2 - len(queued) - len(unit))])
+        self.send(node, [self.long_pending.pop(0), *self.take(1 - len(queued))])
         return True
 
     def take_chunk(self, count: int, at_least: int) -> list[int]:
