@@ -124,11 +124,11 @@ def _install() -> None:
 
     on_joint_command = base_node.GimbalDriverNode._on_joint_command
 
-    def traced_on_joint_command(self, msg):
+    def traced_on_joint_command(self, msg, info):
         entry = time.time()
         local.writes = []
         try:
-            return on_joint_command(self, msg)
+            return on_joint_command(self, msg, info)
         finally:
             records.append({
                 'index': msg.header.frame_id,

@@ -197,8 +197,8 @@ class TurretDevice(Device):
                             "closed")
         if client.node_silent():
             node = client.config.turret_node_id
-            seen = client.node_last_seen(node)
-            silent_for = "" if seen is None else f" for {time.monotonic() - seen:.1f} s"
+            quiet = client.silent_for(node)
+            silent_for = "" if quiet is None else f" for {quiet:.1f} s"
             others = client.frames_since_seen(node)
             heard = (f"{others} other CAN frames arrived meanwhile; data frames from a node "
                      f"id other than turret_node_id {node} on this connection: "

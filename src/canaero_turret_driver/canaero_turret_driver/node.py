@@ -148,8 +148,9 @@ class CanaeroTurretNode(GimbalDriverNode):
                                "s without a data identifier before it is stale (WARN)",
                                value_range=(0.05, 600.0))
         self.node_timeout = p("node_timeout", 1.0,
-                              "s without any frame from the turret before it is silent "
-                              "(link lost, ERROR)", value_range=(0.05, 600.0))
+                              "s without any frame from the turret while the node "
+                              "listened before it is silent (link lost, ERROR)",
+                              value_range=(0.05, 600.0))
         self.pad_frames = p("pad_frames", False, "send 8-byte frames (zero padded)")
         self.transfer_first_number = p(
             "transfer_first_number", 0, "number of the first DDS/DUS data message: 0 "

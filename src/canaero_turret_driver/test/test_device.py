@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 
 import pytest
 
@@ -99,6 +100,41 @@ def test_connect_identity_and_streamed_samples(rig):
     assert set(sample.positions) == set(JOINTS)
     assert sample.currents["yaw"] > 0.0  # motor current, A
     assert sample.moving == {"yaw": False, "pitch": False}  # status bytes: target reached
+
+
+def test_a_reader_that_stands_still_is_not_taken_for_a_silent_turret(rig, monkeypatch):
+    """The reader stands still inside a take (the sample lock held, the device thread
+    waiting on it: a publish that blocks, a core that runs something else) for 2.5
+    node_timeouts. It heard nothing because it did not listen: the turret is not judged
+    silent meanwhile, and the link stays up once the reader reads on
+    (``TurretClient.silent_for``). Judged up to now, a 5 s stall on a loaded pinned core
+    dropped the link with "turret node 1 silent for 5.7 s (no CAN frames ...)"."""
+    client = rig.device.client
+    client.config.node_timeout = 1.0
+    wait_for(lambda: rig.samples >= 10, 30, "samples from the broadcasts")
+    read, parked, release = rig.device.read, threading.Event(), threading.Event()
+
+    def read_on_a_stalled_reader():
+        if threading.current_thread().name == "canaero-reader" and not parked.is_set():
+            parked.set()
+            release.wait(30)
+        return read()
+
+    monkeypatch.setattr(rig.device, "read", read_on_a_stalled_reader)
+    assert parked.wait(30), "the reader never took a sample"
+    try:
+        release.wait(2.5 * client.config.node_timeout)  # the stall: longer than the timeout
+        assert not client.node_silent()
+    finally:
+        release.set()
+    seen = rig.samples
+    wait_for(lambda: rig.samples >= seen + 10, 30, "samples after the stall")
+    assert rig.controller.connected, rig.controller.link_error
+    assert client.counters.reconnects == 0
+    # the same client still finds a turret that is silent while it listens
+    rig.simulator.set_silent("turret")
+    wait_for(lambda: not rig.controller.connected, 30, "the silent turret to drop the link")
+    assert "turret node 1 silent for" in rig.controller.link_error
 
 
 def test_move_converges_in_si_units(rig):

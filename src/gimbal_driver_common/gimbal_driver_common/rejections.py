@@ -85,13 +85,15 @@ class CommandRejections:
             result[kind][reason] = count
         return result
 
-    def status_part(self) -> StatusPart:
-        """The ``joint_command`` diagnostics part: totals, then one value per reason."""
+    def status_part(self, extra: list[tuple[str, str]] | None = None) -> StatusPart:
+        """The ``joint_command`` diagnostics part: totals, one value per reason, then
+        ``extra`` (the node's delivery gaps: :mod:`~gimbal_driver_common.command_stream`)."""
         counts = self.counts()
         totals = {kind: sum(by_reason.values()) for kind, by_reason in counts.items()}
         values = [(kind, str(total)) for kind, total in totals.items()]
         for kind, by_reason in counts.items():
             values += [(f'{kind}: {reason}', str(count)) for reason, count in by_reason.items()]
+        values += extra or []
         message = (f'{totals[REJECTED]} rejected, {totals[REFUSED]} refused'
                    if any(totals.values()) else 'none rejected or refused')
         return StatusPart('joint_command', Level.OK, message, values)

@@ -17,6 +17,9 @@ simulator, and the next test that needs the shared node starts it again. Every w
 from __future__ import annotations
 
 import math
+import os
+import signal
+import threading
 import time
 from collections.abc import Iterator, Sequence
 
@@ -25,6 +28,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from gimbal_driver_common.command_stream import GAP_TEXT
 from gimbal_driver_common.rejections import LOG_PERIOD_S
 from gimbal_driver_testing import wait_for
 from gimbal_driver_testing.conformance_rig import (
@@ -50,6 +54,8 @@ from gimbal_msgs.srv import ClearPreset, GotoPreset, ListPresets, SetPreset, Sta
 
 __all__ = ['ConformanceRig', 'DriverConformance', 'GoalStatus', 'SimulatorHandle']
 
+#: the shared node's dead-man timeout (node_parameters)
+COMMAND_TIMEOUT_S = 0.5
 #: at most this many 0.5 s bursts of refused commands until 20 are counted
 REJECTED_BURSTS = 6
 
@@ -97,7 +103,8 @@ class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionSta
 
     def node_parameters(self) -> list[str]:
         """Test-speed parameters of the shared node (publish_rate stays at its default)."""
-        return ['reconnect_period:=0.3', 'diagnostics_period:=0.25', 'command_timeout:=0.5']
+        return ['reconnect_period:=0.3', 'diagnostics_period:=0.25',
+                f'command_timeout:={COMMAND_TIMEOUT_S}']
 
     # ---------------------------------------------------------------- fixtures
     @pytest.fixture(scope='class')
@@ -182,6 +189,40 @@ class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionSta
         rig.ros.wait_for_message('joint_states', JointState,
                                  lambda m: abs(m.velocity[index]) < 1e-3, timeout=20)
         rig.node.wait_for_output('expired')
+
+    @pytest.mark.ros
+    def test_a_jog_the_node_took_late_is_told_from_a_client_that_paused(
+            self, rig: ConformanceRig) -> None:
+        """The node stands still (SIGSTOP) while the test keeps publishing its jog every
+        20 ms: it took no command for longer than ``command_timeout`` while the publisher
+        did not pause, and says so (command_stream) in its log and diagnostics."""
+        joint, velocity = self.jog
+        node, ros = rig.node, rig.ros
+        command = JointState(name=[joint], velocity=[velocity])
+        ros.publish('joint_command', command)
+        wait_for(lambda: rig.sim.moving(joint), 20.0, f'the {joint} jog to start')
+        publishing, paused = threading.Event(), threading.Event()
+
+        def stream() -> None:  # the client: a steady 50 Hz, through the pause
+            while not publishing.wait(0.02):
+                ros.publish('joint_command', command)
+        streamer = threading.Thread(target=stream, name='jog-stream')
+        streamer.start()
+        try:
+            os.killpg(node.process.pid, signal.SIGSTOP)
+            paused.wait(2 * COMMAND_TIMEOUT_S)  # the stimulus: twice the dead-man window
+            os.killpg(node.process.pid, signal.SIGCONT)
+            node.wait_for_output(GAP_TEXT, 20.0)
+        finally:
+            os.killpg(node.process.pid, signal.SIGCONT)
+            publishing.set()
+            streamer.join()
+        rig.ros.wait_for_diagnostic(
+            self.node_name, COMMAND_PART,
+            lambda s: int(dict((v.key, v.value) for v in s.values)['delivery gaps']) >= 1,
+            timeout=20.0)
+        self.wait_stopped(rig, joint, 'the watchdog to stop the jog once the stream ended')
+        rig.stop_node()  # the next test gets a node that never stood still
 
     @pytest.mark.ros
     def test_stop_service_halts_a_move(self, rig: ConformanceRig) -> None:

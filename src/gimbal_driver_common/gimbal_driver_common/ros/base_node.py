@@ -32,6 +32,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from gimbal_driver_common.command_stream import CommandStream
 from gimbal_driver_common.controller import GimbalController
 from gimbal_driver_common.device import Device, DeviceInfo, JointSample
 from gimbal_driver_common.diagnostics import FrequencyMonitor
@@ -135,6 +136,9 @@ class GimbalDriverNode(LifecycleNode):
         #: refused joint_commands by reason (the ``joint_command`` diagnostics part), kept
         #: across configure/cleanup
         self.rejections = CommandRejections(self.get_logger())
+        #: joint_command's delivery gaps (a dead-man stop the client did not cause)
+        self.command_stream = CommandStream(self.get_logger(),
+                                            lambda: self.config.command_timeout)
         self._active = False
         #: the lifecycle state this node's transitions left it in (rclpy keeps its own
         #: state machine private): unconfigured, inactive, active or finalized
@@ -348,10 +352,13 @@ class GimbalDriverNode(LifecycleNode):
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._status_pub = self.create_publisher(GimbalStatus, '~/status', 10)
         # keep-last 1 (docs/interface.md): newest wins; the callback never waits on the device,
-        # so run_driver's executor runs it inline (ros/run.py InlineGroupExecutor)
+        # so run_driver's executor runs it inline (ros/run.py InlineGroupExecutor). Two
+        # arguments: rclpy hands the message info too (Subscription.callback reads the
+        # signature), which rclpy 7's annotation of create_subscription does not know of
         command_group = InlineCallbackGroup()
-        self.create_subscription(JointState, 'joint_command', self._on_joint_command, 1,
-                                 callback_group=command_group)
+        self.create_subscription(JointState, 'joint_command',
+                                 self._on_joint_command,  # type: ignore[arg-type]
+                                 1, callback_group=command_group)
         services = [
             (Trigger, '~/stop', self._on_stop),
             (Trigger, '~/reset_faults', self._on_reset_faults),
@@ -447,7 +454,7 @@ class GimbalDriverNode(LifecycleNode):
         self._joint_rate.sample(time.monotonic(),
                                 live=self._active and ctl is not None and ctl.connected)
         parts = messages.diagnostic_parts(ctl, self.joint_names, self._joint_rate, self._active)
-        parts.append(self.rejections.status_part())
+        parts.append(self.rejections.status_part(self.command_stream.values()))
         hardware_id = ctl.device_info.hardware_id if ctl else DeviceInfo().hardware_id
         self._diag_pub.publish(messages.diagnostic_array(
             self.get_name(), self.get_clock().now().to_msg(), hardware_id, parts))
@@ -462,7 +469,9 @@ class GimbalDriverNode(LifecycleNode):
         msg.header.stamp = self.get_clock().now().to_msg()
         self._status_pub.publish(msg)
 
-    def _on_joint_command(self, msg: JointState) -> None:
+    def _on_joint_command(self, msg: JointState, info: dict[str, Any]) -> None:
+        # rclpy's message info: the publisher's timestamp and sequence number
+        self.command_stream.took(info['source_timestamp'], info.get('publication_sequence_number'))
         try:
             if self.controller is None:
                 raise DeviceRefused(self.command_refusal(), reason='node not active')
