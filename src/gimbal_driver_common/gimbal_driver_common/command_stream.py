@@ -32,6 +32,9 @@ from gimbal_driver_common.config import Logger
 LOG_PERIOD_S = 5.0
 #: the log line's opening words (tests read a node's log for it)
 GAP_TEXT = 'took no joint_command for'
+#: the keys of the ``joint_command`` diagnostics part: a count, and seconds
+GAPS_KEY = 'delivery gaps'
+LONGEST_GAP_KEY = 'longest delivery gap s'
 
 
 @dataclass(frozen=True)
@@ -114,5 +117,5 @@ class CommandStream:
         """For the ``joint_command`` diagnostics part."""
         with self._lock:
             gaps, longest = self.gaps, self.longest
-        return [('delivery gaps', str(gaps)),
-                ('longest delivery gap s', f'{longest.seconds:.3f}' if longest else '0')]
+        return [(GAPS_KEY, str(gaps)),
+                (LONGEST_GAP_KEY, f'{longest.seconds:.3f}' if longest else '0')]

@@ -28,7 +28,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from gimbal_driver_common.command_stream import GAP_TEXT
+from gimbal_driver_common.command_stream import GAP_TEXT, GAPS_KEY
 from gimbal_driver_common.rejections import LOG_PERIOD_S
 from gimbal_driver_testing import wait_for
 from gimbal_driver_testing.conformance_rig import (
@@ -38,6 +38,7 @@ from gimbal_driver_testing.conformance_rig import (
     ConformanceRig,
     GoalStatus,
     SimulatorHandle,
+    command_counts,
     frequency_level_fits,
     measured_hz,
 )
@@ -217,10 +218,8 @@ class DriverConformance(TopicInterfaceConformance, RestartConformance, MotionSta
             os.killpg(node.process.pid, signal.SIGCONT)
             publishing.set()
             streamer.join()
-        rig.ros.wait_for_diagnostic(
-            self.node_name, COMMAND_PART,
-            lambda s: int(dict((v.key, v.value) for v in s.values)['delivery gaps']) >= 1,
-            timeout=20.0)
+        rig.ros.wait_for_diagnostic(self.node_name, COMMAND_PART,
+                                    lambda s: command_counts(s)[GAPS_KEY] >= 1, timeout=20.0)
         self.wait_stopped(rig, joint, 'the watchdog to stop the jog once the stream ended')
         rig.stop_node()  # the next test gets a node that never stood still
 

@@ -15,6 +15,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
 
 from gimbal_driver_common import registry
+from gimbal_driver_common.command_stream import LONGEST_GAP_KEY
 from gimbal_driver_common.sim_handle import SimHandle, make_handle
 from gimbal_driver_testing import DomainLease, ManagedProcess, wait_for
 from gimbal_driver_testing.ros import RosTestClient, joint_positions
@@ -60,8 +61,9 @@ def measured_hz(status: DiagnosticStatus) -> float:
 
 
 def command_counts(status: DiagnosticStatus) -> dict[str, int]:
-    """The counts of a ``joint_command`` diagnostics part, by key."""
-    return {kv.key: int(kv.value) for kv in status.values}
+    """The counts of a ``joint_command`` diagnostics part, by key (every value but the
+    longest delivery gap, which is in seconds)."""
+    return {kv.key: int(kv.value) for kv in status.values if kv.key != LONGEST_GAP_KEY}
 
 
 class GoalStatus:
