@@ -79,7 +79,7 @@ class Rig:
 
     def sent(self, name: str) -> int:
         opcode = COMMANDS[name].opcode
-        return sum(1 for frame in list(self.sim.model.requests) if frame.opcode == opcode)
+        return self.sim.model.request_counts[opcode]
 
     def wait_positions(self, targets: dict[str, float], tolerance: float = 2e-3,
                        timeout: float = 20.0) -> None:

@@ -64,3 +64,19 @@ def test_a_request_reads_the_axis_as_it_is_now():
 
     first = position()
     wait_for(lambda: position() > first + 0.05, 5.0, 'the move to show in a position read')
+
+
+def test_request_counts_keep_every_request_past_the_trimmed_log():
+    """A node polls 5,000 requests in about 20 s; the simulator keeps only the last few
+    thousand frames, and counts every one (the ``count`` verb and ``state`` read them)."""
+    session = connected_session()
+    start = COMMANDS['LRF_StartMeasurement']
+    getter = COMMANDS['MOT_GetLoadPosition'].encode(1)
+    session.on_bytes(start.encode())
+    for _ in range(6000):
+        session.on_bytes(getter)
+    session.on_bytes(start.encode())
+    model = session.model
+    assert len(model.requests) < 6002
+    assert model.request_counts[start.opcode] == 2
+    assert model.request_total == 6003  # with COM_Connect

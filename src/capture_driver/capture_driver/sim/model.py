@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
@@ -131,7 +131,14 @@ class PedestalModel(CommandHandlers):
         #: play a controller that takes one packet per receive and drops the rest (the
         #: worst case for the client's batched reads; see CaptureClient.read_many)
         self.one_request_per_read = False
-        self.requests: list[Frame] = []  # every request received (tests inspect it)
+        #: the requests received, the last 4,000-5,000 of them (tests inspect it); a node
+        #: polling at 50 Hz sends 5,000 in about 20 s, so a long-lived simulator counts
+        #: from :attr:`request_counts` and :attr:`request_total`, which keep every one
+        #: (a count taken from this list once stayed the same across a new request: the
+        #: trim had taken the old one out)
+        self.requests: list[Frame] = []
+        self.request_counts: Counter[int] = Counter()  # by opcode, every request
+        self.request_total = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._last_advance = time.monotonic()
@@ -325,6 +332,8 @@ class PedestalModel(CommandHandlers):
             self.last_command = time.monotonic()
             self.advance()
             self.requests.append(frame)
+            self.request_counts[frame.opcode] += 1
+            self.request_total += 1
             if len(self.requests) > 5000:
                 del self.requests[:1000]
             command = BY_OPCODE.get(frame.opcode)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from collections import Counter
-
 from gimbal_driver_common.sim_control import (
     ControlError,
     SimControl,
@@ -204,7 +202,7 @@ class CaptureSimulator:
     def _count(self, args: list[str]) -> str:
         opcode = COMMANDS[args[0]].opcode
         with self.model.lock:
-            return str(sum(1 for f in self.model.requests if f.opcode == opcode))
+            return str(self.model.request_counts[opcode])
 
     def state(self) -> dict:
         """The ``state`` answer: axes (load degrees) and the controller's modes."""
@@ -224,10 +222,10 @@ class CaptureSimulator:
                                for n in range(1, 7)},
                 'lrf_measuring': bool(model.stored.get(('LRF_measuring', 0))),
                 'keepalive': model.keepalive_on,
-                'requests': len(model.requests),
-                'requests_by_command': dict(Counter(
-                    BY_OPCODE[f.opcode].name if f.opcode in BY_OPCODE
-                    else f'0x{f.opcode:04X}' for f in model.requests)),
+                'requests': model.request_total,
+                'requests_by_command': {
+                    BY_OPCODE[opcode].name if opcode in BY_OPCODE else f'0x{opcode:04X}': count
+                    for opcode, count in model.request_counts.items()},
                 'connections': self.tcp.connections if self.tcp else 0,
                 'nack_all': model.nack_all is not None,
                 'ack_unknown': model.ack_unknown,
