@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -80,3 +82,20 @@ def test_request_counts_keep_every_request_past_the_trimmed_log():
     assert len(model.requests) < 6002
     assert model.request_counts[start.opcode] == 2
     assert model.request_total == 6003  # with COM_Connect
+
+
+def test_the_keepalive_expires_only_over_time_the_simulator_listened():
+    """The host's silence is counted up to the reader's last run: a reader that stood still
+    (a starved core) has not heard what the host sent; once it listens and still hears
+    nothing for the allowed time, the axes go off as the controller's would."""
+    session = connected_session()
+    model = session.model
+    model.keepalive_on, model.keepalive_timeout_ms, model.keepalive_count = True, 100, 3
+    model.axes[1].axis_on = True
+    model.last_command = time.monotonic() - 5.0
+    model.last_listened = model.last_command - 1.0  # the reader stood still since
+    model.advance()
+    assert model.keepalive_on and model.axes[1].axis_on
+    session.poll()  # the reader runs: 5 s of silence heard
+    model.advance()
+    assert not model.keepalive_on and not model.axes[1].axis_on

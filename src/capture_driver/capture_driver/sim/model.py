@@ -107,6 +107,8 @@ class PedestalModel(CommandHandlers):
         self.keepalive_timeout_ms = 1000
         self.keepalive_count = 3
         self.last_command = time.monotonic()
+        #: when a connection's reader last ran (CaptureSession.poll); None: no server polls
+        self.last_listened: float | None = None
         self.csr_latched = 0
         self.protocol_error = ''
         self.stored: dict[tuple[str, int], object] = {}
@@ -194,11 +196,23 @@ class PedestalModel(CommandHandlers):
             for axis in self.axes.values():
                 axis.step(dt)
 
+    def listened(self) -> None:
+        """A connection's reader ran (it had read what had arrived)."""
+        self.last_listened = time.monotonic()
+
     def _check_keepalive(self) -> None:
+        """The keep-alive expires once the host sent nothing for the allowed time while
+        this simulator listened: counted up to its reader's last run, not up to now. A
+        real controller's reader always runs; this one shares a process and a core with
+        other work, and a reader that stood still has not heard what the host sent. The
+        physics thread's own stalls are credited in :meth:`_run`. Judged up to now, a pinned
+        test run saw "keep-alive expired" (the axes off) under a node polling at 50 Hz."""
         if not self.keepalive_on:
             return
         allowed = self.keepalive_timeout_ms / 1000.0 * max(self.keepalive_count, 1)
-        if time.monotonic() - self.last_command > allowed:  # real time, not simulated
+        now = time.monotonic()  # real time, not simulated
+        heard_until = now if self.last_listened is None else min(now, self.last_listened)
+        if heard_until - self.last_command > allowed:
             # 4.6.5: the controller stops any motion and turns off the axes.
             LOG.warning('keep-alive expired: stopping and turning the axes off')
             self.keepalive_on = False

@@ -34,6 +34,8 @@ class CaptureSession:
         self.late: LateReplies[bytes] = LateReplies()
 
     def poll(self) -> bytes:
+        # the server calls this every few ms while its reader runs: the reader is listening
+        self.model.listened()
         greeting, self._greeting = self._greeting, b''
         return greeting + b''.join(self.late.due())
 
