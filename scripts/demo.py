@@ -47,6 +47,9 @@ from gimbal_msgs.srv import GotoPreset, SetPreset, StartScan
 ROOT = Path(__file__).resolve().parent.parent
 BAG_NAME = 'demo_bag'  # the rosbag2 bag directory in --output
 COMMANDS_FILE = 'demo_commands.json'  # what each step commanded (the plot's dashed line)
+#: a jog moved the axis when it went this far (rad or m) the commanded way: 5x the
+#: simulators' position resolution, far below what a 1.5 s jog at the demo's speeds covers
+JOG_MOVED_MIN = 0.01
 
 
 @dataclass
@@ -228,7 +231,11 @@ def drive(target: DemoTarget, ros: RosTestClient, stop: threading.Event) -> None
             raise RuntimeError(f'the dead-man did not stop the jog: {exc}') from None
         target.note = ''
         moved = stopped_at - before
-        if moved * velocity <= 0 or abs(moved) < 0.25 * abs(velocity) * seconds:
+        # "it happens": the axis went the commanded way, well past the position noise. How
+        # far is a figure, not a verdict: a jog the dead-man stopped early because the
+        # commands reached the node late (a starved machine) moved less, and the node logs
+        # that ("took no joint_command for ..."); make bench measures the stream
+        if moved * velocity <= 0 or abs(moved) < JOG_MOVED_MIN:
             raise RuntimeError(f'{joint} moved {moved:+.3f} during a {velocity:+g} rad/s jog '
                                f'of {seconds:g} s')
         return (f'{joint} at {velocity:+g} rad/s for {seconds:g} s: moved {moved:+.3f}, '

@@ -47,6 +47,24 @@ def processes_in_domain(domain: str) -> list[str]:
     return found
 
 
+def node_warnings(output: Path) -> str:
+    """The failed steps and each log's warnings and errors, for the failure message: the
+    demo's directory is pytest's, and a later run may have removed it by the time one reads
+    the report."""
+    parts = []
+    failures = output / 'demo_failures.log'
+    if failures.exists():
+        parts.append(f'--- {failures.name}\n{failures.read_text()[-4000:]}')
+    for log in sorted(output.glob('*.log')):
+        if log == failures:
+            continue
+        lines = [line for line in log.read_text(errors='replace').splitlines()
+                 if '[WARN]' in line or '[ERROR]' in line]
+        if lines:
+            parts.append(f'--- {log.name} (warnings and errors)\n' + '\n'.join(lines[-40:]))
+    return '\n' + '\n'.join(parts)
+
+
 #: an outer deadline for the whole demo (it ends as soon as it is done: about 2 min, pinned
 #: to one core): its steps' own deadlines are up to 60 s (docs/testing.md)
 DEMO_DEADLINE_S = 420
@@ -75,7 +93,7 @@ def test_demo_drives_every_driver_and_records_a_bag(tmp_path, check_rosbag2):
         out, _ = demo.communicate(timeout=60)
         pytest.fail(f'the demo did not finish within {DEMO_DEADLINE_S} s:\n{out[-6000:]}')
     ended = time.time_ns()
-    assert demo.returncode == 0, out[-6000:]
+    assert demo.returncode == 0, out[-6000:] + node_warnings(output)
     for node, _ in expected.values():
         assert re.search(rf'\[{node}\]: OK$', out, re.MULTILINE), f'{node} not OK:\n{out}'
     assert 'failed' not in out.split('demo summary', 1)[1]
