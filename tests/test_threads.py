@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from gimbal_driver_common.registry import DriverSpec, drivers
@@ -98,6 +99,9 @@ def test_a_running_node_has_the_threads_the_architecture_lists(spec: DriverSpec,
                 # the driver-side scan thread: their threads must be listed too
                 # (both requests may run twice: a second start restarts the same scan)
                 if spec.demo.scan is not None:
+                    # a scan starts from the current position: "active" comes before the
+                    # first sample on a loaded core ("no current position yet")
+                    ros.wait_for_message('/joint_states', JointState, timeout=60)
                     reply = ros.call(StartScan, f'/{spec.node_name}/start_scan',
                                      StartScan.Request(**spec.demo.scan), timeout=30,
                                      idempotent=True)

@@ -395,9 +395,15 @@ class SilentRequestConformance(ConformanceHelpers):
 
     def check_backoff(self, log: RequestLog, request: SilentRequest, mark: int,
                       window: float) -> None:
-        """The muted request is asked again, each time after a longer pause, never at once.
-        Each form of it in the log is one request: Capture's per-axis register read for
-        axis 1 and for axis 2 are two (the read of axis 2 follows axis 1's timeout)."""
+        """The muted request is asked again, never at once: each pause is longer than its
+        timeout. Each form of it in the log is one request: Capture's per-axis register read
+        for axis 1 and for axis 2 are two (the read of axis 2 follows axis 1's timeout).
+
+        That the pauses grow (the back-off doubles) is checked on an injected clock
+        (``gimbal_driver_common/test/test_unanswered.py``), not here: through processes
+        each pause also holds the poll's alignment and, for axis 2, axis 1's timeout when
+        both come due in one refresh, so two pauses 1 s apart by the back-off read 2.23 and
+        2.06 s in a pinned run."""
         def series() -> dict[str, list[float]]:
             asked: dict[str, list[float]] = {}
             for t, r in log.since(mark):
@@ -413,8 +419,6 @@ class SilentRequestConformance(ConformanceHelpers):
                     for earlier, later in itertools.pairwise(times[:BACKOFF_ASKS])]
             assert all(gap > window for gap in gaps), (
                 f'{form} asked back to back (gaps {gaps}, its timeout {window:g} s)')
-            assert all(b > a for a, b in itertools.pairwise(gaps)), (
-                f'{form}: the pauses between asks do not grow: {gaps}')
 
     def motion_after(self, rig: ConformanceRig, log: RequestLog, mark: int
                      ) -> list[tuple[float, str]]:
