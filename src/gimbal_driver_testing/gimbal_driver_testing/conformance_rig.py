@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import math
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -219,12 +220,27 @@ class ConformanceHelpers(RegisteredDriver):
         wait_for(lambda: not rig.sim.moving(joint), 20.0, what)
 
     def start_far_move(self, rig: ConformanceRig) -> None:
-        """A slow joint_command move toward ``far_move`` that the device shows as motion."""
+        """A slow joint_command move toward ``far_move`` that the device shows as motion.
+
+        Published again (the same target) every half second until the device moves: a node
+        just started may not have matched this client's publisher yet, and a message sent
+        before that is lost (volatile). A pinned run's U-Camera node never saw the one
+        message of a restarted node's first move."""
         joint, position, speed = self.far_move
-        assert rig.ros is not None and rig.sim is not None
-        rig.ros.publish('joint_command', JointState(name=[joint], position=[position],
-                                                    velocity=[speed]))
-        wait_for(lambda: rig.sim.moving(joint), 20.0, f'{joint} to start its slow move')
+        ros, sim = rig.ros, rig.sim
+        assert ros is not None and sim is not None
+        command = JointState(name=[joint], position=[position], velocity=[speed])
+        sent = [-math.inf]
+
+        def moving() -> bool:
+            if sim.moving(joint):
+                return True
+            if time.monotonic() - sent[0] >= 0.5:
+                ros.publish('joint_command', command)
+                sent[0] = time.monotonic()
+            return False
+
+        wait_for(moving, 20.0, f'{joint} to start its slow move')
 
     def assert_short_of_far_target(self, rig: ConformanceRig) -> None:
         joint, position, _ = self.far_move
