@@ -938,12 +938,17 @@ def test_a_stream_move_with_a_lost_ack_is_sent_again_one_request_at_a_time(sim, 
 @pytest.mark.parametrize('transport', ['tcp', 'pty'])
 def test_a_controller_that_drops_queued_requests_gets_moves_one_at_a_time(sim, link, transport):
     sim.model.one_request_per_read = True
-    client, _ = link(transport, timeout=LOST_TIMEOUT)
+    # answered requests get REQUEST_TIMEOUT: with LOST_TIMEOUT for all of them, an answered
+    # MOT_SetPositionMode timed out in a loaded make test run (the simulator shares this
+    # process); only the post, whose MOT_Update is lost on purpose, waits LOST_TIMEOUT
+    client, _ = link(transport, timeout=REQUEST_TIMEOUT)
     target = 1.0
     client.move_absolute(1, target, SPEED, ACCELERATION)
     for _ in range(3):  # each post loses its MOT_Update: sent again, and counted
         target += 1.0
+        client.timeout = LOST_TIMEOUT
         assert not client.settle_posted(client.post_moves({1: (target, SPEED, ACCELERATION)}))
+        client.timeout = REQUEST_TIMEOUT
         client.move_absolute(1, target, SPEED, ACCELERATION)
         settle(client, 1, target)
     assert not client.batching
