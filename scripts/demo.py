@@ -47,8 +47,8 @@ from gimbal_msgs.srv import GotoPreset, SetPreset, StartScan
 ROOT = Path(__file__).resolve().parent.parent
 BAG_NAME = 'demo_bag'  # the rosbag2 bag directory in --output
 COMMANDS_FILE = 'demo_commands.json'  # what each step commanded (the plot's dashed line)
-#: a jog moved the axis when it went this far (rad or m) the commanded way: 5x the
-#: simulators' position resolution, far below what a 1.5 s jog at the demo's speeds covers
+#: a jog moved the axis when it went this far (rad or m) the commanded way: far below what
+#: a 1.5 s jog at the demo's speeds covers (0.3-0.75 rad), far above a report's rounding
 JOG_MOVED_MIN = 0.01
 
 

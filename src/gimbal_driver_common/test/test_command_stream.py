@@ -45,6 +45,14 @@ class Stream:
         return self.stream.took(self.published_ns, self.sequence if sequence else None)
 
 
+def started(period_ms: int = 10, sequence: bool = True) -> Stream:
+    """A stream whose first command the node has taken (nothing to compare before it)."""
+    s = Stream(period_ms)
+    s.publish()
+    assert s.take(0.010, sequence) is None
+    return s
+
+
 def test_a_steady_stream_taken_on_time_has_no_gap() -> None:
     s = Stream()
     for _ in range(100):
@@ -55,9 +63,7 @@ def test_a_steady_stream_taken_on_time_has_no_gap() -> None:
 
 
 def test_commands_superseded_while_the_node_took_none_are_a_delivery_gap() -> None:
-    s = Stream()
-    s.publish()
-    s.take(0.010)
+    s = started()
     s.publish(61)  # 60 of them overwritten before the node took the newest
     gap = s.take(0.62)
     assert gap is not None
@@ -70,9 +76,7 @@ def test_commands_superseded_while_the_node_took_none_are_a_delivery_gap() -> No
 
 def test_a_publisher_that_paused_is_no_delivery_gap() -> None:
     """The dead-man stop was the client's doing: its own timestamps show the pause."""
-    s = Stream(period_ms=700)
-    s.publish()
-    s.take(0.010)
+    s = started(period_ms=700)
     s.publish()  # 0.7 s later by its clock, the next in sequence
     assert s.take(0.70) is None
     assert s.log.lines == []
@@ -81,17 +85,13 @@ def test_a_publisher_that_paused_is_no_delivery_gap() -> None:
 def test_a_pause_of_several_commands_spaced_near_the_window_is_no_delivery_gap() -> None:
     """Superseded commands, but published 250 ms apart (half the window): a client too slow
     for its dead-man timeout, not a late delivery."""
-    s = Stream(period_ms=250)
-    s.publish()
-    s.take(0.010)
+    s = started(period_ms=250)
     s.publish(3)
     assert s.take(0.75) is None
 
 
 def test_a_message_held_up_on_its_way_is_a_delivery_gap_without_superseded_ones() -> None:
-    s = Stream()
-    s.publish()
-    s.take(0.010)
+    s = started()
     s.publish()  # published 10 ms after the last, taken 0.6 s after it
     gap = s.take(0.60)
     assert gap is not None and gap.superseded == 0
@@ -100,9 +100,7 @@ def test_a_message_held_up_on_its_way_is_a_delivery_gap_without_superseded_ones(
 def test_no_sequence_numbers_judges_by_timestamps_alone() -> None:
     """Without them the span is one interval, an upper bound: a long one reads as a pause
     (no false alarm), a short one as a gap."""
-    s = Stream()
-    s.publish()
-    s.take(0.010, sequence=False)
+    s = started(sequence=False)
     s.publish(61)
     assert s.take(0.62, sequence=False) is None
     s.publish(2)
@@ -126,18 +124,14 @@ def test_a_new_publisher_starts_a_new_stream() -> None:
 
 
 def test_the_window_is_read_at_every_command() -> None:
-    s = Stream()
-    s.publish()
-    s.take(0.010)
+    s = started()
     s.window = 1.0  # command_timeout raised at runtime
     s.publish(61)
     assert s.take(0.62) is None
 
 
 def test_gaps_are_counted_every_time_and_logged_once_per_period() -> None:
-    s = Stream()
-    s.publish()
-    s.take(0.010)
+    s = started()
     for _ in range(3):
         s.publish(61)
         assert s.take(0.62) is not None
