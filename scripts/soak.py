@@ -172,6 +172,7 @@ class Soak:
         args = ['--ros-args', *parameter_arguments(parameters)]
         self.node = ManagedProcess.ros(self.spec.package, self.spec.node_executable,
                                        self.domain, args)
+        self.node.keep_log = True  # the report names it (node_log)
 
     def on_joint_state(self, msg: JointState) -> None:
         with self.arrivals_lock:

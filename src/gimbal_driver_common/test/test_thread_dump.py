@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import signal
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -18,13 +19,18 @@ from gimbal_driver_testing import (
 
 HANGS = '''
 import faulthandler, signal, sys, threading
+# Ctrl-C ends it, as it does a node, even if started with SIGINT ignored (a background job)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 if sys.argv[1] == 'dumps':
     faulthandler.register(signal.SIGUSR2, file=sys.stderr, all_threads=True)
 def stuck_in_a_wait_for_the_device():
     threading.Event().wait()
 threading.Thread(target=stuck_in_a_wait_for_the_device, daemon=True).start()
 print('up', flush=True)
-threading.Event().wait(600)  # hung until the test ends it
+try:
+    threading.Event().wait(600)  # hung until the test ends it
+except KeyboardInterrupt:
+    pass
 '''
 
 
@@ -49,6 +55,15 @@ def test_a_process_with_the_handler_dumps_every_thread_into_its_log() -> None:
         assert 'stuck_in_a_wait_for_the_device' in note
         assert ManagedProcess.live[id(process)] is process
     assert id(process) not in ManagedProcess.live
+    assert Path(process.log_path).exists(), 'a log a report named went at the stop'
+
+
+def test_a_stopped_process_keeps_its_output_and_leaves_no_log_file() -> None:
+    with ManagedProcess([sys.executable, '-c', HANGS, 'plain'], name='plain') as process:
+        process.wait_for_output('up')
+    assert not Path(process.log_path).exists()
+    assert process.output() == 'up\n'
+    assert 'removed at its stop' in process.report()
 
 
 def test_a_process_without_the_handler_is_not_signalled() -> None:

@@ -159,7 +159,10 @@ class ManagedProcess:
     The processes of this test process that are still running are in :attr:`live`: when a
     test fails, :mod:`gimbal_driver_testing.node_reports` asks each for a thread dump
     and attaches its log (:meth:`report`); a process that ends a ``with`` block on an
-    error does the same before it stops (:meth:`__exit__`).
+    error does the same before it stops (:meth:`__exit__`). The log file goes when the
+    process is stopped (its text stays in :meth:`output`), unless a report named it or
+    :attr:`keep_log` is set: a suite of 250 node starts left as many files in the temp
+    directory at every run.
     """
 
     live: ClassVar[dict[int, ManagedProcess]] = {}
@@ -173,6 +176,10 @@ class ManagedProcess:
             prefix=f'{self.name}-', suffix='.log', delete=False
         )
         self.log_path = self._log.name
+        #: keep the log file after :meth:`stop` (a script that names it in its own report)
+        self.keep_log = False
+        self._reported = False
+        self._final_output: str | None = None
         self.process = subprocess.Popen(
             self.args, env=dict(env) if env is not None else None,
             stdout=self._log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
@@ -202,6 +209,8 @@ class ManagedProcess:
         return self.process.poll() is None
 
     def output(self) -> str:
+        if self._final_output is not None:
+            return self._final_output
         if not self._log.closed:
             self._log.flush()
         return Path(self.log_path).read_text(encoding='utf-8', errors='replace')
@@ -246,7 +255,9 @@ class ManagedProcess:
         """The process' state, where its whole log is kept, and the log's last ``tail``
         characters, for a failure report."""
         state = 'running' if self.running else f'exited {self.process.returncode}'
-        return (f'{self.name} (pid {self.process.pid}, {state}); log: {self.log_path}\n'
+        self._reported = True
+        where = self.log_path if Path(self.log_path).exists() else 'removed at its stop'
+        return (f'{self.name} (pid {self.process.pid}, {state}); log: {where}\n'
                 f'{self.output()[-tail:]}')
 
     def send_signal(self, sig: int) -> None:
@@ -262,7 +273,11 @@ class ManagedProcess:
             self.send_signal(sig)
             with contextlib.suppress(subprocess.TimeoutExpired):
                 self.process.wait(wait)
-        self._log.close()
+        if self._final_output is None:
+            self._final_output = self.output()
+            self._log.close()
+            if not (self.keep_log or self._reported):
+                Path(self.log_path).unlink(missing_ok=True)
         ManagedProcess.live.pop(id(self), None)
         return self.process.returncode if self.process.returncode is not None else -9
 
