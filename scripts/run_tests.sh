@@ -3,7 +3,8 @@
 # Extra arguments go to pytest (e.g. -k capture, -m "not ros").
 # The tests run side by side in PYTEST_WORKERS processes (pytest-xdist, default 8): they
 # mostly wait on simulators, nodes and DDS, and each leases its own ROS domain and ports.
-# 8 workers on a quiet 2-core machine: pytest 288-296 s, bound by CPU; the long tests and
+# 8 workers on a quiet 2-core machine: pytest 279-296 s on 2026-12-03, 330-336 s on the
+# same machine the day after at the same CPU per test, bound by CPU; the long tests and
 # the costliest classes go out first (gimbal_driver_testing/schedule.py; docs/testing.md,
 # "Where the time goes").
 set -euo pipefail
