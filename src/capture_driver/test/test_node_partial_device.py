@@ -7,10 +7,10 @@ says (issue 26), capture_sim as a process in two modes:
 * partial: knows COM_Connect, the joint poll and the motion set-up without MOT_SetTum, and
   answers NACK 0xA6 to the rest (``--only partial``).
 
-With default parameters (but the link) the node reaches active, joint_states flow, a move
-and a joint_command are carried out, the diagnostics name what the device did not answer,
-identity reads "unknown", and nothing in the log says "silent". Waits are "up to a
-timeout", never timing assertions.
+With default parameters (but the link, and a generous ``request_timeout``) the node
+reaches active, joint_states flow, a move and a joint_command are carried out, the
+diagnostics name what the device did not answer, identity reads "unknown", and nothing in
+the log says "silent". Waits are "up to a timeout", never timing assertions.
 """
 
 from __future__ import annotations
@@ -38,6 +38,11 @@ MODES = {
     'third-party': ['--only', 'third-party', '--ack-unknown'],
     'partial': ['--only', 'partial'],
 }
+#: the node's ``request_timeout`` (s): the simulator answers every request at once, so no
+#: reply waits it out unless the machine holds it up (one came later than the default 0.5 s
+#: in a pinned run and counted as a timeout, docs/testing.md); an answer of the
+#: wrong kind is told at once, whatever the timeout
+REQUEST_TIMEOUT = 5.0
 #: what the device was asked at connect and in the status poll and does not answer with data
 NOT_ANSWERED = ('COM_GetSn', 'COM_GetFw', 'COM_GetHw', 'COM_GetPn', 'IMU_IsReadyImu',
                 'GPS_isConnectedGPS', 'MOT_SrlRegister', 'ERR_CaptureSystemRegister')
@@ -65,7 +70,7 @@ def at(positions: dict[str, float]):
 
 @pytest.mark.parametrize('mode', MODES)
 def test_a_partial_controller_is_driven_as_far_as_it_goes(capture_rig, mode):
-    with capture_rig(['--time-scale', '4', *MODES[mode]], [],
+    with capture_rig(['--time-scale', '4', *MODES[mode]], [f'request_timeout:={REQUEST_TIMEOUT}'],
                      record=[('/rosout', Log)], node_log_tail=6000) as (rig, control_port):
         ros = rig.ros
         status_messages = ros.subscribe(f'/{NODE}/status', GimbalStatus)
@@ -92,7 +97,7 @@ def test_a_partial_controller_is_driven_as_far_as_it_goes(capture_rig, mode):
         assert device.level == OK, (device.message, values)
         assert 'device does not know: ' in device.message
         assert device.message.count('COM_GetFw') == 1  # said once
-        assert values['link.timeouts'] == '0'
+        assert values['link.timeouts'] == '0', values  # no reply waited out
         connection = next(s for s in array.status if s.name == f'{NODE}: connection')
         assert connection.level == OK
         assert connection.hardware_id.startswith(
