@@ -5,9 +5,8 @@
 # mostly wait on simulators, nodes and DDS, and each leases its own ROS domain and ports.
 # 8 workers on a quiet 2-core machine: pytest 279-296 s on 2026-12-03, 330-336 s on the
 # same machine the day after at the same CPU per test, 276-306 s on a new machine of the
-# same kind that evening, bound by CPU; the long tests and
-# the costliest classes go out first (gimbal_driver_testing/schedule.py; docs/testing.md,
-# "Where the time goes").
+# same kind that evening, bound by CPU; the long tests and the costliest classes go out
+# first (gimbal_driver_testing/schedule.py; docs/testing.md, "Where the time goes").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup_env.sh

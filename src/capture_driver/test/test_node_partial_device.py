@@ -38,11 +38,12 @@ MODES = {
     'third-party': ['--only', 'third-party', '--ack-unknown'],
     'partial': ['--only', 'partial'],
 }
-#: the node's ``request_timeout`` (s): the simulator answers every request at once, so no
-#: reply waits it out unless the machine holds it up (one came later than the default 0.5 s
-#: in a pinned run and counted as a timeout, docs/testing.md); an answer of the
-#: wrong kind is told at once, whatever the timeout
-REQUEST_TIMEOUT = 5.0
+#: s: the node's ``request_timeout``, as ``ANSWER_TIMEOUT_S`` of the in-process twin of this
+#: test (``test_partial_device.py``): the simulator answers every request at once, so no reply
+#: waits it out unless the machine holds it up (one came later than the default 0.5 s in a
+#: pinned run and counted as a timeout, docs/testing.md); an answer of the wrong kind is told
+#: at once, whatever the timeout
+ANSWER_TIMEOUT_S = 5.0
 #: what the device was asked at connect and in the status poll and does not answer with data
 NOT_ANSWERED = ('COM_GetSn', 'COM_GetFw', 'COM_GetHw', 'COM_GetPn', 'IMU_IsReadyImu',
                 'GPS_isConnectedGPS', 'MOT_SrlRegister', 'ERR_CaptureSystemRegister')
@@ -70,7 +71,7 @@ def at(positions: dict[str, float]):
 
 @pytest.mark.parametrize('mode', MODES)
 def test_a_partial_controller_is_driven_as_far_as_it_goes(capture_rig, mode):
-    with capture_rig(['--time-scale', '4', *MODES[mode]], [f'request_timeout:={REQUEST_TIMEOUT}'],
+    with capture_rig(['--time-scale', '4', *MODES[mode]], [f'request_timeout:={ANSWER_TIMEOUT_S}'],
                      record=[('/rosout', Log)], node_log_tail=6000) as (rig, control_port):
         ros = rig.ros
         status_messages = ros.subscribe(f'/{NODE}/status', GimbalStatus)
