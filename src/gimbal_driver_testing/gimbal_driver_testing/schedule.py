@@ -9,14 +9,15 @@ goes"). The node-id prefixes in the ``long_tests`` ini option name those tests. 
 first, in the order listed, each to a worker of its own, on at most 3 in 8 of the workers
 at a time (``LONG_SHARE``: the rest keep the CPU-bound tests going beside them; with half
 of the workers on them, the two cores stood 40 % idle for the run's first 100 s, since the
-long tests mostly wait). Every other test goes out as ``load`` hands it out: consecutive
-chunks, refilled when a worker runs low, so a class's or a module's tests mostly stay on
-one worker and its rig starts once there; but the classes and modules go out costliest
-first, by the worker seconds each took in a recorded run (the ``test_durations`` ini option
-names the file; ``pytest --record-test-durations`` writes it), so the run ends on cheap
-tests in small chunks, not on a driver's conformance class handed out late (one ran 80 s
-past the others). A class or module the file does not know goes after those it does, in
-collection order.
+long tests mostly wait). Every other test goes out with its class or module (its rig): one
+whole class or module to a worker that holds fewer than two tests, so each rig starts once,
+on one worker, and no worker holds work another could have started (xdist's ``load``
+chunks split classes between workers and queued several modules on one). The classes and
+modules go out costliest first, by the worker seconds each took in a recorded run (the
+``test_durations`` ini option names the file; ``pytest --record-test-durations`` writes
+it), so the run ends on cheap ones, not on a driver's conformance class handed out late
+(one ran 80 s past the others). A class or module the file does not know goes after those
+it does, in collection order.
 
 The scheduler keeps to xdist's scheduling protocol (``xdist.scheduler.protocol.Scheduling``,
 the contract of its ``pytest_xdist_make_scheduler`` hook), so this module imports nothing of
@@ -138,8 +139,6 @@ class LongTestsFirst:
         self.costs = dict(costs or {})
         #: the seconds each class or module took in this run
         self.measured: dict[str, float] = {}
-        #: each other test's share of its class's or module's recorded cost
-        self.test_costs: dict[int, float] = {}
         self.node2collection: dict[Any, list[str]] = {}
         self.node2pending: dict[Any, list[int]] = {}
         self.collection: list[str] | None = None
@@ -185,7 +184,7 @@ class LongTestsFirst:
         if self.collection is not None:
             rig = rig_of(self.collection[item_index])
             self.measured[rig] = self.measured.get(rig, 0.0) + duration
-        self.check_schedule(node, duration)
+        self.check_schedule(node)
 
     def mark_test_pending(self, item: str) -> None:
         assert self.collection is not None
@@ -228,10 +227,9 @@ class LongTestsFirst:
         self.long_tests = frozenset(rank)
         self.pending = self.costliest_first(
             [i for i in range(len(self.collection)) if i not in self.long_tests])
-        chunk = max(2, len(self.collection) // max(1, len(self.nodes)) // 4)
         for node in self.nodes:
             if not self.send_long_test(node):
-                self.send(node, self.take(chunk))
+                self.send(node, self.take_rigs(2))
         if not self.pending and not self.long_pending:
             for node in self.nodes:
                 node.shutdown()
@@ -244,11 +242,8 @@ class LongTestsFirst:
         assert self.collection is not None
         rigs = {index: rig_of(self.collection[index]) for index in indices}
         first: dict[str, int] = {}
-        tests: dict[str, int] = {}
         for index in indices:
             first.setdefault(rigs[index], index)
-            tests[rigs[index]] = tests.get(rigs[index], 0) + 1
-        self.test_costs = {i: self.costs.get(rigs[i], 0.0) / tests[rigs[i]] for i in indices}
         return sorted(indices, key=lambda i: (-self.costs.get(rigs[i], 0.0), first[rigs[i]], i))
 
     @property
@@ -260,48 +255,68 @@ class LongTestsFirst:
         return sum(any(index in self.long_tests for index in queued)
                    for queued in self.node2pending.values())
 
-    def check_schedule(self, node: Worker, duration: float = 0) -> None:
-        """Give ``node`` more tests if it runs low, as xdist's ``load`` does: a long test
-        first if one is left and may go out, else a chunk of the others."""
+    def check_schedule(self, node: Worker) -> None:
+        """Give ``node`` more tests once it holds fewer than two (it runs its last one
+        only when it knows the next): a long test first if one is left and may go out,
+        else the next class or module whole, or the cheapest one behind a long test."""
         if node.shutting_down:
             return
-        if not self.send_long_test(node) and self.pending:
-            queued = self.node2pending[node]
-            per_node = len(self.pending) // len(self.node2pending)
-            low, high = max(2, per_node // 4), max(2, per_node // 2)
-            # xdist's heuristic: a worker on long tests that still has two waits for them
-            if len(queued) < low and not (duration >= 0.1 and len(queued) >= 2):
-                self.send(node, self.take_chunk(high - len(queued), 2 - len(queued)))
+        queued = self.node2pending[node]
+        if not self.send_long_test(node) and self.pending and len(queued) < 2:
+            if queued and queued[-1] in self.long_tests:
+                self.send(node, self.take_filler())
+            else:
+                self.send(node, self.take_rigs(2 - len(queued)))
         if not self.pending and not self.long_pending:
             node.shutdown()
 
     def send_long_test(self, node: Worker) -> bool:
         """Send ``node`` the next long test if it has at most one test queued and
         the limit allows; once the other tests are all out, there is no limit (nothing is
-        left to keep going beside them, and a worker holding its last test would wait)."""
+        left to keep going beside them, and a worker holding its last test would wait).
+        A worker with nothing queued gets the cheapest class or module behind it, so that
+        the long test starts at once and nothing costly waits for it."""
         queued = self.node2pending[node]
         if not self.long_pending or len(queued) > 1:
             return False
         if self.pending and self.long_tests_out() >= self.long_limit:
             return False
-        self.send(node, [self.long_pending.pop(0), *self.take(1 - len(queued))])
+        self.send(node, [self.long_pending.pop(0), *(self.take_filler() if not queued else [])])
         return True
 
-    def take_chunk(self, count: int, at_least: int) -> list[int]:
-        """Up to ``count`` other tests, fewer where their recorded cost passes half of a
-        worker's share of what is left (xdist's ``load`` counts tests only, and a worker
-        that took a chunk of 25 tests worth 40 s near the end ran alone for 40 s after the
-        others had finished), but at least ``at_least`` (a worker runs its last queued test
-        only once it has another)."""
-        budget = sum(self.test_costs.get(i, 0.0) for i in self.pending) / len(
-            self.node2pending) / 2
-        spent, size = 0.0, 0
-        for index in self.pending[:count]:
-            spent += self.test_costs.get(index, 0.0)
-            if size >= max(1, at_least) and spent > budget:
-                break
-            size += 1
-        return self.take(size)
+    def take_rigs(self, at_least: int) -> list[int]:
+        """The next class or module whole, and the ones after it while fewer than
+        ``at_least`` tests are taken.
+
+        One at a time, never a chunk of several: what a worker holds is its own until it
+        runs it, and a worker whose chunk held a 45 s module behind a long one ran 35 s
+        past the others (docs/testing.md, "The order the workers get the tests"). Whole,
+        so that its rig starts once, on one worker."""
+        taken: list[int] = []
+        while self.pending and len(taken) < max(1, at_least):
+            rig = rig_of(self.collection_of(self.pending[0]))
+            size = 1
+            while (size < len(self.pending)
+                   and rig_of(self.collection_of(self.pending[size])) == rig):
+                size += 1
+            taken += self.take(size)
+        return taken
+
+    def take_filler(self) -> list[int]:
+        """The cheapest recorded class or module left (else the last one), whole: what a
+        worker holds behind a long test waits for it."""
+        rigs = [rig_of(self.collection_of(index)) for index in self.pending]
+        if not rigs:
+            return []
+        recorded = [rig for rig in rigs if rig in self.costs]
+        cheapest = min(recorded, key=lambda rig: self.costs[rig]) if recorded else rigs[-1]
+        pairs = list(zip(self.pending, rigs, strict=True))
+        self.pending = [index for index, rig in pairs if rig != cheapest]
+        return [index for index, rig in pairs if rig == cheapest]
+
+    def collection_of(self, index: int) -> str:
+        assert self.collection is not None
+        return self.collection[index]
 
     def take(self, count: int) -> list[int]:
         """The next ``count`` other tests (none for a count below one)."""

@@ -51,8 +51,9 @@ def collection() -> list[str]:
             + [f'tests/test_threads.py::test_{n}' for n in range(10)])
 
 
-def started(workers: int) -> tuple[LongTestsFirst, list[StandInWorker]]:
-    scheduler = LongTestsFirst(workers, LONG)
+def started(workers: int, costs: dict[str, float] | None = None,
+            long_prefixes: Sequence[str] = LONG) -> tuple[LongTestsFirst, list[StandInWorker]]:
+    scheduler = LongTestsFirst(workers, long_prefixes, costs=costs)
     nodes = [StandInWorker(f'gw{n}') for n in range(workers)]
     for node in nodes:
         scheduler.add_node(node)
@@ -96,24 +97,26 @@ def test_every_test_runs_once_and_every_worker_is_shut_down(workers: int) -> Non
 
 
 def test_the_long_tests_go_first_each_to_a_worker_of_its_own_in_the_listed_order() -> None:
-    scheduler, nodes = started(8)
-    # 3 of the 8 workers: new_driver's build, then the soaks in their order
+    costs = {'src/a/test/test_conformance.py::TestA': 40.0, 'src/b/test/test_node.py': 20.0,
+             'tests/test_threads.py': 1.0, 'tests/test_new_driver.py': 0.5}
+    scheduler, nodes = started(8, costs)
+    # 3 of the 8 workers: new_driver's build, then the soaks in their order, each with the
+    # cheapest class or module left behind it (so it starts at once, and nothing costly
+    # waits for it); the next worker gets the costliest class
     assert names(nodes[0].queued) == ['tests/test_new_driver.py::test_builds',
-                                      'src/a/test/test_conformance.py::TestA::test_0']
-    assert names(nodes[1].queued) == ['tests/test_soak.py::test_soak[a]',
-                                      'src/a/test/test_conformance.py::TestA::test_1']
-    assert names(nodes[2].queued) == ['tests/test_soak.py::test_soak[b]',
-                                      'src/a/test/test_conformance.py::TestA::test_2']
-    # each has one other test behind it (so it starts at once); the other workers start on
-    # the rest in collection order, in chunks
-    assert nodes[3].queued[:2] == [3, 4]
-    assert nodes[4].queued[0] == 3 + len(nodes[3].queued)
-    long_out: list[tuple[bool, int]] = []
-    run_to_the_end(scheduler, nodes, long_out)
-    assert max(out for others_left, out in long_out if others_left) == 3
-    # test_copy is not long: only the node-id prefixes listed are
-    assert all(not name.startswith('tests/test_new_driver.py::test_copy')
-               for node in nodes[:4] for name in names(node.ran[:1]))
+                                      'tests/test_new_driver.py::test_copy']
+    assert names(nodes[1].queued) == (['tests/test_soak.py::test_soak[a]']
+                                      + [f'tests/test_threads.py::test_{n}' for n in range(10)])
+    assert names(nodes[2].queued) == (['tests/test_soak.py::test_soak[b]']
+                                      + [f'src/b/test/test_node.py::test_{n}' for n in range(20)])
+    assert names(nodes[3].queued) == [f'src/a/test/test_conformance.py::TestA::test_{n}'
+                                      for n in range(40)]
+    # every other test is out, so the limit is lifted: the last soak goes to the next worker
+    assert not scheduler.pending
+    assert names(nodes[4].queued) == ['tests/test_soak.py::test_soak[c]']
+    assert not any(node.queued for node in nodes[5:])
+    run_to_the_end(scheduler, nodes)
+    assert sorted(i for node in nodes for i in node.ran) == list(range(len(collection())))
 
 
 def test_no_more_workers_on_long_tests_than_their_share_while_other_tests_are_left() -> None:
@@ -127,17 +130,28 @@ def test_no_more_workers_on_long_tests_than_their_share_while_other_tests_are_le
     assert sorted(ran_long) == sorted(scheduler.long_tests)
 
 
-def test_without_long_tests_it_hands_out_consecutive_chunks_as_load_does() -> None:
-    scheduler = LongTestsFirst(2, ('tests/no_such_test.py',))
-    nodes = [StandInWorker('gw0'), StandInWorker('gw1')]
-    for node in nodes:
-        scheduler.add_node(node)
-        scheduler.add_node_collection(node, collection())
-    scheduler.schedule()
-    chunk = len(collection()) // 2 // 4
-    assert nodes[0].queued == list(range(chunk))
-    assert nodes[1].queued == list(range(chunk, 2 * chunk))
-    run_to_the_end(scheduler, nodes)
+def test_each_class_or_module_goes_whole_to_one_worker_one_at_a_time() -> None:
+    """What a worker holds is its own until it runs it: besides the test it runs, a worker
+    holds at most one class's or module's tests, and each class's or module's tests all run
+    on one worker (its rig starts once)."""
+    costs = {'src/a/test/test_conformance.py::TestA': 40.0, 'src/b/test/test_node.py': 2.0,
+             'tests/test_threads.py': 1.0}
+    scheduler, nodes = started(2, costs, long_prefixes=())
+    assert {rig_of(name) for name in names(nodes[0].queued)} == {
+        'src/a/test/test_conformance.py::TestA'}
+    assert {rig_of(name) for name in names(nodes[1].queued)} == {'src/b/test/test_node.py'}
+    held: list[int] = []
+    while any(node.can_run() for node in nodes):
+        for node in nodes:
+            if node.can_run():
+                index = node.queued.pop(0)
+                node.ran.append(index)
+                scheduler.mark_test_complete(node, index, duration=0.01)
+                held.append(len({rig_of(name) for name in names(node.queued[1:])}))
+    assert max(held) == 1
+    ran_on = {rig_of(collection()[i]): {n for n, node in enumerate(nodes) if i in node.ran}
+              for i in range(len(collection()))}
+    assert all(len(workers) == 1 for workers in ran_on.values())
     assert sorted(nodes[0].ran + nodes[1].ran) == list(range(len(collection())))
 
 
@@ -165,42 +179,30 @@ def test_workers_that_collected_different_tests_get_no_test() -> None:
 def test_recorded_costs_send_the_costliest_class_or_module_first_each_kept_together() -> None:
     costs = {'tests/test_threads.py': 30.0, 'src/b/test/test_node.py': 20.0,
              'src/a/test/test_conformance.py::TestA': 5.0, 'gone/test_old.py': 99.0}
-    scheduler = LongTestsFirst(1, LONG, costs=costs)
-    node = StandInWorker('gw0')
-    scheduler.add_node(node)
-    scheduler.add_node_collection(node, collection())
-    scheduler.schedule()
-    run_to_the_end(scheduler, [node])
-    ran = [rig_of(name) for name in names(node.ran)]
-    # the long tests first, then by cost; test_copy's module was not recorded: last
-    others = [rig for rig in ran if rig != 'tests/test_soak.py'
-              and not rig.startswith('tests/test_new_driver.py')]
-    assert others == (['tests/test_threads.py'] * 10 + ['src/b/test/test_node.py'] * 20
-                      + ['src/a/test/test_conformance.py::TestA'] * 40)
-    assert names(node.ran)[-1] == 'tests/test_new_driver.py::test_copy'
+    scheduler, nodes = started(1, costs, long_prefixes=())
+    run_to_the_end(scheduler, nodes)
+    ran = [rig_of(name) for name in names(nodes[0].ran)]
+    # by cost; the soaks' and test_copy's modules were not recorded: last, in collection order
+    assert ran == (['tests/test_threads.py'] * 10 + ['src/b/test/test_node.py'] * 20
+                   + ['src/a/test/test_conformance.py::TestA'] * 40
+                   + ['tests/test_new_driver.py'] * 2 + ['tests/test_soak.py'] * 3)
     assert scheduler.measured['tests/test_threads.py'] == pytest.approx(0.1)
 
 
-def test_a_refill_holds_at_most_half_a_workers_share_of_the_recorded_cost() -> None:
-    costs = {'src/a/test/test_conformance.py::TestA': 40.0, 'src/b/test/test_node.py': 2.0}
-    scheduler = LongTestsFirst(2, (), costs=costs)
-    nodes = [StandInWorker('gw0'), StandInWorker('gw1')]
-    for node in nodes:
-        scheduler.add_node(node)
-        scheduler.add_node_collection(node, collection())
-    scheduler.schedule()
-    share = sum(scheduler.test_costs[i] for i in scheduler.pending) / 2 / 2
-    chunk = scheduler.take_chunk(100, 2)
-    assert len(chunk) >= 2
-    assert sum(scheduler.test_costs[i] for i in chunk) <= share + 1.0  # 1 s: one test
-    # what has no recorded cost is counted, as xdist counts: the rest goes in one chunk
-    unrecorded = [i for i in scheduler.pending if not scheduler.test_costs[i]]
-    scheduler.pending = list(unrecorded)
-    assert scheduler.take_chunk(len(unrecorded), 2) == unrecorded
-    # and a chunk never leaves a worker holding one test it cannot run
-    scheduler.pending = [0, 1, 2]
-    scheduler.test_costs = {0: 50.0, 1: 50.0, 2: 50.0}
-    assert scheduler.take_chunk(3, 2) == [0, 1]
+def test_behind_a_long_test_goes_the_cheapest_recorded_class_or_module() -> None:
+    costs = {'tests/test_threads.py': 30.0, 'src/b/test/test_node.py': 20.0,
+             'src/a/test/test_conformance.py::TestA': 5.0}
+    scheduler, nodes = started(1, costs)
+    assert names(nodes[0].queued) == (['tests/test_new_driver.py::test_builds']
+                                      + [f'src/a/test/test_conformance.py::TestA::test_{n}'
+                                         for n in range(40)])
+    # then the cheapest recorded of those left, and once none is recorded, the last
+    assert {rig_of(name) for name in names(scheduler.take_filler())} == {
+        'src/b/test/test_node.py'}
+    assert {rig_of(name) for name in names(scheduler.take_filler())} == {
+        'tests/test_threads.py'}
+    assert names(scheduler.take_filler()) == ['tests/test_new_driver.py::test_copy']
+    assert scheduler.take_filler() == [] and not scheduler.pending
 
 
 def test_unreadable_durations_give_no_costs(tmp_path: Path) -> None:
