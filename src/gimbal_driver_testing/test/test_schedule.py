@@ -4,7 +4,7 @@ against stand-in workers that run what they are sent as xdist's do, and through 
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import pytest
@@ -66,18 +66,17 @@ def started(workers: int, costs: dict[str, float] | None = None,
 
 
 def run_to_the_end(scheduler: LongTestsFirst, nodes: list[StandInWorker],
-                   long_out: list[tuple[bool, int]] | None = None) -> None:
+                   after_each: Callable[[StandInWorker], None] | None = None) -> None:
     """Let the workers run one test each in turn, reporting each to the scheduler, until
-    none can run; ``long_out`` gets, after each report, whether other tests were left to
-    send and how many long tests were queued."""
+    none can run; ``after_each(worker)`` runs after each report."""
     while any(node.can_run() for node in nodes):
         for node in nodes:
             if node.can_run():
                 index = node.queued.pop(0)
                 node.ran.append(index)
                 scheduler.mark_test_complete(node, index, duration=0.01)
-                if long_out is not None:
-                    long_out.append((bool(scheduler.pending), scheduler.long_tests_out()))
+                if after_each is not None:
+                    after_each(node)
 
 
 def names(indices: list[int]) -> list[str]:
@@ -123,8 +122,10 @@ def test_no_more_workers_on_long_tests_than_their_share_while_other_tests_are_le
     scheduler, nodes = started(2)
     assert names([nodes[0].queued[0]]) == ['tests/test_new_driver.py::test_builds']
     assert not any(i in scheduler.long_tests for i in nodes[1].queued)
+    # after each report: whether other tests were left to send, how many long tests queued
     long_out: list[tuple[bool, int]] = []
-    run_to_the_end(scheduler, nodes, long_out)
+    run_to_the_end(scheduler, nodes, lambda node: long_out.append(
+        (bool(scheduler.pending), scheduler.long_tests_out())))
     assert {out for others_left, out in long_out if others_left} == {0, 1}
     ran_long = [i for node in nodes for i in node.ran if i in scheduler.long_tests]
     assert sorted(ran_long) == sorted(scheduler.long_tests)
@@ -141,13 +142,8 @@ def test_each_class_or_module_goes_whole_to_one_worker_one_at_a_time() -> None:
         'src/a/test/test_conformance.py::TestA'}
     assert {rig_of(name) for name in names(nodes[1].queued)} == {'src/b/test/test_node.py'}
     held: list[int] = []
-    while any(node.can_run() for node in nodes):
-        for node in nodes:
-            if node.can_run():
-                index = node.queued.pop(0)
-                node.ran.append(index)
-                scheduler.mark_test_complete(node, index, duration=0.01)
-                held.append(len({rig_of(name) for name in names(node.queued[1:])}))
+    run_to_the_end(scheduler, nodes, lambda node: held.append(
+        len({rig_of(name) for name in names(node.queued[1:])})))
     assert max(held) == 1
     ran_on = {rig_of(collection()[i]): {n for n, node in enumerate(nodes) if i in node.ran}
               for i in range(len(collection()))}
