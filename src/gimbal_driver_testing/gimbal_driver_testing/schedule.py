@@ -289,9 +289,9 @@ class LongTestsFirst:
         ``at_least`` tests are taken.
 
         One at a time, never a chunk of several: what a worker holds is its own until it
-        runs it, and a worker whose chunk held a 45 s module behind a long one ran 35 s
-        past the others (docs/testing.md, "The order the workers get the tests"). Whole,
-        so that its rig starts once, on one worker."""
+        runs it, and a worker whose chunk held a 45 s class behind the 45 s crash-safety
+        module ran 35 s past the others (docs/testing.md, "The order the workers get the
+        tests"). Whole, so that its rig starts once, on one worker."""
         taken: list[int] = []
         while self.pending and len(taken) < max(1, at_least):
             rig = rig_of(self.collection_of(self.pending[0]))
